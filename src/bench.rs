@@ -1,0 +1,189 @@
+//! `mesoflow bench ...`: benchmarks meant for the GPU machine. Each compares against a
+//! baseline measured in the same process, and prints one table (BENCHMARKS.md records
+//! them with adapter and date).
+
+use std::time::Instant;
+
+use clap::Subcommand;
+
+use crate::cli::CliError;
+use crate::exec::{Program, RunOptions};
+use crate::gpu::{Binding, CompileCtx, GpuContext, KernelCache, KernelSpec, WG_1D};
+use crate::graph::{self, LoadOptions};
+use crate::node::Registry;
+use crate::plan::{self, PlanOptions};
+use crate::value::{HostArray, ValueType};
+
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Executor overhead: a chain of tiny unfused pointwise nodes against raw wgpu.
+    Overhead {
+        /// Nodes in the chain.
+        #[arg(long, default_value_t = 1000)]
+        nodes: usize,
+        /// Elements per node (tiny, so that launch cost dominates).
+        #[arg(long, default_value_t = 256)]
+        elements: u32,
+        /// Repetitions of the whole chain.
+        #[arg(long, default_value_t = 50)]
+        reps: u64,
+    },
+}
+
+pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
+    match cmd {
+        BenchCommand::Overhead { nodes, elements, reps } => overhead(nodes, elements, reps),
+    }
+}
+
+fn runtime(e: impl std::fmt::Display) -> CliError {
+    CliError::Runtime(e.to_string())
+}
+
+/// A graph file with a chain of `n` scale nodes.
+pub fn chain_graph(n: usize) -> String {
+    let mut nodes = Vec::new();
+    for i in 0..n {
+        let src = if i == 0 { "inputs.x".to_string() } else { format!("s{}.out", i - 1) };
+        nodes.push(format!(
+            r#"{{"id": "s{i}", "kind": "scale", "params": {{"factor": 1.0001}}, "inputs": {{"x": "{src}"}}}}"#
+        ));
+    }
+    format!(
+        r#"{{"mesoflow": 1, "doc": "chain of {n} scale nodes",
+  "inputs": {{"x": {{"type": "particles", "cols": 1}}}},
+  "nodes": [{}],
+  "outputs": {{"y": "s{}.out"}}}}"#,
+        nodes.join(",\n"),
+        n - 1
+    )
+}
+
+fn overhead(nodes: usize, elements: u32, reps: u64) -> Result<(), CliError> {
+    if nodes == 0 || reps == 0 {
+        return Err(CliError::Input("--nodes and --reps must be positive".into()));
+    }
+    let gpu = GpuContext::new().map_err(runtime)?;
+    let dir = std::env::temp_dir().join(format!("mesoflow-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(runtime)?;
+    let file = dir.join("chain.json");
+    std::fs::write(&file, chain_graph(nodes)).map_err(runtime)?;
+    let registry = Registry::standard();
+    let g = graph::load(&file, &registry, &LoadOptions::default()).map_err(|p| CliError::Input(p.to_string()))?;
+    let ty = ValueType::Particles { n: elements, k: 1 };
+    let opts = PlanOptions { outputs: None, inputs: [("x".to_string(), ty)].into_iter().collect(), fuse: false };
+    let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(&gpu, &g, &p, &mut cache).map_err(runtime)?;
+    let x = HostArray::f32(ty, (0..elements).map(|i| i as f32).collect());
+    program.upload(&[("x".to_string(), x)].into_iter().collect()).map_err(runtime)?;
+    let run = |program: &mut Program, steps: u64| program.run(&RunOptions { steps, profile: false, progress: false });
+    run(&mut program, 2).map_err(runtime)?; // warm-up
+    let mut exec_times = Vec::new();
+    for _ in 0..5 {
+        let stats = run(&mut program, reps).map_err(runtime)?;
+        exec_times.push(stats.wall.as_secs_f64());
+    }
+    let exec = median(&mut exec_times) / (reps as f64 * nodes as f64);
+
+    // Raw wgpu: one pipeline, pre-made bind groups, all dispatches in one pass per submit.
+    let src = crate::gpu::shaders::resolve(&raw_kernel_source()).map_err(runtime)?;
+    let mut cx = CompileCtx { gpu: &gpu, kernels: &mut cache, clock: &dummy(&gpu), allocated: Default::default() };
+    let k = cx
+        .kernel(&KernelSpec::new("raw scale", src, &[Binding::StorageRead, Binding::StorageReadWrite, Binding::Uniform]))
+        .map_err(runtime)?;
+    let bufs: Vec<wgpu::Buffer> = (0..2).map(|_| storage(&gpu, elements as u64 * 4)).collect();
+    let uni = cx.uniform("n", bytemuck::bytes_of(&elements));
+    let dispatches: Vec<_> = (0..nodes)
+        .map(|i| cx.dispatch(&k, &[&bufs[i % 2], &bufs[(i + 1) % 2], &uni], cx.grid_1d(elements as u64, WG_1D)))
+        .collect();
+    let per_submit = (4096 / (nodes + 1)).max(1) as u64;
+    let raw_run = |reps: u64| -> Result<f64, CliError> {
+        let t = Instant::now();
+        let mut last = None;
+        let mut done = 0;
+        while done < reps {
+            let n = per_submit.min(reps - done);
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                for _ in 0..n {
+                    for d in &dispatches {
+                        pass.set_pipeline(&d.kernel.pipeline);
+                        pass.set_bind_group(0, &d.bind_group, &[]);
+                        pass.dispatch_workgroups(d.workgroups[0], d.workgroups[1], d.workgroups[2]);
+                    }
+                }
+            }
+            let idx = gpu.queue.submit([enc.finish()]);
+            if let Some(prev) = last.replace(idx) {
+                gpu.wait(prev).map_err(runtime)?;
+            }
+            done += n;
+        }
+        if let Some(prev) = last {
+            gpu.wait(prev).map_err(runtime)?;
+        }
+        Ok(t.elapsed().as_secs_f64())
+    };
+    raw_run(2)?;
+    let mut raw_times = Vec::new();
+    for _ in 0..5 {
+        raw_times.push(raw_run(reps)?);
+    }
+    let raw = median(&mut raw_times) / (reps as f64 * nodes as f64);
+
+    // Submit-and-wait round trip of one tiny dispatch.
+    let mut rt = Vec::new();
+    for _ in 0..50 {
+        let t = Instant::now();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            let d = &dispatches[0];
+            pass.set_pipeline(&d.kernel.pipeline);
+            pass.set_bind_group(0, &d.bind_group, &[]);
+            pass.dispatch_workgroups(d.workgroups[0], d.workgroups[1], d.workgroups[2]);
+        }
+        let idx = gpu.queue.submit([enc.finish()]);
+        gpu.wait(idx).map_err(runtime)?;
+        rt.push(t.elapsed().as_secs_f64());
+    }
+    let roundtrip = median(&mut rt);
+    let _ = std::fs::remove_dir_all(&dir);
+
+    println!("adapter: {}", gpu.caps.summary());
+    println!("chain of {nodes} unfused pointwise nodes, {elements} elements each, {reps} repetitions, median of 5");
+    println!("{:<44} {:>12}", "", "us per node");
+    println!("{:<44} {:>12.3}", "mesoflow executor (graph file, planned)", exec * 1e6);
+    println!("{:<44} {:>12.3}", "raw wgpu (same kernel, one pass per submit)", raw * 1e6);
+    println!("{:<44} {:>12.3}", "ratio executor / raw", exec / raw);
+    println!("{:<44} {:>12.1}", "submit-and-wait round trip (us)", roundtrip * 1e6);
+    Ok(())
+}
+
+fn raw_kernel_source() -> String {
+    format!(
+        "#import common/index.wgsl\n@group(0) @binding(0) var<storage, read> x: array<f32>;\n@group(0) @binding(1) var<storage, read_write> y: array<f32>;\n@group(0) @binding(2) var<uniform> n: vec4<u32>;\n@compute @workgroup_size({WG_1D})\nfn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {{\n    let i = flat_index(wid, nwg, lid, {WG_1D}u);\n    if (i < n.x) {{ y[i] = 1.0001 * x[i]; }}\n}}\n"
+    )
+}
+
+fn storage(gpu: &GpuContext, bytes: u64) -> wgpu::Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("bench"),
+        size: bytes.max(16),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+fn dummy(gpu: &GpuContext) -> wgpu::Buffer {
+    storage(gpu, 16)
+}
+
+/// Median of a sample (sorts it).
+pub fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+}

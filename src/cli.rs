@@ -1,0 +1,442 @@
+//! The `mesoflow` command line. Raw arguments (clap) become validated requests here, and
+//! every failure becomes a message and an exit code: 2 for problems in what the user gave
+//! (graph files, params, inputs, arguments), 1 for failures while running.
+
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+use crate::exec::{Program, RunOptions, RunStats};
+use crate::expr::ParamValue;
+use crate::gpu::{DeviceCaps, GpuContext, KernelCache};
+use crate::graph::{self, Dim, Graph, InputShape, LoadOptions};
+use crate::node::Registry;
+use crate::plan::{self, Plan, PlanOptions};
+use crate::value::{HostArray, HostData, ValueType};
+
+#[derive(Parser, Debug)]
+#[command(name = "mesoflow", version, about = "Complex-fluid simulation algorithms on the GPU as graphs of compute nodes")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Run a graph file.
+    Run {
+        graph: PathBuf,
+        /// Set a graph param: NAME=VALUE (a number, a string, or a JSON array such as [64,64,64]).
+        #[arg(long = "set", value_name = "NAME=VALUE")]
+        sets: Vec<String>,
+        /// Give a graph input from an NPY file: NAME=FILE.npy.
+        #[arg(long = "input", value_name = "NAME=FILE")]
+        inputs: Vec<String>,
+        /// Request an output, and write it to an NPY file when =FILE is given: NAME[=FILE.npy].
+        /// Without any --output, every output is computed and summarised.
+        #[arg(long = "output", value_name = "NAME[=FILE]")]
+        outputs: Vec<String>,
+        /// Number of time steps.
+        #[arg(long, default_value_t = 1)]
+        steps: u64,
+        /// Random seed (the built-in param `seed`).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Print GPU time per node.
+        #[arg(long)]
+        profile: bool,
+        /// Do not fuse element-wise nodes.
+        #[arg(long)]
+        no_fuse: bool,
+    },
+    /// Check graph files: structure, params, kinds, ports, types and shapes (no GPU needed).
+    Validate {
+        #[arg(required = true)]
+        graphs: Vec<PathBuf>,
+    },
+    /// Print the plan of a graph: order, fused groups, buffers, peak memory.
+    Inspect {
+        graph: PathBuf,
+        #[arg(long = "set", value_name = "NAME=VALUE")]
+        sets: Vec<String>,
+        /// Take an input's shape from an NPY file (otherwise the declared sizes' defaults).
+        #[arg(long = "input", value_name = "NAME=FILE")]
+        inputs: Vec<String>,
+        /// Plan for these outputs only.
+        #[arg(long = "output", value_name = "NAME")]
+        outputs: Vec<String>,
+        #[arg(long, default_value_t = 1)]
+        steps: u64,
+        #[arg(long)]
+        no_fuse: bool,
+        /// Print Graphviz DOT instead of text.
+        #[arg(long)]
+        dot: bool,
+    },
+    /// List every node kind with its ports, params and a one-line doc.
+    Nodes {
+        /// Show only this kind.
+        kind: Option<String>,
+    },
+    /// Benchmarks run on the GPU (see BENCHMARKS.md).
+    Bench {
+        #[command(subcommand)]
+        which: crate::bench::BenchCommand,
+    },
+}
+
+/// A failure with its exit code.
+#[derive(Debug)]
+pub enum CliError {
+    /// Something the user gave is wrong (exit 2).
+    Input(String),
+    /// Running failed (exit 1).
+    Runtime(String),
+}
+
+impl CliError {
+    fn code(&self) -> u8 {
+        match self {
+            CliError::Input(_) => 2,
+            CliError::Runtime(_) => 1,
+        }
+    }
+}
+
+impl From<crate::exec::ExecError> for CliError {
+    fn from(e: crate::exec::ExecError) -> Self {
+        match e {
+            crate::exec::ExecError::Input { .. } => CliError::Input(e.to_string()),
+            other => CliError::Runtime(other.to_string()),
+        }
+    }
+}
+
+impl From<crate::gpu::GpuError> for CliError {
+    fn from(e: crate::gpu::GpuError) -> Self {
+        CliError::Runtime(e.to_string())
+    }
+}
+
+/// Entry point of the binary.
+pub fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+        }
+    };
+    match execute(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            let (CliError::Input(m) | CliError::Runtime(m)) = &e;
+            eprintln!("error: {}", m.trim_end());
+            ExitCode::from(e.code())
+        }
+    }
+}
+
+pub fn execute(cmd: Command) -> Result<(), CliError> {
+    let registry = Registry::standard();
+    match cmd {
+        Command::Run { graph, sets, inputs, outputs, steps, seed, profile, no_fuse } => {
+            run(&registry, &graph, &sets, &inputs, &outputs, steps, seed, profile, !no_fuse)
+        }
+        Command::Validate { graphs } => validate(&registry, &graphs),
+        Command::Inspect { graph, sets, inputs, outputs, steps, no_fuse, dot } => {
+            inspect(&registry, &graph, &sets, &inputs, &outputs, steps, !no_fuse, dot)
+        }
+        Command::Nodes { kind } => nodes(&registry, kind.as_deref()),
+        Command::Bench { which } => crate::bench::run(which),
+    }
+}
+
+fn split_pair<'s>(arg: &'s str, flag: &str, what: &str) -> Result<(&'s str, &'s str), CliError> {
+    arg.split_once('=')
+        .filter(|(n, v)| !n.is_empty() && !v.is_empty())
+        .ok_or_else(|| CliError::Input(format!("--{flag} `{arg}`: expected {what}")))
+}
+
+/// `--set NAME=VALUE` arguments as param values.
+pub fn parse_sets(sets: &[String]) -> Result<BTreeMap<String, ParamValue>, CliError> {
+    let mut out = BTreeMap::new();
+    for s in sets {
+        let (name, value) = split_pair(s, "set", "NAME=VALUE")?;
+        let v = ParamValue::from_cli(value).map_err(|e| CliError::Input(format!("--set {name}: {e}")))?;
+        if out.insert(name.trim().to_string(), v).is_some() {
+            return Err(CliError::Input(format!("--set {name} is given twice")));
+        }
+    }
+    Ok(out)
+}
+
+fn load(registry: &Registry, path: &Path, opts: &LoadOptions) -> Result<Graph, CliError> {
+    graph::load(path, registry, opts).map_err(|p| CliError::Input(p.to_string()))
+}
+
+/// Input types from the declarations with the sizes' defaults (free counts: 1).
+pub fn declared_input_types(g: &Graph) -> BTreeMap<String, ValueType> {
+    let size = |s: &str| g.sizes.iter().find(|d| d.name == s).map(|d| d.default);
+    g.inputs
+        .iter()
+        .filter_map(|i| {
+            let shape = match &i.shape {
+                InputShape::Particles { rows: Dim::Free, cols } => InputShape::Particles { rows: Dim::Fixed(1), cols: *cols },
+                InputShape::Indices { rows: Dim::Free } => InputShape::Indices { rows: Dim::Fixed(1) },
+                other => other.clone(),
+            };
+            shape.with_sizes(size).map(|t| (i.name.clone(), t))
+        })
+        .collect()
+}
+
+fn read_inputs(g: &Graph, args: &[String]) -> Result<BTreeMap<String, HostArray>, CliError> {
+    let mut out = BTreeMap::new();
+    for a in args {
+        let (name, file) = split_pair(a, "input", "NAME=FILE.npy")?;
+        let Some(i) = g.input(name) else {
+            let known: Vec<&str> = g.inputs.iter().map(|i| i.name.as_str()).collect();
+            return Err(CliError::Input(format!(
+                "--input {name}: the graph has no input `{name}` (inputs: {})",
+                if known.is_empty() { "none".into() } else { known.join(", ") }
+            )));
+        };
+        if out.contains_key(name) {
+            return Err(CliError::Input(format!("--input {name} is given twice")));
+        }
+        let arr = crate::npy::read_input(Path::new(file), &g.inputs[i].shape)
+            .map_err(|e| CliError::Input(format!("--input {name}: {e}")))?;
+        out.insert(name.to_string(), arr);
+    }
+    Ok(out)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run(
+    registry: &Registry,
+    path: &Path,
+    sets: &[String],
+    input_args: &[String],
+    output_args: &[String],
+    steps: u64,
+    seed: Option<u64>,
+    profile: bool,
+    fuse: bool,
+) -> Result<(), CliError> {
+    if steps == 0 {
+        return Err(CliError::Input("--steps must be at least 1".into()));
+    }
+    let overrides = parse_sets(sets)?;
+    let seed = match (seed, overrides.get("seed")) {
+        (Some(_), Some(_)) => return Err(CliError::Input("give the seed once: --seed or --set seed=".into())),
+        (Some(s), None) => s,
+        (None, Some(ParamValue::Number(x))) if *x >= 0.0 && x.fract() == 0.0 => *x as u64,
+        (None, Some(v)) => return Err(CliError::Input(format!("--set seed={v}: expected a non-negative integer"))),
+        (None, None) => 0,
+    };
+    let g = load(registry, path, &LoadOptions { overrides, steps, seed })?;
+    let data = read_inputs(&g, input_args)?;
+    let missing: Vec<String> = g
+        .inputs
+        .iter()
+        .filter(|i| !i.optional && !data.contains_key(&i.name))
+        .map(|i| format!("--input {}=FILE.npy ({})", i.name, i.shape.describe()))
+        .collect();
+    if !missing.is_empty() {
+        return Err(CliError::Input(format!("{}: missing required inputs: {}", path.display(), missing.join(", "))));
+    }
+    // Requested outputs and where they go; checked before any GPU work.
+    let mut requested = Vec::new();
+    let mut files: BTreeMap<String, PathBuf> = BTreeMap::new();
+    for o in output_args {
+        let (name, file) = match o.split_once('=') {
+            Some((n, f)) if !n.is_empty() && !f.is_empty() => (n, Some(PathBuf::from(f))),
+            Some(_) => return Err(CliError::Input(format!("--output `{o}`: expected NAME or NAME=FILE.npy"))),
+            None => (o.as_str(), None),
+        };
+        if g.output(name).is_none() {
+            let known: Vec<&str> = g.outputs.iter().map(|o| o.name.as_str()).collect();
+            return Err(CliError::Input(format!("--output {name}: the graph has no output `{name}` (outputs: {})", known.join(", "))));
+        }
+        if let Some(f) = file {
+            let dir = f.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+            if !dir.is_dir() {
+                return Err(CliError::Input(format!("--output {name}: folder {} does not exist", dir.display())));
+            }
+            files.insert(name.to_string(), f);
+        }
+        requested.push(name.to_string());
+    }
+    let gpu = GpuContext::new()?;
+    eprintln!("mesoflow: {}", gpu.caps.summary());
+    let opts = PlanOptions {
+        outputs: if requested.is_empty() { None } else { Some(requested) },
+        inputs: data.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
+        fuse,
+    };
+    let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(&gpu, &g, &p, &mut cache)?;
+    program.upload(&data)?;
+    let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
+    let stats = program.run(&RunOptions { steps, profile, progress })?;
+    let results = program.read_outputs()?;
+    eprintln!(
+        "mesoflow: {} step{} in {:.3} s ({} dispatches per step, GPU memory {} planned + {} tables)",
+        stats.steps,
+        if stats.steps == 1 { "" } else { "s" },
+        stats.wall.as_secs_f64(),
+        program.dispatches_per_step(),
+        plan::human_bytes(p.memory.total()),
+        plan::human_bytes(program.table_bytes),
+    );
+    if profile {
+        print_profile(&stats);
+    }
+    for (name, arr) in &results {
+        match files.get(name) {
+            Some(f) => {
+                crate::npy::write(f, arr).map_err(|e| CliError::Runtime(e.to_string()))?;
+                println!("{name}: {} -> {}", arr.ty, f.display());
+            }
+            None => println!("{name}: {}", summary(arr)),
+        }
+    }
+    Ok(())
+}
+
+/// Shape and statistics of an array, with its first values.
+pub fn summary(a: &HostArray) -> String {
+    let v = a.data.to_f64();
+    if v.is_empty() {
+        return format!("{} (empty)", a.ty);
+    }
+    let min = v.iter().cloned().fold(f64::INFINITY, f64::min);
+    let max = v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    let head: Vec<String> = match &a.data {
+        HostData::F32(x) => x.iter().take(6).map(|x| format!("{x:.6e}")).collect(),
+        HostData::U32(x) => x.iter().take(6).map(|x| x.to_string()).collect(),
+    };
+    let more = if v.len() > 6 { ", ..." } else { "" };
+    if v.len() == 1 {
+        format!("{} = {}", a.ty, head[0])
+    } else {
+        format!("{}  min {min:.6e}  max {max:.6e}  mean {mean:.6e}  [{}{more}]", a.ty, head.join(", "))
+    }
+}
+
+fn print_profile(stats: &RunStats) {
+    let total: f64 = stats.profile.iter().map(|r| r.total.as_secs_f64()).sum();
+    println!(
+        "profile: GPU time per launch over {} step{} ({})",
+        stats.steps,
+        if stats.steps == 1 { "" } else { "s" },
+        if stats.timed_by_gpu { "timestamp queries" } else { "wall clock with a wait per launch: no timestamp queries on this device" }
+    );
+    println!("  {:<40} {:<28} {:>6} {:>12} {:>12} {:>6}", "launch", "kinds", "calls", "total ms", "mean us", "%");
+    let mut rows = stats.profile.clone();
+    rows.sort_by(|a, b| b.total.cmp(&a.total));
+    for r in rows {
+        let t = r.total.as_secs_f64();
+        println!(
+            "  {:<40} {:<28} {:>6} {:>12.4} {:>12.2} {:>6.1}",
+            r.label,
+            r.kinds,
+            r.calls,
+            t * 1e3,
+            if r.calls > 0 { t * 1e6 / r.calls as f64 } else { 0.0 },
+            if total > 0.0 { 100.0 * t / total } else { 0.0 }
+        );
+    }
+    println!("  {:<40} {:<28} {:>6} {:>12.4}", "total", "", "", total * 1e3);
+}
+
+/// Caps for checks that do not depend on a device: no binding-size limit.
+fn structural_caps() -> DeviceCaps {
+    DeviceCaps { max_binding: u64::MAX, max_buffer: u64::MAX, ..DeviceCaps::baseline() }
+}
+
+fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
+    let mut failures = Vec::new();
+    for path in graphs {
+        match check_graph(registry, path) {
+            Ok(summary) => println!("{}: ok ({summary})", path.display()),
+            Err(e) => failures.push(e),
+        }
+    }
+    if failures.is_empty() {
+        Ok(())
+    } else {
+        Err(CliError::Input(failures.join("")))
+    }
+}
+
+/// Loads a graph with its defaults and plans all its outputs with the declared inputs.
+pub fn check_graph(registry: &Registry, path: &Path) -> Result<String, String> {
+    let g = graph::load(path, registry, &LoadOptions::default()).map_err(|p| p.to_string())?;
+    let opts = PlanOptions { outputs: None, inputs: declared_input_types(&g), fuse: true };
+    let p = plan::plan(&g, &opts, &structural_caps()).map_err(|p| p.to_string())?;
+    Ok(format!("{} nodes, {} launches per step", g.nodes.len(), p.step.len()))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn inspect(
+    registry: &Registry,
+    path: &Path,
+    sets: &[String],
+    input_args: &[String],
+    outputs: &[String],
+    steps: u64,
+    fuse: bool,
+    dot: bool,
+) -> Result<(), CliError> {
+    let overrides = parse_sets(sets)?;
+    let g = load(registry, path, &LoadOptions { overrides, steps, seed: 0 })?;
+    let mut inputs = declared_input_types(&g);
+    for (name, arr) in read_inputs(&g, input_args)? {
+        inputs.insert(name, arr.ty);
+    }
+    let caps = match GpuContext::new() {
+        Ok(gpu) => gpu.caps.clone(),
+        Err(_) => DeviceCaps::baseline(),
+    };
+    let opts = PlanOptions { outputs: if outputs.is_empty() { None } else { Some(outputs.to_vec()) }, inputs, fuse };
+    let p: Plan = plan::plan(&g, &opts, &caps).map_err(|e| CliError::Input(e.to_string()))?;
+    if dot {
+        print!("{}", plan::to_dot(&g, &p));
+    } else {
+        print!("{}", plan::to_text(&g, &p));
+    }
+    Ok(())
+}
+
+fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
+    let mut shown = 0;
+    for k in registry.kinds() {
+        if only.is_some_and(|o| o != k.name()) {
+            continue;
+        }
+        shown += 1;
+        println!("{}: {}", k.name(), k.doc());
+        for p in k.inputs() {
+            println!("  in   {:<14} {}{} - {}", p.name, p.ty, if p.optional { " (optional)" } else { "" }, p.doc);
+        }
+        for p in k.outputs() {
+            println!("  out  {:<14} {}{} - {}", p.name, p.ty, if p.persistent { " (persistent)" } else { "" }, p.doc);
+        }
+        for p in k.params() {
+            println!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);
+        }
+        println!();
+    }
+    if shown == 0 {
+        let hint = only.and_then(|o| registry.suggest(o)).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
+        return Err(CliError::Input(format!("no node kind `{}`{hint}", only.unwrap_or(""))));
+    }
+    Ok(())
+}

@@ -1,0 +1,467 @@
+//! The executor: compiles a [`Plan`] into buffers, pipelines and bind groups once, then
+//! runs it. Only the executor submits to the queue.
+//!
+//! A run uploads the inputs, runs the prologue (state initial values), then records the
+//! time steps into compute passes, many dispatches per pass and several steps per
+//! submission, with at most two submissions in flight. Nothing comes back to the host
+//! between steps: the step index lives in a GPU buffer (the clock) that a tiny kernel
+//! advances at the end of every step, and states swap between two buffers by parity.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use thiserror::Error;
+
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, GpuContext, GpuError, KernelCache, KernelSpec, NodeIo, Slot, WG_1D};
+use crate::graph::Graph;
+use crate::node::Lowering;
+use crate::plan::{Launch, Phase, Plan, Storage, ValueId};
+use crate::value::HostArray;
+
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum ExecError {
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("node `{node}`: {source}")]
+    Compile { node: String, source: CompileError },
+    #[error("input `{name}`: {message}")]
+    Input { name: String, message: String },
+    #[error("{0}")]
+    Run(String),
+}
+
+/// How to run.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub steps: u64,
+    /// Time every launch on the GPU (timestamp queries; one host round trip per step).
+    pub profile: bool,
+    /// Draw a progress bar (on a terminal only).
+    pub progress: bool,
+}
+
+/// GPU time of one launch over a run.
+#[derive(Clone, Debug)]
+pub struct ProfileRow {
+    pub label: String,
+    pub kinds: String,
+    pub dispatches: usize,
+    pub calls: u64,
+    pub total: Duration,
+}
+
+#[derive(Clone, Debug)]
+pub struct RunStats {
+    pub steps: u64,
+    pub wall: Duration,
+    /// Per-launch GPU times when profiling; `timed_by_gpu` says whether timestamps were used.
+    pub profile: Vec<ProfileRow>,
+    pub timed_by_gpu: bool,
+}
+
+struct Compiled {
+    label: String,
+    kinds: String,
+    dispatches: Vec<Dispatch>,
+}
+
+/// A compiled plan, ready to run repeatedly.
+pub struct Program<'a> {
+    gpu: &'a GpuContext,
+    graph: &'a Graph,
+    plan: &'a Plan,
+    input_buffers: BTreeMap<usize, wgpu::Buffer>,
+    state_buffers: Vec<[wgpu::Buffer; 2]>,
+    buffers: Vec<wgpu::Buffer>,
+    clock: wgpu::Buffer,
+    prologue: Vec<Compiled>,
+    /// Step launches for even and odd steps (they differ only in state buffers).
+    step: [Vec<Compiled>; 2],
+    clock_tick: Dispatch,
+    /// Pipelines built for this program (cache misses).
+    pub kernels_built: usize,
+    /// Bytes nodes allocated for uniforms and tables.
+    pub table_bytes: u64,
+    steps_done: u64,
+}
+
+fn storage_buffer(gpu: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(16).next_multiple_of(16),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+impl<'a> Program<'a> {
+    /// Allocates the plan's buffers and compiles every launch.
+    pub fn compile(gpu: &'a GpuContext, graph: &'a Graph, plan: &'a Plan, cache: &mut KernelCache) -> Result<Self, ExecError> {
+        let built_before = cache.built;
+        let input_buffers = plan
+            .inputs
+            .iter()
+            .map(|(i, t)| (*i, storage_buffer(gpu, &format!("inputs.{}", graph.inputs[*i].name), t.bytes())))
+            .collect();
+        let state_buffers = plan
+            .states
+            .iter()
+            .map(|s| {
+                [
+                    storage_buffer(gpu, &format!("state.{} A", s.name), s.ty.bytes()),
+                    storage_buffer(gpu, &format!("state.{} B", s.name), s.ty.bytes()),
+                ]
+            })
+            .collect();
+        let buffers = plan.buffers.iter().enumerate().map(|(i, b)| storage_buffer(gpu, &format!("buf {i}"), b.bytes)).collect();
+        let clock = storage_buffer(gpu, "clock", 16);
+        let mut cx = CompileCtx { gpu, kernels: cache, clock: &clock, allocated: std::cell::Cell::new(0) };
+        let tick_kernel = cx
+            .kernel(&KernelSpec::new("clock_tick", cx.shader("engine/clock_tick.wgsl").map_err(engine_err)?, &[Binding::StorageReadWrite]))
+            .map_err(engine_err)?;
+        let clock_tick = cx.dispatch(&tick_kernel, &[&clock], [1, 1, 1]);
+        let mut program = Program {
+            gpu,
+            graph,
+            plan,
+            input_buffers,
+            state_buffers,
+            buffers,
+            clock: clock.clone(),
+            prologue: Vec::new(),
+            step: [Vec::new(), Vec::new()],
+            clock_tick,
+            kernels_built: 0,
+            table_bytes: 0,
+            steps_done: 0,
+        };
+        let mut prologue = Vec::new();
+        for l in &plan.prologue {
+            prologue.push(program.compile_launch(&mut cx, l, 0)?);
+        }
+        let mut even = Vec::new();
+        let mut odd = Vec::new();
+        for l in &plan.step {
+            let c0 = program.compile_launch(&mut cx, l, 0)?;
+            let touches_state = l
+                .reads()
+                .into_iter()
+                .chain(l.writes())
+                .any(|v| matches!(plan.values[v].storage, Storage::State { .. }));
+            let c1 = if touches_state {
+                program.compile_launch(&mut cx, l, 1)?
+            } else {
+                Compiled { label: c0.label.clone(), kinds: c0.kinds.clone(), dispatches: c0.dispatches.clone() }
+            };
+            even.push(c0);
+            odd.push(c1);
+        }
+        let table_bytes = cx.allocated.get();
+        drop(cx);
+        program.prologue = prologue;
+        program.step = [even, odd];
+        program.table_bytes = table_bytes;
+        program.kernels_built = cache.built - built_before;
+        gpu.take_errors()?;
+        Ok(program)
+    }
+
+    /// The buffer of a value for a step of the given parity.
+    fn buffer(&self, v: ValueId, parity: usize) -> &wgpu::Buffer {
+        match self.plan.values[v].storage {
+            Storage::Input(i) => &self.input_buffers[&i],
+            Storage::State { state, next } => &self.state_buffers[state][if next { 1 - parity } else { parity }],
+            Storage::Buffer(b) => &self.buffers[b],
+            Storage::Register | Storage::Pending(_) => {
+                panic!("value `{}` has no buffer", self.plan.values[v].name)
+            }
+        }
+    }
+
+    fn compile_launch(&self, cx: &mut CompileCtx, l: &Launch, parity: usize) -> Result<Compiled, ExecError> {
+        let g = self.graph;
+        match l {
+            Launch::Node { node, inputs, outputs, scratch } => {
+                let inst = &g.nodes[*node];
+                let io = NodeIo {
+                    inputs: inputs
+                        .iter()
+                        .map(|v| v.map(|v| Slot { buffer: self.buffer(v, parity), ty: self.plan.values[v].ty }))
+                        .collect(),
+                    outputs: outputs.iter().map(|&v| Slot { buffer: self.buffer(v, parity), ty: self.plan.values[v].ty }).collect(),
+                    scratch: scratch.iter().map(|&v| self.buffer(v, parity)).collect(),
+                };
+                let Lowering::Kernels(k) = inst.node.lowering() else {
+                    panic!("pointwise node `{}` scheduled as a single launch", inst.id)
+                };
+                let dispatches =
+                    k.compile(cx, &io).map_err(|source| ExecError::Compile { node: inst.id.clone(), source })?;
+                Ok(Compiled { label: inst.id.clone(), kinds: inst.kind.to_string(), dispatches })
+            }
+            Launch::Fused(k) => {
+                let ids: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].id.as_str()).collect();
+                let kinds: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].kind).collect();
+                let label = if ids.len() == 1 { ids[0].to_string() } else { format!("fused[{}]", ids.join(", ")) };
+                let mut bindings = vec![Binding::StorageRead];
+                bindings.extend(k.inputs.iter().map(|_| Binding::StorageRead));
+                bindings.extend(k.outputs.iter().map(|_| Binding::StorageReadWrite));
+                let spec = KernelSpec::new(format!("pointwise {}", kinds.join("+")), k.source.clone(), &bindings);
+                let kernel = cx.kernel(&spec).map_err(|source| ExecError::Compile { node: label.clone(), source })?;
+                let params = cx.table("pointwise params", bytemuck::cast_slice(&k.params));
+                let mut bufs: Vec<&wgpu::Buffer> = vec![&params];
+                bufs.extend(k.inputs.iter().map(|&v| self.buffer(v, parity)));
+                bufs.extend(k.outputs.iter().map(|&v| self.buffer(v, parity)));
+                let d = cx.dispatch(&kernel, &bufs, cx.grid_1d(k.len, WG_1D));
+                Ok(Compiled { label, kinds: kinds.join("+"), dispatches: vec![d] })
+            }
+            Launch::Copy { src, dst } => {
+                let words = self.plan.values[*src].ty.words();
+                let kernel = cx
+                    .kernel(&KernelSpec::new(
+                        "copy",
+                        cx.shader("engine/copy.wgsl").map_err(engine_err)?,
+                        &[Binding::StorageRead, Binding::StorageReadWrite, Binding::Uniform],
+                    ))
+                    .map_err(engine_err)?;
+                let shape = cx.uniform("copy shape", bytemuck::bytes_of(&(words as u32)));
+                let d = cx.dispatch(&kernel, &[self.buffer(*src, parity), self.buffer(*dst, parity), &shape], cx.grid_1d(words, WG_1D));
+                let label = format!("copy -> {}", self.plan.values[*dst].name);
+                Ok(Compiled { label, kinds: "copy".into(), dispatches: vec![d] })
+            }
+        }
+    }
+
+    /// Uploads the given graph inputs; their types must be the planned ones.
+    pub fn upload(&self, inputs: &BTreeMap<String, HostArray>) -> Result<(), ExecError> {
+        for (i, t) in &self.plan.inputs {
+            let name = &self.graph.inputs[*i].name;
+            let a = inputs.get(name).ok_or_else(|| ExecError::Input { name: name.clone(), message: "not given".into() })?;
+            if a.ty != *t {
+                return Err(ExecError::Input { name: name.clone(), message: format!("planned as {t}, given {}", a.ty) });
+            }
+            if !a.data.is_empty() {
+                self.gpu.queue.write_buffer(&self.input_buffers[i], 0, a.data.as_bytes());
+            }
+        }
+        Ok(())
+    }
+
+    fn record(pass: &mut wgpu::ComputePass, dispatches: &[Dispatch]) {
+        for d in dispatches {
+            if d.workgroups.contains(&0) {
+                continue;
+            }
+            pass.set_pipeline(&d.kernel.pipeline);
+            pass.set_bind_group(0, &d.bind_group, &[]);
+            pass.dispatch_workgroups(d.workgroups[0], d.workgroups[1], d.workgroups[2]);
+        }
+    }
+
+    /// Resets persistent values and the clock, then runs the prologue.
+    fn start(&mut self) -> Result<(), ExecError> {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        for (b, info) in self.buffers.iter().zip(&self.plan.buffers) {
+            if info.role == crate::plan::BufferRole::Persistent {
+                enc.clear_buffer(b, 0, None);
+            }
+        }
+        enc.clear_buffer(&self.clock, 0, None);
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            for c in &self.prologue {
+                Self::record(&mut pass, &c.dispatches);
+            }
+        }
+        let idx = self.gpu.queue.submit([enc.finish()]);
+        self.gpu.wait(idx)?;
+        self.steps_done = 0;
+        Ok(())
+    }
+
+    /// Runs the prologue and `steps` time steps.
+    pub fn run(&mut self, opts: &RunOptions) -> Result<RunStats, ExecError> {
+        if opts.steps == 0 {
+            return Err(ExecError::Run("the number of steps must be at least 1".into()));
+        }
+        let t0 = Instant::now();
+        self.start()?;
+        let stats = if opts.profile { self.run_profiled(opts.steps)? } else { self.run_batched(opts)? };
+        Ok(RunStats { wall: t0.elapsed(), ..stats })
+    }
+
+    fn run_batched(&mut self, opts: &RunOptions) -> Result<RunStats, ExecError> {
+        let per_step: usize = self.step[0].iter().map(|c| c.dispatches.len()).sum::<usize>() + 1;
+        // Several steps per submission, bounded so that the progress bar moves and the
+        // driver's queue stays shallow.
+        let steps_per_submit = ((4096 / per_step).max(1) as u64).min(opts.steps);
+        let bar = if opts.progress && opts.steps > 1 {
+            let b = indicatif::ProgressBar::new(opts.steps);
+            b.set_style(
+                indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {per_sec}  eta {eta}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            Some(b)
+        } else {
+            None
+        };
+        let mut in_flight: Option<(wgpu::SubmissionIndex, u64)> = None;
+        let mut done = 0;
+        while done < opts.steps {
+            let n = steps_per_submit.min(opts.steps - done);
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                for s in 0..n {
+                    let parity = ((self.steps_done + done + s) % 2) as usize;
+                    for c in &self.step[parity] {
+                        Self::record(&mut pass, &c.dispatches);
+                    }
+                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick));
+                }
+            }
+            let idx = self.gpu.queue.submit([enc.finish()]);
+            if let Some((prev, k)) = in_flight.take() {
+                self.gpu.wait(prev)?;
+                if let Some(b) = &bar {
+                    b.inc(k);
+                }
+            }
+            in_flight = Some((idx, n));
+            done += n;
+        }
+        if let Some((prev, k)) = in_flight {
+            self.gpu.wait(prev)?;
+            if let Some(b) = &bar {
+                b.inc(k);
+            }
+        }
+        if let Some(b) = bar {
+            b.finish_and_clear();
+        }
+        self.steps_done += opts.steps;
+        Ok(RunStats { steps: opts.steps, wall: Duration::ZERO, profile: Vec::new(), timed_by_gpu: false })
+    }
+
+    /// Runs steps one launch per compute pass with timestamps around each pass (or with a
+    /// wait after each launch where the device has no timestamp queries).
+    fn run_profiled(&mut self, steps: u64) -> Result<RunStats, ExecError> {
+        let launches = self.step[0].len();
+        let mut rows: Vec<ProfileRow> = self.step[0]
+            .iter()
+            .map(|c| ProfileRow {
+                label: c.label.clone(),
+                kinds: c.kinds.clone(),
+                dispatches: c.dispatches.len(),
+                calls: 0,
+                total: Duration::ZERO,
+            })
+            .collect();
+        let use_gpu = self.gpu.caps.timestamps;
+        let count = (2 * launches).max(2) as u32;
+        let queries = use_gpu.then(|| {
+            self.gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("profile"),
+                ty: wgpu::QueryType::Timestamp,
+                count,
+            })
+        });
+        let resolve = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("profile resolve"),
+            size: 8 * count as u64,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let period = self.gpu.queue.get_timestamp_period() as f64;
+        for s in 0..steps {
+            let parity = ((self.steps_done + s) % 2) as usize;
+            if let Some(qs) = &queries {
+                let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+                for (i, c) in self.step[parity].iter().enumerate() {
+                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some(&c.label),
+                        timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
+                            query_set: qs,
+                            beginning_of_pass_write_index: Some(2 * i as u32),
+                            end_of_pass_write_index: Some(2 * i as u32 + 1),
+                        }),
+                    });
+                    Self::record(&mut pass, &c.dispatches);
+                }
+                {
+                    let mut pass = enc.begin_compute_pass(&Default::default());
+                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick));
+                }
+                if launches > 0 {
+                    enc.resolve_query_set(qs, 0..2 * launches as u32, &resolve, 0);
+                }
+                let idx = self.gpu.queue.submit([enc.finish()]);
+                self.gpu.wait(idx)?;
+                if launches > 0 {
+                    let bytes = self.gpu.read_buffer(&resolve, 16 * launches as u64)?;
+                    let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
+                    for (i, row) in rows.iter_mut().enumerate() {
+                        let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period;
+                        row.total += Duration::from_nanos(dt as u64);
+                        row.calls += 1;
+                    }
+                }
+            } else {
+                for (i, c) in self.step[parity].iter().enumerate() {
+                    let t = Instant::now();
+                    let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+                    {
+                        let mut pass = enc.begin_compute_pass(&Default::default());
+                        Self::record(&mut pass, &c.dispatches);
+                    }
+                    let idx = self.gpu.queue.submit([enc.finish()]);
+                    self.gpu.wait(idx)?;
+                    rows[i].total += t.elapsed();
+                    rows[i].calls += 1;
+                }
+                let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+                {
+                    let mut pass = enc.begin_compute_pass(&Default::default());
+                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick));
+                }
+                let idx = self.gpu.queue.submit([enc.finish()]);
+                self.gpu.wait(idx)?;
+            }
+        }
+        self.steps_done += steps;
+        Ok(RunStats { steps, wall: Duration::ZERO, profile: rows, timed_by_gpu: use_gpu })
+    }
+
+    /// Reads back the requested outputs (their values after the last step run).
+    pub fn read_outputs(&self) -> Result<Vec<(String, HostArray)>, ExecError> {
+        if self.steps_done == 0 {
+            return Err(ExecError::Run("outputs are read after a run".into()));
+        }
+        let parity = ((self.steps_done - 1) % 2) as usize;
+        let mut out = Vec::new();
+        for (name, v) in &self.plan.outputs {
+            let ty = self.plan.values[*v].ty;
+            let bytes = self.gpu.read_buffer(self.buffer(*v, parity), ty.bytes())?;
+            out.push((name.clone(), HostArray::from_bytes(ty, &bytes)));
+        }
+        Ok(out)
+    }
+
+    /// Number of dispatches recorded per step (the clock tick included).
+    pub fn dispatches_per_step(&self) -> usize {
+        self.step[0].iter().map(|c| c.dispatches.len()).sum::<usize>() + 1
+    }
+
+    /// Which phase each compiled launch belongs to, with its label (for reports).
+    pub fn launch_labels(&self) -> Vec<(Phase, String)> {
+        self.prologue
+            .iter()
+            .map(|c| (Phase::Prologue, c.label.clone()))
+            .chain(self.step[0].iter().map(|c| (Phase::Step, c.label.clone())))
+            .collect()
+    }
+}
+
+fn engine_err(source: CompileError) -> ExecError {
+    ExecError::Compile { node: "(engine)".into(), source }
+}

@@ -1,0 +1,495 @@
+//! Parameter values and the small arithmetic language graph files use to derive them.
+//!
+//! A node param in a graph file may be a literal (`0.5`, `"gaussian"`, `[64, 64, 32]`),
+//! a reference to a graph param (`"$box"`, which keeps the referenced value's type), or an
+//! expression (`"= sqrt(2*temperature*dt)"`), evaluated in f64 over the graph params.
+//!
+//! Written here rather than taken from a crate: the well-known evaluators either divide
+//! integers as integers (`2/3 = 0`, a silent trap in physics formulas) or are AGPL.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+/// The value of a param after resolution.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ParamValue {
+    Number(f64),
+    Text(String),
+    Numbers(Vec<f64>),
+    Bool(bool),
+}
+
+impl ParamValue {
+    /// Converts a JSON literal. Objects, nested arrays and nulls are not param values.
+    pub fn from_json(v: &serde_json::Value) -> Result<ParamValue, String> {
+        use serde_json::Value;
+        match v {
+            Value::Number(n) => n
+                .as_f64()
+                .map(ParamValue::Number)
+                .ok_or_else(|| format!("number {n} is out of range")),
+            Value::String(s) => Ok(ParamValue::Text(s.clone())),
+            Value::Bool(b) => Ok(ParamValue::Bool(*b)),
+            Value::Array(items) => items
+                .iter()
+                .map(|x| x.as_f64().ok_or_else(|| format!("array element {x} is not a number")))
+                .collect::<Result<Vec<_>, _>>()
+                .map(ParamValue::Numbers),
+            Value::Null => Err("null is not a param value".into()),
+            Value::Object(_) => Err("an object is not a param value".into()),
+        }
+    }
+
+    /// Parses a command-line `--set` value: a JSON number or array, `true`/`false`, or else
+    /// a plain string.
+    pub fn from_cli(text: &str) -> Result<ParamValue, String> {
+        let t = text.trim();
+        if t.starts_with('[') {
+            let v: serde_json::Value =
+                serde_json::from_str(t).map_err(|e| format!("`{t}` is not a JSON array: {e}"))?;
+            return ParamValue::from_json(&v);
+        }
+        if let Ok(v @ serde_json::Value::Number(_)) = serde_json::from_str::<serde_json::Value>(t) {
+            return ParamValue::from_json(&v);
+        }
+        match t {
+            "true" => Ok(ParamValue::Bool(true)),
+            "false" => Ok(ParamValue::Bool(false)),
+            _ => Ok(ParamValue::Text(t.to_string())),
+        }
+    }
+
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            ParamValue::Number(_) => "a number",
+            ParamValue::Text(_) => "a string",
+            ParamValue::Numbers(_) => "an array of numbers",
+            ParamValue::Bool(_) => "a boolean",
+        }
+    }
+
+    pub fn to_json(&self) -> serde_json::Value {
+        match self {
+            ParamValue::Number(x) => json_number(*x),
+            ParamValue::Text(s) => serde_json::Value::String(s.clone()),
+            ParamValue::Numbers(v) => serde_json::Value::Array(v.iter().map(|&x| json_number(x)).collect()),
+            ParamValue::Bool(b) => serde_json::Value::Bool(*b),
+        }
+    }
+}
+
+fn json_number(x: f64) -> serde_json::Value {
+    serde_json::Number::from_f64(x).map(serde_json::Value::Number).unwrap_or(serde_json::Value::Null)
+}
+
+impl fmt::Display for ParamValue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ParamValue::Number(x) => write!(f, "{x}"),
+            ParamValue::Text(s) => write!(f, "\"{s}\""),
+            ParamValue::Numbers(v) => {
+                write!(f, "[")?;
+                for (i, x) in v.iter().enumerate() {
+                    if i > 0 {
+                        write!(f, ", ")?;
+                    }
+                    write!(f, "{x}")?;
+                }
+                write!(f, "]")
+            }
+            ParamValue::Bool(b) => write!(f, "{b}"),
+        }
+    }
+}
+
+/// Names visible to expressions.
+pub type Scope = BTreeMap<String, ParamValue>;
+
+/// Resolves a param as written in a graph file: a literal, a `$name` reference, or an
+/// `= expression`.
+pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, String> {
+    if let serde_json::Value::String(s) = v {
+        if let Some(name) = s.strip_prefix('$') {
+            let name = name.trim();
+            return scope.get(name).cloned().ok_or_else(|| unknown_name(name, scope));
+        }
+        if let Some(expr) = s.strip_prefix('=') {
+            return eval(expr, scope).map(ParamValue::Number);
+        }
+    }
+    ParamValue::from_json(v)
+}
+
+fn unknown_name(name: &str, scope: &Scope) -> String {
+    let known: Vec<&str> = scope.keys().map(|s| s.as_str()).collect();
+    format!("unknown param `{name}` (graph params: {})", known.join(", "))
+}
+
+/// Evaluates an arithmetic expression in f64.
+///
+/// Grammar: numbers, names of graph params, `+ - * / ^` (power, right-associative),
+/// unary minus, parentheses, indexing of array params (`box[0]`), the constant `pi`, and
+/// the functions sqrt, cbrt, exp, log (natural), log10, sin, cos, tan, atan, abs, floor,
+/// ceil, round, pow(x, y), min(...), max(...), sum(...), prod(...) (the last four also
+/// take arrays).
+pub fn eval(text: &str, scope: &Scope) -> Result<f64, String> {
+    let mut p = Parser { src: text, toks: lex(text)?, pos: 0, scope };
+    let v = p.expr()?;
+    if p.pos != p.toks.len() {
+        return Err(format!("unexpected `{}` in expression `{}`", p.toks[p.pos].text(), text.trim()));
+    }
+    let x = v.number(text)?;
+    if !x.is_finite() {
+        return Err(format!("expression `{}` is not finite ({x})", text.trim()));
+    }
+    Ok(x)
+}
+
+#[derive(Clone, Debug, PartialEq)]
+enum Tok {
+    Num(f64),
+    Name(String),
+    Op(char),
+}
+
+impl Tok {
+    fn text(&self) -> String {
+        match self {
+            Tok::Num(x) => x.to_string(),
+            Tok::Name(s) => s.clone(),
+            Tok::Op(c) => c.to_string(),
+        }
+    }
+}
+
+fn lex(s: &str) -> Result<Vec<Tok>, String> {
+    let b = s.as_bytes();
+    let mut i = 0;
+    let mut out = Vec::new();
+    while i < b.len() {
+        let c = b[i] as char;
+        if c.is_ascii_whitespace() {
+            i += 1;
+        } else if c.is_ascii_digit() || c == '.' {
+            let start = i;
+            while i < b.len() && (b[i].is_ascii_digit() || b[i] == b'.') {
+                i += 1;
+            }
+            if i < b.len() && (b[i] == b'e' || b[i] == b'E') {
+                let save = i;
+                i += 1;
+                if i < b.len() && (b[i] == b'+' || b[i] == b'-') {
+                    i += 1;
+                }
+                if i < b.len() && b[i].is_ascii_digit() {
+                    while i < b.len() && b[i].is_ascii_digit() {
+                        i += 1;
+                    }
+                } else {
+                    i = save;
+                }
+            }
+            let t = &s[start..i];
+            out.push(Tok::Num(t.parse().map_err(|_| format!("bad number `{t}` in expression `{}`", s.trim()))?));
+        } else if c.is_ascii_alphabetic() || c == '_' {
+            let start = i;
+            while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
+                i += 1;
+            }
+            out.push(Tok::Name(s[start..i].to_string()));
+        } else if "+-*/^(),[]".contains(c) {
+            out.push(Tok::Op(c));
+            i += 1;
+        } else {
+            return Err(format!("unexpected character `{c}` in expression `{}`", s.trim()));
+        }
+    }
+    Ok(out)
+}
+
+/// An intermediate value: expressions compute numbers, but names may denote arrays.
+enum V {
+    Num(f64),
+    Arr(Vec<f64>),
+}
+
+impl V {
+    fn number(self, src: &str) -> Result<f64, String> {
+        match self {
+            V::Num(x) => Ok(x),
+            V::Arr(_) => Err(format!("expression `{}` gives an array where a number is needed", src.trim())),
+        }
+    }
+}
+
+struct Parser<'a> {
+    src: &'a str,
+    toks: Vec<Tok>,
+    pos: usize,
+    scope: &'a Scope,
+}
+
+impl Parser<'_> {
+    fn peek_op(&self, c: char) -> bool {
+        matches!(self.toks.get(self.pos), Some(Tok::Op(o)) if *o == c)
+    }
+
+    fn expect(&mut self, c: char) -> Result<(), String> {
+        if self.peek_op(c) {
+            self.pos += 1;
+            Ok(())
+        } else {
+            Err(format!("expected `{c}` in expression `{}`", self.src.trim()))
+        }
+    }
+
+    fn num(&mut self) -> Result<f64, String> {
+        let src = self.src;
+        self.unary()?.number(src)
+    }
+
+    fn expr(&mut self) -> Result<V, String> {
+        let mut lhs = self.term()?;
+        while self.peek_op('+') || self.peek_op('-') {
+            let op = self.toks[self.pos].clone();
+            self.pos += 1;
+            let a = lhs.number(self.src)?;
+            let b = self.term()?.number(self.src)?;
+            lhs = V::Num(if op == Tok::Op('+') { a + b } else { a - b });
+        }
+        Ok(lhs)
+    }
+
+    fn term(&mut self) -> Result<V, String> {
+        let mut lhs = self.unary()?;
+        while self.peek_op('*') || self.peek_op('/') {
+            let op = self.toks[self.pos].clone();
+            self.pos += 1;
+            let a = lhs.number(self.src)?;
+            let b = self.num()?;
+            lhs = V::Num(if op == Tok::Op('*') { a * b } else { a / b });
+        }
+        Ok(lhs)
+    }
+
+    fn unary(&mut self) -> Result<V, String> {
+        if self.peek_op('-') {
+            self.pos += 1;
+            let x = self.num()?;
+            return Ok(V::Num(-x));
+        }
+        if self.peek_op('+') {
+            self.pos += 1;
+            return self.unary();
+        }
+        self.power()
+    }
+
+    fn power(&mut self) -> Result<V, String> {
+        let base = self.postfix()?;
+        if self.peek_op('^') {
+            self.pos += 1;
+            let a = base.number(self.src)?;
+            let b = self.num()?; // right-associative through unary -> power
+            return Ok(V::Num(a.powf(b)));
+        }
+        Ok(base)
+    }
+
+    fn postfix(&mut self) -> Result<V, String> {
+        let mut v = self.atom()?;
+        while self.peek_op('[') {
+            self.pos += 1;
+            let idx = self.expr()?.number(self.src)?;
+            self.expect(']')?;
+            let arr = match v {
+                V::Arr(a) => a,
+                V::Num(_) => return Err(format!("indexing a number in expression `{}`", self.src.trim())),
+            };
+            if idx < 0.0 || idx.fract() != 0.0 || idx as usize >= arr.len() {
+                return Err(format!(
+                    "index {idx} out of range for an array of length {} in expression `{}`",
+                    arr.len(),
+                    self.src.trim()
+                ));
+            }
+            v = V::Num(arr[idx as usize]);
+        }
+        Ok(v)
+    }
+
+    fn atom(&mut self) -> Result<V, String> {
+        let tok = self
+            .toks
+            .get(self.pos)
+            .cloned()
+            .ok_or_else(|| format!("expression `{}` ends too early", self.src.trim()))?;
+        self.pos += 1;
+        match tok {
+            Tok::Num(x) => Ok(V::Num(x)),
+            Tok::Op('(') => {
+                let v = self.expr()?;
+                self.expect(')')?;
+                Ok(v)
+            }
+            Tok::Name(name) => {
+                if self.peek_op('(') {
+                    self.pos += 1;
+                    let mut args = Vec::new();
+                    if !self.peek_op(')') {
+                        loop {
+                            args.push(self.expr()?);
+                            if self.peek_op(',') {
+                                self.pos += 1;
+                            } else {
+                                break;
+                            }
+                        }
+                    }
+                    self.expect(')')?;
+                    return self.call(&name, args);
+                }
+                if let Some(v) = self.scope.get(&name) {
+                    return match v {
+                        ParamValue::Number(x) => Ok(V::Num(*x)),
+                        ParamValue::Numbers(a) => Ok(V::Arr(a.clone())),
+                        ParamValue::Bool(b) => Ok(V::Num(if *b { 1.0 } else { 0.0 })),
+                        ParamValue::Text(_) => Err(format!(
+                            "param `{name}` is a string and cannot be used in expression `{}`",
+                            self.src.trim()
+                        )),
+                    };
+                }
+                if name == "pi" {
+                    return Ok(V::Num(std::f64::consts::PI));
+                }
+                Err(format!("{} in expression `{}`", unknown_name(&name, self.scope), self.src.trim()))
+            }
+            Tok::Op(c) => Err(format!("unexpected `{c}` in expression `{}`", self.src.trim())),
+        }
+    }
+
+    fn call(&self, name: &str, args: Vec<V>) -> Result<V, String> {
+        let src = self.src.trim();
+        let flat = |args: Vec<V>| -> Vec<f64> {
+            args.into_iter()
+                .flat_map(|a| match a {
+                    V::Num(x) => vec![x],
+                    V::Arr(v) => v,
+                })
+                .collect()
+        };
+        let unary = |args: Vec<V>, f: fn(f64) -> f64| -> Result<V, String> {
+            if args.len() != 1 {
+                return Err(format!("`{name}` takes one argument in expression `{src}`"));
+            }
+            let x = args.into_iter().next().map(|a| a.number(src)).transpose()?.unwrap_or(0.0);
+            Ok(V::Num(f(x)))
+        };
+        match name {
+            "sqrt" => unary(args, f64::sqrt),
+            "cbrt" => unary(args, f64::cbrt),
+            "exp" => unary(args, f64::exp),
+            "log" => unary(args, f64::ln),
+            "log10" => unary(args, f64::log10),
+            "sin" => unary(args, f64::sin),
+            "cos" => unary(args, f64::cos),
+            "tan" => unary(args, f64::tan),
+            "atan" => unary(args, f64::atan),
+            "abs" => unary(args, f64::abs),
+            "floor" => unary(args, f64::floor),
+            "ceil" => unary(args, f64::ceil),
+            "round" => unary(args, f64::round),
+            "pow" => {
+                let v = flat(args);
+                if v.len() != 2 {
+                    return Err(format!("`pow` takes two arguments in expression `{src}`"));
+                }
+                Ok(V::Num(v[0].powf(v[1])))
+            }
+            "min" | "max" | "sum" | "prod" => {
+                let v = flat(args);
+                if v.is_empty() {
+                    return Err(format!("`{name}` needs at least one value in expression `{src}`"));
+                }
+                Ok(V::Num(match name {
+                    "min" => v.iter().cloned().fold(f64::INFINITY, f64::min),
+                    "max" => v.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+                    "sum" => v.iter().sum(),
+                    _ => v.iter().product(),
+                }))
+            }
+            _ => Err(format!("unknown function `{name}` in expression `{src}`")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scope() -> Scope {
+        let mut s = Scope::new();
+        s.insert("dt".into(), ParamValue::Number(0.01));
+        s.insert("temperature".into(), ParamValue::Number(2.0));
+        s.insert("box".into(), ParamValue::Numbers(vec![64.0, 32.0, 16.0]));
+        s.insert("kernel".into(), ParamValue::Text("gaussian".into()));
+        s
+    }
+
+    #[test]
+    fn arithmetic_is_f64_not_integer() {
+        let s = scope();
+        assert_eq!(eval("2/3", &s).unwrap(), 2.0 / 3.0);
+        assert_eq!(eval("1 + 2*3 - 4", &s).unwrap(), 3.0);
+        assert_eq!(eval("2^3^2", &s).unwrap(), 512.0); // right-associative
+        assert_eq!(eval("-2^2", &s).unwrap(), -4.0);
+        assert_eq!(eval("1e-3 * 2E+2", &s).unwrap(), 0.2);
+    }
+
+    #[test]
+    fn names_functions_and_indexing() {
+        let s = scope();
+        assert!((eval("sqrt(2*temperature*dt)", &s).unwrap() - 0.2).abs() < 1e-15);
+        assert_eq!(eval("box[1] / 2", &s).unwrap(), 16.0);
+        assert_eq!(eval("prod(box)", &s).unwrap(), 64.0 * 32.0 * 16.0);
+        assert_eq!(eval("max(box, 100)", &s).unwrap(), 100.0);
+        assert_eq!(eval("pi", &s).unwrap(), std::f64::consts::PI);
+    }
+
+    #[test]
+    fn errors_name_the_problem() {
+        let s = scope();
+        assert!(eval("viscosity * 2", &s).unwrap_err().contains("unknown param `viscosity`"));
+        assert!(eval("box[3]", &s).unwrap_err().contains("out of range"));
+        assert!(eval("box", &s).unwrap_err().contains("array"));
+        assert!(eval("kernel + 1", &s).unwrap_err().contains("string"));
+        assert!(eval("1 +", &s).unwrap_err().contains("ends too early"));
+        assert!(eval("(1", &s).unwrap_err().contains("expected `)`"));
+        assert!(eval("1/0", &s).unwrap_err().contains("not finite"));
+        assert!(eval("foo(1)", &s).unwrap_err().contains("unknown function"));
+        assert!(eval("1 # 2", &s).unwrap_err().contains("unexpected character"));
+    }
+
+    #[test]
+    fn resolve_literals_references_expressions() {
+        let s = scope();
+        let j = |t: &str| serde_json::from_str::<serde_json::Value>(t).unwrap();
+        assert_eq!(resolve(&j("0.5"), &s).unwrap(), ParamValue::Number(0.5));
+        assert_eq!(resolve(&j("\"$kernel\""), &s).unwrap(), ParamValue::Text("gaussian".into()));
+        assert_eq!(resolve(&j("\"$box\""), &s).unwrap(), ParamValue::Numbers(vec![64.0, 32.0, 16.0]));
+        assert_eq!(resolve(&j("\"= dt * 100\""), &s).unwrap(), ParamValue::Number(1.0));
+        assert_eq!(resolve(&j("\"es\""), &s).unwrap(), ParamValue::Text("es".into()));
+        assert!(resolve(&j("\"$nope\""), &s).is_err());
+        assert!(resolve(&j("null"), &s).is_err());
+    }
+
+    #[test]
+    fn cli_values() {
+        assert_eq!(ParamValue::from_cli("3").unwrap(), ParamValue::Number(3.0));
+        assert_eq!(ParamValue::from_cli("[64,64,32]").unwrap(), ParamValue::Numbers(vec![64.0, 64.0, 32.0]));
+        assert_eq!(ParamValue::from_cli("es").unwrap(), ParamValue::Text("es".into()));
+        assert_eq!(ParamValue::from_cli("true").unwrap(), ParamValue::Bool(true));
+        assert!(ParamValue::from_cli("[1, \"a\"]").is_err());
+    }
+}

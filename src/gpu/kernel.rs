@@ -1,0 +1,288 @@
+//! Compute kernels (pipeline + explicit bind-group layout), their cache keyed by source and
+//! constants, and the recorded unit of GPU work, [`Dispatch`]. Nodes build dispatches
+//! through [`CompileCtx`]; only the executor puts them into passes and submits.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use thiserror::Error;
+use wgpu::util::DeviceExt;
+
+use super::context::{DeviceCaps, GpuContext};
+use super::shaders;
+use crate::value::ValueType;
+
+/// Errors while turning nodes into pipelines and dispatches.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum CompileError {
+    #[error("shader `{label}` failed to compile: {message}")]
+    Shader { label: String, message: String },
+    #[error("shader library: {0}")]
+    Library(String),
+    #[error("{0}")]
+    Unsupported(String),
+}
+
+/// How a kernel sees one binding (all bindings are in group 0, numbered in order).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Binding {
+    StorageRead,
+    StorageReadWrite,
+    Uniform,
+}
+
+/// Everything that identifies a compiled kernel.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct KernelSpec {
+    pub label: String,
+    /// Complete WGSL (imports already resolved).
+    pub source: String,
+    pub entry: String,
+    /// WGSL `override` constants, as (name, value bits) so the key is hashable.
+    pub constants: Vec<(String, u64)>,
+    pub bindings: Vec<Binding>,
+}
+
+impl KernelSpec {
+    pub fn new(label: impl Into<String>, source: impl Into<String>, bindings: &[Binding]) -> Self {
+        KernelSpec {
+            label: label.into(),
+            source: source.into(),
+            entry: "main".into(),
+            constants: Vec::new(),
+            bindings: bindings.to_vec(),
+        }
+    }
+
+    pub fn entry(mut self, entry: &str) -> Self {
+        self.entry = entry.into();
+        self
+    }
+
+    pub fn constant(mut self, name: &str, value: f64) -> Self {
+        self.constants.push((name.into(), value.to_bits()));
+        self
+    }
+}
+
+/// A compiled compute pipeline with its explicit layout.
+pub struct Kernel {
+    pub label: String,
+    pub pipeline: wgpu::ComputePipeline,
+    pub layout: wgpu::BindGroupLayout,
+    pub bindings: Vec<Binding>,
+}
+
+/// Pipelines keyed by source, entry point, constants and bindings.
+#[derive(Default)]
+pub struct KernelCache {
+    map: HashMap<KernelSpec, Arc<Kernel>>,
+    /// How many pipelines were actually built (cache misses).
+    pub built: usize,
+}
+
+impl KernelCache {
+    pub fn get_or_build(&mut self, gpu: &GpuContext, spec: &KernelSpec) -> Result<Arc<Kernel>, CompileError> {
+        if let Some(k) = self.map.get(spec) {
+            return Ok(k.clone());
+        }
+        let k = Arc::new(build_kernel(gpu, spec)?);
+        self.built += 1;
+        self.map.insert(spec.clone(), k.clone());
+        Ok(k)
+    }
+
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
+fn build_kernel(gpu: &GpuContext, spec: &KernelSpec) -> Result<Kernel, CompileError> {
+    let device = &gpu.device;
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let entries: Vec<wgpu::BindGroupLayoutEntry> = spec
+        .bindings
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupLayoutEntry {
+            binding: i as u32,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: match b {
+                Binding::StorageRead => wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                Binding::StorageReadWrite => wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: false },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                Binding::Uniform => wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+            },
+            count: None,
+        })
+        .collect();
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(&spec.label),
+        entries: &entries,
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(&spec.label),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(&spec.label),
+        source: wgpu::ShaderSource::Wgsl(spec.source.as_str().into()),
+    });
+    let constants: Vec<(&str, f64)> = spec.constants.iter().map(|(n, b)| (n.as_str(), f64::from_bits(*b))).collect();
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(&spec.label),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some(&spec.entry),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants: &constants,
+            zero_initialize_workgroup_memory: false,
+        },
+        cache: None,
+    });
+    if let Some(err) = pollster::block_on(scope.pop()) {
+        return Err(CompileError::Shader { label: spec.label.clone(), message: err.to_string() });
+    }
+    Ok(Kernel { label: spec.label.clone(), pipeline, layout, bindings: spec.bindings.clone() })
+}
+
+/// One recorded dispatch: a kernel, its bind group and a workgroup count.
+#[derive(Clone)]
+pub struct Dispatch {
+    pub kernel: Arc<Kernel>,
+    pub bind_group: wgpu::BindGroup,
+    pub workgroups: [u32; 3],
+}
+
+/// A value's buffer as a node sees it.
+#[derive(Clone, Copy)]
+pub struct Slot<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub ty: ValueType,
+}
+
+/// The buffers of one node invocation, in port order.
+pub struct NodeIo<'a> {
+    pub inputs: Vec<Option<Slot<'a>>>,
+    pub outputs: Vec<Slot<'a>>,
+    pub scratch: Vec<&'a wgpu::Buffer>,
+}
+
+/// What a node may use while compiling: the device, the kernel cache, the engine clock.
+pub struct CompileCtx<'a> {
+    pub gpu: &'a GpuContext,
+    pub kernels: &'a mut KernelCache,
+    /// The engine clock: a storage buffer whose first u32 is the current step.
+    pub clock: &'a wgpu::Buffer,
+    /// Bytes of uniforms and tables created so far (reported with the plan's memory).
+    pub allocated: std::cell::Cell<u64>,
+}
+
+/// Workgroup size of the engine's 1-D kernels.
+pub const WG_1D: u32 = 256;
+
+impl CompileCtx<'_> {
+    pub fn caps(&self) -> &DeviceCaps {
+        &self.gpu.caps
+    }
+
+    /// Builds (or finds) a kernel.
+    pub fn kernel(&mut self, spec: &KernelSpec) -> Result<Arc<Kernel>, CompileError> {
+        self.kernels.get_or_build(self.gpu, spec)
+    }
+
+    /// A shader file from `shaders/` with its imports resolved.
+    pub fn shader(&self, path: &str) -> Result<String, CompileError> {
+        shaders::source(path).map_err(CompileError::Library)
+    }
+
+    /// A uniform buffer holding `bytes` (padded to 16 bytes).
+    pub fn uniform(&self, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+        let mut data = bytes.to_vec();
+        data.resize(bytes.len().max(16).next_multiple_of(16), 0);
+        self.allocated.set(self.allocated.get() + data.len() as u64);
+        self.gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &data,
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+    }
+
+    /// A read-only storage buffer holding a table computed on the host.
+    pub fn table(&self, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+        let mut data = bytes.to_vec();
+        data.resize(bytes.len().max(16).next_multiple_of(4), 0);
+        self.allocated.set(self.allocated.get() + data.len() as u64);
+        self.gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &data,
+            usage: wgpu::BufferUsages::STORAGE,
+        })
+    }
+
+    /// A dispatch of `kernel` with `buffers` bound in order.
+    pub fn dispatch(&self, kernel: &Arc<Kernel>, buffers: &[&wgpu::Buffer], workgroups: [u32; 3]) -> Dispatch {
+        assert_eq!(buffers.len(), kernel.bindings.len(), "kernel `{}`: wrong number of buffers", kernel.label);
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+            .collect();
+        let bind_group = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&kernel.label),
+            layout: &kernel.layout,
+            entries: &entries,
+        });
+        Dispatch { kernel: kernel.clone(), bind_group, workgroups }
+    }
+
+    /// Workgroup counts covering `items` threads in groups of `wg`, folded into (x, y)
+    /// because one dimension holds at most `max_workgroups_per_dim` groups. Kernels
+    /// rebuild the flat index as `(wid.y * nwg.x + wid.x) * wg + lid`.
+    pub fn grid_1d(&self, items: u64, wg: u32) -> [u32; 3] {
+        grid_1d(items, wg, self.caps().max_workgroups_per_dim)
+    }
+}
+
+/// See [`CompileCtx::grid_1d`].
+pub fn grid_1d(items: u64, wg: u32, max_per_dim: u32) -> [u32; 3] {
+    let groups = items.div_ceil(wg as u64);
+    if groups == 0 {
+        return [0, 1, 1];
+    }
+    let x = groups.min(max_per_dim as u64);
+    let y = groups.div_ceil(x);
+    [x as u32, y as u32, 1]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::grid_1d;
+
+    #[test]
+    fn grid_folds_past_the_dimension_cap() {
+        assert_eq!(grid_1d(0, 256, 65535), [0, 1, 1]);
+        assert_eq!(grid_1d(1, 256, 65535), [1, 1, 1]);
+        assert_eq!(grid_1d(256 * 65535, 256, 65535), [65535, 1, 1]);
+        let g = grid_1d(256 * 65535 + 1, 256, 65535);
+        assert_eq!(g, [65535, 2, 1]);
+        assert!(g[0] as u64 * g[1] as u64 * 256 >= 256 * 65535 + 1);
+    }
+}

@@ -1,0 +1,69 @@
+//! The WGSL library: every file under `shaders/`, embedded at build time.
+//!
+//! WGSL has no include mechanism, so a shader may start with lines
+//! `#import common/index.wgsl`; [`source`] replaces each with that file's text (each file
+//! once, recursively). Everything else is plain WGSL.
+
+mod files {
+    include!(concat!(env!("OUT_DIR"), "/shader_files.rs"));
+}
+
+/// All embedded shader paths, relative to `shaders/`.
+pub fn paths() -> impl Iterator<Item = &'static str> {
+    files::FILES.iter().map(|(p, _)| *p)
+}
+
+/// The raw text of one shader file.
+pub fn raw(path: &str) -> Option<&'static str> {
+    files::FILES.iter().find(|(p, _)| *p == path).map(|(_, s)| *s)
+}
+
+/// A shader's text with its `#import` lines resolved.
+pub fn source(path: &str) -> Result<String, String> {
+    let mut out = String::new();
+    let mut seen = Vec::new();
+    append(path, &mut out, &mut seen, &mut Vec::new())?;
+    Ok(out)
+}
+
+/// Resolves `#import` lines in a generated source.
+pub fn resolve(text: &str) -> Result<String, String> {
+    let mut out = String::new();
+    let mut seen = Vec::new();
+    append_text("<generated>", text, &mut out, &mut seen, &mut Vec::new())?;
+    Ok(out)
+}
+
+fn append(path: &str, out: &mut String, seen: &mut Vec<String>, stack: &mut Vec<String>) -> Result<(), String> {
+    if seen.iter().any(|s| s == path) {
+        return Ok(());
+    }
+    if stack.iter().any(|s| s == path) {
+        return Err(format!("import cycle: {} -> {path}", stack.join(" -> ")));
+    }
+    let text = raw(path).ok_or_else(|| format!("no shader file `shaders/{path}`"))?;
+    stack.push(path.to_string());
+    append_text(path, text, out, seen, stack)?;
+    stack.pop();
+    seen.push(path.to_string());
+    Ok(())
+}
+
+fn append_text(
+    name: &str,
+    text: &str,
+    out: &mut String,
+    seen: &mut Vec<String>,
+    stack: &mut Vec<String>,
+) -> Result<(), String> {
+    for line in text.lines() {
+        if let Some(rest) = line.trim_start().strip_prefix("#import") {
+            let dep = rest.trim();
+            append(dep, out, seen, stack).map_err(|e| format!("in {name}: {e}"))?;
+        } else {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    Ok(())
+}

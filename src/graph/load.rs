@@ -1,0 +1,789 @@
+//! Loading: file -> schema types -> flattened, validated [`Graph`].
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+use indexmap::IndexMap;
+
+use super::schema::{GraphFile, InputDecl, NodeDecl, ParamDecl, SCHEMA_VERSION};
+use super::{Dim, Graph, GraphParam, InputDef, InputShape, NodeInst, OutputDef, Problem, Problems, SizeDef, Source, StateDef};
+use crate::expr::{self, ParamValue, Scope};
+use crate::node::{Registry, check_params, edit_distance};
+
+/// Names every graph sees without declaring them.
+pub const BUILTIN_PARAMS: [&str; 2] = ["steps", "seed"];
+
+/// What the caller fixes before loading.
+#[derive(Clone, Debug)]
+pub struct LoadOptions {
+    /// Values for the top-level graph params (`--set`).
+    pub overrides: BTreeMap<String, ParamValue>,
+    /// Number of time steps the run will take (the built-in param `steps`).
+    pub steps: u64,
+    /// The run's random seed (the built-in param `seed`).
+    pub seed: u64,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions { overrides: BTreeMap::new(), steps: 1, seed: 0 }
+    }
+}
+
+/// Loads a graph file and everything it uses, reporting all problems together.
+pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Graph, Problems> {
+    let mut builtins = Scope::new();
+    builtins.insert("steps".into(), ParamValue::Number(opts.steps as f64));
+    builtins.insert("seed".into(), ParamValue::Number(opts.seed as f64));
+    let mut l = Loader {
+        registry,
+        builtins,
+        problems: Vec::new(),
+        pending_nodes: Vec::new(),
+        node_ids: HashMap::new(),
+        input_alias: HashMap::new(),
+        sub_outputs: HashMap::new(),
+        stack: Vec::new(),
+        root: RootParts::default(),
+    };
+    let overrides: IndexMap<String, ParamValue> = opts.overrides.clone().into_iter().collect();
+    l.load_file(path, "", &overrides, None);
+    l.finish(path)
+}
+
+/// An unresolved `node.port` reference and where it was written.
+#[derive(Clone, Debug)]
+struct PendingRef {
+    scope: String,
+    text: String,
+    file: PathBuf,
+    node: Option<String>,
+    port: Option<String>,
+}
+
+impl PendingRef {
+    fn problem(&self, message: String) -> Problem {
+        Problem { file: self.file.clone(), node: self.node.clone(), port: self.port.clone(), message }
+    }
+}
+
+enum Alias {
+    Root(usize),
+    Parent(PendingRef),
+    Absent,
+}
+
+enum NodeEntry {
+    Kind(usize),
+    Sub(String),
+}
+
+struct PendingNode {
+    inst: NodeInst,
+    refs: Vec<Option<PendingRef>>,
+}
+
+#[derive(Default)]
+struct RootParts {
+    doc: String,
+    params: Vec<GraphParam>,
+    sizes: Vec<SizeDef>,
+    inputs: Vec<InputDef>,
+    states: Vec<(String, PendingRef, PendingRef, String)>,
+    outputs: Vec<(String, PendingRef, String)>,
+}
+
+/// How a subgraph is connected by its parent.
+struct Binding<'a> {
+    file: &'a Path,
+    node: &'a str,
+    scope: &'a str,
+    inputs: &'a IndexMap<String, String>,
+}
+
+struct Loader<'r> {
+    registry: &'r Registry,
+    builtins: Scope,
+    problems: Vec<Problem>,
+    pending_nodes: Vec<PendingNode>,
+    node_ids: HashMap<(String, String), NodeEntry>,
+    input_alias: HashMap<(String, String), Alias>,
+    sub_outputs: HashMap<(String, String), PendingRef>,
+    stack: Vec<PathBuf>,
+    root: RootParts,
+}
+
+fn valid_id(id: &str) -> bool {
+    let mut c = id.chars();
+    matches!(c.next(), Some(ch) if ch.is_ascii_alphabetic() || ch == '_')
+        && c.all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+}
+
+impl Loader<'_> {
+    /// Loads one file into the scope `scope` ("" for the top level, "a/b/" inside
+    /// subgraphs). `overrides` are param values from the command line or the parent.
+    fn load_file(&mut self, path: &Path, scope: &str, overrides: &IndexMap<String, ParamValue>, parent: Option<Binding>) {
+        let is_root = parent.is_none();
+        let problem_here = |msg: String| match &parent {
+            Some(b) => Problem::node(b.file, b.node, msg),
+            None => Problem::file(path, msg),
+        };
+        let canonical = path.canonicalize().unwrap_or_else(|_| path.to_path_buf());
+        if self.stack.contains(&canonical) {
+            let chain: Vec<String> = self.stack.iter().map(|p| p.display().to_string()).collect();
+            self.problems.push(problem_here(format!(
+                "subgraph cycle: {} -> {}",
+                chain.join(" -> "),
+                canonical.display()
+            )));
+            return;
+        }
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) => {
+                let what = if is_root { "cannot read graph file" } else { "cannot read subgraph file" };
+                self.problems.push(problem_here(format!("{what} {}: {e}", path.display())));
+                return;
+            }
+        };
+        let file: GraphFile = match serde_json::from_str(&text) {
+            Ok(f) => f,
+            Err(e) => {
+                self.problems.push(Problem::file(path, format!("line {}, column {}: {e}", e.line(), e.column())));
+                return;
+            }
+        };
+        if file.mesoflow != SCHEMA_VERSION {
+            self.problems.push(Problem::file(
+                path,
+                format!(
+                    "schema version {} is not supported (this mesoflow reads version {SCHEMA_VERSION}; set \"mesoflow\": {SCHEMA_VERSION})",
+                    file.mesoflow
+                ),
+            ));
+            return;
+        }
+        self.stack.push(canonical);
+
+        let scope_values = self.params(path, &file.params, overrides, &parent);
+        let size_names = self.sizes(path, &file, is_root);
+        self.inputs(path, scope, &file.inputs, &size_names, &scope_values, &parent);
+        if is_root {
+            self.root.doc = file.doc.clone();
+        } else if !file.state.is_empty() {
+            self.problems.push(Problem::file(
+                path,
+                "state is only allowed in the top-level graph; this file is used as a subgraph",
+            ));
+        }
+        self.nodes(path, scope, &file.nodes, &scope_values);
+        for (name, decl) in &file.outputs {
+            let r = PendingRef {
+                scope: scope.into(),
+                text: decl.from().into(),
+                file: path.into(),
+                node: None,
+                port: None,
+            };
+            if is_root {
+                let r = PendingRef { node: Some(format!("outputs.{name}")), ..r };
+                self.root.outputs.push((name.clone(), r, decl.doc().into()));
+            } else {
+                self.sub_outputs.insert((scope.into(), name.clone()), r);
+            }
+        }
+        if is_root {
+            for (name, s) in &file.state {
+                let mk = |text: &str, what: &str| PendingRef {
+                    scope: String::new(),
+                    text: text.into(),
+                    file: path.into(),
+                    node: Some(format!("state.{name}")),
+                    port: Some(what.into()),
+                };
+                self.root.states.push((name.clone(), mk(&s.init, "init"), mk(&s.next, "next"), s.doc.clone()));
+            }
+        }
+        self.stack.pop();
+    }
+
+    /// Resolves graph params: defaults in order (a default may be an expression over the
+    /// params above it), then overrides. Returns the expression scope of the file.
+    fn params(
+        &mut self,
+        path: &Path,
+        decls: &IndexMap<String, ParamDecl>,
+        overrides: &IndexMap<String, ParamValue>,
+        parent: &Option<Binding>,
+    ) -> Scope {
+        let mut scope = self.builtins.clone();
+        let is_root = parent.is_none();
+        for name in overrides.keys() {
+            if !decls.contains_key(name) && !(is_root && BUILTIN_PARAMS.contains(&name.as_str())) {
+                let known: Vec<&str> = decls.keys().map(|s| s.as_str()).collect();
+                let msg = format!(
+                    "unknown param `{name}` (this graph's params: {})",
+                    if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                );
+                self.problems.push(match parent {
+                    Some(b) => Problem::port(b.file, b.node, name, msg),
+                    None => Problem::file(path, msg),
+                });
+            }
+        }
+        for (name, decl) in decls {
+            if BUILTIN_PARAMS.contains(&name.as_str()) {
+                self.problems.push(Problem::file(
+                    path,
+                    format!("param `{name}` is built in (set it with --{name}); do not declare it"),
+                ));
+                continue;
+            }
+            if !valid_id(name) {
+                self.problems.push(Problem::file(path, format!("param name `{name}` is not a valid identifier")));
+                continue;
+            }
+            let default = match expr::resolve(&decl.default, &scope) {
+                Ok(v) => v,
+                Err(e) => {
+                    self.problems.push(Problem::file(path, format!("param `{name}`: default: {e}")));
+                    continue;
+                }
+            };
+            let constraint = describe_constraint(decl);
+            if let Err(e) = check_param(decl, &default, &default) {
+                self.problems.push(Problem::file(path, format!("param `{name}`: default {default}: {e}")));
+            }
+            let value = match overrides.get(name) {
+                Some(v) => {
+                    if let Err(e) = check_param(decl, &default, v) {
+                        let msg = format!("bad value {v} for param `{name}`: {e}");
+                        self.problems.push(match parent {
+                            Some(b) => Problem::port(b.file, b.node, name, msg),
+                            None => Problem::file(path, msg),
+                        });
+                    }
+                    v.clone()
+                }
+                None => default.clone(),
+            };
+            if is_root {
+                self.root.params.push(GraphParam {
+                    name: name.clone(),
+                    value: value.clone(),
+                    default,
+                    doc: decl.doc.clone(),
+                    constraint,
+                });
+            }
+            scope.insert(name.clone(), value);
+        }
+        if is_root {
+            if let Some(v) = overrides.get("seed") {
+                match v {
+                    ParamValue::Number(x) if *x >= 0.0 && x.fract() == 0.0 && *x < 9.007e15 => {
+                        scope.insert("seed".into(), v.clone());
+                    }
+                    _ => self.problems.push(Problem::file(
+                        path,
+                        format!("bad value {v} for param `seed`: expected a non-negative integer"),
+                    )),
+                }
+            }
+            if overrides.contains_key("steps") {
+                self.problems.push(Problem::file(path, "set the number of steps with --steps, not --set steps"));
+            }
+        }
+        scope
+    }
+
+    fn sizes(&mut self, path: &Path, file: &GraphFile, is_root: bool) -> Vec<String> {
+        let mut names = Vec::new();
+        for (name, decl) in &file.sizes {
+            if !valid_id(name) {
+                self.problems.push(Problem::file(path, format!("size name `{name}` is not a valid identifier")));
+                continue;
+            }
+            names.push(name.clone());
+            if is_root {
+                self.root.sizes.push(SizeDef { name: name.clone(), default: decl.default, doc: decl.doc.clone() });
+            }
+        }
+        names
+    }
+
+    fn inputs(
+        &mut self,
+        path: &Path,
+        scope: &str,
+        decls: &IndexMap<String, InputDecl>,
+        size_names: &[String],
+        values: &Scope,
+        parent: &Option<Binding>,
+    ) {
+        if let Some(b) = parent {
+            for name in b.inputs.keys() {
+                if !decls.contains_key(name) {
+                    let known: Vec<&str> = decls.keys().map(|s| s.as_str()).collect();
+                    self.problems.push(Problem::port(
+                        b.file,
+                        b.node,
+                        name,
+                        format!("subgraph {} has no input `{name}` (inputs: {})", path.display(), known.join(", ")),
+                    ));
+                }
+            }
+        }
+        for (name, decl) in decls {
+            let shape = match input_shape(decl, size_names, values) {
+                Ok(s) => s,
+                Err(e) => {
+                    self.problems.push(Problem::node(path, &format!("inputs.{name}"), e));
+                    continue;
+                }
+            };
+            let key = (scope.to_string(), name.clone());
+            match parent {
+                None => {
+                    self.input_alias.insert(key, Alias::Root(self.root.inputs.len()));
+                    self.root.inputs.push(InputDef {
+                        name: name.clone(),
+                        shape,
+                        optional: decl.optional,
+                        doc: decl.doc.clone(),
+                    });
+                }
+                Some(b) => match b.inputs.get(name) {
+                    Some(text) => {
+                        let r = PendingRef {
+                            scope: b.scope.into(),
+                            text: text.clone(),
+                            file: b.file.into(),
+                            node: Some(b.node.into()),
+                            port: Some(name.clone()),
+                        };
+                        self.input_alias.insert(key, Alias::Parent(r));
+                    }
+                    None if decl.optional => {
+                        self.input_alias.insert(key, Alias::Absent);
+                    }
+                    None => self.problems.push(Problem::port(
+                        b.file,
+                        b.node,
+                        name,
+                        format!("input is not connected (subgraph {} requires it)", path.display()),
+                    )),
+                },
+            }
+        }
+    }
+
+    fn nodes(&mut self, path: &Path, scope: &str, decls: &[serde_json::Value], values: &Scope) {
+        for (i, raw) in decls.iter().enumerate() {
+            let decl: NodeDecl = match serde_json::from_value(raw.clone()) {
+                Ok(d) => d,
+                Err(e) => {
+                    let id = raw.get("id").and_then(|v| v.as_str()).map(String::from).unwrap_or(format!("#{}", i + 1));
+                    self.problems.push(Problem::node(path, &id, e.to_string()));
+                    continue;
+                }
+            };
+            let id = decl.id.as_str();
+            if !valid_id(id) || id == "inputs" || id == "state" || id == "outputs" {
+                self.problems.push(Problem::node(
+                    path,
+                    id,
+                    "invalid node id (letters, digits and _, not starting with a digit; `inputs`, `state` and `outputs` are reserved)",
+                ));
+                continue;
+            }
+            let key = (scope.to_string(), id.to_string());
+            if self.node_ids.contains_key(&key) {
+                self.problems.push(Problem::node(path, id, "duplicate node id"));
+                continue;
+            }
+            // Param values: literals, `$name` references or `= expressions`.
+            let mut raw_params = BTreeMap::new();
+            let mut bad = false;
+            for (pname, v) in &decl.params {
+                match expr::resolve(v, values) {
+                    Ok(pv) => {
+                        raw_params.insert(pname.clone(), pv);
+                    }
+                    Err(e) => {
+                        bad = true;
+                        self.problems.push(Problem::node(path, id, format!("param `{pname}`: {e}")));
+                    }
+                }
+            }
+            match (&decl.kind, &decl.graph) {
+                (Some(kind), None) => {
+                    if !bad {
+                        self.kind_node(path, scope, &decl, kind, raw_params);
+                    }
+                }
+                (None, Some(sub)) => {
+                    let child_scope = format!("{scope}{id}/");
+                    self.node_ids.insert(key, NodeEntry::Sub(child_scope.clone()));
+                    if bad {
+                        continue;
+                    }
+                    let child_path = path.parent().unwrap_or(Path::new(".")).join(sub);
+                    let overrides: IndexMap<String, ParamValue> = raw_params.into_iter().collect();
+                    let binding = Binding { file: path, node: id, scope, inputs: &decl.inputs };
+                    self.load_file(&child_path, &child_scope, &overrides, Some(binding));
+                }
+                (Some(_), Some(_)) => {
+                    self.problems.push(Problem::node(path, id, "give either `kind` or `graph`, not both"))
+                }
+                (None, None) => self.problems.push(Problem::node(
+                    path,
+                    id,
+                    "missing `kind` (a node kind; `mesoflow nodes` lists them) or `graph` (a graph file used as a node)",
+                )),
+            }
+        }
+    }
+
+    fn kind_node(
+        &mut self,
+        path: &Path,
+        scope: &str,
+        decl: &NodeDecl,
+        kind_name: &str,
+        raw_params: BTreeMap<String, ParamValue>,
+    ) {
+        let id = decl.id.as_str();
+        let Some(kind) = self.registry.get(kind_name).cloned() else {
+            let hint = self.registry.suggest(kind_name).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
+            self.problems.push(Problem::node(
+                path,
+                id,
+                format!("unknown kind `{kind_name}`{hint}; `mesoflow nodes` lists the kinds"),
+            ));
+            return;
+        };
+        let input_ports = kind.inputs();
+        let output_ports = kind.outputs();
+        for name in decl.inputs.keys() {
+            if !input_ports.iter().any(|p| p.name == name) {
+                let known: Vec<&str> = input_ports.iter().map(|p| p.name).collect();
+                self.problems.push(Problem::port(
+                    path,
+                    id,
+                    name,
+                    format!("unknown input port (kind `{kind_name}` has inputs: {})", known.join(", ")),
+                ));
+            }
+        }
+        let mut refs = Vec::new();
+        for p in &input_ports {
+            match decl.inputs.get(p.name) {
+                Some(text) => refs.push(Some(PendingRef {
+                    scope: scope.into(),
+                    text: text.clone(),
+                    file: path.into(),
+                    node: Some(id.into()),
+                    port: Some(p.name.into()),
+                })),
+                None if p.optional => refs.push(None),
+                None => {
+                    self.problems.push(Problem::port(path, id, p.name, "input is not connected"));
+                    refs.push(None);
+                }
+            }
+        }
+        let params = match check_params(&kind.params(), &raw_params) {
+            Ok(p) => p,
+            Err(errs) => {
+                for (pname, msg) in errs {
+                    self.problems.push(Problem::node(path, id, format!("param `{pname}`: {msg}")));
+                }
+                return;
+            }
+        };
+        let node = match kind.build(&params) {
+            Ok(n) => n,
+            Err(e) => {
+                self.problems.push(Problem::node(path, id, e));
+                return;
+            }
+        };
+        let index = self.pending_nodes.len();
+        self.node_ids.insert((scope.into(), id.into()), NodeEntry::Kind(index));
+        self.pending_nodes.push(PendingNode {
+            inst: NodeInst {
+                id: format!("{scope}{id}"),
+                kind: kind.name(),
+                file: path.into(),
+                params,
+                input_ports,
+                output_ports,
+                inputs: Vec::new(),
+                node,
+            },
+            refs,
+        });
+    }
+
+    fn resolve(&self, r: &PendingRef, depth: usize) -> Result<Source, Problem> {
+        if depth > 64 {
+            return Err(r.problem(format!("reference `{}` loops through subgraph inputs and outputs", r.text)));
+        }
+        let Some((head, port)) = r.text.split_once('.') else {
+            return Err(r.problem(format!(
+                "reference `{}` should be `node.port`, `inputs.NAME` or `state.NAME`",
+                r.text
+            )));
+        };
+        match head {
+            "inputs" => match self.input_alias.get(&(r.scope.clone(), port.to_string())) {
+                Some(Alias::Root(i)) => Ok(Source::Input(*i)),
+                Some(Alias::Parent(p)) => self.resolve(p, depth + 1),
+                Some(Alias::Absent) => Ok(Source::Absent),
+                None => Err(r.problem(format!("no graph input `{port}`"))),
+            },
+            "state" => {
+                if !r.scope.is_empty() {
+                    return Err(r.problem("state is only available in the top-level graph".into()));
+                }
+                match self.root.states.iter().position(|s| s.0 == port) {
+                    Some(i) => Ok(Source::State(i)),
+                    None => Err(r.problem(format!("no state `{port}`"))),
+                }
+            }
+            id => match self.node_ids.get(&(r.scope.clone(), id.to_string())) {
+                Some(NodeEntry::Kind(n)) => {
+                    let ports = &self.pending_nodes[*n].inst.output_ports;
+                    match ports.iter().position(|p| p.name == port) {
+                        Some(i) => Ok(Source::Node { node: *n, port: i }),
+                        None => {
+                            let known: Vec<&str> = ports.iter().map(|p| p.name).collect();
+                            Err(r.problem(format!(
+                                "node `{id}` has no output `{port}` (outputs: {})",
+                                known.join(", ")
+                            )))
+                        }
+                    }
+                }
+                Some(NodeEntry::Sub(child)) => match self.sub_outputs.get(&(child.clone(), port.to_string())) {
+                    Some(inner) => self.resolve(inner, depth + 1),
+                    None => Err(r.problem(format!("subgraph node `{id}` has no output `{port}`"))),
+                },
+                None => {
+                    let hint = self
+                        .node_ids
+                        .keys()
+                        .filter(|(s, _)| *s == r.scope)
+                        .map(|(_, n)| n.as_str())
+                        .min_by_key(|n| edit_distance(n, id))
+                        .filter(|n| edit_distance(n, id) <= 2)
+                        .map(|n| format!(" (did you mean `{n}`?)"))
+                        .unwrap_or_default();
+                    Err(r.problem(format!("no node `{id}`{hint}")))
+                }
+            },
+        }
+    }
+
+    fn finish(mut self, path: &Path) -> Result<Graph, Problems> {
+        let mut failed = Vec::new();
+        let mut resolved_refs = Vec::new();
+        for p in &self.pending_nodes {
+            let srcs: Vec<Source> = p
+                .refs
+                .iter()
+                .map(|r| match r {
+                    None => Source::Absent,
+                    Some(r) => self.resolve(r, 0).unwrap_or_else(|e| {
+                        failed.push(e);
+                        Source::Absent
+                    }),
+                })
+                .collect();
+            resolved_refs.push(srcs);
+        }
+        let mut resolve = |r: &PendingRef| {
+            self.resolve(r, 0).unwrap_or_else(|e| {
+                failed.push(e);
+                Source::Absent
+            })
+        };
+        let states: Vec<StateDef> = self
+            .root
+            .states
+            .iter()
+            .map(|(name, init, next, doc)| StateDef {
+                name: name.clone(),
+                init: resolve(init),
+                next: resolve(next),
+                doc: doc.clone(),
+            })
+            .collect();
+        let outputs: Vec<OutputDef> = self
+            .root
+            .outputs
+            .iter()
+            .map(|(name, r, doc)| OutputDef { name: name.clone(), source: resolve(r), doc: doc.clone() })
+            .collect();
+        self.problems.extend(failed);
+        let pending = std::mem::take(&mut self.pending_nodes);
+        let nodes: Vec<NodeInst> = pending
+            .into_iter()
+            .zip(resolved_refs)
+            .map(|(p, srcs)| NodeInst { inputs: srcs, ..p.inst })
+            .collect();
+        let root = std::mem::take(&mut self.root);
+        self.check_cycles(&nodes);
+        if !self.problems.is_empty() {
+            return Err(Problems(self.problems));
+        }
+        Ok(Graph {
+            file: path.to_path_buf(),
+            doc: root.doc,
+            params: root.params,
+            sizes: root.sizes,
+            inputs: root.inputs,
+            states,
+            nodes,
+            outputs,
+        })
+    }
+
+    fn check_cycles(&mut self, nodes: &[NodeInst]) {
+        use petgraph::graph::DiGraph;
+        let mut g = DiGraph::<usize, ()>::with_capacity(nodes.len(), 0);
+        let idx: Vec<_> = (0..nodes.len()).map(|i| g.add_node(i)).collect();
+        for (i, n) in nodes.iter().enumerate() {
+            for s in &n.inputs {
+                if let Source::Node { node, .. } = s {
+                    g.add_edge(idx[*node], idx[i], ());
+                }
+            }
+        }
+        for scc in petgraph::algo::tarjan_scc(&g) {
+            let cyclic = scc.len() > 1 || g.contains_edge(scc[0], scc[0]);
+            if cyclic {
+                let mut ids: Vec<&str> = scc.iter().map(|&ix| nodes[g[ix]].id.as_str()).collect();
+                ids.sort();
+                let first = &nodes[g[scc[0]]];
+                self.problems.push(Problem::node(
+                    &first.file,
+                    &first.id,
+                    format!(
+                        "cycle through nodes {}; a value that feeds back into the next step must go through `state`",
+                        ids.join(", ")
+                    ),
+                ));
+            }
+        }
+    }
+}
+
+fn check_param(decl: &ParamDecl, default: &ParamValue, v: &ParamValue) -> Result<(), String> {
+    if std::mem::discriminant(default) != std::mem::discriminant(v) {
+        return Err(format!("expected {} like the default, got {}", default.type_name(), v.type_name()));
+    }
+    let nums: Vec<f64> = match v {
+        ParamValue::Number(x) => vec![*x],
+        ParamValue::Numbers(xs) => xs.clone(),
+        _ => vec![],
+    };
+    for x in nums {
+        if decl.integer && x.fract() != 0.0 {
+            return Err(format!("{x} is not an integer"));
+        }
+        if let Some(m) = decl.min {
+            if x < m {
+                return Err(format!("{x} is below the minimum {m}"));
+            }
+        }
+        if let Some(m) = decl.max {
+            if x > m {
+                return Err(format!("{x} is above the maximum {m}"));
+            }
+        }
+    }
+    if let (Some(c), ParamValue::Text(s)) = (&decl.choices, v) {
+        if !c.contains(s) {
+            return Err(format!("\"{s}\" is not one of {}", c.join(", ")));
+        }
+    }
+    if let (ParamValue::Numbers(d), ParamValue::Numbers(x)) = (default, v) {
+        if d.len() != x.len() {
+            return Err(format!("expected {} numbers like the default, got {}", d.len(), x.len()));
+        }
+    }
+    Ok(())
+}
+
+fn describe_constraint(decl: &ParamDecl) -> String {
+    let mut parts = Vec::new();
+    if decl.integer {
+        parts.push("integer".to_string());
+    }
+    match (decl.min, decl.max) {
+        (Some(a), Some(b)) => parts.push(format!("in [{a}, {b}]")),
+        (Some(a), None) => parts.push(format!(">= {a}")),
+        (None, Some(b)) => parts.push(format!("<= {b}")),
+        (None, None) => {}
+    }
+    if let Some(c) = &decl.choices {
+        parts.push(format!("one of {}", c.join(" | ")));
+    }
+    parts.join(", ")
+}
+
+fn input_shape(decl: &InputDecl, sizes: &[String], values: &Scope) -> Result<InputShape, String> {
+    let rows = || -> Result<Dim, String> {
+        match &decl.rows {
+            None => Ok(Dim::Free),
+            Some(serde_json::Value::String(s)) if !s.starts_with('$') && !s.starts_with('=') => {
+                if sizes.contains(s) {
+                    Ok(Dim::Size(s.clone()))
+                } else {
+                    Err(format!("rows names size `{s}`, which is not declared under \"sizes\""))
+                }
+            }
+            Some(v) => match expr::resolve(v, values)? {
+                ParamValue::Number(x) if x >= 0.0 && x.fract() == 0.0 && x <= u32::MAX as f64 => Ok(Dim::Fixed(x as u32)),
+                other => Err(format!("rows must be a count or a size name, got {other}")),
+            },
+        }
+    };
+    let grid = || -> Result<([u32; 3], u32), String> {
+        let dims = match &decl.dims {
+            Some(v) => match expr::resolve(v, values)? {
+                ParamValue::Numbers(x) if (1..=3).contains(&x.len()) => {
+                    let mut d = [1u32; 3];
+                    for (i, v) in x.iter().enumerate() {
+                        if *v < 1.0 || v.fract() != 0.0 {
+                            return Err(format!("grid dims must be positive integers, got {v}"));
+                        }
+                        d[i] = *v as u32;
+                    }
+                    d
+                }
+                other => return Err(format!("dims must be an array of 1 to 3 counts, got {other}")),
+            },
+            None => return Err("a grid input needs `dims`".into()),
+        };
+        Ok((dims, decl.comps.unwrap_or(1)))
+    };
+    match decl.ty.as_str() {
+        "particles" => Ok(InputShape::Particles { rows: rows()?, cols: decl.cols.unwrap_or(1) }),
+        "indices" => Ok(InputShape::Indices { rows: rows()? }),
+        "real_grid" => {
+            let (dims, comps) = grid()?;
+            Ok(InputShape::RealGrid { dims, comps })
+        }
+        "complex_grid" => {
+            let (dims, comps) = grid()?;
+            Ok(InputShape::ComplexGrid { dims, comps })
+        }
+        "scalar" => Ok(InputShape::Scalar),
+        other => Err(format!(
+            "unknown input type `{other}` (types: particles, real_grid, complex_grid, indices, scalar)"
+        )),
+    }
+}

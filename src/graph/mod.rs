@@ -1,0 +1,256 @@
+//! Graph files and the validated graph they load into.
+//!
+//! `load` reads a JSON graph file, expands subgraph nodes (other graph files used as
+//! nodes) inline, resolves params, builds every node through the registry and resolves
+//! every edge. It reports all problems at once, each with file, node and port. The
+//! result, [`Graph`], is flat: subgraph nodes are gone, their nodes carry ids like
+//! `mobility/spread`.
+
+mod load;
+mod schema;
+
+use std::fmt;
+use std::path::PathBuf;
+
+pub use load::{LoadOptions, load};
+pub use schema::SCHEMA_VERSION;
+
+use crate::expr::ParamValue;
+use crate::node::{Node, Params, PortSpec};
+use crate::value::ValueType;
+
+/// Where a value comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Source {
+    /// A graph input (index into [`Graph::inputs`]).
+    Input(usize),
+    /// The current value of a state (index into [`Graph::states`]).
+    State(usize),
+    /// Output `port` of node `node` (index into [`Graph::nodes`]).
+    Node { node: usize, port: usize },
+    /// Nothing: an optional input left unconnected.
+    Absent,
+}
+
+/// One problem in a graph file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Problem {
+    pub file: PathBuf,
+    pub node: Option<String>,
+    pub port: Option<String>,
+    pub message: String,
+}
+
+impl Problem {
+    pub fn file(file: &std::path::Path, message: impl Into<String>) -> Self {
+        Problem { file: file.to_path_buf(), node: None, port: None, message: message.into() }
+    }
+
+    pub fn node(file: &std::path::Path, node: &str, message: impl Into<String>) -> Self {
+        Problem { file: file.to_path_buf(), node: Some(node.to_string()), port: None, message: message.into() }
+    }
+
+    pub fn port(file: &std::path::Path, node: &str, port: &str, message: impl Into<String>) -> Self {
+        Problem {
+            file: file.to_path_buf(),
+            node: Some(node.to_string()),
+            port: Some(port.to_string()),
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file.display())?;
+        if let Some(n) = &self.node {
+            write!(f, ": node `{n}`")?;
+        }
+        if let Some(p) = &self.port {
+            write!(f, ", port `{p}`")?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+/// All problems of a graph file, reported together.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Problems(pub Vec<Problem>);
+
+impl fmt::Display for Problems {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let n = self.0.len();
+        writeln!(f, "{n} problem{}:", if n == 1 { "" } else { "s" })?;
+        for p in &self.0 {
+            writeln!(f, "  {p}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for Problems {}
+
+/// A graph-level param with its resolved value.
+#[derive(Clone, Debug)]
+pub struct GraphParam {
+    pub name: String,
+    pub value: ParamValue,
+    pub default: ParamValue,
+    pub doc: String,
+    pub constraint: String,
+}
+
+/// A named size with the default used when no data fixes it.
+#[derive(Clone, Debug)]
+pub struct SizeDef {
+    pub name: String,
+    pub default: u32,
+    pub doc: String,
+}
+
+/// A count in an input declaration.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Dim {
+    Fixed(u32),
+    /// A declared size; all inputs naming it must agree.
+    Size(String),
+    /// Any count.
+    Free,
+}
+
+/// The declared shape of a graph input.
+#[derive(Clone, Debug, PartialEq)]
+pub enum InputShape {
+    Particles { rows: Dim, cols: u32 },
+    Indices { rows: Dim },
+    RealGrid { dims: [u32; 3], comps: u32 },
+    ComplexGrid { dims: [u32; 3], comps: u32 },
+    Scalar,
+}
+
+impl InputShape {
+    /// Checks a concrete type against the declaration; sizes are checked by the caller.
+    pub fn check(&self, t: &ValueType) -> Result<(), String> {
+        let ok = match (self, t) {
+            (InputShape::Particles { rows, cols }, ValueType::Particles { n, k }) => {
+                cols == k && !matches!(rows, Dim::Fixed(r) if r != n)
+            }
+            (InputShape::Indices { rows }, ValueType::Indices { n }) => !matches!(rows, Dim::Fixed(r) if r != n),
+            (InputShape::RealGrid { dims, comps }, ValueType::RealGrid { dims: d, comps: c }) => dims == d && comps == c,
+            (InputShape::ComplexGrid { dims, comps }, ValueType::ComplexGrid { dims: d, comps: c }) => {
+                dims == d && comps == c
+            }
+            (InputShape::Scalar, ValueType::Scalar) => true,
+            _ => false,
+        };
+        if ok { Ok(()) } else { Err(format!("expected {}, got {t}", self.describe())) }
+    }
+
+    /// The type this input has when its sizes take the given values.
+    pub fn with_sizes(&self, size: impl Fn(&str) -> Option<u32>) -> Option<ValueType> {
+        let dim = |d: &Dim| match d {
+            Dim::Fixed(n) => Some(*n),
+            Dim::Size(s) => size(s),
+            Dim::Free => None,
+        };
+        Some(match self {
+            InputShape::Particles { rows, cols } => ValueType::Particles { n: dim(rows)?, k: *cols },
+            InputShape::Indices { rows } => ValueType::Indices { n: dim(rows)? },
+            InputShape::RealGrid { dims, comps } => ValueType::RealGrid { dims: *dims, comps: *comps },
+            InputShape::ComplexGrid { dims, comps } => ValueType::ComplexGrid { dims: *dims, comps: *comps },
+            InputShape::Scalar => ValueType::Scalar,
+        })
+    }
+
+    pub fn describe(&self) -> String {
+        let dim = |d: &Dim| match d {
+            Dim::Fixed(n) => n.to_string(),
+            Dim::Size(s) => s.clone(),
+            Dim::Free => "N".into(),
+        };
+        match self {
+            InputShape::Particles { rows, cols } => format!("particles({}x{cols})", dim(rows)),
+            InputShape::Indices { rows } => format!("indices({})", dim(rows)),
+            InputShape::RealGrid { dims, comps } => {
+                format!("real_grid({}x{}x{}, {comps} comp)", dims[0], dims[1], dims[2])
+            }
+            InputShape::ComplexGrid { dims, comps } => {
+                format!("complex_grid({}x{}x{}, {comps} comp)", dims[0], dims[1], dims[2])
+            }
+            InputShape::Scalar => "scalar".into(),
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct InputDef {
+    pub name: String,
+    pub shape: InputShape,
+    pub optional: bool,
+    pub doc: String,
+}
+
+#[derive(Clone, Debug)]
+pub struct StateDef {
+    pub name: String,
+    pub init: Source,
+    pub next: Source,
+    pub doc: String,
+}
+
+#[derive(Clone, Debug)]
+pub struct OutputDef {
+    pub name: String,
+    pub source: Source,
+    pub doc: String,
+}
+
+/// A node of the flattened graph.
+pub struct NodeInst {
+    /// Full id: `parent/child` for nodes that came from subgraphs.
+    pub id: String,
+    pub kind: &'static str,
+    /// The graph file that declared it.
+    pub file: PathBuf,
+    pub params: Params,
+    pub input_ports: Vec<PortSpec>,
+    pub output_ports: Vec<PortSpec>,
+    /// One source per input port; [`Source::Absent`] for an unconnected optional port.
+    pub inputs: Vec<Source>,
+    pub node: Box<dyn Node>,
+}
+
+/// A loaded, validated, flattened graph.
+pub struct Graph {
+    pub file: PathBuf,
+    pub doc: String,
+    pub params: Vec<GraphParam>,
+    pub sizes: Vec<SizeDef>,
+    pub inputs: Vec<InputDef>,
+    pub states: Vec<StateDef>,
+    pub nodes: Vec<NodeInst>,
+    pub outputs: Vec<OutputDef>,
+}
+
+impl Graph {
+    pub fn input(&self, name: &str) -> Option<usize> {
+        self.inputs.iter().position(|i| i.name == name)
+    }
+
+    pub fn output(&self, name: &str) -> Option<usize> {
+        self.outputs.iter().position(|o| o.name == name)
+    }
+
+    /// A value's name as users write it: `inputs.x`, `state.x`, `node.port`.
+    pub fn source_name(&self, s: Source) -> String {
+        match s {
+            Source::Input(i) => format!("inputs.{}", self.inputs[i].name),
+            Source::State(i) => format!("state.{}", self.states[i].name),
+            Source::Node { node, port } => {
+                let n = &self.nodes[node];
+                format!("{}.{}", n.id, n.output_ports[port].name)
+            }
+            Source::Absent => "(absent)".into(),
+        }
+    }
+}

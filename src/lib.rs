@@ -1,0 +1,20 @@
+//! mesoflow: complex-fluid simulation algorithms on the GPU as graphs of compute nodes.
+//!
+//! The path of a graph through the engine, one type per stage:
+//! graph file --[`graph::load`]--> [`graph::Graph`] --[`plan::plan`]--> [`plan::Plan`]
+//! --[`exec::Program::compile`]--> [`exec::Program`] --run--> outputs.
+//! See ARCHITECTURE.md for the code map and the invariants.
+
+pub mod bench;
+pub mod cli;
+pub mod exec;
+pub mod expr;
+pub mod gpu;
+pub mod graph;
+pub mod node;
+pub mod npy;
+pub mod plan;
+pub mod value;
+
+#[path = "../nodes/mod.rs"]
+pub mod nodes;

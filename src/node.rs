@@ -1,0 +1,426 @@
+//! The node contract: what every node kind declares and implements, and the registry
+//! that maps kind names to node factories.
+//!
+//! A [`NodeKind`] is the factory: a name, a one-line doc, ports and typed params. Given
+//! checked params it builds a [`Node`], which infers its output types from its input
+//! types at plan time, says how it lowers to GPU work ([`Lowering`]), and carries an f64
+//! CPU reference that its tests compare the GPU against.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use crate::expr::ParamValue;
+use crate::gpu::{CompileCtx, CompileError, Dispatch, NodeIo};
+use crate::value::{PortType, RefArray, ValueType};
+
+/// One input or output port of a node kind.
+#[derive(Clone, Debug)]
+pub struct PortSpec {
+    pub name: &'static str,
+    pub ty: PortType,
+    pub doc: &'static str,
+    /// Inputs only: the node runs without it (an absent value).
+    pub optional: bool,
+    /// Outputs only: the value persists across time steps and the node updates it in
+    /// place (it starts at zero). Trajectory recorders and running averages use this.
+    pub persistent: bool,
+}
+
+impl PortSpec {
+    pub const fn new(name: &'static str, ty: PortType, doc: &'static str) -> Self {
+        PortSpec { name, ty, doc, optional: false, persistent: false }
+    }
+
+    pub const fn optional(mut self) -> Self {
+        self.optional = true;
+        self
+    }
+
+    pub const fn persistent(mut self) -> Self {
+        self.persistent = true;
+        self
+    }
+}
+
+/// The type and valid range of a param.
+#[derive(Clone, Debug)]
+pub enum ParamKind {
+    /// A number in [min, max]; integer-valued when `integer`.
+    Number { min: f64, max: f64, integer: bool },
+    /// An array of numbers, each in [min, max], of length `len` when given.
+    Numbers { len: Option<usize>, min: f64, max: f64 },
+    /// One of a fixed set of strings.
+    Choice(&'static [&'static str]),
+    Bool,
+}
+
+/// One param of a node kind.
+#[derive(Clone, Debug)]
+pub struct ParamSpec {
+    pub name: &'static str,
+    pub kind: ParamKind,
+    /// `None`: the graph file must give it.
+    pub default: Option<ParamValue>,
+    pub doc: &'static str,
+}
+
+impl ParamSpec {
+    pub fn number(name: &'static str, default: Option<f64>, min: f64, max: f64, doc: &'static str) -> Self {
+        ParamSpec {
+            name,
+            kind: ParamKind::Number { min, max, integer: false },
+            default: default.map(ParamValue::Number),
+            doc,
+        }
+    }
+
+    pub fn integer(name: &'static str, default: Option<f64>, min: f64, max: f64, doc: &'static str) -> Self {
+        ParamSpec {
+            name,
+            kind: ParamKind::Number { min, max, integer: true },
+            default: default.map(ParamValue::Number),
+            doc,
+        }
+    }
+
+    pub fn choice(name: &'static str, default: &'static str, choices: &'static [&'static str], doc: &'static str) -> Self {
+        ParamSpec { name, kind: ParamKind::Choice(choices), default: Some(ParamValue::Text(default.into())), doc }
+    }
+
+    /// Checks a value against the spec; the message says what was expected.
+    pub fn check(&self, v: &ParamValue) -> Result<(), String> {
+        match (&self.kind, v) {
+            (ParamKind::Number { min, max, integer }, ParamValue::Number(x)) => {
+                if !x.is_finite() {
+                    return Err(format!("{x} is not finite"));
+                }
+                if *integer && x.fract() != 0.0 {
+                    return Err(format!("{x} is not an integer"));
+                }
+                if x < min || x > max {
+                    return Err(format!("{x} is outside [{min}, {max}]"));
+                }
+                Ok(())
+            }
+            (ParamKind::Numbers { len, min, max }, ParamValue::Numbers(xs)) => {
+                if let Some(n) = len {
+                    if xs.len() != *n {
+                        return Err(format!("expected {n} numbers, got {}", xs.len()));
+                    }
+                }
+                for x in xs {
+                    if !x.is_finite() || x < min || x > max {
+                        return Err(format!("element {x} is outside [{min}, {max}]"));
+                    }
+                }
+                Ok(())
+            }
+            (ParamKind::Choice(choices), ParamValue::Text(s)) => {
+                if choices.contains(&s.as_str()) {
+                    Ok(())
+                } else {
+                    Err(format!("\"{s}\" is not one of {}", choices.join(", ")))
+                }
+            }
+            (ParamKind::Bool, ParamValue::Bool(_)) => Ok(()),
+            (kind, v) => Err(format!("expected {}, got {}", kind_name(kind), v.type_name())),
+        }
+    }
+
+    /// The spec as `mesoflow nodes` prints it.
+    pub fn describe(&self) -> String {
+        let range = match &self.kind {
+            ParamKind::Number { min, max, integer } => {
+                format!("{} in [{}, {}]", if *integer { "integer" } else { "number" }, fmt_bound(*min), fmt_bound(*max))
+            }
+            ParamKind::Numbers { len, min, max } => format!(
+                "{} numbers in [{}, {}]",
+                len.map(|n| n.to_string()).unwrap_or_else(|| "any count of".into()),
+                fmt_bound(*min),
+                fmt_bound(*max)
+            ),
+            ParamKind::Choice(c) => format!("one of {}", c.join(" | ")),
+            ParamKind::Bool => "true | false".into(),
+        };
+        match &self.default {
+            Some(d) => format!("{range}, default {d}"),
+            None => format!("{range}, required"),
+        }
+    }
+}
+
+fn fmt_bound(x: f64) -> String {
+    if x == f64::INFINITY {
+        "inf".into()
+    } else if x == f64::NEG_INFINITY {
+        "-inf".into()
+    } else {
+        x.to_string()
+    }
+}
+
+fn kind_name(k: &ParamKind) -> &'static str {
+    match k {
+        ParamKind::Number { integer: true, .. } => "an integer",
+        ParamKind::Number { .. } => "a number",
+        ParamKind::Numbers { .. } => "an array of numbers",
+        ParamKind::Choice(_) => "a string",
+        ParamKind::Bool => "a boolean",
+    }
+}
+
+/// Checked param values of one node, with typed accessors. Every declared param is
+/// present (defaults filled in), so accessors only fail on a kind's own coding error.
+#[derive(Clone, Debug, Default)]
+pub struct Params {
+    values: BTreeMap<String, ParamValue>,
+}
+
+impl Params {
+    pub fn new(values: BTreeMap<String, ParamValue>) -> Self {
+        Params { values }
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = (&String, &ParamValue)> {
+        self.values.iter()
+    }
+
+    pub fn get(&self, name: &str) -> Option<&ParamValue> {
+        self.values.get(name)
+    }
+
+    pub fn number(&self, name: &str) -> f64 {
+        match self.values.get(name) {
+            Some(ParamValue::Number(x)) => *x,
+            other => panic!("param `{name}` is not a checked number: {other:?}"),
+        }
+    }
+
+    pub fn numbers(&self, name: &str) -> &[f64] {
+        match self.values.get(name) {
+            Some(ParamValue::Numbers(x)) => x,
+            other => panic!("param `{name}` is not a checked number array: {other:?}"),
+        }
+    }
+
+    pub fn text(&self, name: &str) -> &str {
+        match self.values.get(name) {
+            Some(ParamValue::Text(s)) => s,
+            other => panic!("param `{name}` is not a checked string: {other:?}"),
+        }
+    }
+
+    pub fn flag(&self, name: &str) -> bool {
+        match self.values.get(name) {
+            Some(ParamValue::Bool(b)) => *b,
+            other => panic!("param `{name}` is not a checked boolean: {other:?}"),
+        }
+    }
+}
+
+/// Checks raw values against a kind's specs and fills defaults. Returns every problem
+/// as (param name, message).
+pub fn check_params(
+    specs: &[ParamSpec],
+    raw: &BTreeMap<String, ParamValue>,
+) -> Result<Params, Vec<(String, String)>> {
+    let mut problems = Vec::new();
+    for name in raw.keys() {
+        if !specs.iter().any(|s| s.name == name) {
+            let known: Vec<&str> = specs.iter().map(|s| s.name).collect();
+            problems.push((
+                name.clone(),
+                format!(
+                    "unknown param (this kind takes: {})",
+                    if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                ),
+            ));
+        }
+    }
+    let mut values = BTreeMap::new();
+    for spec in specs {
+        match raw.get(spec.name).or(spec.default.as_ref()) {
+            Some(v) => match spec.check(v) {
+                Ok(()) => {
+                    values.insert(spec.name.to_string(), v.clone());
+                }
+                Err(e) => problems.push((spec.name.to_string(), format!("bad value: {e}"))),
+            },
+            None => problems.push((spec.name.to_string(), "missing required param".into())),
+        }
+    }
+    if problems.is_empty() { Ok(Params::new(values)) } else { Err(problems) }
+}
+
+/// A type error at one port, found while inferring shapes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PortError {
+    pub port: String,
+    pub message: String,
+}
+
+impl PortError {
+    pub fn new(port: impl Into<String>, message: impl Into<String>) -> Self {
+        PortError { port: port.into(), message: message.into() }
+    }
+}
+
+/// Output types and scratch needs of a node for given input types.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Signature {
+    pub outputs: Vec<ValueType>,
+    /// Scratch buffers in bytes, live only while the node runs; the planner pools them.
+    pub scratch: Vec<u64>,
+}
+
+impl Signature {
+    pub fn outputs(outputs: Vec<ValueType>) -> Self {
+        Signature { outputs, scratch: Vec::new() }
+    }
+}
+
+/// An element-wise f32 operation the planner may fuse with its neighbours.
+///
+/// The body is a WGSL function body returning the output element. It sees its inputs as
+/// f32 arguments named after the input ports (scalar-typed inputs are broadcast), `idx`
+/// (flat element index, u32), `comp` (component: the column of a particle array, the
+/// component of a grid), and its params as `p0`, `p1`, ... (f32).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointwiseBody {
+    pub body: String,
+    pub params: Vec<f32>,
+}
+
+/// How a node turns into GPU work.
+pub enum Lowering<'a> {
+    /// An element-wise body the planner compiles, fused or alone.
+    Pointwise(PointwiseBody),
+    /// The node records its own dispatches.
+    Kernels(&'a dyn GpuKernels),
+}
+
+/// A node that records its own dispatches.
+///
+/// `compile` may be called more than once for one node (once per state-buffer parity),
+/// so it must not keep GPU state of its own that outlives a step: anything that persists
+/// belongs in a `persistent` output, which the planner owns.
+pub trait GpuKernels {
+    fn compile(&self, cx: &mut CompileCtx<'_>, io: &NodeIo<'_>) -> Result<Vec<Dispatch>, CompileError>;
+}
+
+/// Context given to CPU references.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RefCtx {
+    /// The time step (0 for the first step).
+    pub step: u64,
+}
+
+/// A node instance with checked params.
+pub trait Node: Send + Sync {
+    /// Output types for the given input types (`None`: an absent optional input). Inputs
+    /// already match their ports' [`PortType`]s; this checks the relations between them.
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError>;
+
+    fn lowering(&self) -> Lowering<'_>;
+
+    /// The f64 CPU reference of one evaluation; `outputs` holds the previous contents of
+    /// the node's persistent outputs (zeros at the first step).
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx);
+}
+
+/// A node kind: the factory behind a `kind` name in graph files.
+pub trait NodeKind: Send + Sync {
+    fn name(&self) -> &'static str;
+    /// One line, shown by `mesoflow nodes`.
+    fn doc(&self) -> &'static str;
+    fn inputs(&self) -> Vec<PortSpec>;
+    fn outputs(&self) -> Vec<PortSpec>;
+    fn params(&self) -> Vec<ParamSpec>;
+    /// Builds a node from checked params; the error names what is wrong with them together.
+    fn build(&self, params: &Params) -> Result<Box<dyn Node>, String>;
+}
+
+/// Kind names to factories.
+#[derive(Clone, Default)]
+pub struct Registry {
+    kinds: BTreeMap<&'static str, Arc<dyn NodeKind>>,
+}
+
+impl Registry {
+    /// Every node kind mesoflow ships.
+    pub fn standard() -> Self {
+        let mut r = Registry::default();
+        crate::nodes::register_all(&mut r);
+        r
+    }
+
+    /// Adds a kind. Two kinds with one name are a programming error.
+    pub fn add(&mut self, kind: impl NodeKind + 'static) {
+        let name = kind.name();
+        let previous = self.kinds.insert(name, Arc::new(kind));
+        assert!(previous.is_none(), "node kind `{name}` registered twice");
+    }
+
+    pub fn get(&self, name: &str) -> Option<&Arc<dyn NodeKind>> {
+        self.kinds.get(name)
+    }
+
+    pub fn kinds(&self) -> impl Iterator<Item = &Arc<dyn NodeKind>> {
+        self.kinds.values()
+    }
+
+    /// Known names closest to `name`, for "did you mean" hints.
+    pub fn suggest(&self, name: &str) -> Option<&'static str> {
+        self.kinds.keys().copied().min_by_key(|k| edit_distance(k, name)).filter(|k| edit_distance(k, name) <= 3)
+    }
+}
+
+/// Levenshtein distance, for suggestions in error messages.
+pub fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut cur = vec![i + 1; b.len() + 1];
+        for (j, cb) in b.iter().enumerate() {
+            cur[j + 1] = (prev[j] + usize::from(ca != *cb)).min(prev[j + 1] + 1).min(cur[j] + 1);
+        }
+        prev = cur;
+    }
+    prev[b.len()]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn param_checks() {
+        let s = ParamSpec::integer("count", Some(3.0), 1.0, 10.0, "");
+        assert!(s.check(&ParamValue::Number(4.0)).is_ok());
+        assert!(s.check(&ParamValue::Number(4.5)).unwrap_err().contains("not an integer"));
+        assert!(s.check(&ParamValue::Number(11.0)).unwrap_err().contains("outside"));
+        assert!(s.check(&ParamValue::Text("x".into())).unwrap_err().contains("expected an integer"));
+        let c = ParamSpec::choice("kernel", "gaussian", &["gaussian", "es"], "");
+        assert!(c.check(&ParamValue::Text("peskin".into())).unwrap_err().contains("not one of"));
+    }
+
+    #[test]
+    fn check_params_reports_all() {
+        let specs = vec![
+            ParamSpec::number("a", None, 0.0, 1.0, ""),
+            ParamSpec::number("b", Some(0.5), 0.0, 1.0, ""),
+        ];
+        let mut raw = BTreeMap::new();
+        raw.insert("b".to_string(), ParamValue::Number(2.0));
+        raw.insert("c".to_string(), ParamValue::Number(1.0));
+        let errs = check_params(&specs, &raw).unwrap_err();
+        let names: Vec<&str> = errs.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, vec!["c", "a", "b"]);
+    }
+
+    #[test]
+    fn suggestions() {
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+        assert_eq!(edit_distance("", "abc"), 3);
+    }
+}
