@@ -2,7 +2,10 @@
 //! neighbours, or alone); each kind is a WGSL body plus its f64 CPU reference, written
 //! side by side in one table row.
 
-use crate::node::{Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PointwiseBody, PortError, PortSpec, RefCtx, Registry, Signature};
+use crate::node::{
+    Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PointwiseBody, PortError, PortSpec,
+    RefCtx, Registry, Signature,
+};
 use crate::value::{PortType, RefArray, ValueType};
 
 /// One element-wise kind.
@@ -44,14 +47,21 @@ fn components_match(t: &ValueType, p: &[f64]) -> Result<(), String> {
     if comps as usize == p.len() {
         Ok(())
     } else {
-        Err(format!("{} per-component values given for a value with {comps} components ({t})", p.len()))
+        Err(format!(
+            "{} per-component values given for a value with {comps} components ({t})",
+            p.len()
+        ))
     }
 }
 
 fn per_component_param(name: &'static str, doc: &'static str) -> ParamSpec {
     ParamSpec {
         name,
-        kind: ParamKind::Numbers { len: None, min: f64::MIN, max: f64::MAX },
+        kind: ParamKind::Numbers {
+            len: None,
+            min: f64::MIN,
+            max: f64::MAX,
+        },
         default: None,
         doc,
     }
@@ -70,7 +80,15 @@ pub static KINDS: &[PointwiseKind] = &[
         name: "scale",
         doc: "out = factor * x, element-wise",
         inputs: &[("x", "values to scale", false)],
-        params: || vec![ParamSpec::number("factor", None, f64::MIN, f64::MAX, "the factor")],
+        params: || {
+            vec![ParamSpec::number(
+                "factor",
+                None,
+                f64::MIN,
+                f64::MAX,
+                "the factor",
+            )]
+        },
         flatten: |p| vec![p.number("factor")],
         check: any_shape,
         body: "return p0 * x;",
@@ -125,7 +143,15 @@ pub static KINDS: &[PointwiseKind] = &[
         name: "axpy",
         doc: "out = alpha * x + y, element-wise",
         inputs: &[("x", "scaled term", false), ("y", "added term", false)],
-        params: || vec![ParamSpec::number("alpha", None, f64::MIN, f64::MAX, "factor on x")],
+        params: || {
+            vec![ParamSpec::number(
+                "alpha",
+                None,
+                f64::MIN,
+                f64::MAX,
+                "factor on x",
+            )]
+        },
         flatten: |p| vec![p.number("alpha")],
         check: any_shape,
         body: "return fma(p0, x, y);",
@@ -168,7 +194,12 @@ pub static KINDS: &[PointwiseKind] = &[
         name: "scale_components",
         doc: "out = x * factors[component], one factor per column of a particle array (or grid component)",
         inputs: &[("x", "values", false)],
-        params: || vec![per_component_param("factors", "one factor per component, at most 4")],
+        params: || {
+            vec![per_component_param(
+                "factors",
+                "one factor per component, at most 4",
+            )]
+        },
         flatten: |p| flatten_numbers("factors")(p),
         check: components_match,
         body: "var t = array<f32, 4>(p0, p1, p2, p3); return x * t[min(comp, 3u)];",
@@ -179,7 +210,12 @@ pub static KINDS: &[PointwiseKind] = &[
         name: "offset_components",
         doc: "out = x + offsets[component], one offset per column of a particle array (or grid component)",
         inputs: &[("x", "values", false)],
-        params: || vec![per_component_param("offsets", "one offset per component, at most 4")],
+        params: || {
+            vec![per_component_param(
+                "offsets",
+                "one offset per component, at most 4",
+            )]
+        },
         flatten: |p| flatten_numbers("offsets")(p),
         check: components_match,
         body: "var t = array<f32, 4>(p0, p1, p2, p3); return x + t[min(comp, 3u)];",
@@ -208,7 +244,11 @@ impl NodeKind for &'static PointwiseKind {
     }
 
     fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("out", PortType::RealArray, "result, shaped like the non-scalar inputs")]
+        vec![PortSpec::new(
+            "out",
+            PortType::RealArray,
+            "result, shaped like the non-scalar inputs",
+        )]
     }
 
     fn params(&self) -> Vec<ParamSpec> {
@@ -218,13 +258,20 @@ impl NodeKind for &'static PointwiseKind {
     fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
         let values = (self.flatten)(params);
         if self.per_component && values.len() > MAX_COMPONENTS {
-            return Err(format!("at most {MAX_COMPONENTS} per-component values are supported, got {}", values.len()));
+            return Err(format!(
+                "at most {MAX_COMPONENTS} per-component values are supported, got {}",
+                values.len()
+            ));
         }
         let mut gpu_params: Vec<f32> = values.iter().map(|&x| x as f32).collect();
         if self.per_component {
             gpu_params.resize(MAX_COMPONENTS, 0.0);
         }
-        Ok(Box::new(PointwiseNode { kind: self, values, gpu_params }))
+        Ok(Box::new(PointwiseNode {
+            kind: self,
+            values,
+            gpu_params,
+        }))
     }
 }
 
@@ -247,19 +294,26 @@ impl Node for PointwiseNode {
                 Some((j, s)) if s != *t => {
                     return Err(PortError::new(
                         self.kind.inputs[i].0,
-                        format!("is {t} but `{}` is {s}; element-wise operands must match (or be scalars)", self.kind.inputs[j].0),
+                        format!(
+                            "is {t} but `{}` is {s}; element-wise operands must match (or be scalars)",
+                            self.kind.inputs[j].0
+                        ),
                     ));
                 }
                 _ => {}
             }
         }
         let out = shape.map(|(_, t)| t).unwrap_or(ValueType::Scalar);
-        (self.kind.check)(&out, &self.values).map_err(|e| PortError::new(self.kind.inputs[0].0, e))?;
+        (self.kind.check)(&out, &self.values)
+            .map_err(|e| PortError::new(self.kind.inputs[0].0, e))?;
         Ok(Signature::outputs(vec![out]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
-        Lowering::Pointwise(PointwiseBody { body: self.kind.body.to_string(), params: self.gpu_params.clone() })
+        Lowering::Pointwise(PointwiseBody {
+            body: self.kind.body.to_string(),
+            params: self.gpu_params.clone(),
+        })
     }
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _cx: RefCtx) {
@@ -273,7 +327,8 @@ impl Node for PointwiseNode {
                     Some(r) => r.data[idx],
                 };
             }
-            out.data[idx] = (self.kind.reference)(&args, out.ty.component_of(idx as u64), &self.values);
+            out.data[idx] =
+                (self.kind.reference)(&args, out.ty.component_of(idx as u64), &self.values);
         }
     }
 }

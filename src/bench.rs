@@ -32,7 +32,11 @@ pub enum BenchCommand {
 
 pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
     match cmd {
-        BenchCommand::Overhead { nodes, elements, reps } => overhead(nodes, elements, reps),
+        BenchCommand::Overhead {
+            nodes,
+            elements,
+            reps,
+        } => overhead(nodes, elements, reps),
     }
 }
 
@@ -44,7 +48,11 @@ fn runtime(e: impl std::fmt::Display) -> CliError {
 pub fn chain_graph(n: usize) -> String {
     let mut nodes = Vec::new();
     for i in 0..n {
-        let src = if i == 0 { "inputs.x".to_string() } else { format!("s{}.out", i - 1) };
+        let src = if i == 0 {
+            "inputs.x".to_string()
+        } else {
+            format!("s{}.out", i - 1)
+        };
         nodes.push(format!(
             r#"{{"id": "s{i}", "kind": "scale", "params": {{"factor": 1.0001}}, "inputs": {{"x": "{src}"}}}}"#
         ));
@@ -61,7 +69,9 @@ pub fn chain_graph(n: usize) -> String {
 
 fn overhead(nodes: usize, elements: u32, reps: u64) -> Result<(), CliError> {
     if nodes == 0 || reps == 0 {
-        return Err(CliError::Input("--nodes and --reps must be positive".into()));
+        return Err(CliError::Input(
+            "--nodes and --reps must be positive".into(),
+        ));
     }
     let gpu = GpuContext::new().map_err(runtime)?;
     let dir = std::env::temp_dir().join(format!("mesoflow-bench-{}", std::process::id()));
@@ -69,15 +79,28 @@ fn overhead(nodes: usize, elements: u32, reps: u64) -> Result<(), CliError> {
     let file = dir.join("chain.json");
     std::fs::write(&file, chain_graph(nodes)).map_err(runtime)?;
     let registry = Registry::standard();
-    let g = graph::load(&file, &registry, &LoadOptions::default()).map_err(|p| CliError::Input(p.to_string()))?;
+    let g = graph::load(&file, &registry, &LoadOptions::default())
+        .map_err(|p| CliError::Input(p.to_string()))?;
     let ty = ValueType::Particles { n: elements, k: 1 };
-    let opts = PlanOptions { outputs: None, inputs: [("x".to_string(), ty)].into_iter().collect(), fuse: false };
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: [("x".to_string(), ty)].into_iter().collect(),
+        fuse: false,
+    };
     let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
     let mut cache = KernelCache::default();
     let mut program = Program::compile(&gpu, &g, &p, &mut cache).map_err(runtime)?;
     let x = HostArray::f32(ty, (0..elements).map(|i| i as f32).collect());
-    program.upload(&[("x".to_string(), x)].into_iter().collect()).map_err(runtime)?;
-    let run = |program: &mut Program, steps: u64| program.run(&RunOptions { steps, profile: false, progress: false });
+    program
+        .upload(&[("x".to_string(), x)].into_iter().collect())
+        .map_err(runtime)?;
+    let run = |program: &mut Program, steps: u64| {
+        program.run(&RunOptions {
+            steps,
+            profile: false,
+            progress: false,
+        })
+    };
     run(&mut program, 2).map_err(runtime)?; // warm-up
     let mut exec_times = Vec::new();
     for _ in 0..5 {
@@ -88,14 +111,33 @@ fn overhead(nodes: usize, elements: u32, reps: u64) -> Result<(), CliError> {
 
     // Raw wgpu: one pipeline, pre-made bind groups, all dispatches in one pass per submit.
     let src = crate::gpu::shaders::resolve(&raw_kernel_source()).map_err(runtime)?;
-    let mut cx = CompileCtx { gpu: &gpu, kernels: &mut cache, clock: &dummy(&gpu), allocated: Default::default() };
+    let mut cx = CompileCtx {
+        gpu: &gpu,
+        kernels: &mut cache,
+        clock: &dummy(&gpu),
+        allocated: Default::default(),
+    };
     let k = cx
-        .kernel(&KernelSpec::new("raw scale", src, &[Binding::StorageRead, Binding::StorageReadWrite, Binding::Uniform]))
+        .kernel(&KernelSpec::new(
+            "raw scale",
+            src,
+            &[
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
+        ))
         .map_err(runtime)?;
     let bufs: Vec<wgpu::Buffer> = (0..2).map(|_| storage(&gpu, elements as u64 * 4)).collect();
     let uni = cx.uniform("n", bytemuck::bytes_of(&elements));
     let dispatches: Vec<_> = (0..nodes)
-        .map(|i| cx.dispatch(&k, &[&bufs[i % 2], &bufs[(i + 1) % 2], &uni], cx.grid_1d(elements as u64, WG_1D)))
+        .map(|i| {
+            cx.dispatch(
+                &k,
+                &[&bufs[i % 2], &bufs[(i + 1) % 2], &uni],
+                cx.grid_1d(elements as u64, WG_1D),
+            )
+        })
         .collect();
     let per_submit = (4096 / (nodes + 1)).max(1) as u64;
     let raw_run = |reps: u64| -> Result<f64, CliError> {
@@ -153,12 +195,26 @@ fn overhead(nodes: usize, elements: u32, reps: u64) -> Result<(), CliError> {
     let _ = std::fs::remove_dir_all(&dir);
 
     println!("adapter: {}", gpu.caps.summary());
-    println!("chain of {nodes} unfused pointwise nodes, {elements} elements each, {reps} repetitions, median of 5");
+    println!(
+        "chain of {nodes} unfused pointwise nodes, {elements} elements each, {reps} repetitions, median of 5"
+    );
     println!("{:<44} {:>12}", "", "us per node");
-    println!("{:<44} {:>12.3}", "mesoflow executor (graph file, planned)", exec * 1e6);
-    println!("{:<44} {:>12.3}", "raw wgpu (same kernel, one pass per submit)", raw * 1e6);
+    println!(
+        "{:<44} {:>12.3}",
+        "mesoflow executor (graph file, planned)",
+        exec * 1e6
+    );
+    println!(
+        "{:<44} {:>12.3}",
+        "raw wgpu (same kernel, one pass per submit)",
+        raw * 1e6
+    );
     println!("{:<44} {:>12.3}", "ratio executor / raw", exec / raw);
-    println!("{:<44} {:>12.1}", "submit-and-wait round trip (us)", roundtrip * 1e6);
+    println!(
+        "{:<44} {:>12.1}",
+        "submit-and-wait round trip (us)",
+        roundtrip * 1e6
+    );
     Ok(())
 }
 
@@ -172,7 +228,9 @@ fn storage(gpu: &GpuContext, bytes: u64) -> wgpu::Buffer {
     gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("bench"),
         size: bytes.max(16),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
 }
@@ -185,5 +243,9 @@ fn dummy(gpu: &GpuContext) -> wgpu::Buffer {
 pub fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     let n = v.len();
-    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
 }

@@ -18,7 +18,11 @@ use crate::plan::{self, Plan, PlanOptions};
 use crate::value::{HostArray, HostData, ValueType};
 
 #[derive(Parser, Debug)]
-#[command(name = "mesoflow", version, about = "Complex-fluid simulation algorithms on the GPU as graphs of compute nodes")]
+#[command(
+    name = "mesoflow",
+    version,
+    about = "Complex-fluid simulation algorithms on the GPU as graphs of compute nodes"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -143,13 +147,30 @@ pub fn main() -> ExitCode {
 pub fn execute(cmd: Command) -> Result<(), CliError> {
     let registry = Registry::standard();
     match cmd {
-        Command::Run { graph, sets, inputs, outputs, steps, seed, profile, no_fuse } => {
-            run(&registry, &graph, &sets, &inputs, &outputs, steps, seed, profile, !no_fuse)
-        }
+        Command::Run {
+            graph,
+            sets,
+            inputs,
+            outputs,
+            steps,
+            seed,
+            profile,
+            no_fuse,
+        } => run(
+            &registry, &graph, &sets, &inputs, &outputs, steps, seed, profile, !no_fuse,
+        ),
         Command::Validate { graphs } => validate(&registry, &graphs),
-        Command::Inspect { graph, sets, inputs, outputs, steps, no_fuse, dot } => {
-            inspect(&registry, &graph, &sets, &inputs, &outputs, steps, !no_fuse, dot)
-        }
+        Command::Inspect {
+            graph,
+            sets,
+            inputs,
+            outputs,
+            steps,
+            no_fuse,
+            dot,
+        } => inspect(
+            &registry, &graph, &sets, &inputs, &outputs, steps, !no_fuse, dot,
+        ),
         Command::Nodes { kind } => nodes(&registry, kind.as_deref()),
         Command::Bench { which } => crate::bench::run(which),
     }
@@ -166,7 +187,8 @@ pub fn parse_sets(sets: &[String]) -> Result<BTreeMap<String, ParamValue>, CliEr
     let mut out = BTreeMap::new();
     for s in sets {
         let (name, value) = split_pair(s, "set", "NAME=VALUE")?;
-        let v = ParamValue::from_cli(value).map_err(|e| CliError::Input(format!("--set {name}: {e}")))?;
+        let v = ParamValue::from_cli(value)
+            .map_err(|e| CliError::Input(format!("--set {name}: {e}")))?;
         if out.insert(name.trim().to_string(), v).is_some() {
             return Err(CliError::Input(format!("--set {name} is given twice")));
         }
@@ -185,8 +207,16 @@ pub fn declared_input_types(g: &Graph) -> BTreeMap<String, ValueType> {
         .iter()
         .filter_map(|i| {
             let shape = match &i.shape {
-                InputShape::Particles { rows: Dim::Free, cols } => InputShape::Particles { rows: Dim::Fixed(1), cols: *cols },
-                InputShape::Indices { rows: Dim::Free } => InputShape::Indices { rows: Dim::Fixed(1) },
+                InputShape::Particles {
+                    rows: Dim::Free,
+                    cols,
+                } => InputShape::Particles {
+                    rows: Dim::Fixed(1),
+                    cols: *cols,
+                },
+                InputShape::Indices { rows: Dim::Free } => InputShape::Indices {
+                    rows: Dim::Fixed(1),
+                },
                 other => other.clone(),
             };
             shape.with_sizes(size).map(|t| (i.name.clone(), t))
@@ -202,7 +232,11 @@ fn read_inputs(g: &Graph, args: &[String]) -> Result<BTreeMap<String, HostArray>
             let known: Vec<&str> = g.inputs.iter().map(|i| i.name.as_str()).collect();
             return Err(CliError::Input(format!(
                 "--input {name}: the graph has no input `{name}` (inputs: {})",
-                if known.is_empty() { "none".into() } else { known.join(", ") }
+                if known.is_empty() {
+                    "none".into()
+                } else {
+                    known.join(", ")
+                }
             )));
         };
         if out.contains_key(name) {
@@ -232,13 +266,29 @@ fn run(
     }
     let overrides = parse_sets(sets)?;
     let seed = match (seed, overrides.get("seed")) {
-        (Some(_), Some(_)) => return Err(CliError::Input("give the seed once: --seed or --set seed=".into())),
+        (Some(_), Some(_)) => {
+            return Err(CliError::Input(
+                "give the seed once: --seed or --set seed=".into(),
+            ));
+        }
         (Some(s), None) => s,
         (None, Some(ParamValue::Number(x))) if *x >= 0.0 && x.fract() == 0.0 => *x as u64,
-        (None, Some(v)) => return Err(CliError::Input(format!("--set seed={v}: expected a non-negative integer"))),
+        (None, Some(v)) => {
+            return Err(CliError::Input(format!(
+                "--set seed={v}: expected a non-negative integer"
+            )));
+        }
         (None, None) => 0,
     };
-    let g = load(registry, path, &LoadOptions { overrides, steps, seed })?;
+    let g = load(
+        registry,
+        path,
+        &LoadOptions {
+            overrides,
+            steps,
+            seed,
+        },
+    )?;
     let data = read_inputs(&g, input_args)?;
     let missing: Vec<String> = g
         .inputs
@@ -247,7 +297,11 @@ fn run(
         .map(|i| format!("--input {}=FILE.npy ({})", i.name, i.shape.describe()))
         .collect();
     if !missing.is_empty() {
-        return Err(CliError::Input(format!("{}: missing required inputs: {}", path.display(), missing.join(", "))));
+        return Err(CliError::Input(format!(
+            "{}: missing required inputs: {}",
+            path.display(),
+            missing.join(", ")
+        )));
     }
     // Requested outputs and where they go; checked before any GPU work.
     let mut requested = Vec::new();
@@ -255,17 +309,30 @@ fn run(
     for o in output_args {
         let (name, file) = match o.split_once('=') {
             Some((n, f)) if !n.is_empty() && !f.is_empty() => (n, Some(PathBuf::from(f))),
-            Some(_) => return Err(CliError::Input(format!("--output `{o}`: expected NAME or NAME=FILE.npy"))),
+            Some(_) => {
+                return Err(CliError::Input(format!(
+                    "--output `{o}`: expected NAME or NAME=FILE.npy"
+                )));
+            }
             None => (o.as_str(), None),
         };
         if g.output(name).is_none() {
             let known: Vec<&str> = g.outputs.iter().map(|o| o.name.as_str()).collect();
-            return Err(CliError::Input(format!("--output {name}: the graph has no output `{name}` (outputs: {})", known.join(", "))));
+            return Err(CliError::Input(format!(
+                "--output {name}: the graph has no output `{name}` (outputs: {})",
+                known.join(", ")
+            )));
         }
         if let Some(f) = file {
-            let dir = f.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+            let dir = f
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new("."));
             if !dir.is_dir() {
-                return Err(CliError::Input(format!("--output {name}: folder {} does not exist", dir.display())));
+                return Err(CliError::Input(format!(
+                    "--output {name}: folder {} does not exist",
+                    dir.display()
+                )));
             }
             files.insert(name.to_string(), f);
         }
@@ -274,7 +341,11 @@ fn run(
     let gpu = GpuContext::new()?;
     eprintln!("mesoflow: {}", gpu.caps.summary());
     let opts = PlanOptions {
-        outputs: if requested.is_empty() { None } else { Some(requested) },
+        outputs: if requested.is_empty() {
+            None
+        } else {
+            Some(requested)
+        },
         inputs: data.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse,
     };
@@ -283,7 +354,11 @@ fn run(
     let mut program = Program::compile(&gpu, &g, &p, &mut cache)?;
     program.upload(&data)?;
     let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
-    let stats = program.run(&RunOptions { steps, profile, progress })?;
+    let stats = program.run(&RunOptions {
+        steps,
+        profile,
+        progress,
+    })?;
     let results = program.read_outputs()?;
     eprintln!(
         "mesoflow: {} step{} in {:.3} s ({} dispatches per step, GPU memory {} planned + {} tables)",
@@ -326,7 +401,11 @@ pub fn summary(a: &HostArray) -> String {
     if v.len() == 1 {
         format!("{} = {}", a.ty, head[0])
     } else {
-        format!("{}  min {min:.6e}  max {max:.6e}  mean {mean:.6e}  [{}{more}]", a.ty, head.join(", "))
+        format!(
+            "{}  min {min:.6e}  max {max:.6e}  mean {mean:.6e}  [{}{more}]",
+            a.ty,
+            head.join(", ")
+        )
     }
 }
 
@@ -336,9 +415,16 @@ fn print_profile(stats: &RunStats) {
         "profile: GPU time per launch over {} step{} ({})",
         stats.steps,
         if stats.steps == 1 { "" } else { "s" },
-        if stats.timed_by_gpu { "timestamp queries" } else { "wall clock with a wait per launch: no timestamp queries on this device" }
+        if stats.timed_by_gpu {
+            "timestamp queries"
+        } else {
+            "wall clock with a wait per launch: no timestamp queries on this device"
+        }
     );
-    println!("  {:<40} {:<28} {:>6} {:>12} {:>12} {:>6}", "launch", "kinds", "calls", "total ms", "mean us", "%");
+    println!(
+        "  {:<40} {:<28} {:>6} {:>12} {:>12} {:>6}",
+        "launch", "kinds", "calls", "total ms", "mean us", "%"
+    );
     let mut rows = stats.profile.clone();
     rows.sort_by(|a, b| b.total.cmp(&a.total));
     for r in rows {
@@ -349,16 +435,30 @@ fn print_profile(stats: &RunStats) {
             r.kinds,
             r.calls,
             t * 1e3,
-            if r.calls > 0 { t * 1e6 / r.calls as f64 } else { 0.0 },
+            if r.calls > 0 {
+                t * 1e6 / r.calls as f64
+            } else {
+                0.0
+            },
             if total > 0.0 { 100.0 * t / total } else { 0.0 }
         );
     }
-    println!("  {:<40} {:<28} {:>6} {:>12.4}", "total", "", "", total * 1e3);
+    println!(
+        "  {:<40} {:<28} {:>6} {:>12.4}",
+        "total",
+        "",
+        "",
+        total * 1e3
+    );
 }
 
 /// Caps for checks that do not depend on a device: no binding-size limit.
 fn structural_caps() -> DeviceCaps {
-    DeviceCaps { max_binding: u64::MAX, max_buffer: u64::MAX, ..DeviceCaps::baseline() }
+    DeviceCaps {
+        max_binding: u64::MAX,
+        max_buffer: u64::MAX,
+        ..DeviceCaps::baseline()
+    }
 }
 
 fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
@@ -379,9 +479,17 @@ fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
 /// Loads a graph with its defaults and plans all its outputs with the declared inputs.
 pub fn check_graph(registry: &Registry, path: &Path) -> Result<String, String> {
     let g = graph::load(path, registry, &LoadOptions::default()).map_err(|p| p.to_string())?;
-    let opts = PlanOptions { outputs: None, inputs: declared_input_types(&g), fuse: true };
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: declared_input_types(&g),
+        fuse: true,
+    };
     let p = plan::plan(&g, &opts, &structural_caps()).map_err(|p| p.to_string())?;
-    Ok(format!("{} nodes, {} launches per step", g.nodes.len(), p.step.len()))
+    Ok(format!(
+        "{} nodes, {} launches per step",
+        g.nodes.len(),
+        p.step.len()
+    ))
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -396,7 +504,15 @@ fn inspect(
     dot: bool,
 ) -> Result<(), CliError> {
     let overrides = parse_sets(sets)?;
-    let g = load(registry, path, &LoadOptions { overrides, steps, seed: 0 })?;
+    let g = load(
+        registry,
+        path,
+        &LoadOptions {
+            overrides,
+            steps,
+            seed: 0,
+        },
+    )?;
     let mut inputs = declared_input_types(&g);
     for (name, arr) in read_inputs(&g, input_args)? {
         inputs.insert(name, arr.ty);
@@ -405,7 +521,15 @@ fn inspect(
         Ok(gpu) => gpu.caps.clone(),
         Err(_) => DeviceCaps::baseline(),
     };
-    let opts = PlanOptions { outputs: if outputs.is_empty() { None } else { Some(outputs.to_vec()) }, inputs, fuse };
+    let opts = PlanOptions {
+        outputs: if outputs.is_empty() {
+            None
+        } else {
+            Some(outputs.to_vec())
+        },
+        inputs,
+        fuse,
+    };
     let p: Plan = plan::plan(&g, &opts, &caps).map_err(|e| CliError::Input(e.to_string()))?;
     if dot {
         print!("{}", plan::to_dot(&g, &p));
@@ -424,10 +548,22 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
         shown += 1;
         println!("{}: {}", k.name(), k.doc());
         for p in k.inputs() {
-            println!("  in   {:<14} {}{} - {}", p.name, p.ty, if p.optional { " (optional)" } else { "" }, p.doc);
+            println!(
+                "  in   {:<14} {}{} - {}",
+                p.name,
+                p.ty,
+                if p.optional { " (optional)" } else { "" },
+                p.doc
+            );
         }
         for p in k.outputs() {
-            println!("  out  {:<14} {}{} - {}", p.name, p.ty, if p.persistent { " (persistent)" } else { "" }, p.doc);
+            println!(
+                "  out  {:<14} {}{} - {}",
+                p.name,
+                p.ty,
+                if p.persistent { " (persistent)" } else { "" },
+                p.doc
+            );
         }
         for p in k.params() {
             println!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);
@@ -435,8 +571,14 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
         println!();
     }
     if shown == 0 {
-        let hint = only.and_then(|o| registry.suggest(o)).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
-        return Err(CliError::Input(format!("no node kind `{}`{hint}", only.unwrap_or(""))));
+        let hint = only
+            .and_then(|o| registry.suggest(o))
+            .map(|s| format!(" (did you mean `{s}`?)"))
+            .unwrap_or_default();
+        return Err(CliError::Input(format!(
+            "no node kind `{}`{hint}",
+            only.unwrap_or("")
+        )));
     }
     Ok(())
 }

@@ -32,7 +32,10 @@ impl ParamValue {
             Value::Bool(b) => Ok(ParamValue::Bool(*b)),
             Value::Array(items) => items
                 .iter()
-                .map(|x| x.as_f64().ok_or_else(|| format!("array element {x} is not a number")))
+                .map(|x| {
+                    x.as_f64()
+                        .ok_or_else(|| format!("array element {x} is not a number"))
+                })
                 .collect::<Result<Vec<_>, _>>()
                 .map(ParamValue::Numbers),
             Value::Null => Err("null is not a param value".into()),
@@ -72,14 +75,18 @@ impl ParamValue {
         match self {
             ParamValue::Number(x) => json_number(*x),
             ParamValue::Text(s) => serde_json::Value::String(s.clone()),
-            ParamValue::Numbers(v) => serde_json::Value::Array(v.iter().map(|&x| json_number(x)).collect()),
+            ParamValue::Numbers(v) => {
+                serde_json::Value::Array(v.iter().map(|&x| json_number(x)).collect())
+            }
             ParamValue::Bool(b) => serde_json::Value::Bool(*b),
         }
     }
 }
 
 fn json_number(x: f64) -> serde_json::Value {
-    serde_json::Number::from_f64(x).map(serde_json::Value::Number).unwrap_or(serde_json::Value::Null)
+    serde_json::Number::from_f64(x)
+        .map(serde_json::Value::Number)
+        .unwrap_or(serde_json::Value::Null)
 }
 
 impl fmt::Display for ParamValue {
@@ -111,7 +118,10 @@ pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, Strin
     if let serde_json::Value::String(s) = v {
         if let Some(name) = s.strip_prefix('$') {
             let name = name.trim();
-            return scope.get(name).cloned().ok_or_else(|| unknown_name(name, scope));
+            return scope
+                .get(name)
+                .cloned()
+                .ok_or_else(|| unknown_name(name, scope));
         }
         if let Some(expr) = s.strip_prefix('=') {
             return eval(expr, scope).map(ParamValue::Number);
@@ -122,7 +132,10 @@ pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, Strin
 
 fn unknown_name(name: &str, scope: &Scope) -> String {
     let known: Vec<&str> = scope.keys().map(|s| s.as_str()).collect();
-    format!("unknown param `{name}` (graph params: {})", known.join(", "))
+    format!(
+        "unknown param `{name}` (graph params: {})",
+        known.join(", ")
+    )
 }
 
 /// Evaluates an arithmetic expression in f64.
@@ -133,10 +146,19 @@ fn unknown_name(name: &str, scope: &Scope) -> String {
 /// ceil, round, pow(x, y), min(...), max(...), sum(...), prod(...) (the last four also
 /// take arrays).
 pub fn eval(text: &str, scope: &Scope) -> Result<f64, String> {
-    let mut p = Parser { src: text, toks: lex(text)?, pos: 0, scope };
+    let mut p = Parser {
+        src: text,
+        toks: lex(text)?,
+        pos: 0,
+        scope,
+    };
     let v = p.expr()?;
     if p.pos != p.toks.len() {
-        return Err(format!("unexpected `{}` in expression `{}`", p.toks[p.pos].text(), text.trim()));
+        return Err(format!(
+            "unexpected `{}` in expression `{}`",
+            p.toks[p.pos].text(),
+            text.trim()
+        ));
     }
     let x = v.number(text)?;
     if !x.is_finite() {
@@ -190,7 +212,9 @@ fn lex(s: &str) -> Result<Vec<Tok>, String> {
                 }
             }
             let t = &s[start..i];
-            out.push(Tok::Num(t.parse().map_err(|_| format!("bad number `{t}` in expression `{}`", s.trim()))?));
+            out.push(Tok::Num(t.parse().map_err(|_| {
+                format!("bad number `{t}` in expression `{}`", s.trim())
+            })?));
         } else if c.is_ascii_alphabetic() || c == '_' {
             let start = i;
             while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
@@ -201,7 +225,10 @@ fn lex(s: &str) -> Result<Vec<Tok>, String> {
             out.push(Tok::Op(c));
             i += 1;
         } else {
-            return Err(format!("unexpected character `{c}` in expression `{}`", s.trim()));
+            return Err(format!(
+                "unexpected character `{c}` in expression `{}`",
+                s.trim()
+            ));
         }
     }
     Ok(out)
@@ -217,7 +244,10 @@ impl V {
     fn number(self, src: &str) -> Result<f64, String> {
         match self {
             V::Num(x) => Ok(x),
-            V::Arr(_) => Err(format!("expression `{}` gives an array where a number is needed", src.trim())),
+            V::Arr(_) => Err(format!(
+                "expression `{}` gives an array where a number is needed",
+                src.trim()
+            )),
         }
     }
 }
@@ -239,7 +269,10 @@ impl Parser<'_> {
             self.pos += 1;
             Ok(())
         } else {
-            Err(format!("expected `{c}` in expression `{}`", self.src.trim()))
+            Err(format!(
+                "expected `{c}` in expression `{}`",
+                self.src.trim()
+            ))
         }
     }
 
@@ -304,7 +337,12 @@ impl Parser<'_> {
             self.expect(']')?;
             let arr = match v {
                 V::Arr(a) => a,
-                V::Num(_) => return Err(format!("indexing a number in expression `{}`", self.src.trim())),
+                V::Num(_) => {
+                    return Err(format!(
+                        "indexing a number in expression `{}`",
+                        self.src.trim()
+                    ));
+                }
             };
             if idx < 0.0 || idx.fract() != 0.0 || idx as usize >= arr.len() {
                 return Err(format!(
@@ -363,9 +401,16 @@ impl Parser<'_> {
                 if name == "pi" {
                     return Ok(V::Num(std::f64::consts::PI));
                 }
-                Err(format!("{} in expression `{}`", unknown_name(&name, self.scope), self.src.trim()))
+                Err(format!(
+                    "{} in expression `{}`",
+                    unknown_name(&name, self.scope),
+                    self.src.trim()
+                ))
             }
-            Tok::Op(c) => Err(format!("unexpected `{c}` in expression `{}`", self.src.trim())),
+            Tok::Op(c) => Err(format!(
+                "unexpected `{c}` in expression `{}`",
+                self.src.trim()
+            )),
         }
     }
 
@@ -383,7 +428,12 @@ impl Parser<'_> {
             if args.len() != 1 {
                 return Err(format!("`{name}` takes one argument in expression `{src}`"));
             }
-            let x = args.into_iter().next().map(|a| a.number(src)).transpose()?.unwrap_or(0.0);
+            let x = args
+                .into_iter()
+                .next()
+                .map(|a| a.number(src))
+                .transpose()?
+                .unwrap_or(0.0);
             Ok(V::Num(f(x)))
         };
         match name {
@@ -410,7 +460,9 @@ impl Parser<'_> {
             "min" | "max" | "sum" | "prod" => {
                 let v = flat(args);
                 if v.is_empty() {
-                    return Err(format!("`{name}` needs at least one value in expression `{src}`"));
+                    return Err(format!(
+                        "`{name}` needs at least one value in expression `{src}`"
+                    ));
                 }
                 Ok(V::Num(match name {
                     "min" => v.iter().cloned().fold(f64::INFINITY, f64::min),
@@ -460,7 +512,11 @@ mod tests {
     #[test]
     fn errors_name_the_problem() {
         let s = scope();
-        assert!(eval("viscosity * 2", &s).unwrap_err().contains("unknown param `viscosity`"));
+        assert!(
+            eval("viscosity * 2", &s)
+                .unwrap_err()
+                .contains("unknown param `viscosity`")
+        );
         assert!(eval("box[3]", &s).unwrap_err().contains("out of range"));
         assert!(eval("box", &s).unwrap_err().contains("array"));
         assert!(eval("kernel + 1", &s).unwrap_err().contains("string"));
@@ -468,7 +524,11 @@ mod tests {
         assert!(eval("(1", &s).unwrap_err().contains("expected `)`"));
         assert!(eval("1/0", &s).unwrap_err().contains("not finite"));
         assert!(eval("foo(1)", &s).unwrap_err().contains("unknown function"));
-        assert!(eval("1 # 2", &s).unwrap_err().contains("unexpected character"));
+        assert!(
+            eval("1 # 2", &s)
+                .unwrap_err()
+                .contains("unexpected character")
+        );
     }
 
     #[test]
@@ -476,10 +536,22 @@ mod tests {
         let s = scope();
         let j = |t: &str| serde_json::from_str::<serde_json::Value>(t).unwrap();
         assert_eq!(resolve(&j("0.5"), &s).unwrap(), ParamValue::Number(0.5));
-        assert_eq!(resolve(&j("\"$kernel\""), &s).unwrap(), ParamValue::Text("gaussian".into()));
-        assert_eq!(resolve(&j("\"$box\""), &s).unwrap(), ParamValue::Numbers(vec![64.0, 32.0, 16.0]));
-        assert_eq!(resolve(&j("\"= dt * 100\""), &s).unwrap(), ParamValue::Number(1.0));
-        assert_eq!(resolve(&j("\"es\""), &s).unwrap(), ParamValue::Text("es".into()));
+        assert_eq!(
+            resolve(&j("\"$kernel\""), &s).unwrap(),
+            ParamValue::Text("gaussian".into())
+        );
+        assert_eq!(
+            resolve(&j("\"$box\""), &s).unwrap(),
+            ParamValue::Numbers(vec![64.0, 32.0, 16.0])
+        );
+        assert_eq!(
+            resolve(&j("\"= dt * 100\""), &s).unwrap(),
+            ParamValue::Number(1.0)
+        );
+        assert_eq!(
+            resolve(&j("\"es\""), &s).unwrap(),
+            ParamValue::Text("es".into())
+        );
         assert!(resolve(&j("\"$nope\""), &s).is_err());
         assert!(resolve(&j("null"), &s).is_err());
     }
@@ -487,9 +559,18 @@ mod tests {
     #[test]
     fn cli_values() {
         assert_eq!(ParamValue::from_cli("3").unwrap(), ParamValue::Number(3.0));
-        assert_eq!(ParamValue::from_cli("[64,64,32]").unwrap(), ParamValue::Numbers(vec![64.0, 64.0, 32.0]));
-        assert_eq!(ParamValue::from_cli("es").unwrap(), ParamValue::Text("es".into()));
-        assert_eq!(ParamValue::from_cli("true").unwrap(), ParamValue::Bool(true));
+        assert_eq!(
+            ParamValue::from_cli("[64,64,32]").unwrap(),
+            ParamValue::Numbers(vec![64.0, 64.0, 32.0])
+        );
+        assert_eq!(
+            ParamValue::from_cli("es").unwrap(),
+            ParamValue::Text("es".into())
+        );
+        assert_eq!(
+            ParamValue::from_cli("true").unwrap(),
+            ParamValue::Bool(true)
+        );
         assert!(ParamValue::from_cli("[1, \"a\"]").is_err());
     }
 }

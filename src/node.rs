@@ -28,7 +28,13 @@ pub struct PortSpec {
 
 impl PortSpec {
     pub const fn new(name: &'static str, ty: PortType, doc: &'static str) -> Self {
-        PortSpec { name, ty, doc, optional: false, persistent: false }
+        PortSpec {
+            name,
+            ty,
+            doc,
+            optional: false,
+            persistent: false,
+        }
     }
 
     pub const fn optional(mut self) -> Self {
@@ -46,9 +52,17 @@ impl PortSpec {
 #[derive(Clone, Debug)]
 pub enum ParamKind {
     /// A number in [min, max]; integer-valued when `integer`.
-    Number { min: f64, max: f64, integer: bool },
+    Number {
+        min: f64,
+        max: f64,
+        integer: bool,
+    },
     /// An array of numbers, each in [min, max], of length `len` when given.
-    Numbers { len: Option<usize>, min: f64, max: f64 },
+    Numbers {
+        len: Option<usize>,
+        min: f64,
+        max: f64,
+    },
     /// One of a fixed set of strings.
     Choice(&'static [&'static str]),
     Bool,
@@ -65,26 +79,56 @@ pub struct ParamSpec {
 }
 
 impl ParamSpec {
-    pub fn number(name: &'static str, default: Option<f64>, min: f64, max: f64, doc: &'static str) -> Self {
+    pub fn number(
+        name: &'static str,
+        default: Option<f64>,
+        min: f64,
+        max: f64,
+        doc: &'static str,
+    ) -> Self {
         ParamSpec {
             name,
-            kind: ParamKind::Number { min, max, integer: false },
+            kind: ParamKind::Number {
+                min,
+                max,
+                integer: false,
+            },
             default: default.map(ParamValue::Number),
             doc,
         }
     }
 
-    pub fn integer(name: &'static str, default: Option<f64>, min: f64, max: f64, doc: &'static str) -> Self {
+    pub fn integer(
+        name: &'static str,
+        default: Option<f64>,
+        min: f64,
+        max: f64,
+        doc: &'static str,
+    ) -> Self {
         ParamSpec {
             name,
-            kind: ParamKind::Number { min, max, integer: true },
+            kind: ParamKind::Number {
+                min,
+                max,
+                integer: true,
+            },
             default: default.map(ParamValue::Number),
             doc,
         }
     }
 
-    pub fn choice(name: &'static str, default: &'static str, choices: &'static [&'static str], doc: &'static str) -> Self {
-        ParamSpec { name, kind: ParamKind::Choice(choices), default: Some(ParamValue::Text(default.into())), doc }
+    pub fn choice(
+        name: &'static str,
+        default: &'static str,
+        choices: &'static [&'static str],
+        doc: &'static str,
+    ) -> Self {
+        ParamSpec {
+            name,
+            kind: ParamKind::Choice(choices),
+            default: Some(ParamValue::Text(default.into())),
+            doc,
+        }
     }
 
     /// Checks a value against the spec; the message says what was expected.
@@ -123,7 +167,11 @@ impl ParamSpec {
                 }
             }
             (ParamKind::Bool, ParamValue::Bool(_)) => Ok(()),
-            (kind, v) => Err(format!("expected {}, got {}", kind_name(kind), v.type_name())),
+            (kind, v) => Err(format!(
+                "expected {}, got {}",
+                kind_name(kind),
+                v.type_name()
+            )),
         }
     }
 
@@ -131,11 +179,17 @@ impl ParamSpec {
     pub fn describe(&self) -> String {
         let range = match &self.kind {
             ParamKind::Number { min, max, integer } => {
-                format!("{} in [{}, {}]", if *integer { "integer" } else { "number" }, fmt_bound(*min), fmt_bound(*max))
+                format!(
+                    "{} in [{}, {}]",
+                    if *integer { "integer" } else { "number" },
+                    fmt_bound(*min),
+                    fmt_bound(*max)
+                )
             }
             ParamKind::Numbers { len, min, max } => format!(
                 "{} numbers in [{}, {}]",
-                len.map(|n| n.to_string()).unwrap_or_else(|| "any count of".into()),
+                len.map(|n| n.to_string())
+                    .unwrap_or_else(|| "any count of".into()),
                 fmt_bound(*min),
                 fmt_bound(*max)
             ),
@@ -232,7 +286,11 @@ pub fn check_params(
                 name.clone(),
                 format!(
                     "unknown param (this kind takes: {})",
-                    if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                    if known.is_empty() {
+                        "none".to_string()
+                    } else {
+                        known.join(", ")
+                    }
                 ),
             ));
         }
@@ -249,7 +307,11 @@ pub fn check_params(
             None => problems.push((spec.name.to_string(), "missing required param".into())),
         }
     }
-    if problems.is_empty() { Ok(Params::new(values)) } else { Err(problems) }
+    if problems.is_empty() {
+        Ok(Params::new(values))
+    } else {
+        Err(problems)
+    }
 }
 
 /// A type error at one port, found while inferring shapes.
@@ -261,7 +323,10 @@ pub struct PortError {
 
 impl PortError {
     pub fn new(port: impl Into<String>, message: impl Into<String>) -> Self {
-        PortError { port: port.into(), message: message.into() }
+        PortError {
+            port: port.into(),
+            message: message.into(),
+        }
     }
 }
 
@@ -275,7 +340,10 @@ pub struct Signature {
 
 impl Signature {
     pub fn outputs(outputs: Vec<ValueType>) -> Self {
-        Signature { outputs, scratch: Vec::new() }
+        Signature {
+            outputs,
+            scratch: Vec::new(),
+        }
     }
 }
 
@@ -305,7 +373,11 @@ pub enum Lowering<'a> {
 /// so it must not keep GPU state of its own that outlives a step: anything that persists
 /// belongs in a `persistent` output, which the planner owns.
 pub trait GpuKernels {
-    fn compile(&self, cx: &mut CompileCtx<'_>, io: &NodeIo<'_>) -> Result<Vec<Dispatch>, CompileError>;
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError>;
 }
 
 /// Context given to CPU references.
@@ -371,7 +443,11 @@ impl Registry {
 
     /// Known names closest to `name`, for "did you mean" hints.
     pub fn suggest(&self, name: &str) -> Option<&'static str> {
-        self.kinds.keys().copied().min_by_key(|k| edit_distance(k, name)).filter(|k| edit_distance(k, name) <= 3)
+        self.kinds
+            .keys()
+            .copied()
+            .min_by_key(|k| edit_distance(k, name))
+            .filter(|k| edit_distance(k, name) <= 3)
     }
 }
 
@@ -382,7 +458,9 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
     for (i, ca) in a.chars().enumerate() {
         let mut cur = vec![i + 1; b.len() + 1];
         for (j, cb) in b.iter().enumerate() {
-            cur[j + 1] = (prev[j] + usize::from(ca != *cb)).min(prev[j + 1] + 1).min(cur[j] + 1);
+            cur[j + 1] = (prev[j] + usize::from(ca != *cb))
+                .min(prev[j + 1] + 1)
+                .min(cur[j] + 1);
         }
         prev = cur;
     }
@@ -397,11 +475,27 @@ mod tests {
     fn param_checks() {
         let s = ParamSpec::integer("count", Some(3.0), 1.0, 10.0, "");
         assert!(s.check(&ParamValue::Number(4.0)).is_ok());
-        assert!(s.check(&ParamValue::Number(4.5)).unwrap_err().contains("not an integer"));
-        assert!(s.check(&ParamValue::Number(11.0)).unwrap_err().contains("outside"));
-        assert!(s.check(&ParamValue::Text("x".into())).unwrap_err().contains("expected an integer"));
+        assert!(
+            s.check(&ParamValue::Number(4.5))
+                .unwrap_err()
+                .contains("not an integer")
+        );
+        assert!(
+            s.check(&ParamValue::Number(11.0))
+                .unwrap_err()
+                .contains("outside")
+        );
+        assert!(
+            s.check(&ParamValue::Text("x".into()))
+                .unwrap_err()
+                .contains("expected an integer")
+        );
         let c = ParamSpec::choice("kernel", "gaussian", &["gaussian", "es"], "");
-        assert!(c.check(&ParamValue::Text("peskin".into())).unwrap_err().contains("not one of"));
+        assert!(
+            c.check(&ParamValue::Text("peskin".into()))
+                .unwrap_err()
+                .contains("not one of")
+        );
     }
 
     #[test]

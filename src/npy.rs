@@ -18,15 +18,24 @@ use crate::value::{Elem, HostArray, HostData, ValueType};
 #[non_exhaustive]
 pub enum NpyError {
     #[error("{path}: cannot read: {source}")]
-    Read { path: PathBuf, source: std::io::Error },
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: cannot write: {source}")]
-    Write { path: PathBuf, source: std::io::Error },
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: {message}")]
     Content { path: PathBuf, message: String },
 }
 
 fn content(path: &Path, message: impl Into<String>) -> NpyError {
-    NpyError::Content { path: path.to_path_buf(), message: message.into() }
+    NpyError::Content {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
 }
 
 /// Raw numbers of a file, widened, with its shape.
@@ -36,37 +45,105 @@ enum Numbers {
 }
 
 fn read_numbers(path: &Path) -> Result<(Vec<u64>, Numbers, bool), NpyError> {
-    let f = File::open(path).map_err(|source| NpyError::Read { path: path.into(), source })?;
+    let f = File::open(path).map_err(|source| NpyError::Read {
+        path: path.into(),
+        source,
+    })?;
     let npy = npyz::NpyFile::new(BufReader::new(f))
         .map_err(|e| content(path, format!("not a valid NPY file: {e}")))?;
     let shape = npy.shape().to_vec();
     if npy.order() == npyz::Order::Fortran && shape.iter().filter(|&&d| d > 1).count() > 1 {
-        return Err(content(path, "Fortran-ordered arrays are not supported; save with np.ascontiguousarray"));
+        return Err(content(
+            path,
+            "Fortran-ordered arrays are not supported; save with np.ascontiguousarray",
+        ));
     }
     let dtype = match npy.dtype() {
         npyz::DType::Plain(ts) => ts.to_string(),
-        other => return Err(content(path, format!("unsupported dtype {other:?}: use float32 or float64"))),
-    };
-    let bad = |e: std::io::Error| content(path, format!("reading data: {e}"));
-    let (nums, complex) = match dtype.as_str() {
-        "<f4" | "=f4" => (Numbers::Float(npy.into_vec::<f32>().map_err(bad)?.into_iter().map(f64::from).collect()), false),
-        "<f8" | "=f8" => (Numbers::Float(npy.into_vec::<f64>().map_err(bad)?), false),
-        "<c8" => {
-            let v: Vec<num_complex::Complex<f32>> = npy.into_vec().map_err(bad)?;
-            (Numbers::Float(v.into_iter().flat_map(|c| [c.re as f64, c.im as f64]).collect()), true)
-        }
-        "<c16" => {
-            let v: Vec<num_complex::Complex<f64>> = npy.into_vec().map_err(bad)?;
-            (Numbers::Float(v.into_iter().flat_map(|c| [c.re, c.im]).collect()), true)
-        }
-        "<i4" => (Numbers::Int(npy.into_vec::<i32>().map_err(bad)?.into_iter().map(i128::from).collect()), false),
-        "<i8" => (Numbers::Int(npy.into_vec::<i64>().map_err(bad)?.into_iter().map(i128::from).collect()), false),
-        "<u4" => (Numbers::Int(npy.into_vec::<u32>().map_err(bad)?.into_iter().map(i128::from).collect()), false),
-        "<u8" => (Numbers::Int(npy.into_vec::<u64>().map_err(bad)?.into_iter().map(i128::from).collect()), false),
         other => {
             return Err(content(
                 path,
-                format!("unsupported dtype {other}: use float32 or float64 (or integers for index arrays)"),
+                format!("unsupported dtype {other:?}: use float32 or float64"),
+            ));
+        }
+    };
+    let bad = |e: std::io::Error| content(path, format!("reading data: {e}"));
+    let (nums, complex) = match dtype.as_str() {
+        "<f4" | "=f4" => (
+            Numbers::Float(
+                npy.into_vec::<f32>()
+                    .map_err(bad)?
+                    .into_iter()
+                    .map(f64::from)
+                    .collect(),
+            ),
+            false,
+        ),
+        "<f8" | "=f8" => (Numbers::Float(npy.into_vec::<f64>().map_err(bad)?), false),
+        "<c8" => {
+            let v: Vec<num_complex::Complex<f32>> = npy.into_vec().map_err(bad)?;
+            (
+                Numbers::Float(
+                    v.into_iter()
+                        .flat_map(|c| [c.re as f64, c.im as f64])
+                        .collect(),
+                ),
+                true,
+            )
+        }
+        "<c16" => {
+            let v: Vec<num_complex::Complex<f64>> = npy.into_vec().map_err(bad)?;
+            (
+                Numbers::Float(v.into_iter().flat_map(|c| [c.re, c.im]).collect()),
+                true,
+            )
+        }
+        "<i4" => (
+            Numbers::Int(
+                npy.into_vec::<i32>()
+                    .map_err(bad)?
+                    .into_iter()
+                    .map(i128::from)
+                    .collect(),
+            ),
+            false,
+        ),
+        "<i8" => (
+            Numbers::Int(
+                npy.into_vec::<i64>()
+                    .map_err(bad)?
+                    .into_iter()
+                    .map(i128::from)
+                    .collect(),
+            ),
+            false,
+        ),
+        "<u4" => (
+            Numbers::Int(
+                npy.into_vec::<u32>()
+                    .map_err(bad)?
+                    .into_iter()
+                    .map(i128::from)
+                    .collect(),
+            ),
+            false,
+        ),
+        "<u8" => (
+            Numbers::Int(
+                npy.into_vec::<u64>()
+                    .map_err(bad)?
+                    .into_iter()
+                    .map(i128::from)
+                    .collect(),
+            ),
+            false,
+        ),
+        other => {
+            return Err(content(
+                path,
+                format!(
+                    "unsupported dtype {other}: use float32 or float64 (or integers for index arrays)"
+                ),
             ));
         }
     };
@@ -75,7 +152,11 @@ fn read_numbers(path: &Path) -> Result<(Vec<u64>, Numbers, bool), NpyError> {
 
 fn shape_text(s: &[u64]) -> String {
     let parts: Vec<String> = s.iter().map(|d| d.to_string()).collect();
-    if parts.len() == 1 { format!("({},)", parts[0]) } else { format!("({})", parts.join(", ")) }
+    if parts.len() == 1 {
+        format!("({},)", parts[0])
+    } else {
+        format!("({})", parts.join(", "))
+    }
 }
 
 /// The type a file's shape gives for a declared input, or why it does not fit.
@@ -84,35 +165,65 @@ fn type_for(shape: &[u64], complex: bool, decl: &InputShape) -> Result<ValueType
     let total: u64 = shape.iter().product();
     match decl {
         InputShape::Particles { cols, .. } => match shape {
-            [n, k] if *k == *cols as u64 => Ok(ValueType::Particles { n: to_u32(*n)?, k: *cols }),
-            [len] if len % *cols as u64 == 0 => Ok(ValueType::Particles { n: to_u32(len / *cols as u64)?, k: *cols }),
-            [n] if *cols == 1 => Ok(ValueType::Particles { n: to_u32(*n)?, k: 1 }),
-            _ => Err(format!("shape {} does not fit {}: expected (N, {cols}) or flat ({cols}N,)", shape_text(shape), decl.describe())),
+            [n, k] if *k == *cols as u64 => Ok(ValueType::Particles {
+                n: to_u32(*n)?,
+                k: *cols,
+            }),
+            [len] if len % *cols as u64 == 0 => Ok(ValueType::Particles {
+                n: to_u32(len / *cols as u64)?,
+                k: *cols,
+            }),
+            [n] if *cols == 1 => Ok(ValueType::Particles {
+                n: to_u32(*n)?,
+                k: 1,
+            }),
+            _ => Err(format!(
+                "shape {} does not fit {}: expected (N, {cols}) or flat ({cols}N,)",
+                shape_text(shape),
+                decl.describe()
+            )),
         },
         InputShape::Indices { .. } => match shape {
             [n] => Ok(ValueType::Indices { n: to_u32(*n)? }),
-            _ => Err(format!("shape {} does not fit {}: expected (N,)", shape_text(shape), decl.describe())),
+            _ => Err(format!(
+                "shape {} does not fit {}: expected (N,)",
+                shape_text(shape),
+                decl.describe()
+            )),
         },
         InputShape::Scalar => {
             if total == 1 && shape.len() <= 1 {
                 Ok(ValueType::Scalar)
             } else {
-                Err(format!("shape {} is not a scalar: expected () or (1,)", shape_text(shape)))
+                Err(format!(
+                    "shape {} is not a scalar: expected () or (1,)",
+                    shape_text(shape)
+                ))
             }
         }
         InputShape::RealGrid { dims, comps } => {
             let want = dims[0] as u64 * dims[1] as u64 * dims[2] as u64 * *comps as u64;
             if total == want && !complex {
-                Ok(ValueType::RealGrid { dims: *dims, comps: *comps })
+                Ok(ValueType::RealGrid {
+                    dims: *dims,
+                    comps: *comps,
+                })
             } else {
-                Err(format!("shape {} does not fit {}", shape_text(shape), decl.describe()))
+                Err(format!(
+                    "shape {} does not fit {}",
+                    shape_text(shape),
+                    decl.describe()
+                ))
             }
         }
         InputShape::ComplexGrid { dims, comps } => {
             let want = dims[0] as u64 * dims[1] as u64 * dims[2] as u64 * *comps as u64;
             let got = if complex { total * 2 } else { total };
             if got == 2 * want && (complex || shape.last() == Some(&2)) {
-                Ok(ValueType::ComplexGrid { dims: *dims, comps: *comps })
+                Ok(ValueType::ComplexGrid {
+                    dims: *dims,
+                    comps: *comps,
+                })
             } else {
                 Err(format!(
                     "shape {} does not fit {}: give a complex array or a float array with a trailing axis of 2",
@@ -133,47 +244,75 @@ pub fn read_input(path: &Path, decl: &InputShape) -> Result<HostArray, NpyError>
             let mut out = Vec::with_capacity(v.len());
             for (i, x) in v.into_iter().enumerate() {
                 if !x.is_finite() {
-                    return Err(content(path, format!("element {i} is {x}; inputs must be finite")));
+                    return Err(content(
+                        path,
+                        format!("element {i} is {x}; inputs must be finite"),
+                    ));
                 }
                 if x.abs() > f32::MAX as f64 {
-                    return Err(content(path, format!("element {i} = {x} does not fit in float32")));
+                    return Err(content(
+                        path,
+                        format!("element {i} = {x} does not fit in float32"),
+                    ));
                 }
                 out.push(x as f32);
             }
             Ok(HostArray::f32(ty, out))
         }
-        (Elem::F32, Numbers::Int(v)) => {
-            Ok(HostArray::f32(ty, v.into_iter().map(|x| x as f32).collect()))
-        }
+        (Elem::F32, Numbers::Int(v)) => Ok(HostArray::f32(
+            ty,
+            v.into_iter().map(|x| x as f32).collect(),
+        )),
         (Elem::U32, Numbers::Int(v)) => {
             let mut out = Vec::with_capacity(v.len());
             for (i, x) in v.into_iter().enumerate() {
-                out.push(u32::try_from(x).map_err(|_| content(path, format!("element {i} = {x} is not a valid u32 index")))?);
+                out.push(u32::try_from(x).map_err(|_| {
+                    content(path, format!("element {i} = {x} is not a valid u32 index"))
+                })?);
             }
             Ok(HostArray::u32(ty, out))
         }
-        (Elem::U32, Numbers::Float(_)) => Err(content(path, "index arrays must have an integer dtype")),
+        (Elem::U32, Numbers::Float(_)) => {
+            Err(content(path, "index arrays must have an integer dtype"))
+        }
     }
 }
 
 /// Writes an array (float32 or uint32) atomically: temporary file, then rename.
 pub fn write(path: &Path, a: &HostArray) -> Result<(), NpyError> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_else(|| "out".into());
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_else(|| "out".into());
     let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    let werr = |source: std::io::Error| NpyError::Write { path: path.into(), source };
+    let werr = |source: std::io::Error| NpyError::Write {
+        path: path.into(),
+        source,
+    };
     let result = (|| -> std::io::Result<()> {
         let file = File::create(&tmp)?;
         let mut w = BufWriter::new(file);
         let shape = a.ty.npy_shape();
         match &a.data {
             HostData::F32(v) => {
-                let mut npy = npyz::WriteOptions::<f32>::new().default_dtype().shape(&shape).writer(&mut w).begin_nd()?;
+                let mut npy = npyz::WriteOptions::<f32>::new()
+                    .default_dtype()
+                    .shape(&shape)
+                    .writer(&mut w)
+                    .begin_nd()?;
                 npy.extend(v.iter().copied())?;
                 npy.finish()?;
             }
             HostData::U32(v) => {
-                let mut npy = npyz::WriteOptions::<u32>::new().default_dtype().shape(&shape).writer(&mut w).begin_nd()?;
+                let mut npy = npyz::WriteOptions::<u32>::new()
+                    .default_dtype()
+                    .shape(&shape)
+                    .writer(&mut w)
+                    .begin_nd()?;
                 npy.extend(v.iter().copied())?;
                 npy.finish()?;
             }
@@ -207,23 +346,49 @@ mod tests {
     fn round_trip_particles() {
         let d = tmpdir("rt");
         let p = d.join("x.npy");
-        let a = HostArray::f32(ValueType::Particles { n: 2, k: 3 }, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        let a = HostArray::f32(
+            ValueType::Particles { n: 2, k: 3 },
+            vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        );
         write(&p, &a).unwrap();
-        let b = read_input(&p, &InputShape::Particles { rows: Dim::Free, cols: 3 }).unwrap();
+        let b = read_input(
+            &p,
+            &InputShape::Particles {
+                rows: Dim::Free,
+                cols: 3,
+            },
+        )
+        .unwrap();
         assert_eq!(a, b);
         // No temporary file is left next to the output.
-        let names: Vec<_> = std::fs::read_dir(&d).unwrap().flatten().map(|e| e.file_name()).collect();
+        let names: Vec<_> = std::fs::read_dir(&d)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
         assert_eq!(names.len(), 1);
     }
 
     #[test]
     fn shape_rules() {
-        let p = InputShape::Particles { rows: Dim::Free, cols: 3 };
-        assert_eq!(type_for(&[6], false, &p).unwrap(), ValueType::Particles { n: 2, k: 3 });
+        let p = InputShape::Particles {
+            rows: Dim::Free,
+            cols: 3,
+        };
+        assert_eq!(
+            type_for(&[6], false, &p).unwrap(),
+            ValueType::Particles { n: 2, k: 3 }
+        );
         assert!(type_for(&[5], false, &p).unwrap_err().contains("(N, 3)"));
         assert!(type_for(&[2, 2], false, &p).is_err());
-        assert_eq!(type_for(&[], false, &InputShape::Scalar).unwrap(), ValueType::Scalar);
-        assert_eq!(type_for(&[1], false, &InputShape::Scalar).unwrap(), ValueType::Scalar);
+        assert_eq!(
+            type_for(&[], false, &InputShape::Scalar).unwrap(),
+            ValueType::Scalar
+        );
+        assert_eq!(
+            type_for(&[1], false, &InputShape::Scalar).unwrap(),
+            ValueType::Scalar
+        );
         assert!(type_for(&[2], false, &InputShape::Scalar).is_err());
     }
 }

@@ -106,10 +106,18 @@ impl fmt::Display for ValueType {
         match *self {
             ValueType::Particles { n, k } => write!(f, "particles({n}x{k})"),
             ValueType::RealGrid { dims, comps } => {
-                write!(f, "real_grid({}x{}x{}, {comps} comp)", dims[0], dims[1], dims[2])
+                write!(
+                    f,
+                    "real_grid({}x{}x{}, {comps} comp)",
+                    dims[0], dims[1], dims[2]
+                )
             }
             ValueType::ComplexGrid { dims, comps } => {
-                write!(f, "complex_grid({}x{}x{}, {comps} comp)", dims[0], dims[1], dims[2])
+                write!(
+                    f,
+                    "complex_grid({}x{}x{}, {comps} comp)",
+                    dims[0], dims[1], dims[2]
+                )
             }
             ValueType::Indices { n } => write!(f, "indices({n})"),
             ValueType::Scalar => write!(f, "scalar"),
@@ -207,12 +215,18 @@ pub struct HostArray {
 impl HostArray {
     pub fn f32(ty: ValueType, data: Vec<f32>) -> Self {
         debug_assert_eq!(ty.words() as usize, data.len());
-        HostArray { ty, data: HostData::F32(data) }
+        HostArray {
+            ty,
+            data: HostData::F32(data),
+        }
     }
 
     pub fn u32(ty: ValueType, data: Vec<u32>) -> Self {
         debug_assert_eq!(ty.words() as usize, data.len());
-        HostArray { ty, data: HostData::U32(data) }
+        HostArray {
+            ty,
+            data: HostData::U32(data),
+        }
     }
 
     /// Rebuilds a typed array from raw little-endian words read back from the GPU.
@@ -227,7 +241,10 @@ impl HostArray {
 
     /// The same value widened to f64, as CPU references take it.
     pub fn to_ref(&self) -> RefArray {
-        RefArray { ty: self.ty, data: self.data.to_f64() }
+        RefArray {
+            ty: self.ty,
+            data: self.data.to_f64(),
+        }
     }
 }
 
@@ -262,7 +279,10 @@ mod tests {
         let p = ValueType::Particles { n: 10, k: 3 };
         assert_eq!(p.words(), 30);
         assert_eq!(p.npy_shape(), vec![10, 3]);
-        let c = ValueType::ComplexGrid { dims: [4, 5, 6], comps: 3 };
+        let c = ValueType::ComplexGrid {
+            dims: [4, 5, 6],
+            comps: 3,
+        };
         assert_eq!(c.words(), 2 * 120 * 3);
         assert_eq!(c.npy_shape(), vec![3, 6, 5, 4, 2]);
         assert_eq!(ValueType::Scalar.npy_shape(), Vec::<u64>::new());

@@ -12,7 +12,10 @@ use std::time::{Duration, Instant};
 
 use thiserror::Error;
 
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, GpuContext, GpuError, KernelCache, KernelSpec, NodeIo, Slot, WG_1D};
+use crate::gpu::{
+    Binding, CompileCtx, CompileError, Dispatch, GpuContext, GpuError, KernelCache, KernelSpec,
+    NodeIo, Slot, WG_1D,
+};
 use crate::graph::Graph;
 use crate::node::Lowering;
 use crate::plan::{Launch, Phase, Plan, Storage, ValueId};
@@ -90,19 +93,31 @@ fn storage_buffer(gpu: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
     gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(16).next_multiple_of(16),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
 }
 
 impl<'a> Program<'a> {
     /// Allocates the plan's buffers and compiles every launch.
-    pub fn compile(gpu: &'a GpuContext, graph: &'a Graph, plan: &'a Plan, cache: &mut KernelCache) -> Result<Self, ExecError> {
+    pub fn compile(
+        gpu: &'a GpuContext,
+        graph: &'a Graph,
+        plan: &'a Plan,
+        cache: &mut KernelCache,
+    ) -> Result<Self, ExecError> {
         let built_before = cache.built;
         let input_buffers = plan
             .inputs
             .iter()
-            .map(|(i, t)| (*i, storage_buffer(gpu, &format!("inputs.{}", graph.inputs[*i].name), t.bytes())))
+            .map(|(i, t)| {
+                (
+                    *i,
+                    storage_buffer(gpu, &format!("inputs.{}", graph.inputs[*i].name), t.bytes()),
+                )
+            })
             .collect();
         let state_buffers = plan
             .states
@@ -114,11 +129,25 @@ impl<'a> Program<'a> {
                 ]
             })
             .collect();
-        let buffers = plan.buffers.iter().enumerate().map(|(i, b)| storage_buffer(gpu, &format!("buf {i}"), b.bytes)).collect();
+        let buffers = plan
+            .buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| storage_buffer(gpu, &format!("buf {i}"), b.bytes))
+            .collect();
         let clock = storage_buffer(gpu, "clock", 16);
-        let mut cx = CompileCtx { gpu, kernels: cache, clock: &clock, allocated: std::cell::Cell::new(0) };
+        let mut cx = CompileCtx {
+            gpu,
+            kernels: cache,
+            clock: &clock,
+            allocated: std::cell::Cell::new(0),
+        };
         let tick_kernel = cx
-            .kernel(&KernelSpec::new("clock_tick", cx.shader("engine/clock_tick.wgsl").map_err(engine_err)?, &[Binding::StorageReadWrite]))
+            .kernel(&KernelSpec::new(
+                "clock_tick",
+                cx.shader("engine/clock_tick.wgsl").map_err(engine_err)?,
+                &[Binding::StorageReadWrite],
+            ))
             .map_err(engine_err)?;
         let clock_tick = cx.dispatch(&tick_kernel, &[&clock], [1, 1, 1]);
         let mut program = Program {
@@ -152,7 +181,11 @@ impl<'a> Program<'a> {
             let c1 = if touches_state {
                 program.compile_launch(&mut cx, l, 1)?
             } else {
-                Compiled { label: c0.label.clone(), kinds: c0.kinds.clone(), dispatches: c0.dispatches.clone() }
+                Compiled {
+                    label: c0.label.clone(),
+                    kinds: c0.kinds.clone(),
+                    dispatches: c0.dispatches.clone(),
+                }
             };
             even.push(c0);
             odd.push(c1);
@@ -171,7 +204,9 @@ impl<'a> Program<'a> {
     fn buffer(&self, v: ValueId, parity: usize) -> &wgpu::Buffer {
         match self.plan.values[v].storage {
             Storage::Input(i) => &self.input_buffers[&i],
-            Storage::State { state, next } => &self.state_buffers[state][if next { 1 - parity } else { parity }],
+            Storage::State { state, next } => {
+                &self.state_buffers[state][if next { 1 - parity } else { parity }]
+            }
             Storage::Buffer(b) => &self.buffers[b],
             Storage::Register | Storage::Pending(_) => {
                 panic!("value `{}` has no buffer", self.plan.values[v].name)
@@ -179,41 +214,83 @@ impl<'a> Program<'a> {
         }
     }
 
-    fn compile_launch(&self, cx: &mut CompileCtx, l: &Launch, parity: usize) -> Result<Compiled, ExecError> {
+    fn compile_launch(
+        &self,
+        cx: &mut CompileCtx,
+        l: &Launch,
+        parity: usize,
+    ) -> Result<Compiled, ExecError> {
         let g = self.graph;
         match l {
-            Launch::Node { node, inputs, outputs, scratch } => {
+            Launch::Node {
+                node,
+                inputs,
+                outputs,
+                scratch,
+            } => {
                 let inst = &g.nodes[*node];
                 let io = NodeIo {
                     inputs: inputs
                         .iter()
-                        .map(|v| v.map(|v| Slot { buffer: self.buffer(v, parity), ty: self.plan.values[v].ty }))
+                        .map(|v| {
+                            v.map(|v| Slot {
+                                buffer: self.buffer(v, parity),
+                                ty: self.plan.values[v].ty,
+                            })
+                        })
                         .collect(),
-                    outputs: outputs.iter().map(|&v| Slot { buffer: self.buffer(v, parity), ty: self.plan.values[v].ty }).collect(),
+                    outputs: outputs
+                        .iter()
+                        .map(|&v| Slot {
+                            buffer: self.buffer(v, parity),
+                            ty: self.plan.values[v].ty,
+                        })
+                        .collect(),
                     scratch: scratch.iter().map(|&v| self.buffer(v, parity)).collect(),
                 };
                 let Lowering::Kernels(k) = inst.node.lowering() else {
                     panic!("pointwise node `{}` scheduled as a single launch", inst.id)
                 };
-                let dispatches =
-                    k.compile(cx, &io).map_err(|source| ExecError::Compile { node: inst.id.clone(), source })?;
-                Ok(Compiled { label: inst.id.clone(), kinds: inst.kind.to_string(), dispatches })
+                let dispatches = k.compile(cx, &io).map_err(|source| ExecError::Compile {
+                    node: inst.id.clone(),
+                    source,
+                })?;
+                Ok(Compiled {
+                    label: inst.id.clone(),
+                    kinds: inst.kind.to_string(),
+                    dispatches,
+                })
             }
             Launch::Fused(k) => {
                 let ids: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].id.as_str()).collect();
                 let kinds: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].kind).collect();
-                let label = if ids.len() == 1 { ids[0].to_string() } else { format!("fused[{}]", ids.join(", ")) };
+                let label = if ids.len() == 1 {
+                    ids[0].to_string()
+                } else {
+                    format!("fused[{}]", ids.join(", "))
+                };
                 let mut bindings = vec![Binding::StorageRead];
                 bindings.extend(k.inputs.iter().map(|_| Binding::StorageRead));
                 bindings.extend(k.outputs.iter().map(|_| Binding::StorageReadWrite));
-                let spec = KernelSpec::new(format!("pointwise {}", kinds.join("+")), k.source.clone(), &bindings);
-                let kernel = cx.kernel(&spec).map_err(|source| ExecError::Compile { node: label.clone(), source })?;
+                let spec = KernelSpec::new(
+                    format!("pointwise {}", kinds.join("+")),
+                    k.source.clone(),
+                    &bindings,
+                );
+                let kernel = cx.kernel(&spec).map_err(|source| ExecError::Compile {
+                    node: label.clone(),
+                    source,
+                })?;
                 let params = cx.table("pointwise params", bytemuck::cast_slice(&k.params));
                 let mut bufs: Vec<&wgpu::Buffer> = vec![&params];
                 bufs.extend(k.inputs.iter().map(|&v| self.buffer(v, parity)));
                 bufs.extend(k.outputs.iter().map(|&v| self.buffer(v, parity)));
                 let d = cx.dispatch(&kernel, &bufs, cx.grid_1d(k.len, WG_1D));
-                Ok(Compiled { label, kinds: kinds.join("+"), dispatches: vec![d] })
+                Ok(Compiled {
+                    label,
+                    kinds: kinds.join("+"),
+                    dispatches: vec![d],
+                })
             }
             Launch::Copy { src, dst } => {
                 let words = self.plan.values[*src].ty.words();
@@ -221,13 +298,25 @@ impl<'a> Program<'a> {
                     .kernel(&KernelSpec::new(
                         "copy",
                         cx.shader("engine/copy.wgsl").map_err(engine_err)?,
-                        &[Binding::StorageRead, Binding::StorageReadWrite, Binding::Uniform],
+                        &[
+                            Binding::StorageRead,
+                            Binding::StorageReadWrite,
+                            Binding::Uniform,
+                        ],
                     ))
                     .map_err(engine_err)?;
                 let shape = cx.uniform("copy shape", bytemuck::bytes_of(&(words as u32)));
-                let d = cx.dispatch(&kernel, &[self.buffer(*src, parity), self.buffer(*dst, parity), &shape], cx.grid_1d(words, WG_1D));
+                let d = cx.dispatch(
+                    &kernel,
+                    &[self.buffer(*src, parity), self.buffer(*dst, parity), &shape],
+                    cx.grid_1d(words, WG_1D),
+                );
                 let label = format!("copy -> {}", self.plan.values[*dst].name);
-                Ok(Compiled { label, kinds: "copy".into(), dispatches: vec![d] })
+                Ok(Compiled {
+                    label,
+                    kinds: "copy".into(),
+                    dispatches: vec![d],
+                })
             }
         }
     }
@@ -236,12 +325,20 @@ impl<'a> Program<'a> {
     pub fn upload(&self, inputs: &BTreeMap<String, HostArray>) -> Result<(), ExecError> {
         for (i, t) in &self.plan.inputs {
             let name = &self.graph.inputs[*i].name;
-            let a = inputs.get(name).ok_or_else(|| ExecError::Input { name: name.clone(), message: "not given".into() })?;
+            let a = inputs.get(name).ok_or_else(|| ExecError::Input {
+                name: name.clone(),
+                message: "not given".into(),
+            })?;
             if a.ty != *t {
-                return Err(ExecError::Input { name: name.clone(), message: format!("planned as {t}, given {}", a.ty) });
+                return Err(ExecError::Input {
+                    name: name.clone(),
+                    message: format!("planned as {t}, given {}", a.ty),
+                });
             }
             if !a.data.is_empty() {
-                self.gpu.queue.write_buffer(&self.input_buffers[i], 0, a.data.as_bytes());
+                self.gpu
+                    .queue
+                    .write_buffer(&self.input_buffers[i], 0, a.data.as_bytes());
             }
         }
         Ok(())
@@ -282,24 +379,39 @@ impl<'a> Program<'a> {
     /// Runs the prologue and `steps` time steps.
     pub fn run(&mut self, opts: &RunOptions) -> Result<RunStats, ExecError> {
         if opts.steps == 0 {
-            return Err(ExecError::Run("the number of steps must be at least 1".into()));
+            return Err(ExecError::Run(
+                "the number of steps must be at least 1".into(),
+            ));
         }
         let t0 = Instant::now();
         self.start()?;
-        let stats = if opts.profile { self.run_profiled(opts.steps)? } else { self.run_batched(opts)? };
-        Ok(RunStats { wall: t0.elapsed(), ..stats })
+        let stats = if opts.profile {
+            self.run_profiled(opts.steps)?
+        } else {
+            self.run_batched(opts)?
+        };
+        Ok(RunStats {
+            wall: t0.elapsed(),
+            ..stats
+        })
     }
 
     fn run_batched(&mut self, opts: &RunOptions) -> Result<RunStats, ExecError> {
-        let per_step: usize = self.step[0].iter().map(|c| c.dispatches.len()).sum::<usize>() + 1;
+        let per_step: usize = self.step[0]
+            .iter()
+            .map(|c| c.dispatches.len())
+            .sum::<usize>()
+            + 1;
         // Several steps per submission, bounded so that the progress bar moves and the
         // driver's queue stays shallow.
         let steps_per_submit = ((4096 / per_step).max(1) as u64).min(opts.steps);
         let bar = if opts.progress && opts.steps > 1 {
             let b = indicatif::ProgressBar::new(opts.steps);
             b.set_style(
-                indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {per_sec}  eta {eta}")
-                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+                indicatif::ProgressStyle::with_template(
+                    "{bar:40} {pos}/{len} steps  {per_sec}  eta {eta}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
             );
             Some(b)
         } else {
@@ -340,7 +452,12 @@ impl<'a> Program<'a> {
             b.finish_and_clear();
         }
         self.steps_done += opts.steps;
-        Ok(RunStats { steps: opts.steps, wall: Duration::ZERO, profile: Vec::new(), timed_by_gpu: false })
+        Ok(RunStats {
+            steps: opts.steps,
+            wall: Duration::ZERO,
+            profile: Vec::new(),
+            timed_by_gpu: false,
+        })
     }
 
     /// Runs steps one launch per compute pass with timestamps around each pass (or with a
@@ -429,7 +546,12 @@ impl<'a> Program<'a> {
             }
         }
         self.steps_done += steps;
-        Ok(RunStats { steps, wall: Duration::ZERO, profile: rows, timed_by_gpu: use_gpu })
+        Ok(RunStats {
+            steps,
+            wall: Duration::ZERO,
+            profile: rows,
+            timed_by_gpu: use_gpu,
+        })
     }
 
     /// Reads back the requested outputs (their values after the last step run).
@@ -449,7 +571,11 @@ impl<'a> Program<'a> {
 
     /// Number of dispatches recorded per step (the clock tick included).
     pub fn dispatches_per_step(&self) -> usize {
-        self.step[0].iter().map(|c| c.dispatches.len()).sum::<usize>() + 1
+        self.step[0]
+            .iter()
+            .map(|c| c.dispatches.len())
+            .sum::<usize>()
+            + 1
     }
 
     /// Which phase each compiled launch belongs to, with its label (for reports).
@@ -463,5 +589,8 @@ impl<'a> Program<'a> {
 }
 
 fn engine_err(source: CompileError) -> ExecError {
-    ExecError::Compile { node: "(engine)".into(), source }
+    ExecError::Compile {
+        node: "(engine)".into(),
+        source,
+    }
 }

@@ -87,7 +87,11 @@ impl DeviceCaps {
             self.adapter,
             self.device_type,
             self.driver,
-            if feats.is_empty() { "no optional features".to_string() } else { feats.join(", ") },
+            if feats.is_empty() {
+                "no optional features".to_string()
+            } else {
+                feats.join(", ")
+            },
             self.max_binding >> 20,
             self.max_workgroup_storage >> 10
         )
@@ -116,7 +120,9 @@ impl GpuContext {
         desc.flags = wgpu::InstanceFlags::empty().with_env();
         let instance = wgpu::Instance::new(desc);
         let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
-        let wanted = std::env::var("MESOFLOW_ADAPTER").ok().filter(|s| !s.is_empty());
+        let wanted = std::env::var("MESOFLOW_ADAPTER")
+            .ok()
+            .filter(|s| !s.is_empty());
         let adapter = choose_adapter(adapters, wanted.as_deref())?;
         Self::open(adapter)
     }
@@ -150,7 +156,10 @@ impl GpuContext {
             required_limits: required_limits.clone(),
             ..Default::default()
         }))
-        .map_err(|e| GpuError::RequestDevice { adapter: info.name.clone(), message: e.to_string() })?;
+        .map_err(|e| GpuError::RequestDevice {
+            adapter: info.name.clone(),
+            message: e.to_string(),
+        })?;
 
         let errors = Arc::new(Mutex::new(Vec::new()));
         let sink = errors.clone();
@@ -163,7 +172,9 @@ impl GpuContext {
         let caps = DeviceCaps {
             adapter: info.name.clone(),
             device_type: format!("{:?}", info.device_type),
-            driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
+            driver: format!("{} {}", info.driver, info.driver_info)
+                .trim()
+                .to_string(),
             f32_atomics: features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC),
             subgroups: features
                 .contains(wgpu::Features::SUBGROUP)
@@ -176,12 +187,21 @@ impl GpuContext {
             max_invocations: required_limits.max_compute_invocations_per_workgroup,
             max_workgroups_per_dim: required_limits.max_compute_workgroups_per_dimension,
         };
-        Ok(GpuContext { adapter, device, queue, caps, errors })
+        Ok(GpuContext {
+            adapter,
+            device,
+            queue,
+            caps,
+            errors,
+        })
     }
 
     /// Errors the device reported outside error scopes since the last call.
     pub fn take_errors(&self) -> Result<(), GpuError> {
-        let mut v = self.errors.lock().map_err(|_| GpuError::Device("error log poisoned".into()))?;
+        let mut v = self
+            .errors
+            .lock()
+            .map_err(|_| GpuError::Device("error log poisoned".into()))?;
         if v.is_empty() {
             Ok(())
         } else {
@@ -194,7 +214,10 @@ impl GpuContext {
     /// Blocks until the given submission has finished, with a finite timeout.
     pub fn wait(&self, index: wgpu::SubmissionIndex) -> Result<(), GpuError> {
         self.device
-            .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: Some(GPU_TIMEOUT) })
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(index),
+                timeout: Some(GPU_TIMEOUT),
+            })
             .map_err(|e| match e {
                 wgpu::PollError::Timeout => GpuError::Timeout(GPU_TIMEOUT),
                 other => GpuError::Device(other.to_string()),
@@ -242,7 +265,10 @@ fn rank(t: wgpu::DeviceType) -> u8 {
     }
 }
 
-fn choose_adapter(adapters: Vec<wgpu::Adapter>, wanted: Option<&str>) -> Result<wgpu::Adapter, GpuError> {
+fn choose_adapter(
+    adapters: Vec<wgpu::Adapter>,
+    wanted: Option<&str>,
+) -> Result<wgpu::Adapter, GpuError> {
     if adapters.is_empty() {
         return Err(GpuError::NoAdapter);
     }
@@ -253,8 +279,14 @@ fn choose_adapter(adapters: Vec<wgpu::Adapter>, wanted: Option<&str>) -> Result<
             adapters
                 .into_iter()
                 .find(|a| a.get_info().name.to_lowercase().contains(&lw))
-                .ok_or_else(|| GpuError::AdapterNotFound { wanted: w.to_string(), found: names.join(", ") })
+                .ok_or_else(|| GpuError::AdapterNotFound {
+                    wanted: w.to_string(),
+                    found: names.join(", "),
+                })
         }
-        None => adapters.into_iter().min_by_key(|a| rank(a.get_info().device_type)).ok_or(GpuError::NoAdapter),
+        None => adapters
+            .into_iter()
+            .min_by_key(|a| rank(a.get_info().device_type))
+            .ok_or(GpuError::NoAdapter),
     }
 }

@@ -83,7 +83,11 @@ pub struct KernelCache {
 }
 
 impl KernelCache {
-    pub fn get_or_build(&mut self, gpu: &GpuContext, spec: &KernelSpec) -> Result<Arc<Kernel>, CompileError> {
+    pub fn get_or_build(
+        &mut self,
+        gpu: &GpuContext,
+        spec: &KernelSpec,
+    ) -> Result<Arc<Kernel>, CompileError> {
         if let Some(k) = self.map.get(spec) {
             return Ok(k.clone());
         }
@@ -145,7 +149,11 @@ fn build_kernel(gpu: &GpuContext, spec: &KernelSpec) -> Result<Kernel, CompileEr
         label: Some(&spec.label),
         source: wgpu::ShaderSource::Wgsl(spec.source.as_str().into()),
     });
-    let constants: Vec<(&str, f64)> = spec.constants.iter().map(|(n, b)| (n.as_str(), f64::from_bits(*b))).collect();
+    let constants: Vec<(&str, f64)> = spec
+        .constants
+        .iter()
+        .map(|(n, b)| (n.as_str(), f64::from_bits(*b)))
+        .collect();
     let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some(&spec.label),
         layout: Some(&pipeline_layout),
@@ -158,9 +166,17 @@ fn build_kernel(gpu: &GpuContext, spec: &KernelSpec) -> Result<Kernel, CompileEr
         cache: None,
     });
     if let Some(err) = pollster::block_on(scope.pop()) {
-        return Err(CompileError::Shader { label: spec.label.clone(), message: err.to_string() });
+        return Err(CompileError::Shader {
+            label: spec.label.clone(),
+            message: err.to_string(),
+        });
     }
-    Ok(Kernel { label: spec.label.clone(), pipeline, layout, bindings: spec.bindings.clone() })
+    Ok(Kernel {
+        label: spec.label.clone(),
+        pipeline,
+        layout,
+        bindings: spec.bindings.clone(),
+    })
 }
 
 /// One recorded dispatch: a kernel, its bind group and a workgroup count.
@@ -218,11 +234,13 @@ impl CompileCtx<'_> {
         let mut data = bytes.to_vec();
         data.resize(bytes.len().max(16).next_multiple_of(16), 0);
         self.allocated.set(self.allocated.get() + data.len() as u64);
-        self.gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: &data,
-            usage: wgpu::BufferUsages::UNIFORM,
-        })
+        self.gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: &data,
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
     }
 
     /// A read-only storage buffer holding a table computed on the host.
@@ -230,27 +248,49 @@ impl CompileCtx<'_> {
         let mut data = bytes.to_vec();
         data.resize(bytes.len().max(16).next_multiple_of(4), 0);
         self.allocated.set(self.allocated.get() + data.len() as u64);
-        self.gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: &data,
-            usage: wgpu::BufferUsages::STORAGE,
-        })
+        self.gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: &data,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
     }
 
     /// A dispatch of `kernel` with `buffers` bound in order.
-    pub fn dispatch(&self, kernel: &Arc<Kernel>, buffers: &[&wgpu::Buffer], workgroups: [u32; 3]) -> Dispatch {
-        assert_eq!(buffers.len(), kernel.bindings.len(), "kernel `{}`: wrong number of buffers", kernel.label);
+    pub fn dispatch(
+        &self,
+        kernel: &Arc<Kernel>,
+        buffers: &[&wgpu::Buffer],
+        workgroups: [u32; 3],
+    ) -> Dispatch {
+        assert_eq!(
+            buffers.len(),
+            kernel.bindings.len(),
+            "kernel `{}`: wrong number of buffers",
+            kernel.label
+        );
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()
             .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
             .collect();
-        let bind_group = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(&kernel.label),
-            layout: &kernel.layout,
-            entries: &entries,
-        });
-        Dispatch { kernel: kernel.clone(), bind_group, workgroups }
+        let bind_group = self
+            .gpu
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(&kernel.label),
+                layout: &kernel.layout,
+                entries: &entries,
+            });
+        Dispatch {
+            kernel: kernel.clone(),
+            bind_group,
+            workgroups,
+        }
     }
 
     /// Workgroup counts covering `items` threads in groups of `wg`, folded into (x, y)

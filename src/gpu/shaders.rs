@@ -15,7 +15,10 @@ pub fn paths() -> impl Iterator<Item = &'static str> {
 
 /// The raw text of one shader file.
 pub fn raw(path: &str) -> Option<&'static str> {
-    files::FILES.iter().find(|(p, _)| *p == path).map(|(_, s)| *s)
+    files::FILES
+        .iter()
+        .find(|(p, _)| *p == path)
+        .map(|(_, s)| *s)
 }
 
 /// A shader's text with its `#import` lines resolved.
@@ -34,7 +37,12 @@ pub fn resolve(text: &str) -> Result<String, String> {
     Ok(out)
 }
 
-fn append(path: &str, out: &mut String, seen: &mut Vec<String>, stack: &mut Vec<String>) -> Result<(), String> {
+fn append(
+    path: &str,
+    out: &mut String,
+    seen: &mut Vec<String>,
+    stack: &mut Vec<String>,
+) -> Result<(), String> {
     if seen.iter().any(|s| s == path) {
         return Ok(());
     }

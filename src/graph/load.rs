@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 use indexmap::IndexMap;
 
 use super::schema::{GraphFile, InputDecl, NodeDecl, ParamDecl, SCHEMA_VERSION};
-use super::{Dim, Graph, GraphParam, InputDef, InputShape, NodeInst, OutputDef, Problem, Problems, SizeDef, Source, StateDef};
+use super::{
+    Dim, Graph, GraphParam, InputDef, InputShape, NodeInst, OutputDef, Problem, Problems, SizeDef,
+    Source, StateDef,
+};
 use crate::expr::{self, ParamValue, Scope};
 use crate::node::{Registry, check_params, edit_distance};
 
@@ -26,7 +29,11 @@ pub struct LoadOptions {
 
 impl Default for LoadOptions {
     fn default() -> Self {
-        LoadOptions { overrides: BTreeMap::new(), steps: 1, seed: 0 }
+        LoadOptions {
+            overrides: BTreeMap::new(),
+            steps: 1,
+            seed: 0,
+        }
     }
 }
 
@@ -59,11 +66,19 @@ struct PendingRef {
     file: PathBuf,
     node: Option<String>,
     port: Option<String>,
+    /// Says where the reference was written when it is not a node's input port
+    /// (an output or a state).
+    place: String,
 }
 
 impl PendingRef {
     fn problem(&self, message: String) -> Problem {
-        Problem { file: self.file.clone(), node: self.node.clone(), port: self.port.clone(), message }
+        Problem {
+            file: self.file.clone(),
+            node: self.node.clone(),
+            port: self.port.clone(),
+            message: format!("{}{message}", self.place),
+        }
     }
 }
 
@@ -76,6 +91,8 @@ enum Alias {
 enum NodeEntry {
     Kind(usize),
     Sub(String),
+    /// A node whose own problems are already reported; references to it add none.
+    Failed,
 }
 
 struct PendingNode {
@@ -122,7 +139,14 @@ fn valid_id(id: &str) -> bool {
 impl Loader<'_> {
     /// Loads one file into the scope `scope` ("" for the top level, "a/b/" inside
     /// subgraphs). `overrides` are param values from the command line or the parent.
-    fn load_file(&mut self, path: &Path, scope: &str, overrides: &IndexMap<String, ParamValue>, parent: Option<Binding>) {
+    /// Returns false when the file could not be read or parsed at all.
+    fn load_file(
+        &mut self,
+        path: &Path,
+        scope: &str,
+        overrides: &IndexMap<String, ParamValue>,
+        parent: Option<Binding>,
+    ) -> bool {
         let is_root = parent.is_none();
         let problem_here = |msg: String| match &parent {
             Some(b) => Problem::node(b.file, b.node, msg),
@@ -136,21 +160,26 @@ impl Loader<'_> {
                 chain.join(" -> "),
                 canonical.display()
             )));
-            return;
+            return false;
         }
         let text = match std::fs::read_to_string(path) {
             Ok(t) => t,
             Err(e) => {
-                let what = if is_root { "cannot read graph file" } else { "cannot read subgraph file" };
-                self.problems.push(problem_here(format!("{what} {}: {e}", path.display())));
-                return;
+                let what = if is_root {
+                    "cannot read graph file"
+                } else {
+                    "cannot read subgraph file"
+                };
+                self.problems
+                    .push(problem_here(format!("{what} {}: {e}", path.display())));
+                return false;
             }
         };
         let file: GraphFile = match serde_json::from_str(&text) {
             Ok(f) => f,
             Err(e) => {
-                self.problems.push(Problem::file(path, format!("line {}, column {}: {e}", e.line(), e.column())));
-                return;
+                self.problems.push(Problem::file(path, e.to_string()));
+                return false;
             }
         };
         if file.mesoflow != SCHEMA_VERSION {
@@ -161,13 +190,20 @@ impl Loader<'_> {
                     file.mesoflow
                 ),
             ));
-            return;
+            return false;
         }
         self.stack.push(canonical);
 
         let scope_values = self.params(path, &file.params, overrides, &parent);
         let size_names = self.sizes(path, &file, is_root);
-        self.inputs(path, scope, &file.inputs, &size_names, &scope_values, &parent);
+        self.inputs(
+            path,
+            scope,
+            &file.inputs,
+            &size_names,
+            &scope_values,
+            &parent,
+        );
         if is_root {
             self.root.doc = file.doc.clone();
         } else if !file.state.is_empty() {
@@ -184,9 +220,9 @@ impl Loader<'_> {
                 file: path.into(),
                 node: None,
                 port: None,
+                place: format!("output `{name}`: "),
             };
             if is_root {
-                let r = PendingRef { node: Some(format!("outputs.{name}")), ..r };
                 self.root.outputs.push((name.clone(), r, decl.doc().into()));
             } else {
                 self.sub_outputs.insert((scope.into(), name.clone()), r);
@@ -198,13 +234,20 @@ impl Loader<'_> {
                     scope: String::new(),
                     text: text.into(),
                     file: path.into(),
-                    node: Some(format!("state.{name}")),
-                    port: Some(what.into()),
+                    node: None,
+                    port: None,
+                    place: format!("state `{name}`, {what}: "),
                 };
-                self.root.states.push((name.clone(), mk(&s.init, "init"), mk(&s.next, "next"), s.doc.clone()));
+                self.root.states.push((
+                    name.clone(),
+                    mk(&s.init, "init"),
+                    mk(&s.next, "next"),
+                    s.doc.clone(),
+                ));
             }
         }
         self.stack.pop();
+        true
     }
 
     /// Resolves graph params: defaults in order (a default may be an expression over the
@@ -223,7 +266,11 @@ impl Loader<'_> {
                 let known: Vec<&str> = decls.keys().map(|s| s.as_str()).collect();
                 let msg = format!(
                     "unknown param `{name}` (this graph's params: {})",
-                    if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                    if known.is_empty() {
+                        "none".to_string()
+                    } else {
+                        known.join(", ")
+                    }
                 );
                 self.problems.push(match parent {
                     Some(b) => Problem::port(b.file, b.node, name, msg),
@@ -240,19 +287,26 @@ impl Loader<'_> {
                 continue;
             }
             if !valid_id(name) {
-                self.problems.push(Problem::file(path, format!("param name `{name}` is not a valid identifier")));
+                self.problems.push(Problem::file(
+                    path,
+                    format!("param name `{name}` is not a valid identifier"),
+                ));
                 continue;
             }
             let default = match expr::resolve(&decl.default, &scope) {
                 Ok(v) => v,
                 Err(e) => {
-                    self.problems.push(Problem::file(path, format!("param `{name}`: default: {e}")));
+                    self.problems
+                        .push(Problem::file(path, format!("param `{name}`: default: {e}")));
                     continue;
                 }
             };
             let constraint = describe_constraint(decl);
             if let Err(e) = check_param(decl, &default, &default) {
-                self.problems.push(Problem::file(path, format!("param `{name}`: default {default}: {e}")));
+                self.problems.push(Problem::file(
+                    path,
+                    format!("param `{name}`: default {default}: {e}"),
+                ));
             }
             let value = match overrides.get(name) {
                 Some(v) => {
@@ -291,7 +345,10 @@ impl Loader<'_> {
                 }
             }
             if overrides.contains_key("steps") {
-                self.problems.push(Problem::file(path, "set the number of steps with --steps, not --set steps"));
+                self.problems.push(Problem::file(
+                    path,
+                    "set the number of steps with --steps, not --set steps",
+                ));
             }
         }
         scope
@@ -301,12 +358,19 @@ impl Loader<'_> {
         let mut names = Vec::new();
         for (name, decl) in &file.sizes {
             if !valid_id(name) {
-                self.problems.push(Problem::file(path, format!("size name `{name}` is not a valid identifier")));
+                self.problems.push(Problem::file(
+                    path,
+                    format!("size name `{name}` is not a valid identifier"),
+                ));
                 continue;
             }
             names.push(name.clone());
             if is_root {
-                self.root.sizes.push(SizeDef { name: name.clone(), default: decl.default, doc: decl.doc.clone() });
+                self.root.sizes.push(SizeDef {
+                    name: name.clone(),
+                    default: decl.default,
+                    doc: decl.doc.clone(),
+                });
             }
         }
         names
@@ -329,7 +393,11 @@ impl Loader<'_> {
                         b.file,
                         b.node,
                         name,
-                        format!("subgraph {} has no input `{name}` (inputs: {})", path.display(), known.join(", ")),
+                        format!(
+                            "subgraph {} has no input `{name}` (inputs: {})",
+                            path.display(),
+                            known.join(", ")
+                        ),
                     ));
                 }
             }
@@ -338,14 +406,16 @@ impl Loader<'_> {
             let shape = match input_shape(decl, size_names, values) {
                 Ok(s) => s,
                 Err(e) => {
-                    self.problems.push(Problem::node(path, &format!("inputs.{name}"), e));
+                    self.problems
+                        .push(Problem::node(path, &format!("inputs.{name}"), e));
                     continue;
                 }
             };
             let key = (scope.to_string(), name.clone());
             match parent {
                 None => {
-                    self.input_alias.insert(key, Alias::Root(self.root.inputs.len()));
+                    self.input_alias
+                        .insert(key, Alias::Root(self.root.inputs.len()));
                     self.root.inputs.push(InputDef {
                         name: name.clone(),
                         shape,
@@ -361,18 +431,26 @@ impl Loader<'_> {
                             file: b.file.into(),
                             node: Some(b.node.into()),
                             port: Some(name.clone()),
+                            place: String::new(),
                         };
                         self.input_alias.insert(key, Alias::Parent(r));
                     }
                     None if decl.optional => {
                         self.input_alias.insert(key, Alias::Absent);
                     }
-                    None => self.problems.push(Problem::port(
-                        b.file,
-                        b.node,
-                        name,
-                        format!("input is not connected (subgraph {} requires it)", path.display()),
-                    )),
+                    None => {
+                        // Reported once here; inside the subgraph it reads as absent.
+                        self.input_alias.insert(key, Alias::Absent);
+                        self.problems.push(Problem::port(
+                            b.file,
+                            b.node,
+                            name,
+                            format!(
+                                "input is not connected (subgraph {} requires it)",
+                                path.display()
+                            ),
+                        ))
+                    }
                 },
             }
         }
@@ -383,7 +461,11 @@ impl Loader<'_> {
             let decl: NodeDecl = match serde_json::from_value(raw.clone()) {
                 Ok(d) => d,
                 Err(e) => {
-                    let id = raw.get("id").and_then(|v| v.as_str()).map(String::from).unwrap_or(format!("#{}", i + 1));
+                    let id = raw
+                        .get("id")
+                        .and_then(|v| v.as_str())
+                        .map(String::from)
+                        .unwrap_or(format!("#{}", i + 1));
                     self.problems.push(Problem::node(path, &id, e.to_string()));
                     continue;
                 }
@@ -399,7 +481,8 @@ impl Loader<'_> {
             }
             let key = (scope.to_string(), id.to_string());
             if self.node_ids.contains_key(&key) {
-                self.problems.push(Problem::node(path, id, "duplicate node id"));
+                self.problems
+                    .push(Problem::node(path, id, "duplicate node id"));
                 continue;
             }
             // Param values: literals, `$name` references or `= expressions`.
@@ -412,35 +495,58 @@ impl Loader<'_> {
                     }
                     Err(e) => {
                         bad = true;
-                        self.problems.push(Problem::node(path, id, format!("param `{pname}`: {e}")));
+                        self.problems.push(Problem::node(
+                            path,
+                            id,
+                            format!("param `{pname}`: {e}"),
+                        ));
                     }
                 }
             }
             match (&decl.kind, &decl.graph) {
                 (Some(kind), None) => {
-                    if !bad {
-                        self.kind_node(path, scope, &decl, kind, raw_params);
+                    let built = !bad && self.kind_node(path, scope, &decl, kind, raw_params);
+                    if !built {
+                        self.node_ids.insert(key, NodeEntry::Failed);
                     }
                 }
                 (None, Some(sub)) => {
                     let child_scope = format!("{scope}{id}/");
-                    self.node_ids.insert(key, NodeEntry::Sub(child_scope.clone()));
-                    if bad {
-                        continue;
-                    }
-                    let child_path = path.parent().unwrap_or(Path::new(".")).join(sub);
-                    let overrides: IndexMap<String, ParamValue> = raw_params.into_iter().collect();
-                    let binding = Binding { file: path, node: id, scope, inputs: &decl.inputs };
-                    self.load_file(&child_path, &child_scope, &overrides, Some(binding));
+                    let loaded = !bad && {
+                        let child_path = path.parent().unwrap_or(Path::new(".")).join(sub);
+                        let overrides: IndexMap<String, ParamValue> =
+                            raw_params.into_iter().collect();
+                        let binding = Binding {
+                            file: path,
+                            node: id,
+                            scope,
+                            inputs: &decl.inputs,
+                        };
+                        self.load_file(&child_path, &child_scope, &overrides, Some(binding))
+                    };
+                    let entry = if loaded {
+                        NodeEntry::Sub(child_scope)
+                    } else {
+                        NodeEntry::Failed
+                    };
+                    self.node_ids.insert(key, entry);
                 }
                 (Some(_), Some(_)) => {
-                    self.problems.push(Problem::node(path, id, "give either `kind` or `graph`, not both"))
+                    self.node_ids.insert(key, NodeEntry::Failed);
+                    self.problems.push(Problem::node(
+                        path,
+                        id,
+                        "give either `kind` or `graph`, not both",
+                    ))
                 }
-                (None, None) => self.problems.push(Problem::node(
-                    path,
-                    id,
-                    "missing `kind` (a node kind; `mesoflow nodes` lists them) or `graph` (a graph file used as a node)",
-                )),
+                (None, None) => {
+                    self.node_ids.insert(key, NodeEntry::Failed);
+                    self.problems.push(Problem::node(
+                        path,
+                        id,
+                        "missing `kind` (a node kind; `mesoflow nodes` lists them) or `graph` (a graph file used as a node)",
+                    ))
+                }
             }
         }
     }
@@ -452,16 +558,20 @@ impl Loader<'_> {
         decl: &NodeDecl,
         kind_name: &str,
         raw_params: BTreeMap<String, ParamValue>,
-    ) {
+    ) -> bool {
         let id = decl.id.as_str();
         let Some(kind) = self.registry.get(kind_name).cloned() else {
-            let hint = self.registry.suggest(kind_name).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
+            let hint = self
+                .registry
+                .suggest(kind_name)
+                .map(|s| format!(" (did you mean `{s}`?)"))
+                .unwrap_or_default();
             self.problems.push(Problem::node(
                 path,
                 id,
                 format!("unknown kind `{kind_name}`{hint}; `mesoflow nodes` lists the kinds"),
             ));
-            return;
+            return false;
         };
         let input_ports = kind.inputs();
         let output_ports = kind.outputs();
@@ -472,7 +582,10 @@ impl Loader<'_> {
                     path,
                     id,
                     name,
-                    format!("unknown input port (kind `{kind_name}` has inputs: {})", known.join(", ")),
+                    format!(
+                        "unknown input port (kind `{kind_name}` has inputs: {})",
+                        known.join(", ")
+                    ),
                 ));
             }
         }
@@ -485,10 +598,12 @@ impl Loader<'_> {
                     file: path.into(),
                     node: Some(id.into()),
                     port: Some(p.name.into()),
+                    place: String::new(),
                 })),
                 None if p.optional => refs.push(None),
                 None => {
-                    self.problems.push(Problem::port(path, id, p.name, "input is not connected"));
+                    self.problems
+                        .push(Problem::port(path, id, p.name, "input is not connected"));
                     refs.push(None);
                 }
             }
@@ -497,20 +612,22 @@ impl Loader<'_> {
             Ok(p) => p,
             Err(errs) => {
                 for (pname, msg) in errs {
-                    self.problems.push(Problem::node(path, id, format!("param `{pname}`: {msg}")));
+                    self.problems
+                        .push(Problem::node(path, id, format!("param `{pname}`: {msg}")));
                 }
-                return;
+                return false;
             }
         };
         let node = match kind.build(&params) {
             Ok(n) => n,
             Err(e) => {
                 self.problems.push(Problem::node(path, id, e));
-                return;
+                return false;
             }
         };
         let index = self.pending_nodes.len();
-        self.node_ids.insert((scope.into(), id.into()), NodeEntry::Kind(index));
+        self.node_ids
+            .insert((scope.into(), id.into()), NodeEntry::Kind(index));
         self.pending_nodes.push(PendingNode {
             inst: NodeInst {
                 id: format!("{scope}{id}"),
@@ -524,11 +641,15 @@ impl Loader<'_> {
             },
             refs,
         });
+        true
     }
 
     fn resolve(&self, r: &PendingRef, depth: usize) -> Result<Source, Problem> {
         if depth > 64 {
-            return Err(r.problem(format!("reference `{}` loops through subgraph inputs and outputs", r.text)));
+            return Err(r.problem(format!(
+                "reference `{}` loops through subgraph inputs and outputs",
+                r.text
+            )));
         }
         let Some((head, port)) = r.text.split_once('.') else {
             return Err(r.problem(format!(
@@ -566,7 +687,11 @@ impl Loader<'_> {
                         }
                     }
                 }
-                Some(NodeEntry::Sub(child)) => match self.sub_outputs.get(&(child.clone(), port.to_string())) {
+                Some(NodeEntry::Failed) => Ok(Source::Absent),
+                Some(NodeEntry::Sub(child)) => match self
+                    .sub_outputs
+                    .get(&(child.clone(), port.to_string()))
+                {
                     Some(inner) => self.resolve(inner, depth + 1),
                     None => Err(r.problem(format!("subgraph node `{id}` has no output `{port}`"))),
                 },
@@ -624,14 +749,21 @@ impl Loader<'_> {
             .root
             .outputs
             .iter()
-            .map(|(name, r, doc)| OutputDef { name: name.clone(), source: resolve(r), doc: doc.clone() })
+            .map(|(name, r, doc)| OutputDef {
+                name: name.clone(),
+                source: resolve(r),
+                doc: doc.clone(),
+            })
             .collect();
         self.problems.extend(failed);
         let pending = std::mem::take(&mut self.pending_nodes);
         let nodes: Vec<NodeInst> = pending
             .into_iter()
             .zip(resolved_refs)
-            .map(|(p, srcs)| NodeInst { inputs: srcs, ..p.inst })
+            .map(|(p, srcs)| NodeInst {
+                inputs: srcs,
+                ..p.inst
+            })
             .collect();
         let root = std::mem::take(&mut self.root);
         self.check_cycles(&nodes);
@@ -682,7 +814,11 @@ impl Loader<'_> {
 
 fn check_param(decl: &ParamDecl, default: &ParamValue, v: &ParamValue) -> Result<(), String> {
     if std::mem::discriminant(default) != std::mem::discriminant(v) {
-        return Err(format!("expected {} like the default, got {}", default.type_name(), v.type_name()));
+        return Err(format!(
+            "expected {} like the default, got {}",
+            default.type_name(),
+            v.type_name()
+        ));
     }
     let nums: Vec<f64> = match v {
         ParamValue::Number(x) => vec![*x],
@@ -711,7 +847,11 @@ fn check_param(decl: &ParamDecl, default: &ParamValue, v: &ParamValue) -> Result
     }
     if let (ParamValue::Numbers(d), ParamValue::Numbers(x)) = (default, v) {
         if d.len() != x.len() {
-            return Err(format!("expected {} numbers like the default, got {}", d.len(), x.len()));
+            return Err(format!(
+                "expected {} numbers like the default, got {}",
+                d.len(),
+                x.len()
+            ));
         }
     }
     Ok(())
@@ -742,11 +882,15 @@ fn input_shape(decl: &InputDecl, sizes: &[String], values: &Scope) -> Result<Inp
                 if sizes.contains(s) {
                     Ok(Dim::Size(s.clone()))
                 } else {
-                    Err(format!("rows names size `{s}`, which is not declared under \"sizes\""))
+                    Err(format!(
+                        "rows names size `{s}`, which is not declared under \"sizes\""
+                    ))
                 }
             }
             Some(v) => match expr::resolve(v, values)? {
-                ParamValue::Number(x) if x >= 0.0 && x.fract() == 0.0 && x <= u32::MAX as f64 => Ok(Dim::Fixed(x as u32)),
+                ParamValue::Number(x) if x >= 0.0 && x.fract() == 0.0 && x <= u32::MAX as f64 => {
+                    Ok(Dim::Fixed(x as u32))
+                }
                 other => Err(format!("rows must be a count or a size name, got {other}")),
             },
         }
@@ -764,14 +908,21 @@ fn input_shape(decl: &InputDecl, sizes: &[String], values: &Scope) -> Result<Inp
                     }
                     d
                 }
-                other => return Err(format!("dims must be an array of 1 to 3 counts, got {other}")),
+                other => {
+                    return Err(format!(
+                        "dims must be an array of 1 to 3 counts, got {other}"
+                    ));
+                }
             },
             None => return Err("a grid input needs `dims`".into()),
         };
         Ok((dims, decl.comps.unwrap_or(1)))
     };
     match decl.ty.as_str() {
-        "particles" => Ok(InputShape::Particles { rows: rows()?, cols: decl.cols.unwrap_or(1) }),
+        "particles" => Ok(InputShape::Particles {
+            rows: rows()?,
+            cols: decl.cols.unwrap_or(1),
+        }),
         "indices" => Ok(InputShape::Indices { rows: rows()? }),
         "real_grid" => {
             let (dims, comps) = grid()?;

@@ -43,14 +43,29 @@ pub struct Problem {
 
 impl Problem {
     pub fn file(file: &std::path::Path, message: impl Into<String>) -> Self {
-        Problem { file: file.to_path_buf(), node: None, port: None, message: message.into() }
+        Problem {
+            file: file.to_path_buf(),
+            node: None,
+            port: None,
+            message: message.into(),
+        }
     }
 
     pub fn node(file: &std::path::Path, node: &str, message: impl Into<String>) -> Self {
-        Problem { file: file.to_path_buf(), node: Some(node.to_string()), port: None, message: message.into() }
+        Problem {
+            file: file.to_path_buf(),
+            node: Some(node.to_string()),
+            port: None,
+            message: message.into(),
+        }
     }
 
-    pub fn port(file: &std::path::Path, node: &str, port: &str, message: impl Into<String>) -> Self {
+    pub fn port(
+        file: &std::path::Path,
+        node: &str,
+        port: &str,
+        message: impl Into<String>,
+    ) -> Self {
         Problem {
             file: file.to_path_buf(),
             node: Some(node.to_string()),
@@ -135,15 +150,24 @@ impl InputShape {
             (InputShape::Particles { rows, cols }, ValueType::Particles { n, k }) => {
                 cols == k && !matches!(rows, Dim::Fixed(r) if r != n)
             }
-            (InputShape::Indices { rows }, ValueType::Indices { n }) => !matches!(rows, Dim::Fixed(r) if r != n),
-            (InputShape::RealGrid { dims, comps }, ValueType::RealGrid { dims: d, comps: c }) => dims == d && comps == c,
-            (InputShape::ComplexGrid { dims, comps }, ValueType::ComplexGrid { dims: d, comps: c }) => {
+            (InputShape::Indices { rows }, ValueType::Indices { n }) => {
+                !matches!(rows, Dim::Fixed(r) if r != n)
+            }
+            (InputShape::RealGrid { dims, comps }, ValueType::RealGrid { dims: d, comps: c }) => {
                 dims == d && comps == c
             }
+            (
+                InputShape::ComplexGrid { dims, comps },
+                ValueType::ComplexGrid { dims: d, comps: c },
+            ) => dims == d && comps == c,
             (InputShape::Scalar, ValueType::Scalar) => true,
             _ => false,
         };
-        if ok { Ok(()) } else { Err(format!("expected {}, got {t}", self.describe())) }
+        if ok {
+            Ok(())
+        } else {
+            Err(format!("expected {}, got {t}", self.describe()))
+        }
     }
 
     /// The type this input has when its sizes take the given values.
@@ -154,10 +178,19 @@ impl InputShape {
             Dim::Free => None,
         };
         Some(match self {
-            InputShape::Particles { rows, cols } => ValueType::Particles { n: dim(rows)?, k: *cols },
+            InputShape::Particles { rows, cols } => ValueType::Particles {
+                n: dim(rows)?,
+                k: *cols,
+            },
             InputShape::Indices { rows } => ValueType::Indices { n: dim(rows)? },
-            InputShape::RealGrid { dims, comps } => ValueType::RealGrid { dims: *dims, comps: *comps },
-            InputShape::ComplexGrid { dims, comps } => ValueType::ComplexGrid { dims: *dims, comps: *comps },
+            InputShape::RealGrid { dims, comps } => ValueType::RealGrid {
+                dims: *dims,
+                comps: *comps,
+            },
+            InputShape::ComplexGrid { dims, comps } => ValueType::ComplexGrid {
+                dims: *dims,
+                comps: *comps,
+            },
             InputShape::Scalar => ValueType::Scalar,
         })
     }
@@ -172,10 +205,16 @@ impl InputShape {
             InputShape::Particles { rows, cols } => format!("particles({}x{cols})", dim(rows)),
             InputShape::Indices { rows } => format!("indices({})", dim(rows)),
             InputShape::RealGrid { dims, comps } => {
-                format!("real_grid({}x{}x{}, {comps} comp)", dims[0], dims[1], dims[2])
+                format!(
+                    "real_grid({}x{}x{}, {comps} comp)",
+                    dims[0], dims[1], dims[2]
+                )
             }
             InputShape::ComplexGrid { dims, comps } => {
-                format!("complex_grid({}x{}x{}, {comps} comp)", dims[0], dims[1], dims[2])
+                format!(
+                    "complex_grid({}x{}x{}, {comps} comp)",
+                    dims[0], dims[1], dims[2]
+                )
             }
             InputShape::Scalar => "scalar".into(),
         }

@@ -9,8 +9,8 @@
 //! same code generator, so fused and unfused runs differ only in f32 rounding of stores
 //! (none: registers hold the same f32 values).
 
-use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
 use std::cmp::Reverse;
+use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
 use std::fmt::Write;
 
 use super::{PlanValue, ValueId};
@@ -58,7 +58,10 @@ fn out_type(ctx: &FuseCtx, n: usize) -> Option<ValueType> {
 }
 
 fn real_array(t: &ValueType) -> bool {
-    matches!(t, ValueType::Particles { .. } | ValueType::RealGrid { .. } | ValueType::Scalar)
+    matches!(
+        t,
+        ValueType::Particles { .. } | ValueType::RealGrid { .. } | ValueType::Scalar
+    )
 }
 
 fn is_pointwise(ctx: &FuseCtx, n: usize) -> bool {
@@ -99,13 +102,16 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
             let mut chosen = None;
             if ctx.fuse {
                 for &u in &producers {
-                    let Some(&gu) = group_of.get(&u) else { continue };
+                    let Some(&gu) = group_of.get(&u) else {
+                        continue;
+                    };
                     if out_type(ctx, u).map(|t| t.words()) != Some(len) {
                         continue;
                     }
                     // No other input may reach this group from outside it.
                     let blocked = producers.iter().any(|&w| {
-                        group_of.get(&w) != Some(&gu) && deps.get(&w).is_some_and(|dw| dw.contains(&gu))
+                        group_of.get(&w) != Some(&gu)
+                            && deps.get(&w).is_some_and(|dw| dw.contains(&gu))
                     });
                     if !blocked {
                         chosen = Some(gu);
@@ -146,7 +152,11 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
     }
     let escapes = |n: usize, gid: usize| -> bool {
         (ctx.escapes)(Source::Node { node: n, port: 0 })
-            || consumers.get(&n).into_iter().flatten().any(|c| group_of.get(c) != Some(&gid))
+            || consumers
+                .get(&n)
+                .into_iter()
+                .flatten()
+                .any(|c| group_of.get(c) != Some(&gid))
     };
 
     // Units, ordered topologically on the quotient graph (first-declared first).
@@ -186,8 +196,10 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
             }
         }
     }
-    let mut ready: BinaryHeap<Reverse<(usize, usize)>> =
-        (0..units.len()).filter(|&u| indeg[u] == 0).map(|u| Reverse((unit_pos[u], u))).collect();
+    let mut ready: BinaryHeap<Reverse<(usize, usize)>> = (0..units.len())
+        .filter(|&u| indeg[u] == 0)
+        .map(|u| Reverse((unit_pos[u], u)))
+        .collect();
     let mut ordered = Vec::new();
     while let Some(Reverse((_, u))) = ready.pop() {
         ordered.push(u);
@@ -198,15 +210,26 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
             }
         }
     }
-    assert_eq!(ordered.len(), units.len(), "fusion produced a cyclic schedule");
+    assert_eq!(
+        ordered.len(),
+        units.len(),
+        "fusion produced a cyclic schedule"
+    );
     let mut slots: Vec<Option<Unit>> = units.into_iter().map(Some).collect();
-    ordered.into_iter().map(|u| slots[u].take().expect("each unit once")).collect()
+    ordered
+        .into_iter()
+        .map(|u| slots[u].take().expect("each unit once"))
+        .collect()
 }
 
 /// Cuts groups into consecutive runs whose kernels fit the binding budget. A run of a
 /// convex group is convex (members are in topological order, and no outside node sits
 /// between two members), so the cut needs no further checks.
-fn split_for_bindings(ctx: &FuseCtx, groups: Vec<Vec<usize>>, consumers: &HashMap<usize, Vec<usize>>) -> Vec<Vec<usize>> {
+fn split_for_bindings(
+    ctx: &FuseCtx,
+    groups: Vec<Vec<usize>>,
+    consumers: &HashMap<usize, Vec<usize>>,
+) -> Vec<Vec<usize>> {
     let bindings = |chunk: &[usize]| -> usize {
         let inside: BTreeSet<usize> = chunk.iter().copied().collect();
         let mut ext = BTreeSet::new();
@@ -222,7 +245,11 @@ fn split_for_bindings(ctx: &FuseCtx, groups: Vec<Vec<usize>>, consumers: &HashMa
                 }
             }
             // Conservative while the run grows: a consumer not (yet) in the run counts as outside.
-            let outside = consumers.get(&m).into_iter().flatten().any(|c| !inside.contains(c));
+            let outside = consumers
+                .get(&m)
+                .into_iter()
+                .flatten()
+                .any(|c| !inside.contains(c));
             if outside || (ctx.escapes)(Source::Node { node: m, port: 0 }) {
                 outs += 1;
             }
@@ -249,23 +276,30 @@ fn split_for_bindings(ctx: &FuseCtx, groups: Vec<Vec<usize>>, consumers: &HashMa
 fn comp_expr(t: &ValueType) -> String {
     match *t {
         ValueType::Particles { k, .. } => format!("idx % {k}u"),
-        ValueType::RealGrid { dims, .. } => format!("idx / {}u", dims[0] as u64 * dims[1] as u64 * dims[2] as u64),
+        ValueType::RealGrid { dims, .. } => format!(
+            "idx / {}u",
+            dims[0] as u64 * dims[1] as u64 * dims[2] as u64
+        ),
         _ => "0u".into(),
     }
 }
 
 /// Generates the kernel of a group. `member_outputs[i]` is the value of member i's
-/// output (in registers unless it escapes); `get` finds the value of any other source.
+/// output (in registers unless it escapes); `get` finds the value of any other source
+/// (`None`: absent).
 pub fn generate(
     g: &Graph,
     members: &[(usize, bool)],
     member_outputs: &[ValueId],
-    get: &dyn Fn(Source) -> ValueId,
+    get: &dyn Fn(Source) -> Option<ValueId>,
     values: &[PlanValue],
 ) -> FusedKernel {
     let len = values[member_outputs[0]].ty.words();
-    let local: HashMap<Source, usize> =
-        members.iter().enumerate().map(|(j, &(n, _))| (Source::Node { node: n, port: 0 }, j)).collect();
+    let local: HashMap<Source, usize> = members
+        .iter()
+        .enumerate()
+        .map(|(j, &(n, _))| (Source::Node { node: n, port: 0 }, j))
+        .collect();
     let mut inputs: Vec<ValueId> = Vec::new();
     let mut input_index: BTreeMap<ValueId, usize> = BTreeMap::new();
     let mut functions: Vec<(String, String)> = Vec::new(); // (signature key, code)
@@ -276,7 +310,9 @@ pub fn generate(
 
     for (j, &(n, escapes)) in members.iter().enumerate() {
         let inst = &g.nodes[n];
-        let Lowering::Pointwise(body) = inst.node.lowering() else { unreachable!("members are pointwise") };
+        let Lowering::Pointwise(body) = inst.node.lowering() else {
+            unreachable!("members are pointwise")
+        };
         let mut sig = String::new();
         for p in &inst.input_ports {
             write!(sig, "{}: f32, ", p.name).unwrap();
@@ -289,19 +325,23 @@ pub fn generate(
         let fid = match functions.iter().position(|(k, _)| *k == key) {
             Some(f) => f,
             None => {
-                let code = format!("fn f{}({sig}) -> f32 {{\n    {}\n}}\n", functions.len(), body.body.trim());
+                let code = format!(
+                    "fn f{}({sig}) -> f32 {{\n    {}\n}}\n",
+                    functions.len(),
+                    body.body.trim()
+                );
                 functions.push((key, code));
                 functions.len() - 1
             }
         };
         let mut args = Vec::new();
         for src in &inst.inputs {
-            args.push(match src {
-                Source::Absent => "0.0".to_string(),
-                s => match local.get(s) {
-                    Some(&l) => format!("v{l}"),
-                    None => {
-                        let v = get(*s);
+            args.push(match local.get(src) {
+                Some(&l) => format!("v{l}"),
+                None => match get(*src) {
+                    // An absent optional input reads as 0.
+                    None => "0.0".to_string(),
+                    Some(v) => {
                         let next = inputs.len();
                         let b = *input_index.entry(v).or_insert_with(|| {
                             inputs.push(v);
@@ -330,14 +370,25 @@ pub fn generate(
         }
     }
 
-    let mut src = String::from("// Generated by mesoflow's fusion pass.\n#import common/index.wgsl\n\n");
+    let mut src =
+        String::from("// Generated by mesoflow's fusion pass.\n#import common/index.wgsl\n\n");
     writeln!(src, "const LEN: u32 = {len}u;").unwrap();
     src.push_str("@group(0) @binding(0) var<storage, read> prm: array<f32>;\n");
     for b in 0..inputs.len() {
-        writeln!(src, "@group(0) @binding({}) var<storage, read> in{b}: array<f32>;", 1 + b).unwrap();
+        writeln!(
+            src,
+            "@group(0) @binding({}) var<storage, read> in{b}: array<f32>;",
+            1 + b
+        )
+        .unwrap();
     }
     for b in 0..outputs.len() {
-        writeln!(src, "@group(0) @binding({}) var<storage, read_write> out{b}: array<f32>;", 1 + inputs.len() + b).unwrap();
+        writeln!(
+            src,
+            "@group(0) @binding({}) var<storage, read_write> out{b}: array<f32>;",
+            1 + inputs.len() + b
+        )
+        .unwrap();
     }
     src.push('\n');
     for (_, code) in &functions {
@@ -352,5 +403,12 @@ pub fn generate(
     src.push_str(&stores);
     src.push_str("}\n");
     let source = crate::gpu::shaders::resolve(&src).expect("common/index.wgsl is embedded");
-    FusedKernel { nodes: members.iter().map(|m| m.0).collect(), source, inputs, outputs, params, len }
+    FusedKernel {
+        nodes: members.iter().map(|m| m.0).collect(),
+        source,
+        inputs,
+        outputs,
+        params,
+        len,
+    }
 }

@@ -36,8 +36,13 @@ pub fn assign(plan: &mut Plan) {
     let mut assigned: HashMap<ValueId, usize> = HashMap::new();
     // Own buffers first: outputs and persistent values are never shared.
     for (v, val) in plan.values.iter().enumerate() {
-        if let Storage::Pending(role @ (BufferRole::Output | BufferRole::Persistent)) = val.storage {
-            buffers.push(PlanBuffer { bytes: padded(val.ty.bytes()), role, holds: vec![val.name.clone()] });
+        if let Storage::Pending(role @ (BufferRole::Output | BufferRole::Persistent)) = val.storage
+        {
+            buffers.push(PlanBuffer {
+                bytes: padded(val.ty.bytes()),
+                role,
+                holds: vec![val.name.clone()],
+            });
             assigned.insert(v, buffers.len() - 1);
         }
     }
@@ -47,12 +52,19 @@ pub fn assign(plan: &mut Plan) {
     for i in 0..launches.len() {
         for v in launches[i].writes() {
             let val = &plan.values[v];
-            if val.storage != Storage::Pending(BufferRole::Pool) || def[&v] != i || assigned.contains_key(&v) {
+            if val.storage != Storage::Pending(BufferRole::Pool)
+                || def[&v] != i
+                || assigned.contains_key(&v)
+            {
                 continue;
             }
             let need = padded(val.ty.bytes());
             pool_without_reuse += need;
-            let best = free.iter().enumerate().filter(|(_, b)| buffers[**b].bytes >= need).min_by_key(|(_, b)| buffers[**b].bytes);
+            let best = free
+                .iter()
+                .enumerate()
+                .filter(|(_, b)| buffers[**b].bytes >= need)
+                .min_by_key(|(_, b)| buffers[**b].bytes);
             let pick = match best {
                 Some((slot, _)) => Some(free.swap_remove(slot)),
                 None => free
@@ -68,7 +80,11 @@ pub fn assign(plan: &mut Plan) {
                     b
                 }
                 None => {
-                    buffers.push(PlanBuffer { bytes: need, role: BufferRole::Pool, holds: Vec::new() });
+                    buffers.push(PlanBuffer {
+                        bytes: need,
+                        role: BufferRole::Pool,
+                        holds: Vec::new(),
+                    });
                     buffers.len() - 1
                 }
             };
@@ -89,16 +105,30 @@ pub fn assign(plan: &mut Plan) {
         plan.values[*v].storage = Storage::Buffer(*b);
     }
     debug_assert!(
-        plan.values.iter().all(|v| !matches!(v.storage, Storage::Pending(_))),
+        plan.values
+            .iter()
+            .all(|v| !matches!(v.storage, Storage::Pending(_))),
         "every pending value is written by some launch"
     );
 
     let m = &mut plan.memory;
     m.inputs = plan.inputs.iter().map(|(_, t)| padded(t.bytes())).sum();
     m.states = plan.states.iter().map(|s| 2 * padded(s.ty.bytes())).sum();
-    m.pool = buffers.iter().filter(|b| b.role == BufferRole::Pool).map(|b| b.bytes).sum();
-    m.outputs = buffers.iter().filter(|b| b.role == BufferRole::Output).map(|b| b.bytes).sum();
-    m.persistent = buffers.iter().filter(|b| b.role == BufferRole::Persistent).map(|b| b.bytes).sum();
+    m.pool = buffers
+        .iter()
+        .filter(|b| b.role == BufferRole::Pool)
+        .map(|b| b.bytes)
+        .sum();
+    m.outputs = buffers
+        .iter()
+        .filter(|b| b.role == BufferRole::Output)
+        .map(|b| b.bytes)
+        .sum();
+    m.persistent = buffers
+        .iter()
+        .filter(|b| b.role == BufferRole::Persistent)
+        .map(|b| b.bytes)
+        .sum();
     m.pool_without_reuse = pool_without_reuse;
     plan.buffers = buffers;
 }

@@ -9,8 +9,8 @@ mod fuse;
 mod memory;
 mod show;
 
-use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
 use std::cmp::Reverse;
+use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
 
 pub use fuse::FusedKernel;
 pub use show::{human_bytes, to_dot, to_text};
@@ -87,7 +87,12 @@ pub struct PlanBuffer {
 #[derive(Clone, Debug)]
 pub enum Launch {
     /// A node that records its own dispatches.
-    Node { node: usize, inputs: Vec<Option<ValueId>>, outputs: Vec<ValueId>, scratch: Vec<ValueId> },
+    Node {
+        node: usize,
+        inputs: Vec<Option<ValueId>>,
+        outputs: Vec<ValueId>,
+        scratch: Vec<ValueId>,
+    },
     /// One generated kernel for a chain of element-wise nodes.
     Fused(FusedKernel),
     /// Engine copy (a state whose next value is not written in place).
@@ -144,7 +149,10 @@ pub struct Plan {
 
 impl Plan {
     pub fn launches(&self) -> impl Iterator<Item = (Phase, &Launch)> {
-        self.prologue.iter().map(|l| (Phase::Prologue, l)).chain(self.step.iter().map(|l| (Phase::Step, l)))
+        self.prologue
+            .iter()
+            .map(|l| (Phase::Prologue, l))
+            .chain(self.step.iter().map(|l| (Phase::Step, l)))
     }
 }
 
@@ -194,8 +202,12 @@ impl<'g> Planner<'g> {
                     match g.output(n) {
                         Some(i) => v.push(i),
                         None => {
-                            let known: Vec<&str> = g.outputs.iter().map(|o| o.name.as_str()).collect();
-                            self.fail(format!("unknown output `{n}` (outputs: {})", known.join(", ")));
+                            let known: Vec<&str> =
+                                g.outputs.iter().map(|o| o.name.as_str()).collect();
+                            self.fail(format!(
+                                "unknown output `{n}` (outputs: {})",
+                                known.join(", ")
+                            ));
                         }
                     }
                 }
@@ -213,7 +225,10 @@ impl<'g> Planner<'g> {
                 }
                 None => {
                     let known: Vec<&str> = g.inputs.iter().map(|i| i.name.as_str()).collect();
-                    self.fail(format!("unknown input `{name}` (inputs: {})", known.join(", ")));
+                    self.fail(format!(
+                        "unknown input `{name}` (inputs: {})",
+                        known.join(", ")
+                    ));
                 }
             }
         }
@@ -284,15 +299,26 @@ impl<'g> Planner<'g> {
         for &n in &step_nodes {
             self.infer_node(n);
         }
+        if !self.problems.is_empty() {
+            return Err(Problems(self.problems));
+        }
         for &s in &needed_states {
             let st = &g.states[s];
             match (self.state_types[s], self.source_type(st.next)) {
                 (Some(a), Some(b)) if a != b => {
-                    let msg = format!("state `{}` is {a} but its next value `{}` is {b}", st.name, g.source_name(st.next));
+                    let msg = format!(
+                        "state `{}` is {a} but its next value `{}` is {b}",
+                        st.name,
+                        g.source_name(st.next)
+                    );
                     self.fail(msg);
                 }
                 (Some(_), None) => {
-                    let msg = format!("state `{}`: next value `{}` is absent", st.name, g.source_name(st.next));
+                    let msg = format!(
+                        "state `{}`: next value `{}` is absent",
+                        st.name,
+                        g.source_name(st.next)
+                    );
                     self.fail(msg);
                 }
                 _ => {}
@@ -324,10 +350,17 @@ impl<'g> Planner<'g> {
         let present = |n: &usize| matches!(self.node_types[*n], Some(Some(_)));
         let prologue_order = self.topo(prologue_nodes.iter().copied().filter(present).collect());
         let step_order = self.topo(step_nodes.iter().copied().filter(present).collect());
-        let pruned: Vec<usize> =
-            (0..g.nodes.len()).filter(|n| !(step_nodes.contains(n) || prologue_nodes.contains(n)) || !present(n)).collect();
+        let pruned: Vec<usize> = (0..g.nodes.len())
+            .filter(|n| !(step_nodes.contains(n) || prologue_nodes.contains(n)) || !present(n))
+            .collect();
 
-        self.build(&requested, &needed_states, prologue_order, step_order, pruned)
+        self.build(
+            &requested,
+            &needed_states,
+            prologue_order,
+            step_order,
+            pruned,
+        )
     }
 
     /// Every input naming one size must agree on it.
@@ -404,7 +437,11 @@ impl<'g> Planner<'g> {
                         &inst.file,
                         &inst.id,
                         port.name,
-                        format!("expects {}, got {t} from `{}`", port.ty, g.source_name(*src)),
+                        format!(
+                            "expects {}, got {t} from `{}`",
+                            port.ty,
+                            g.source_name(*src)
+                        ),
                     ));
                 }
                 _ => {}
@@ -418,7 +455,12 @@ impl<'g> Planner<'g> {
         match inst.node.infer(&types) {
             Ok(sig) => {
                 if sig.outputs.len() != inst.output_ports.len() {
-                    panic!("node kind `{}` inferred {} outputs for {} ports", inst.kind, sig.outputs.len(), inst.output_ports.len());
+                    panic!(
+                        "node kind `{}` inferred {} outputs for {} ports",
+                        inst.kind,
+                        sig.outputs.len(),
+                        inst.output_ports.len()
+                    );
                 }
                 for (port, t) in inst.output_ports.iter().zip(&sig.outputs) {
                     if t.bytes() > self.caps.max_binding {
@@ -438,7 +480,8 @@ impl<'g> Planner<'g> {
                 self.node_types[n] = Some(Some(sig.outputs));
             }
             Err(e) => {
-                self.problems.push(Problem::port(&inst.file, &inst.id, &e.port, e.message));
+                self.problems
+                    .push(Problem::port(&inst.file, &inst.id, &e.port, e.message));
                 self.node_types[n] = Some(None);
             }
         }
@@ -464,8 +507,11 @@ impl<'g> Planner<'g> {
                 users.entry(d).or_default().push(n);
             }
         }
-        let mut ready: BinaryHeap<Reverse<usize>> =
-            indeg.iter().filter(|(_, d)| **d == 0).map(|(n, _)| Reverse(*n)).collect();
+        let mut ready: BinaryHeap<Reverse<usize>> = indeg
+            .iter()
+            .filter(|(_, d)| **d == 0)
+            .map(|(n, _)| Reverse(*n))
+            .collect();
         let mut order = Vec::new();
         while let Some(Reverse(n)) = ready.pop() {
             order.push(n);
@@ -490,42 +536,75 @@ impl<'g> Planner<'g> {
         pruned: Vec<usize>,
     ) -> Result<Plan, Problems> {
         let g = self.g;
-        let mut b = Builder { values: Vec::new(), by_source: HashMap::new() };
+        let mut b = Builder {
+            values: Vec::new(),
+            by_source: HashMap::new(),
+        };
 
         // Graph inputs that are given.
-        let inputs: Vec<(usize, ValueType)> =
-            self.input_types.iter().enumerate().filter_map(|(i, t)| t.map(|t| (i, t))).collect();
+        let inputs: Vec<(usize, ValueType)> = self
+            .input_types
+            .iter()
+            .enumerate()
+            .filter_map(|(i, t)| t.map(|t| (i, t)))
+            .collect();
         for &(i, t) in &inputs {
             for phase in [Phase::Prologue, Phase::Step] {
-                b.add(Source::Input(i), phase, format!("inputs.{}", g.inputs[i].name), t, Storage::Input(i));
+                b.add(
+                    Source::Input(i),
+                    phase,
+                    format!("inputs.{}", g.inputs[i].name),
+                    t,
+                    Storage::Input(i),
+                );
             }
         }
         // States: the current value is a state buffer.
-        let state_index: BTreeMap<usize, usize> = needed_states.iter().enumerate().map(|(k, &s)| (s, k)).collect();
+        let state_index: BTreeMap<usize, usize> = needed_states
+            .iter()
+            .enumerate()
+            .map(|(k, &s)| (s, k))
+            .collect();
         for (&s, &k) in &state_index {
             let ty = self.state_types[s].expect("checked above");
-            b.add(Source::State(s), Phase::Step, format!("state.{}", g.states[s].name), ty, Storage::State { state: k, next: false });
+            b.add(
+                Source::State(s),
+                Phase::Step,
+                format!("state.{}", g.states[s].name),
+                ty,
+                Storage::State {
+                    state: k,
+                    next: false,
+                },
+            );
         }
 
         // Launches per phase (fusion decides grouping and which values stay in registers).
-        let output_sources: BTreeSet<Source> = requested.iter().map(|&o| g.outputs[o].source).collect();
+        let output_sources: BTreeSet<Source> =
+            requested.iter().map(|&o| g.outputs[o].source).collect();
         let mut next_claimed: BTreeMap<Source, usize> = BTreeMap::new();
         for (&s, &k) in &state_index {
             let next = g.states[s].next;
-            if matches!(next, Source::Node { node, port } if !g.nodes[node].output_ports[port].persistent) {
+            if matches!(next, Source::Node { node, port } if !g.nodes[node].output_ports[port].persistent)
+            {
                 next_claimed.entry(next).or_insert(k);
             }
         }
         let mut phases = Vec::new();
-        for (phase, order) in [(Phase::Prologue, &prologue_order), (Phase::Step, &step_order)] {
+        for (phase, order) in [
+            (Phase::Prologue, &prologue_order),
+            (Phase::Step, &step_order),
+        ] {
             let ctx = fuse::FuseCtx {
                 g,
                 types: &self.node_types,
                 order,
                 fuse: self.opts.fuse,
                 escapes: &|src: Source| {
-                    phase == Phase::Step && (output_sources.contains(&src) || next_claimed.contains_key(&src))
-                        || phase == Phase::Prologue && needed_states.iter().any(|&s| g.states[s].init == src)
+                    phase == Phase::Step
+                        && (output_sources.contains(&src) || next_claimed.contains_key(&src))
+                        || phase == Phase::Prologue
+                            && needed_states.iter().any(|&s| g.states[s].init == src)
                 },
             };
             let units = fuse::group(&ctx);
@@ -545,15 +624,39 @@ impl<'g> Planner<'g> {
             let def = &g.states[s];
             let ty = self.state_types[s].expect("checked");
             let init = b.get(def.init, Phase::Prologue);
-            let slot0 = b.push(format!("state.{} (initial)", def.name), ty, Phase::Prologue, Storage::State { state: k, next: false });
-            prologue.push(Launch::Copy { src: init, dst: slot0 });
+            let slot0 = b.push(
+                format!("state.{} (initial)", def.name),
+                ty,
+                Phase::Prologue,
+                Storage::State {
+                    state: k,
+                    next: false,
+                },
+            );
+            prologue.push(Launch::Copy {
+                src: init,
+                dst: slot0,
+            });
             let current = b.get(Source::State(s), Phase::Step);
             if next_claimed.get(&def.next) != Some(&k) {
                 let src = b.get(def.next, Phase::Step);
-                let dst = b.push(format!("state.{} (next)", def.name), ty, Phase::Step, Storage::State { state: k, next: true });
+                let dst = b.push(
+                    format!("state.{} (next)", def.name),
+                    ty,
+                    Phase::Step,
+                    Storage::State {
+                        state: k,
+                        next: true,
+                    },
+                );
                 step.push(Launch::Copy { src, dst });
             }
-            states.push(StatePlan { name: def.name.clone(), ty, init, current });
+            states.push(StatePlan {
+                name: def.name.clone(),
+                ty,
+                init,
+                current,
+            });
         }
 
         // Outputs read after the last step. An output naming `state.x` is the state after
@@ -564,7 +667,15 @@ impl<'g> Planner<'g> {
             let v = match out.source {
                 Source::State(s) => {
                     let k = state_index[&s];
-                    b.push(format!("state.{} (final)", g.states[s].name), self.state_types[s].expect("checked"), Phase::Step, Storage::State { state: k, next: true })
+                    b.push(
+                        format!("state.{} (final)", g.states[s].name),
+                        self.state_types[s].expect("checked"),
+                        Phase::Step,
+                        Storage::State {
+                            state: k,
+                            next: true,
+                        },
+                    )
                 }
                 src => b.get(src, Phase::Step),
             };
@@ -596,18 +707,37 @@ struct Builder {
 
 impl Builder {
     fn push(&mut self, name: String, ty: ValueType, phase: Phase, storage: Storage) -> ValueId {
-        self.values.push(PlanValue { name, ty, phase, storage });
+        self.values.push(PlanValue {
+            name,
+            ty,
+            phase,
+            storage,
+        });
         self.values.len() - 1
     }
 
-    fn add(&mut self, src: Source, phase: Phase, name: String, ty: ValueType, storage: Storage) -> ValueId {
+    fn add(
+        &mut self,
+        src: Source,
+        phase: Phase,
+        name: String,
+        ty: ValueType,
+        storage: Storage,
+    ) -> ValueId {
         let id = self.push(name, ty, phase, storage);
         self.by_source.insert((src, phase), id);
         id
     }
 
     fn get(&self, src: Source, phase: Phase) -> ValueId {
-        *self.by_source.get(&(src, phase)).unwrap_or_else(|| panic!("planner: no value for {src:?} in {phase:?}"))
+        self.try_get(src, phase)
+            .unwrap_or_else(|| panic!("planner: no value for {src:?} in {phase:?}"))
+    }
+
+    /// The value of a source, or `None` when it is absent (an optional input not given,
+    /// or the output of a node that dropped out because of one).
+    fn try_get(&self, src: Source, phase: Phase) -> Option<ValueId> {
+        self.by_source.get(&(src, phase)).copied()
     }
 
     fn lower(
@@ -622,10 +752,15 @@ impl Builder {
         let storage_for = |src: Source, escapes: bool| -> Storage {
             if phase == Phase::Step {
                 if let Some(&k) = next_claimed.get(&src) {
-                    return Storage::State { state: k, next: true };
+                    return Storage::State {
+                        state: k,
+                        next: true,
+                    };
                 }
             }
-            let Source::Node { node, port } = src else { unreachable!("node outputs only") };
+            let Source::Node { node, port } = src else {
+                unreachable!("node outputs only")
+            };
             if g.nodes[node].output_ports[port].persistent {
                 Storage::Pending(BufferRole::Persistent)
             } else if phase == Phase::Step && output_sources.contains(&src) {
@@ -640,7 +775,11 @@ impl Builder {
             fuse::Unit::Single(n) => {
                 let inst = &g.nodes[n];
                 let types = p.node_types[n].clone().flatten().expect("present node");
-                let inputs = inst.inputs.iter().map(|s| (*s != Source::Absent).then(|| self.get(*s, phase))).collect();
+                let inputs = inst
+                    .inputs
+                    .iter()
+                    .map(|s| self.try_get(*s, phase))
+                    .collect();
                 let mut outputs = Vec::new();
                 for (port, t) in types.iter().enumerate() {
                     let src = Source::Node { node: n, port };
@@ -652,11 +791,23 @@ impl Builder {
                     .iter()
                     .enumerate()
                     .map(|(i, &bytes)| {
-                        let ty = ValueType::Indices { n: (bytes.div_ceil(4)) as u32 };
-                        self.push(format!("{} (scratch {i})", inst.id), ty, phase, Storage::Pending(BufferRole::Pool))
+                        let ty = ValueType::Indices {
+                            n: (bytes.div_ceil(4)) as u32,
+                        };
+                        self.push(
+                            format!("{} (scratch {i})", inst.id),
+                            ty,
+                            phase,
+                            Storage::Pending(BufferRole::Pool),
+                        )
                     })
                     .collect();
-                Launch::Node { node: n, inputs, outputs, scratch }
+                Launch::Node {
+                    node: n,
+                    inputs,
+                    outputs,
+                    scratch,
+                }
             }
             fuse::Unit::Group(members) => {
                 let mut member_outputs = Vec::new();
@@ -666,7 +817,7 @@ impl Builder {
                     let st = storage_for(src, escapes);
                     member_outputs.push(self.add(src, phase, g.source_name(src), t, st));
                 }
-                let get = |s: Source| self.get(s, phase);
+                let get = |s: Source| self.try_get(s, phase);
                 let kernel = fuse::generate(g, &members, &member_outputs, &get, &self.values);
                 Launch::Fused(kernel)
             }
@@ -687,7 +838,9 @@ impl Launch {
     /// Values the launch writes (scratch included).
     pub fn writes(&self) -> Vec<ValueId> {
         match self {
-            Launch::Node { outputs, scratch, .. } => outputs.iter().chain(scratch).copied().collect(),
+            Launch::Node {
+                outputs, scratch, ..
+            } => outputs.iter().chain(scratch).copied().collect(),
             Launch::Fused(k) => k.outputs.clone(),
             Launch::Copy { dst, .. } => vec![*dst],
         }

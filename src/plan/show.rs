@@ -24,7 +24,11 @@ fn place(plan: &Plan, v: ValueId) -> String {
     match plan.values[v].storage {
         Storage::Input(i) => format!("input {i}"),
         Storage::State { state, next } => {
-            format!("state {} {}", plan.states[state].name, if next { "next" } else { "current" })
+            format!(
+                "state {} {}",
+                plan.states[state].name,
+                if next { "next" } else { "current" }
+            )
         }
         Storage::Buffer(b) => format!("buf {b}"),
         Storage::Register => "register".into(),
@@ -40,7 +44,12 @@ fn value(plan: &Plan, v: ValueId) -> String {
 fn launch_lines(out: &mut String, g: &Graph, plan: &Plan, launches: &[Launch]) {
     for (i, l) in launches.iter().enumerate() {
         match l {
-            Launch::Node { node, inputs, outputs, scratch } => {
+            Launch::Node {
+                node,
+                inputs,
+                outputs,
+                scratch,
+            } => {
                 let n = &g.nodes[*node];
                 writeln!(out, "  {:>3}. {} ({})", i + 1, n.id, n.kind).unwrap();
                 for v in inputs.iter().flatten() {
@@ -51,9 +60,24 @@ fn launch_lines(out: &mut String, g: &Graph, plan: &Plan, launches: &[Launch]) {
                 }
             }
             Launch::Fused(k) => {
-                let names: Vec<String> = k.nodes.iter().map(|&n| format!("{} ({})", g.nodes[n].id, g.nodes[n].kind)).collect();
-                let label = if k.nodes.len() > 1 { format!("fused x{}", k.nodes.len()) } else { "pointwise".into() };
-                writeln!(out, "  {:>3}. [{label}, {} elements] {}", i + 1, k.len, names.join(" -> ")).unwrap();
+                let names: Vec<String> = k
+                    .nodes
+                    .iter()
+                    .map(|&n| format!("{} ({})", g.nodes[n].id, g.nodes[n].kind))
+                    .collect();
+                let label = if k.nodes.len() > 1 {
+                    format!("fused x{}", k.nodes.len())
+                } else {
+                    "pointwise".into()
+                };
+                writeln!(
+                    out,
+                    "  {:>3}. [{label}, {} elements] {}",
+                    i + 1,
+                    k.len,
+                    names.join(" -> ")
+                )
+                .unwrap();
                 for v in &k.inputs {
                     writeln!(out, "         reads  {}", value(plan, *v)).unwrap();
                 }
@@ -62,7 +86,14 @@ fn launch_lines(out: &mut String, g: &Graph, plan: &Plan, launches: &[Launch]) {
                 }
             }
             Launch::Copy { src, dst } => {
-                writeln!(out, "  {:>3}. copy {} -> {}", i + 1, value(plan, *src), place(plan, *dst)).unwrap();
+                writeln!(
+                    out,
+                    "  {:>3}. copy {} -> {}",
+                    i + 1,
+                    value(plan, *src),
+                    place(plan, *dst)
+                )
+                .unwrap();
             }
         }
     }
@@ -106,8 +137,17 @@ pub fn to_text(g: &Graph, plan: &Plan) -> String {
         writeln!(out, "  {name} <- {}", value(plan, *v)).unwrap();
     }
     if !plan.pruned.is_empty() {
-        let ids: Vec<&str> = plan.pruned.iter().map(|&n| g.nodes[n].id.as_str()).collect();
-        writeln!(out, "not run (no requested output needs them)\n  {}", ids.join(", ")).unwrap();
+        let ids: Vec<&str> = plan
+            .pruned
+            .iter()
+            .map(|&n| g.nodes[n].id.as_str())
+            .collect();
+        writeln!(
+            out,
+            "not run (no requested output needs them)\n  {}",
+            ids.join(", ")
+        )
+        .unwrap();
     }
     writeln!(out, "buffers").unwrap();
     for (i, b) in plan.buffers.iter().enumerate() {
@@ -116,7 +156,13 @@ pub fn to_text(g: &Graph, plan: &Plan) -> String {
             BufferRole::Output => "output",
             BufferRole::Persistent => "persistent",
         };
-        writeln!(out, "  buf {i:<3} {:>10}  {role:<10} {}", human_bytes(b.bytes), b.holds.join(", ")).unwrap();
+        writeln!(
+            out,
+            "  buf {i:<3} {:>10}  {role:<10} {}",
+            human_bytes(b.bytes),
+            b.holds.join(", ")
+        )
+        .unwrap();
     }
     let m = &plan.memory;
     writeln!(
@@ -142,27 +188,57 @@ fn q(s: &str) -> String {
 
 /// The plan as a Graphviz digraph: fused groups are clusters, edges carry types.
 pub fn to_dot(g: &Graph, plan: &Plan) -> String {
-    let mut out = String::from("digraph mesoflow {\n  rankdir=LR;\n  node [shape=box, fontname=\"Helvetica\"];\n");
+    let mut out = String::from(
+        "digraph mesoflow {\n  rankdir=LR;\n  node [shape=box, fontname=\"Helvetica\"];\n",
+    );
     for (i, t) in &plan.inputs {
-        writeln!(out, "  {} [shape=ellipse, label={}];", q(&format!("inputs.{}", g.inputs[*i].name)), q(&format!("{}\\n{t}", g.inputs[*i].name))).unwrap();
+        writeln!(
+            out,
+            "  {} [shape=ellipse, label={}];",
+            q(&format!("inputs.{}", g.inputs[*i].name)),
+            q(&format!("{}\\n{t}", g.inputs[*i].name))
+        )
+        .unwrap();
     }
     for s in &plan.states {
-        writeln!(out, "  {} [shape=diamond, label={}];", q(&format!("state.{}", s.name)), q(&format!("state {}\\n{}", s.name, s.ty))).unwrap();
+        writeln!(
+            out,
+            "  {} [shape=diamond, label={}];",
+            q(&format!("state.{}", s.name)),
+            q(&format!("state {}\\n{}", s.name, s.ty))
+        )
+        .unwrap();
     }
     let mut scheduled = Vec::new();
     for (cluster, l) in plan.step.iter().enumerate() {
         match l {
             Launch::Fused(k) if k.nodes.len() > 1 => {
-                writeln!(out, "  subgraph cluster_{cluster} {{ label=\"fused\"; style=dashed;").unwrap();
+                writeln!(
+                    out,
+                    "  subgraph cluster_{cluster} {{ label=\"fused\"; style=dashed;"
+                )
+                .unwrap();
                 for &n in &k.nodes {
-                    writeln!(out, "    {} [label={}];", q(&g.nodes[n].id), q(&format!("{}\\n{}", g.nodes[n].id, g.nodes[n].kind))).unwrap();
+                    writeln!(
+                        out,
+                        "    {} [label={}];",
+                        q(&g.nodes[n].id),
+                        q(&format!("{}\\n{}", g.nodes[n].id, g.nodes[n].kind))
+                    )
+                    .unwrap();
                     scheduled.push(n);
                 }
                 out.push_str("  }\n");
             }
             other => {
                 for n in other.nodes() {
-                    writeln!(out, "  {} [label={}];", q(&g.nodes[n].id), q(&format!("{}\\n{}", g.nodes[n].id, g.nodes[n].kind))).unwrap();
+                    writeln!(
+                        out,
+                        "  {} [label={}];",
+                        q(&g.nodes[n].id),
+                        q(&format!("{}\\n{}", g.nodes[n].id, g.nodes[n].kind))
+                    )
+                    .unwrap();
                     scheduled.push(n);
                 }
             }
@@ -171,7 +247,16 @@ pub fn to_dot(g: &Graph, plan: &Plan) -> String {
     for l in &plan.prologue {
         for n in l.nodes() {
             if !scheduled.contains(&n) {
-                writeln!(out, "  {} [label={}, style=rounded];", q(&g.nodes[n].id), q(&format!("{}\\n{} (prologue)", g.nodes[n].id, g.nodes[n].kind))).unwrap();
+                writeln!(
+                    out,
+                    "  {} [label={}, style=rounded];",
+                    q(&g.nodes[n].id),
+                    q(&format!(
+                        "{}\\n{} (prologue)",
+                        g.nodes[n].id, g.nodes[n].kind
+                    ))
+                )
+                .unwrap();
                 scheduled.push(n);
             }
         }
@@ -186,22 +271,52 @@ pub fn to_dot(g: &Graph, plan: &Plan) -> String {
         let inst = &g.nodes[n];
         for (port, s) in inst.input_ports.iter().zip(&inst.inputs) {
             if let Some(from) = name(*s) {
-                writeln!(out, "  {} -> {} [label={}];", q(&from), q(&inst.id), q(port.name)).unwrap();
+                writeln!(
+                    out,
+                    "  {} -> {} [label={}];",
+                    q(&from),
+                    q(&inst.id),
+                    q(port.name)
+                )
+                .unwrap();
             }
         }
     }
     for s in &plan.states {
         if let Some(def) = g.states.iter().find(|d| d.name == s.name) {
             if let Some(from) = name(def.next) {
-                writeln!(out, "  {} -> {} [style=dotted, label=\"next\"];", q(&from), q(&format!("state.{}", s.name))).unwrap();
+                writeln!(
+                    out,
+                    "  {} -> {} [style=dotted, label=\"next\"];",
+                    q(&from),
+                    q(&format!("state.{}", s.name))
+                )
+                .unwrap();
             }
         }
     }
     for (oname, v) in &plan.outputs {
-        writeln!(out, "  {} [shape=ellipse, style=bold, label={}];", q(&format!("outputs.{oname}")), q(oname)).unwrap();
-        let src = g.outputs.iter().find(|o| &o.name == oname).and_then(|o| name(o.source));
+        writeln!(
+            out,
+            "  {} [shape=ellipse, style=bold, label={}];",
+            q(&format!("outputs.{oname}")),
+            q(oname)
+        )
+        .unwrap();
+        let src = g
+            .outputs
+            .iter()
+            .find(|o| &o.name == oname)
+            .and_then(|o| name(o.source));
         if let Some(from) = src {
-            writeln!(out, "  {} -> {} [label={}];", q(&from), q(&format!("outputs.{oname}")), q(&plan.values[*v].ty.to_string())).unwrap();
+            writeln!(
+                out,
+                "  {} -> {} [label={}];",
+                q(&from),
+                q(&format!("outputs.{oname}")),
+                q(&plan.values[*v].ty.to_string())
+            )
+            .unwrap();
         }
     }
     out.push_str("}\n");

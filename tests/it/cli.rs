@@ -1,0 +1,254 @@
+//! The `mesoflow` binary: commands, and bad input getting a clear message, a non-zero
+//! exit and no output file.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use mesoflow::value::{HostArray, ValueType};
+
+use crate::util::{gpu, root, tmpdir};
+
+fn mesoflow(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+        .args(args)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("run mesoflow")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// Expects failure with exit code 2 and every `needle` in the message.
+fn fails_with(args: &[&str], needles: &[&str]) {
+    let o = mesoflow(args);
+    let t = text(&o);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{args:?} should exit with 2:\n{t}"
+    );
+    assert!(!t.contains("panicked"), "{args:?} panicked:\n{t}");
+    for n in needles {
+        assert!(t.contains(n), "{args:?}: expected `{n}` in:\n{t}");
+    }
+}
+
+fn relax() -> String {
+    root()
+        .join("graphs/examples/relax.json")
+        .display()
+        .to_string()
+}
+
+fn positions(dir: &Path, name: &str, values: Vec<f32>, n: u32) -> String {
+    let p = dir.join(name);
+    mesoflow::npy::write(
+        &p,
+        &HostArray::f32(ValueType::Particles { n, k: 3 }, values),
+    )
+    .unwrap();
+    p.display().to_string()
+}
+
+#[test]
+fn nodes_lists_every_kind_with_ports_and_params() {
+    let o = mesoflow(&["nodes"]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    for k in crate::util::registry().kinds() {
+        assert!(
+            t.contains(&format!("{}: {}", k.name(), k.doc())),
+            "missing {}",
+            k.name()
+        );
+    }
+    assert!(t.contains("prm  alpha"), "{t}");
+    fails_with(
+        &["nodes", "scal"],
+        &["no node kind `scal` (did you mean `scale`?)"],
+    );
+}
+
+#[test]
+fn validate_reports_problems_with_exit_code_two() {
+    let o = mesoflow(&["validate", &relax()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let bad = root()
+        .join("graphs/fixtures/invalid/bad_ref.json")
+        .display()
+        .to_string();
+    fails_with(
+        &["validate", &relax(), &bad],
+        &["4 problems", "no node `nod1`"],
+    );
+}
+
+#[test]
+fn inspect_prints_the_plan_and_dot() {
+    let o = mesoflow(&["inspect", &relax(), "--set", "dt=0.5"]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.contains("dt = 0.5") && t.contains("fused x2") && t.contains("memory"),
+        "{t}"
+    );
+    let o = mesoflow(&["inspect", &relax(), "--dot"]);
+    assert!(
+        String::from_utf8_lossy(&o.stdout).starts_with("digraph"),
+        "{}",
+        text(&o)
+    );
+}
+
+#[test]
+fn bad_input_is_a_clear_error_and_leaves_no_output() {
+    let dir = tmpdir("cli-bad");
+    let out = dir.join("out.npy");
+    let out_arg = format!("positions={}", out.display());
+    let good = positions(&dir, "good.npy", vec![0.5; 12], 4);
+    let missing = dir.join("missing.npy").display().to_string();
+    fails_with(
+        &[
+            "run",
+            &relax(),
+            "--input",
+            &format!("positions={missing}"),
+            "--output",
+            &out_arg,
+        ],
+        &["missing.npy", "cannot read"],
+    );
+    let short = dir.join("short.npy");
+    mesoflow::npy::write(
+        &short,
+        &HostArray::f32(ValueType::Particles { n: 5, k: 1 }, vec![1.0; 5]),
+    )
+    .unwrap();
+    fails_with(
+        &[
+            "run",
+            &relax(),
+            "--input",
+            &format!("positions={}", short.display()),
+        ],
+        &["short.npy", "shape (5, 1) does not fit particles(nx3)"],
+    );
+    let mut v = vec![0.5; 12];
+    v[4] = f32::NAN;
+    let nan = positions(&dir, "nan.npy", v, 4);
+    fails_with(
+        &["run", &relax(), "--input", &format!("positions={nan}")],
+        &["nan.npy", "element 4 is NaN"],
+    );
+    let input = format!("positions={good}");
+    fails_with(
+        &["run", &relax(), "--input", &input, "--set", "viscosity=2"],
+        &["unknown param `viscosity`", "stiffness, dt"],
+    );
+    fails_with(
+        &["run", &relax(), "--input", &input, "--set", "dt=-1"],
+        &["bad value -1 for param `dt`", "below the minimum 0"],
+    );
+    fails_with(
+        &["run", &relax(), "--input", &input, "--set", "dt=fast"],
+        &["param `dt`", "expected a number"],
+    );
+    fails_with(
+        &[
+            "run",
+            &relax(),
+            "--input",
+            &input,
+            "--output",
+            "velocity=v.npy",
+        ],
+        &["no output `velocity`", "positions, force"],
+    );
+    fails_with(
+        &["run", &relax(), "--input", &input, "--input", &input],
+        &["given twice"],
+    );
+    fails_with(
+        &["run", &relax()],
+        &["missing required inputs", "--input positions=FILE.npy"],
+    );
+    fails_with(
+        &["run", &relax(), "--input", &input, "--steps", "0"],
+        &["--steps must be at least 1"],
+    );
+    let nowhere = format!("positions={}", dir.join("no/such/dir/out.npy").display());
+    fails_with(
+        &["run", &relax(), "--input", &input, "--output", &nowhere],
+        &["does not exist"],
+    );
+    fails_with(
+        &["run", "no_such_graph.json"],
+        &["no_such_graph.json", "cannot read graph file"],
+    );
+    assert!(!out.exists(), "a failed run left an output file");
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().contains("tmp"))
+        .collect();
+    assert!(leftovers.is_empty());
+}
+
+#[test]
+fn run_writes_outputs_and_accepts_float64_and_flat_inputs() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-run");
+    // A float64, flat (3N,) input.
+    let flat = dir.join("flat.npy");
+    {
+        use npyz::WriterBuilder;
+        let mut f = std::io::BufWriter::new(std::fs::File::create(&flat).unwrap());
+        let mut w = npyz::WriteOptions::<f64>::new()
+            .default_dtype()
+            .shape(&[6])
+            .writer(&mut f)
+            .begin_nd()
+            .unwrap();
+        w.extend([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+        w.finish().unwrap();
+    }
+    let out = dir.join("out.npy");
+    let o = mesoflow(&[
+        "run",
+        &relax(),
+        "--input",
+        &format!("positions={}", flat.display()),
+        "--output",
+        &format!("positions={}", out.display()),
+        "--steps",
+        "3",
+        "--set",
+        "stiffness=2",
+        "--profile",
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("profile: GPU time per launch"), "{t}");
+    let shape = ValueType::Particles { n: 2, k: 3 };
+    let got = mesoflow::npy::read_input(
+        &out,
+        &mesoflow::graph::InputShape::Particles {
+            rows: mesoflow::graph::Dim::Free,
+            cols: 3,
+        },
+    )
+    .unwrap();
+    assert_eq!(got.ty, shape);
+    let factor = (1.0f64 - 2.0 * 0.01).powi(3);
+    for (g, x) in got.data.to_f64().iter().zip([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]) {
+        assert!((g - factor * x).abs() < 1e-5, "{g} vs {}", factor * x);
+    }
+}

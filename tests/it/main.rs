@@ -1,0 +1,12 @@
+//! The integration tests: one binary (one link on a 2-core machine), topic modules.
+//! GPU tests run on whatever Vulkan adapter is present (lavapipe in CI); with
+//! MESOFLOW_REQUIRE_GPU=1 (set by .ci/run) a missing adapter fails them instead of
+//! skipping them.
+
+mod cli;
+mod graph_files;
+mod nodes;
+mod plan;
+mod run;
+mod shaders;
+mod util;

@@ -1,0 +1,142 @@
+//! Every node kind against its f64 CPU reference on the GPU, through single-node graph
+//! files (data-driven: one `check` call per case).
+
+use std::collections::BTreeMap;
+
+use mesoflow::value::{HostArray, ValueType};
+
+use crate::util::{
+    Rng, gpu, load, reference, rel_max_err, run_graph, single_node_graph, tmpdir, write_graph,
+};
+
+/// Runs `kind` with `params` on random inputs of the given types and compares every
+/// output with the CPU reference, relative to the output's largest magnitude.
+fn check(kind: &str, params: &str, inputs: &[(&str, ValueType)], tol: f64) {
+    let Some(gpu) = gpu() else { return };
+    let dir = tmpdir(&format!("node-{kind}"));
+    let path = write_graph(&dir, "g.json", &single_node_graph(kind, params, inputs));
+    let g = load(&path);
+    let mut rng = Rng::new(kind.len() as u64 * 7919 + inputs.len() as u64);
+    let data: BTreeMap<String, HostArray> = inputs
+        .iter()
+        .map(|(n, t)| (n.to_string(), rng.array(*t, 0.5, 2.0)))
+        .collect();
+    let out = run_graph(&gpu, &g, &data, None, 1, true);
+    let args: Vec<Option<&HostArray>> = g.nodes[0]
+        .input_ports
+        .iter()
+        .map(|p| data.get(p.name))
+        .collect();
+    let refs = reference(kind, params, &args);
+    for (port, r) in g.nodes[0].output_ports.iter().zip(&refs) {
+        let got = &out[port.name];
+        let (err, at) = rel_max_err(got, r);
+        assert!(
+            err <= tol,
+            "{kind} {params} output {}: relative error {err:e} at element {at} (tolerance {tol:e})",
+            port.name
+        );
+    }
+}
+
+const P: fn(u32, u32) -> ValueType = |n, k| ValueType::Particles { n, k };
+
+/// f32 element-wise arithmetic: a few ulps of the result.
+const ELEMENTWISE_TOL: f64 = 4.0 * f32::EPSILON as f64;
+
+#[test]
+fn pointwise_kinds_match_their_references() {
+    let cases: &[(&str, &str, &[(&str, ValueType)])] = &[
+        ("scale", r#"{"factor": -2.5}"#, &[("x", P(1000, 3))]),
+        ("add", "{}", &[("a", P(257, 3)), ("b", P(257, 3))]),
+        ("add", "{}", &[("a", P(257, 3))]),
+        ("add", "{}", &[("a", P(33, 2)), ("b", ValueType::Scalar)]),
+        ("sub", "{}", &[("a", ValueType::Scalar), ("b", P(33, 2))]),
+        ("multiply", "{}", &[("a", P(100, 1)), ("b", P(100, 1))]),
+        ("divide", "{}", &[("a", P(100, 4)), ("b", P(100, 4))]),
+        (
+            "axpy",
+            r#"{"alpha": 0.3}"#,
+            &[("x", P(513, 3)), ("y", P(513, 3))],
+        ),
+        (
+            "axpby",
+            r#"{"alpha": 0.3, "beta": -1.7}"#,
+            &[("x", P(5, 3)), ("y", P(5, 3))],
+        ),
+        ("affine", r#"{"scale": 3, "offset": -1}"#, &[("x", P(7, 2))]),
+        (
+            "scale_components",
+            r#"{"factors": [1, -2, 0.5]}"#,
+            &[("x", P(65, 3))],
+        ),
+        (
+            "offset_components",
+            r#"{"offsets": [1, -2, 0.5, 4]}"#,
+            &[("x", P(65, 4))],
+        ),
+        (
+            "scale",
+            r#"{"factor": 2}"#,
+            &[(
+                "x",
+                ValueType::RealGrid {
+                    dims: [8, 4, 3],
+                    comps: 2,
+                },
+            )],
+        ),
+        (
+            "scale_components",
+            r#"{"factors": [2, 3]}"#,
+            &[(
+                "x",
+                ValueType::RealGrid {
+                    dims: [4, 4, 4],
+                    comps: 2,
+                },
+            )],
+        ),
+        ("scale", r#"{"factor": 2}"#, &[("x", ValueType::Scalar)]),
+    ];
+    for (kind, params, inputs) in cases {
+        check(kind, params, inputs, ELEMENTWISE_TOL);
+    }
+}
+
+#[test]
+fn pointwise_kinds_handle_empty_and_single_element_arrays() {
+    for n in [0, 1] {
+        check(
+            "axpy",
+            r#"{"alpha": 2}"#,
+            &[("x", P(n, 3)), ("y", P(n, 3))],
+            ELEMENTWISE_TOL,
+        );
+        check(
+            "scale_components",
+            r#"{"factors": [1, 2, 3]}"#,
+            &[("x", P(n, 3))],
+            ELEMENTWISE_TOL,
+        );
+    }
+}
+
+#[test]
+fn per_component_values_must_match_the_components() {
+    let dir = tmpdir("percomp");
+    let path = write_graph(
+        &dir,
+        "g.json",
+        &single_node_graph(
+            "scale_components",
+            r#"{"factors": [1, 2]}"#,
+            &[("x", P(4, 3))],
+        ),
+    );
+    let err = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
+    assert!(
+        err.contains("2 per-component values given for a value with 3 components"),
+        "{err}"
+    );
+}

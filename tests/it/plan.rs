@@ -1,0 +1,260 @@
+//! The planner without a GPU: pruning, fusion groups, memory reuse, errors.
+
+use std::collections::BTreeMap;
+
+use mesoflow::gpu::DeviceCaps;
+use mesoflow::plan::{self, BufferRole, Launch, Plan, PlanOptions, Storage};
+use mesoflow::value::ValueType;
+
+use crate::util::{load, root, tmpdir, write_graph};
+
+fn plan_file(
+    path: &std::path::Path,
+    outputs: Option<&[&str]>,
+    fuse: bool,
+) -> (mesoflow::graph::Graph, Plan) {
+    let g = load(path);
+    let opts = PlanOptions {
+        outputs: outputs.map(|o| o.iter().map(|s| s.to_string()).collect()),
+        inputs: mesoflow::cli::declared_input_types(&g),
+        fuse,
+    };
+    let p = plan::plan(&g, &opts, &DeviceCaps::baseline()).unwrap_or_else(|e| panic!("{e}"));
+    (g, p)
+}
+
+fn node_ids(g: &mesoflow::graph::Graph, p: &Plan) -> Vec<String> {
+    p.launches()
+        .flat_map(|(_, l)| l.nodes())
+        .map(|n| g.nodes[n].id.clone())
+        .collect()
+}
+
+#[test]
+fn only_what_requested_outputs_need_runs() {
+    let path = root().join("graphs/fixtures/branches.json");
+    let (g, p) = plan_file(&path, Some(&["a"]), false);
+    assert_eq!(node_ids(&g, &p), vec!["a1", "a2"]);
+    let pruned: Vec<&str> = p.pruned.iter().map(|&n| g.nodes[n].id.as_str()).collect();
+    assert_eq!(pruned, vec!["b1", "b2"]);
+    let (g, p) = plan_file(&path, Some(&["b"]), false);
+    assert_eq!(node_ids(&g, &p), vec!["b1", "b2"]);
+    let (_, p) = plan_file(&path, None, false);
+    assert!(p.pruned.is_empty());
+}
+
+#[test]
+fn unknown_output_is_a_plan_error() {
+    let g = load(&root().join("graphs/fixtures/branches.json"));
+    let opts = PlanOptions {
+        outputs: Some(vec!["c".into()]),
+        inputs: mesoflow::cli::declared_input_types(&g),
+        fuse: true,
+    };
+    let e = plan::plan(&g, &opts, &DeviceCaps::baseline())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("unknown output `c` (outputs: a, b)"), "{e}");
+}
+
+#[test]
+fn a_chain_fuses_into_one_kernel_and_keeps_intermediates_in_registers() {
+    let dir = tmpdir("plan-chain");
+    let path = write_graph(&dir, "chain.json", &mesoflow::bench::chain_graph(5));
+    let (_, fused) = plan_file(&path, None, true);
+    assert_eq!(fused.step.len(), 1);
+    let Launch::Fused(k) = &fused.step[0] else {
+        panic!("expected a fused launch")
+    };
+    assert_eq!(k.nodes.len(), 5);
+    assert_eq!(k.outputs.len(), 1, "only the chain's end is stored");
+    let registers = fused
+        .values
+        .iter()
+        .filter(|v| v.storage == Storage::Register)
+        .count();
+    assert_eq!(registers, 4);
+    let (_, unfused) = plan_file(&path, None, false);
+    assert_eq!(unfused.step.len(), 5);
+}
+
+#[test]
+fn pooled_buffers_are_reused_along_a_chain() {
+    let dir = tmpdir("plan-reuse");
+    let path = write_graph(&dir, "chain.json", &mesoflow::bench::chain_graph(6));
+    let (_, p) = plan_file(&path, None, false);
+    // Five intermediate values, at most two alive at once: two pooled buffers.
+    let pool: Vec<_> = p
+        .buffers
+        .iter()
+        .filter(|b| b.role == BufferRole::Pool)
+        .collect();
+    assert_eq!(pool.len(), 2, "{:?}", p.buffers);
+    assert_eq!(p.memory.pool_without_reuse, 5 * pool[0].bytes);
+    // No launch reads and writes the same buffer.
+    for (_, l) in p.launches() {
+        for r in l.reads() {
+            for w in l.writes() {
+                if let (Storage::Buffer(a), Storage::Buffer(b)) =
+                    (p.values[r].storage, p.values[w].storage)
+                {
+                    assert_ne!(a, b, "a launch reads and writes buffer {a}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn fusion_respects_paths_through_other_launches() {
+    // b = scale(a); m = multiply(a, c) where c is a broadcast scalar computed from
+    // nothing in the group; a diamond a -> (b, c) -> d fuses whole.
+    let dir = tmpdir("plan-diamond");
+    let path = write_graph(
+        &dir,
+        "diamond.json",
+        r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "rows": 10, "cols": 3}},
+         "nodes": [
+           {"id": "a", "kind": "scale", "params": {"factor": 2}, "inputs": {"x": "inputs.x"}},
+           {"id": "b", "kind": "scale", "params": {"factor": 3}, "inputs": {"x": "a.out"}},
+           {"id": "c", "kind": "affine", "params": {"offset": 1}, "inputs": {"x": "a.out"}},
+           {"id": "d", "kind": "multiply", "inputs": {"a": "b.out", "b": "c.out"}}
+         ],
+         "outputs": {"d": "d.out", "a": "a.out"}}"#,
+    );
+    let (g, p) = plan_file(&path, None, true);
+    assert_eq!(p.step.len(), 1);
+    let Launch::Fused(k) = &p.step[0] else {
+        panic!()
+    };
+    let ids: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].id.as_str()).collect();
+    assert_eq!(ids, vec!["a", "b", "c", "d"]);
+    assert_eq!(k.outputs.len(), 2, "a (an output) and d are stored");
+}
+
+#[test]
+fn absent_optional_inputs_drop_the_nodes_that_need_them() {
+    let dir = tmpdir("plan-absent");
+    let path = write_graph(
+        &dir,
+        "opt.json",
+        r#"{"mesoflow": 1,
+         "inputs": {"x": {"type": "particles", "cols": 3}, "extra": {"type": "particles", "cols": 3, "optional": true}},
+         "nodes": [
+           {"id": "e", "kind": "scale", "params": {"factor": 2}, "inputs": {"x": "inputs.extra"}},
+           {"id": "sum", "kind": "add", "inputs": {"a": "inputs.x", "b": "e.out"}}
+         ],
+         "outputs": {"sum": "sum.out", "e": "e.out"}}"#,
+    );
+    let g = load(&path);
+    let x = ValueType::Particles { n: 4, k: 3 };
+    let only_x: BTreeMap<String, ValueType> = [("x".to_string(), x)].into_iter().collect();
+    let p = plan::plan(
+        &g,
+        &PlanOptions {
+            outputs: Some(vec!["sum".into()]),
+            inputs: only_x.clone(),
+            fuse: true,
+        },
+        &DeviceCaps::baseline(),
+    )
+    .unwrap();
+    assert_eq!(
+        node_ids(&g, &p),
+        vec!["sum"],
+        "the scale of the absent input is dropped"
+    );
+    let e = plan::plan(
+        &g,
+        &PlanOptions {
+            outputs: None,
+            inputs: only_x,
+            fuse: true,
+        },
+        &DeviceCaps::baseline(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("output `e` cannot be computed") && e.contains("extra"),
+        "{e}"
+    );
+}
+
+#[test]
+fn inputs_sharing_a_size_must_agree() {
+    let g = load(&root().join("graphs/fixtures/pointwise_all.json"));
+    let mut inputs = mesoflow::cli::declared_input_types(&g);
+    inputs.insert("y".into(), ValueType::Particles { n: 36, k: 3 });
+    let e = plan::plan(
+        &g,
+        &PlanOptions {
+            outputs: None,
+            inputs,
+            fuse: true,
+        },
+        &DeviceCaps::baseline(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("input `y` has 36 rows but input `x` has 37; both are declared with rows `n`"),
+        "{e}"
+    );
+}
+
+#[test]
+fn values_larger_than_a_binding_are_plan_errors() {
+    let g = load(&root().join("graphs/fixtures/branches.json"));
+    let inputs = [(
+        "x".to_string(),
+        ValueType::Particles {
+            n: 20_000_000,
+            k: 3,
+        },
+    )]
+    .into_iter()
+    .collect();
+    let caps = DeviceCaps {
+        max_binding: 128 << 20,
+        ..DeviceCaps::baseline()
+    };
+    let e = plan::plan(
+        &g,
+        &PlanOptions {
+            outputs: None,
+            inputs,
+            fuse: true,
+        },
+        &caps,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("node `a1`, port `out`") && e.contains("binds at most 128 MiB"),
+        "{e}"
+    );
+}
+
+#[test]
+fn states_swap_buffers_and_outputs_read_the_final_state() {
+    let (_, p) = plan_file(&root().join("graphs/examples/relax.json"), None, true);
+    assert_eq!(p.states.len(), 1);
+    // The step writes the next state in place (no copy) and the output is the final state.
+    assert!(p.step.iter().all(|l| !matches!(l, Launch::Copy { .. })));
+    let (_, v) = p.outputs.iter().find(|(n, _)| n == "positions").unwrap();
+    assert_eq!(
+        p.values[*v].storage,
+        Storage::State {
+            state: 0,
+            next: true
+        }
+    );
+    let text = plan::to_text(&load(&root().join("graphs/examples/relax.json")), &p);
+    assert!(text.contains("fused x2"), "{text}");
+    let dot = plan::to_dot(&load(&root().join("graphs/examples/relax.json")), &p);
+    assert!(
+        dot.starts_with("digraph") && dot.contains("cluster_"),
+        "{dot}"
+    );
+}

@@ -1,0 +1,176 @@
+//! Graphs run end to end on the GPU: closed forms, fusion equivalence, states across
+//! steps, subgraphs, the shipped examples.
+
+use std::collections::BTreeMap;
+
+use mesoflow::value::{HostArray, ValueType};
+
+use crate::util::{Rng, gpu, load, root, run_graph, tmpdir, write_graph};
+
+fn inputs(pairs: &[(&str, HostArray)]) -> BTreeMap<String, HostArray> {
+    pairs
+        .iter()
+        .map(|(n, a)| (n.to_string(), a.clone()))
+        .collect()
+}
+
+fn f32s(a: &HostArray) -> Vec<f32> {
+    match &a.data {
+        mesoflow::value::HostData::F32(v) => v.clone(),
+        other => panic!("expected f32 data, got {other:?}"),
+    }
+}
+
+#[test]
+fn relax_example_matches_its_closed_form() {
+    let Some(gpu) = gpu() else { return };
+    let g = load(&root().join("graphs/examples/relax.json"));
+    let ty = ValueType::Particles { n: 1000, k: 3 };
+    let x0 = Rng::new(1).array(ty, -1.0, 1.0);
+    for steps in [1, 2, 7, 100] {
+        let out = run_graph(
+            &gpu,
+            &g,
+            &inputs(&[("positions", x0.clone())]),
+            Some(vec!["positions".into()]),
+            steps,
+            true,
+        );
+        let x = f32s(&out["positions"]);
+        // x_n = (1 - k dt)^n x_0 with k = 1, dt = 0.01; f32 rounding grows like n * eps.
+        let factor = 0.99f64.powi(steps as i32);
+        for (a, b) in x.iter().zip(f32s(&x0)) {
+            let want = factor * b as f64;
+            assert!(
+                (*a as f64 - want).abs() <= 1e-6 * (1.0 + steps as f64) * b.abs() as f64 + 1e-7,
+                "{steps} steps: {a} vs {want}"
+            );
+        }
+    }
+}
+
+#[test]
+fn fused_and_unfused_runs_agree() {
+    let Some(gpu) = gpu() else { return };
+    let g = load(&root().join("graphs/fixtures/pointwise_all.json"));
+    let mut rng = Rng::new(5);
+    let p = ValueType::Particles { n: 37, k: 3 };
+    let data = inputs(&[
+        ("x", rng.array(p, 0.5, 2.0)),
+        ("y", rng.array(p, 0.5, 2.0)),
+        ("s", rng.array(ValueType::Scalar, 0.5, 2.0)),
+    ]);
+    let fused = run_graph(&gpu, &g, &data, None, 1, true);
+    let unfused = run_graph(&gpu, &g, &data, None, 1, false);
+    for (name, a) in &fused {
+        let (x, y) = (f32s(a), f32s(&unfused[name]));
+        let scale = y.iter().fold(0f32, |m, v| m.max(v.abs()));
+        for (i, (u, v)) in x.iter().zip(&y).enumerate() {
+            // Same f32 operations either way; allow a few ulps for FMA contraction.
+            assert!(
+                (u - v).abs() <= 4.0 * f32::EPSILON * scale,
+                "{name}[{i}]: fused {u} vs unfused {v}"
+            );
+        }
+    }
+}
+
+#[test]
+fn subgraphs_expand_with_their_own_params() {
+    let Some(gpu) = gpu() else { return };
+    let g = load(&root().join("graphs/fixtures/subgraph_parent.json"));
+    assert!(
+        g.nodes.iter().any(|n| n.id == "stiff/f"),
+        "subgraph nodes carry prefixed ids"
+    );
+    let x = Rng::new(3).array(ValueType::Particles { n: 50, k: 3 }, -1.0, 1.0);
+    let out = run_graph(&gpu, &g, &inputs(&[("x", x.clone())]), None, 1, true);
+    for ((soft, both), x) in f32s(&out["soft"])
+        .iter()
+        .zip(f32s(&out["both"]))
+        .zip(f32s(&x))
+    {
+        assert!((soft + 0.5 * x).abs() < 1e-6);
+        assert!((both + 2.5 * x).abs() < 1e-6, "both = -2 x + soft = -2.5 x");
+    }
+}
+
+#[test]
+fn states_carry_across_steps_including_copies_and_swaps() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tmpdir("states");
+    let path = write_graph(
+        &dir,
+        "states.json",
+        r#"{"mesoflow": 1,
+         "inputs": {"x": {"type": "particles", "rows": 3, "cols": 1}, "y": {"type": "particles", "rows": 3, "cols": 1}},
+         "state": {
+           "count": {"init": "inputs.x", "next": "inc.out"},
+           "a": {"init": "inputs.x", "next": "state.b"},
+           "b": {"init": "inputs.y", "next": "state.a"},
+           "held": {"init": "inputs.x", "next": "inputs.y"}
+         },
+         "nodes": [{"id": "inc", "kind": "affine", "params": {"offset": 1}, "inputs": {"x": "state.count"}}],
+         "outputs": {"count": "state.count", "a": "state.a", "b": "state.b", "held": "state.held", "inc": "inc.out"}}"#,
+    );
+    let g = load(&path);
+    let t = ValueType::Particles { n: 3, k: 1 };
+    let x = HostArray::f32(t, vec![1.0, 2.0, 3.0]);
+    let y = HostArray::f32(t, vec![10.0, 20.0, 30.0]);
+    for steps in [1u64, 2, 3, 8] {
+        let out = run_graph(
+            &gpu,
+            &g,
+            &inputs(&[("x", x.clone()), ("y", y.clone())]),
+            None,
+            steps,
+            true,
+        );
+        let n = steps as f32;
+        assert_eq!(
+            f32s(&out["count"]),
+            vec![1.0 + n, 2.0 + n, 3.0 + n],
+            "{steps} steps"
+        );
+        assert_eq!(f32s(&out["inc"]), vec![1.0 + n, 2.0 + n, 3.0 + n]);
+        let (a, b) = if steps % 2 == 1 { (&y, &x) } else { (&x, &y) };
+        assert_eq!(
+            f32s(&out["a"]),
+            f32s(a),
+            "{steps} steps: a and b swap every step"
+        );
+        assert_eq!(f32s(&out["b"]), f32s(b));
+        assert_eq!(f32s(&out["held"]), f32s(&y));
+    }
+}
+
+#[test]
+fn every_example_runs() {
+    let Some(gpu) = gpu() else { return };
+    let dir = root().join("graphs/examples");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap().flatten() {
+        let path = e.path();
+        if path.extension().is_none_or(|x| x != "json") {
+            continue;
+        }
+        let g = load(&path);
+        let types = mesoflow::cli::declared_input_types(&g);
+        let mut rng = Rng::new(11);
+        let data: BTreeMap<String, HostArray> = types
+            .iter()
+            .map(|(k, t)| (k.clone(), rng.array(*t, -1.0, 1.0)))
+            .collect();
+        let out = run_graph(&gpu, &g, &data, None, 3, true);
+        assert_eq!(out.len(), g.outputs.len(), "{}", path.display());
+        for (name, a) in &out {
+            assert!(
+                a.data.to_f64().iter().all(|v| v.is_finite()),
+                "{}: output {name} is not finite",
+                path.display()
+            );
+        }
+        n += 1;
+    }
+    assert!(n >= 1);
+}

@@ -1,0 +1,67 @@
+//! Every WGSL file validates with naga without a GPU, imports resolved, with the
+//! capabilities mesoflow may request; so do the kernels the fusion pass generates.
+
+use mesoflow::gpu::shaders;
+
+fn validate(name: &str, src: &str) {
+    let module = naga::front::wgsl::parse_str(src)
+        .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
+    let caps = naga::valid::Capabilities::FLOAT64
+        | naga::valid::Capabilities::SHADER_FLOAT32_ATOMIC
+        | naga::valid::Capabilities::SUBGROUP
+        | naga::valid::Capabilities::SHADER_INT64;
+    let mut v = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), caps);
+    v.subgroup_stages(naga::valid::ShaderStages::COMPUTE);
+    v.subgroup_operations(naga::valid::SubgroupOperationSet::all());
+    v.validate(&module)
+        .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
+}
+
+#[test]
+fn every_shader_file_validates() {
+    let mut n = 0;
+    for path in shaders::paths() {
+        let src = shaders::source(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+        validate(path, &src);
+        n += 1;
+    }
+    assert!(n >= 3);
+}
+
+#[test]
+fn generated_pointwise_kernels_validate() {
+    use mesoflow::plan::{self, Launch, PlanOptions};
+    // A graph that uses every element-wise kind, fused and unfused.
+    let g = crate::util::load(&crate::util::root().join("graphs/fixtures/pointwise_all.json"));
+    let inputs = mesoflow::cli::declared_input_types(&g);
+    let mut generated = 0;
+    for fuse in [true, false] {
+        let opts = PlanOptions {
+            outputs: None,
+            inputs: inputs.clone(),
+            fuse,
+        };
+        let p = plan::plan(&g, &opts, &mesoflow::gpu::DeviceCaps::baseline()).unwrap();
+        for l in &p.step {
+            if let Launch::Fused(k) = l {
+                validate("generated", &k.source);
+                generated += 1;
+            }
+        }
+    }
+    assert!(
+        generated > g.nodes.len(),
+        "fused and unfused kernels were generated"
+    );
+}
+
+#[test]
+fn imports_resolve_once_and_report_missing_files() {
+    let src = shaders::resolve("#import common/index.wgsl\n#import common/index.wgsl\n").unwrap();
+    assert_eq!(src.matches("fn flat_index").count(), 1);
+    let err = shaders::resolve("#import common/nope.wgsl\n").unwrap_err();
+    assert!(
+        err.contains("no shader file `shaders/common/nope.wgsl`"),
+        "{err}"
+    );
+}

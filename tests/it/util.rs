@@ -1,0 +1,220 @@
+//! Shared helpers: one GPU context for the whole test binary, graph building, running
+//! graphs in-process, CPU references, comparisons.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard, OnceLock};
+
+use mesoflow::exec::{Program, RunOptions};
+use mesoflow::gpu::{GpuContext, KernelCache};
+use mesoflow::graph::{self, Graph, LoadOptions};
+use mesoflow::node::{RefCtx, Registry, check_params};
+use mesoflow::plan::{self, PlanOptions};
+use mesoflow::value::{HostArray, RefArray, ValueType};
+
+static GPU: OnceLock<Option<Mutex<GpuContext>>> = OnceLock::new();
+
+/// The shared GPU context, locked for the caller (tests submit from one thread at a time),
+/// or `None` when there is no adapter and MESOFLOW_REQUIRE_GPU is not set.
+pub fn gpu() -> Option<MutexGuard<'static, GpuContext>> {
+    let slot = GPU.get_or_init(|| match GpuContext::new() {
+        Ok(g) => Some(Mutex::new(g)),
+        Err(e) => {
+            if std::env::var_os("MESOFLOW_REQUIRE_GPU").is_some() {
+                panic!("MESOFLOW_REQUIRE_GPU is set but no GPU context: {e}");
+            }
+            eprintln!("skipping GPU tests: {e}");
+            None
+        }
+    });
+    slot.as_ref()
+        .map(|m| m.lock().unwrap_or_else(|p| p.into_inner()))
+}
+
+pub fn registry() -> &'static Registry {
+    static R: OnceLock<Registry> = OnceLock::new();
+    R.get_or_init(Registry::standard)
+}
+
+/// The repository root.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A fresh temporary folder for one test.
+pub fn tmpdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mesoflow-it-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Writes a graph file and returns its path.
+pub fn write_graph(dir: &Path, name: &str, json: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, json).unwrap();
+    p
+}
+
+pub fn load(path: &Path) -> Graph {
+    graph::load(path, registry(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// How a graph-file input declares a value type.
+pub fn input_decl(t: &ValueType) -> String {
+    match *t {
+        ValueType::Particles { n, k } => {
+            format!(r#"{{"type": "particles", "rows": {n}, "cols": {k}}}"#)
+        }
+        ValueType::Indices { n } => format!(r#"{{"type": "indices", "rows": {n}}}"#),
+        ValueType::RealGrid { dims, comps } => {
+            format!(
+                r#"{{"type": "real_grid", "dims": [{}, {}, {}], "comps": {comps}}}"#,
+                dims[0], dims[1], dims[2]
+            )
+        }
+        ValueType::ComplexGrid { dims, comps } => {
+            format!(
+                r#"{{"type": "complex_grid", "dims": [{}, {}, {}], "comps": {comps}}}"#,
+                dims[0], dims[1], dims[2]
+            )
+        }
+        ValueType::Scalar => r#"{"type": "scalar"}"#.into(),
+    }
+}
+
+/// A graph of one node: its inputs are graph inputs of the same names, its outputs are
+/// graph outputs of the same names.
+pub fn single_node_graph(kind: &str, params: &str, inputs: &[(&str, ValueType)]) -> String {
+    let k = registry()
+        .get(kind)
+        .unwrap_or_else(|| panic!("no kind {kind}"));
+    let decls: Vec<String> = inputs
+        .iter()
+        .map(|(n, t)| format!(r#""{n}": {}"#, input_decl(t)))
+        .collect();
+    let wires: Vec<String> = inputs
+        .iter()
+        .map(|(n, _)| format!(r#""{n}": "inputs.{n}""#))
+        .collect();
+    let outs: Vec<String> = k
+        .outputs()
+        .iter()
+        .map(|p| format!(r#""{0}": "n.{0}""#, p.name))
+        .collect();
+    format!(
+        r#"{{"mesoflow": 1, "inputs": {{{}}}, "nodes": [{{"id": "n", "kind": "{kind}", "params": {params}, "inputs": {{{}}}}}], "outputs": {{{}}}}}"#,
+        decls.join(", "),
+        wires.join(", "),
+        outs.join(", ")
+    )
+}
+
+/// Runs a loaded graph on the GPU and returns its outputs by name.
+pub fn run_graph(
+    gpu: &GpuContext,
+    g: &Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    outputs: Option<Vec<String>>,
+    steps: u64,
+    fuse: bool,
+) -> BTreeMap<String, HostArray> {
+    let opts = PlanOptions {
+        outputs,
+        inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
+        fuse,
+    };
+    let p = plan::plan(g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(gpu, g, &p, &mut cache).unwrap_or_else(|e| panic!("{e}"));
+    program.upload(inputs).unwrap();
+    program
+        .run(&RunOptions {
+            steps,
+            profile: false,
+            progress: false,
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    program.read_outputs().unwrap().into_iter().collect()
+}
+
+/// A small deterministic generator for test data (xorshift), so tests need no seed plumbing.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        let mut x = self.0;
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        self.0 = x;
+        x
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+    }
+
+    pub fn array(&mut self, ty: ValueType, lo: f64, hi: f64) -> HostArray {
+        match ty.elem() {
+            mesoflow::value::Elem::F32 => HostArray::f32(
+                ty,
+                (0..ty.words())
+                    .map(|_| self.uniform(lo, hi) as f32)
+                    .collect(),
+            ),
+            mesoflow::value::Elem::U32 => HostArray::u32(
+                ty,
+                (0..ty.words())
+                    .map(|_| self.uniform(lo, hi) as u32)
+                    .collect(),
+            ),
+        }
+    }
+}
+
+/// Evaluates a kind's f64 CPU reference on the given inputs (one evaluation, no state).
+pub fn reference(kind: &str, params: &str, inputs: &[Option<&HostArray>]) -> Vec<RefArray> {
+    let k = registry().get(kind).unwrap();
+    let raw: BTreeMap<String, serde_json::Value> = serde_json::from_str(params).unwrap();
+    let raw = raw
+        .into_iter()
+        .map(|(n, v)| (n, mesoflow::expr::ParamValue::from_json(&v).unwrap()))
+        .collect();
+    let p = check_params(&k.params(), &raw).unwrap();
+    let node = k.build(&p).unwrap();
+    let types: Vec<Option<ValueType>> = inputs.iter().map(|a| a.map(|a| a.ty)).collect();
+    let sig = node.infer(&types).unwrap();
+    let refs: Vec<Option<RefArray>> = inputs.iter().map(|a| a.map(|a| a.to_ref())).collect();
+    let mut outs: Vec<RefArray> = sig
+        .outputs
+        .iter()
+        .map(|t| RefArray::new(*t, vec![0.0; t.words() as usize]))
+        .collect();
+    node.cpu_reference(&refs, &mut outs, RefCtx::default());
+    outs
+}
+
+/// Largest |gpu - ref| over max(|ref|), with the index where it occurs.
+pub fn rel_max_err(gpu: &HostArray, reference: &RefArray) -> (f64, usize) {
+    assert_eq!(gpu.ty, reference.ty, "types differ");
+    let g = gpu.data.to_f64();
+    let scale = reference
+        .data
+        .iter()
+        .fold(0.0f64, |m, x| m.max(x.abs()))
+        .max(f64::MIN_POSITIVE);
+    let mut worst = (0.0, 0);
+    for (i, (a, b)) in g.iter().zip(&reference.data).enumerate() {
+        let e = (a - b).abs() / scale;
+        if e > worst.0 || e.is_nan() {
+            worst = (e, i);
+        }
+    }
+    worst
+}
