@@ -426,7 +426,7 @@ fn print_profile(stats: &RunStats) {
         "launch", "kinds", "calls", "total ms", "mean us", "%"
     );
     let mut rows = stats.profile.clone();
-    rows.sort_by(|a, b| b.total.cmp(&a.total));
+    rows.sort_by_key(|r| std::cmp::Reverse(r.total));
     for r in rows {
         let t = r.total.as_secs_f64();
         println!(

@@ -147,11 +147,10 @@ impl ParamSpec {
                 Ok(())
             }
             (ParamKind::Numbers { len, min, max }, ParamValue::Numbers(xs)) => {
-                if let Some(n) = len {
-                    if xs.len() != *n {
+                if let Some(n) = len
+                    && xs.len() != *n {
                         return Err(format!("expected {n} numbers, got {}", xs.len()));
                     }
-                }
                 for x in xs {
                     if !x.is_finite() || x < min || x > max {
                         return Err(format!("element {x} is outside [{min}, {max}]"));

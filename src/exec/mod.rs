@@ -191,7 +191,6 @@ impl<'a> Program<'a> {
             odd.push(c1);
         }
         let table_bytes = cx.allocated.get();
-        drop(cx);
         program.prologue = prologue;
         program.step = [even, odd];
         program.table_bytes = table_bytes;

@@ -262,7 +262,7 @@ impl Loader<'_> {
         let mut scope = self.builtins.clone();
         let is_root = parent.is_none();
         for name in overrides.keys() {
-            if !decls.contains_key(name) && !(is_root && BUILTIN_PARAMS.contains(&name.as_str())) {
+            if !(decls.contains_key(name) || is_root && BUILTIN_PARAMS.contains(&name.as_str())) {
                 let known: Vec<&str> = decls.keys().map(|s| s.as_str()).collect();
                 let msg = format!(
                     "unknown param `{name}` (this graph's params: {})",
@@ -829,31 +829,27 @@ fn check_param(decl: &ParamDecl, default: &ParamValue, v: &ParamValue) -> Result
         if decl.integer && x.fract() != 0.0 {
             return Err(format!("{x} is not an integer"));
         }
-        if let Some(m) = decl.min {
-            if x < m {
+        if let Some(m) = decl.min
+            && x < m {
                 return Err(format!("{x} is below the minimum {m}"));
             }
-        }
-        if let Some(m) = decl.max {
-            if x > m {
+        if let Some(m) = decl.max
+            && x > m {
                 return Err(format!("{x} is above the maximum {m}"));
             }
-        }
     }
-    if let (Some(c), ParamValue::Text(s)) = (&decl.choices, v) {
-        if !c.contains(s) {
+    if let (Some(c), ParamValue::Text(s)) = (&decl.choices, v)
+        && !c.contains(s) {
             return Err(format!("\"{s}\" is not one of {}", c.join(", ")));
         }
-    }
-    if let (ParamValue::Numbers(d), ParamValue::Numbers(x)) = (default, v) {
-        if d.len() != x.len() {
+    if let (ParamValue::Numbers(d), ParamValue::Numbers(x)) = (default, v)
+        && d.len() != x.len() {
             return Err(format!(
                 "expected {} numbers like the default, got {}",
                 d.len(),
                 x.len()
             ));
         }
-    }
     Ok(())
 }
 

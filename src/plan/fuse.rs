@@ -187,13 +187,11 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
     for &n in ctx.order {
         let un = unit_of[&n];
         for s in &ctx.g.nodes[n].inputs {
-            if let Source::Node { node, .. } = s {
-                if let Some(&up) = unit_of.get(node) {
-                    if up != un && succ[up].insert(un) {
+            if let Source::Node { node, .. } = s
+                && let Some(&up) = unit_of.get(node)
+                    && up != un && succ[up].insert(un) {
                         indeg[un] += 1;
                     }
-                }
-            }
         }
     }
     let mut ready: BinaryHeap<Reverse<(usize, usize)>> = (0..units.len())

@@ -49,8 +49,8 @@ pub fn assign(plan: &mut Plan) {
     // Pooled values by interval.
     let mut free: Vec<usize> = Vec::new();
     let mut pool_without_reuse = 0;
-    for i in 0..launches.len() {
-        for v in launches[i].writes() {
+    for (i, launch) in launches.iter().enumerate() {
+        for v in launch.writes() {
             let val = &plan.values[v];
             if val.storage != Storage::Pending(BufferRole::Pool)
                 || def[&v] != i
@@ -91,14 +91,12 @@ pub fn assign(plan: &mut Plan) {
             buffers[b].holds.push(val.name.clone());
             assigned.insert(v, b);
         }
-        for v in launches[i].reads().into_iter().chain(launches[i].writes()) {
-            if last.get(&v) == Some(&i) {
-                if let Some(&b) = assigned.get(&v) {
-                    if buffers[b].role == BufferRole::Pool && !free.contains(&b) {
+        for v in launch.reads().into_iter().chain(launch.writes()) {
+            if last.get(&v) == Some(&i)
+                && let Some(&b) = assigned.get(&v)
+                    && buffers[b].role == BufferRole::Pool && !free.contains(&b) {
                         free.push(b);
                     }
-                }
-            }
         }
     }
     for (v, b) in &assigned {

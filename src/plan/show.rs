@@ -283,8 +283,8 @@ pub fn to_dot(g: &Graph, plan: &Plan) -> String {
         }
     }
     for s in &plan.states {
-        if let Some(def) = g.states.iter().find(|d| d.name == s.name) {
-            if let Some(from) = name(def.next) {
+        if let Some(def) = g.states.iter().find(|d| d.name == s.name)
+            && let Some(from) = name(def.next) {
                 writeln!(
                     out,
                     "  {} -> {} [style=dotted, label=\"next\"];",
@@ -293,7 +293,6 @@ pub fn to_dot(g: &Graph, plan: &Plan) -> String {
                 )
                 .unwrap();
             }
-        }
     }
     for (oname, v) in &plan.outputs {
         writeln!(

@@ -39,6 +39,8 @@ fn check(kind: &str, params: &str, inputs: &[(&str, ValueType)], tol: f64) {
     }
 }
 
+type Case<'a> = (&'a str, &'a str, &'a [(&'a str, ValueType)]);
+
 const P: fn(u32, u32) -> ValueType = |n, k| ValueType::Particles { n, k };
 
 /// f32 element-wise arithmetic: a few ulps of the result.
@@ -46,7 +48,7 @@ const ELEMENTWISE_TOL: f64 = 4.0 * f32::EPSILON as f64;
 
 #[test]
 fn pointwise_kinds_match_their_references() {
-    let cases: &[(&str, &str, &[(&str, ValueType)])] = &[
+    let cases: &[Case] = &[
         ("scale", r#"{"factor": -2.5}"#, &[("x", P(1000, 3))]),
         ("add", "{}", &[("a", P(257, 3)), ("b", P(257, 3))]),
         ("add", "{}", &[("a", P(257, 3))]),
