@@ -148,9 +148,10 @@ impl ParamSpec {
             }
             (ParamKind::Numbers { len, min, max }, ParamValue::Numbers(xs)) => {
                 if let Some(n) = len
-                    && xs.len() != *n {
-                        return Err(format!("expected {n} numbers, got {}", xs.len()));
-                    }
+                    && xs.len() != *n
+                {
+                    return Err(format!("expected {n} numbers, got {}", xs.len()));
+                }
                 for x in xs {
                     if !x.is_finite() || x < min || x > max {
                         return Err(format!("element {x} is outside [{min}, {max}]"));

@@ -52,6 +52,21 @@ pub struct ProfileRow {
     pub dispatches: usize,
     pub calls: u64,
     pub total: Duration,
+    /// The time of each call, in order.
+    pub samples: Vec<Duration>,
+}
+
+impl ProfileRow {
+    /// Median time of one call.
+    pub fn median(&self) -> Duration {
+        let mut s = self.samples.clone();
+        s.sort();
+        if s.is_empty() {
+            Duration::ZERO
+        } else {
+            s[s.len() / 2]
+        }
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -471,6 +486,7 @@ impl<'a> Program<'a> {
                 dispatches: c.dispatches.len(),
                 calls: 0,
                 total: Duration::ZERO,
+                samples: Vec::new(),
             })
             .collect();
         let use_gpu = self.gpu.caps.timestamps;
@@ -517,8 +533,11 @@ impl<'a> Program<'a> {
                     let bytes = self.gpu.read_buffer(&resolve, 16 * launches as u64)?;
                     let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
                     for (i, row) in rows.iter_mut().enumerate() {
-                        let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period;
-                        row.total += Duration::from_nanos(dt as u64);
+                        let dt = Duration::from_nanos(
+                            (ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period) as u64,
+                        );
+                        row.total += dt;
+                        row.samples.push(dt);
                         row.calls += 1;
                     }
                 }
@@ -532,7 +551,9 @@ impl<'a> Program<'a> {
                     }
                     let idx = self.gpu.queue.submit([enc.finish()]);
                     self.gpu.wait(idx)?;
-                    rows[i].total += t.elapsed();
+                    let dt = t.elapsed();
+                    rows[i].total += dt;
+                    rows[i].samples.push(dt);
                     rows[i].calls += 1;
                 }
                 let mut enc = self.gpu.device.create_command_encoder(&Default::default());

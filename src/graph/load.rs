@@ -830,26 +830,30 @@ fn check_param(decl: &ParamDecl, default: &ParamValue, v: &ParamValue) -> Result
             return Err(format!("{x} is not an integer"));
         }
         if let Some(m) = decl.min
-            && x < m {
-                return Err(format!("{x} is below the minimum {m}"));
-            }
+            && x < m
+        {
+            return Err(format!("{x} is below the minimum {m}"));
+        }
         if let Some(m) = decl.max
-            && x > m {
-                return Err(format!("{x} is above the maximum {m}"));
-            }
+            && x > m
+        {
+            return Err(format!("{x} is above the maximum {m}"));
+        }
     }
     if let (Some(c), ParamValue::Text(s)) = (&decl.choices, v)
-        && !c.contains(s) {
-            return Err(format!("\"{s}\" is not one of {}", c.join(", ")));
-        }
+        && !c.contains(s)
+    {
+        return Err(format!("\"{s}\" is not one of {}", c.join(", ")));
+    }
     if let (ParamValue::Numbers(d), ParamValue::Numbers(x)) = (default, v)
-        && d.len() != x.len() {
-            return Err(format!(
-                "expected {} numbers like the default, got {}",
-                d.len(),
-                x.len()
-            ));
-        }
+        && d.len() != x.len()
+    {
+        return Err(format!(
+            "expected {} numbers like the default, got {}",
+            d.len(),
+            x.len()
+        ));
+    }
     Ok(())
 }
 

@@ -189,9 +189,11 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
         for s in &ctx.g.nodes[n].inputs {
             if let Source::Node { node, .. } = s
                 && let Some(&up) = unit_of.get(node)
-                    && up != un && succ[up].insert(un) {
-                        indeg[un] += 1;
-                    }
+                && up != un
+                && succ[up].insert(un)
+            {
+                indeg[un] += 1;
+            }
         }
     }
     let mut ready: BinaryHeap<Reverse<(usize, usize)>> = (0..units.len())

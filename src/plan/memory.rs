@@ -94,9 +94,11 @@ pub fn assign(plan: &mut Plan) {
         for v in launch.reads().into_iter().chain(launch.writes()) {
             if last.get(&v) == Some(&i)
                 && let Some(&b) = assigned.get(&v)
-                    && buffers[b].role == BufferRole::Pool && !free.contains(&b) {
-                        free.push(b);
-                    }
+                && buffers[b].role == BufferRole::Pool
+                && !free.contains(&b)
+            {
+                free.push(b);
+            }
         }
     }
     for (v, b) in &assigned {

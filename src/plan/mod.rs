@@ -260,10 +260,9 @@ impl<'g> Planner<'g> {
         let mut stack: Vec<Source> = needed_states.iter().map(|&s| g.states[s].init).collect();
         while let Some(s) = stack.pop() {
             match s {
-                Source::Node { node, .. }
-                    if prologue_nodes.insert(node) => {
-                        stack.extend(g.nodes[node].inputs.iter().copied());
-                    }
+                Source::Node { node, .. } if prologue_nodes.insert(node) => {
+                    stack.extend(g.nodes[node].inputs.iter().copied());
+                }
                 Source::State(i) => {
                     let msg = format!(
                         "the initial value of a state depends on state `{}`; initial values must come from inputs or from nodes that read no state",
@@ -496,9 +495,10 @@ impl<'g> Planner<'g> {
             let mut deps = BTreeSet::new();
             for s in &self.g.nodes[n].inputs {
                 if let Source::Node { node, .. } = s
-                    && set.contains(node) {
-                        deps.insert(*node);
-                    }
+                    && set.contains(node)
+                {
+                    deps.insert(*node);
+                }
             }
             for d in deps {
                 *indeg.get_mut(&n).expect("in set") += 1;
@@ -749,12 +749,13 @@ impl Builder {
     ) -> Launch {
         let storage_for = |src: Source, escapes: bool| -> Storage {
             if phase == Phase::Step
-                && let Some(&k) = next_claimed.get(&src) {
-                    return Storage::State {
-                        state: k,
-                        next: true,
-                    };
-                }
+                && let Some(&k) = next_claimed.get(&src)
+            {
+                return Storage::State {
+                    state: k,
+                    next: true,
+                };
+            }
             let Source::Node { node, port } = src else {
                 unreachable!("node outputs only")
             };

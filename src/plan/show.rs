@@ -284,15 +284,16 @@ pub fn to_dot(g: &Graph, plan: &Plan) -> String {
     }
     for s in &plan.states {
         if let Some(def) = g.states.iter().find(|d| d.name == s.name)
-            && let Some(from) = name(def.next) {
-                writeln!(
-                    out,
-                    "  {} -> {} [style=dotted, label=\"next\"];",
-                    q(&from),
-                    q(&format!("state.{}", s.name))
-                )
-                .unwrap();
-            }
+            && let Some(from) = name(def.next)
+        {
+            writeln!(
+                out,
+                "  {} -> {} [style=dotted, label=\"next\"];",
+                q(&from),
+                q(&format!("state.{}", s.name))
+            )
+            .unwrap();
+        }
     }
     for (oname, v) in &plan.outputs {
         writeln!(

@@ -1,8 +1,12 @@
-//! `mesoflow bench ...`: benchmarks meant for the GPU machine. Each compares against a
-//! baseline measured in the same process, and prints one table (BENCHMARKS.md records
-//! them with adapter and date).
+//! `mesoflow bench ...`: benchmarks meant for the GPU machine. Each prints one table
+//! (BENCHMARKS.md records them with adapter and date); comparisons with other libraries
+//! run in the same command through the scripts in `benches/`.
+//!
+//! Node benchmarks go through the engine like any graph: [`time_graph`] plans and
+//! compiles a graph file and times each launch with GPU timestamps.
 
-use std::time::Instant;
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
 
 use clap::Subcommand;
 
@@ -13,6 +17,84 @@ use crate::graph::{self, LoadOptions};
 use crate::node::Registry;
 use crate::plan::{self, PlanOptions};
 use crate::value::{HostArray, ValueType};
+
+/// GPU time of one launch of a timed graph.
+#[derive(Clone, Debug)]
+pub struct Timing {
+    pub label: String,
+    pub median: Duration,
+    pub min: Duration,
+}
+
+/// A timed graph run: per-launch GPU times and the outputs of the last step.
+pub struct TimedRun {
+    pub timings: Vec<Timing>,
+    pub outputs: BTreeMap<String, HostArray>,
+}
+
+impl TimedRun {
+    /// Sum of the launches' medians: the GPU time of one step.
+    pub fn step_time(&self) -> Duration {
+        self.timings.iter().map(|t| t.median).sum()
+    }
+}
+
+/// Plans, compiles and runs `graph_json` for `reps` steps with per-launch GPU timestamps
+/// (after two untimed warm-up steps).
+pub fn time_graph(
+    gpu: &GpuContext,
+    graph_json: &str,
+    inputs: &BTreeMap<String, HostArray>,
+    reps: u64,
+    fuse: bool,
+) -> Result<TimedRun, CliError> {
+    let dir = std::env::temp_dir().join(format!("mesoflow-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(runtime)?;
+    let file = dir.join("timed.json");
+    std::fs::write(&file, graph_json).map_err(runtime)?;
+    let registry = Registry::standard();
+    let g = graph::load(&file, &registry, &LoadOptions::default())
+        .map_err(|p| CliError::Input(p.to_string()))?;
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
+        fuse,
+    };
+    let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(runtime)?;
+    program.upload(inputs).map_err(runtime)?;
+    program
+        .run(&RunOptions {
+            steps: 2,
+            profile: false,
+            progress: false,
+        })
+        .map_err(runtime)?;
+    let stats = program
+        .run(&RunOptions {
+            steps: reps,
+            profile: true,
+            progress: false,
+        })
+        .map_err(runtime)?;
+    let outputs = program
+        .read_outputs()
+        .map_err(runtime)?
+        .into_iter()
+        .collect();
+    let _ = std::fs::remove_dir_all(&dir);
+    let timings = stats
+        .profile
+        .iter()
+        .map(|r| Timing {
+            label: r.label.clone(),
+            median: r.median(),
+            min: r.samples.iter().min().copied().unwrap_or_default(),
+        })
+        .collect();
+    Ok(TimedRun { timings, outputs })
+}
 
 #[derive(Subcommand, Debug)]
 pub enum BenchCommand {
