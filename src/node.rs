@@ -395,6 +395,13 @@ pub trait Node: Send + Sync {
 
     fn lowering(&self) -> Lowering<'_>;
 
+    /// Decisions the node takes for these input types (a transform's radix plan, a grid
+    /// size chosen from a tolerance), one line each, shown by `mesoflow inspect`.
+    fn notes(&self, inputs: &[Option<ValueType>]) -> Vec<String> {
+        let _ = inputs;
+        Vec::new()
+    }
+
     /// The f64 CPU reference of one evaluation; `outputs` holds the previous contents of
     /// the node's persistent outputs (zeros at the first step).
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx);

@@ -191,9 +191,9 @@ fn type_for(shape: &[u64], complex: bool, decl: &InputShape) -> Result<ValueType
                 decl.describe()
             )),
         },
-        InputShape::Scalar => {
+        InputShape::Fixed(t @ ValueType::Scalar) => {
             if total == 1 && shape.len() <= 1 {
-                Ok(ValueType::Scalar)
+                Ok(*t)
             } else {
                 Err(format!(
                     "shape {} is not a scalar: expected () or (1,)",
@@ -201,34 +201,29 @@ fn type_for(shape: &[u64], complex: bool, decl: &InputShape) -> Result<ValueType
                 ))
             }
         }
-        InputShape::RealGrid { dims, comps } => {
-            let want = dims[0] as u64 * dims[1] as u64 * dims[2] as u64 * *comps as u64;
-            if total == want && !complex {
-                Ok(ValueType::RealGrid {
-                    dims: *dims,
-                    comps: *comps,
-                })
+        InputShape::Fixed(t @ ValueType::RealGrid { .. }) => {
+            if total == t.words() && !complex {
+                Ok(*t)
             } else {
                 Err(format!(
-                    "shape {} does not fit {}",
+                    "shape {} does not fit {}: expected {}",
                     shape_text(shape),
-                    decl.describe()
+                    decl.describe(),
+                    shape_text(&t.npy_shape())
                 ))
             }
         }
-        InputShape::ComplexGrid { dims, comps } => {
-            let want = dims[0] as u64 * dims[1] as u64 * dims[2] as u64 * *comps as u64;
-            let got = if complex { total * 2 } else { total };
-            if got == 2 * want && (complex || shape.last() == Some(&2)) {
-                Ok(ValueType::ComplexGrid {
-                    dims: *dims,
-                    comps: *comps,
-                })
+        InputShape::Fixed(t) => {
+            // Complex values: a complex array, or float pairs along a trailing axis of 2.
+            let words = if complex { total * 2 } else { total };
+            if words == t.words() && (complex || shape.last() == Some(&2)) {
+                Ok(*t)
             } else {
                 Err(format!(
-                    "shape {} does not fit {}: give a complex array or a float array with a trailing axis of 2",
+                    "shape {} does not fit {}: expected {} (float) or the same without the trailing 2 (complex)",
                     shape_text(shape),
-                    decl.describe()
+                    decl.describe(),
+                    shape_text(&t.npy_shape())
                 ))
             }
         }
@@ -382,13 +377,13 @@ mod tests {
         assert!(type_for(&[5], false, &p).unwrap_err().contains("(N, 3)"));
         assert!(type_for(&[2, 2], false, &p).is_err());
         assert_eq!(
-            type_for(&[], false, &InputShape::Scalar).unwrap(),
+            type_for(&[], false, &InputShape::Fixed(ValueType::Scalar)).unwrap(),
             ValueType::Scalar
         );
         assert_eq!(
-            type_for(&[1], false, &InputShape::Scalar).unwrap(),
+            type_for(&[1], false, &InputShape::Fixed(ValueType::Scalar)).unwrap(),
             ValueType::Scalar
         );
-        assert!(type_for(&[2], false, &InputShape::Scalar).is_err());
+        assert!(type_for(&[2], false, &InputShape::Fixed(ValueType::Scalar)).is_err());
     }
 }

@@ -5,6 +5,8 @@
 //! - particles: N rows of k f32, row-major (an (N,3) NPY array as-is);
 //! - real grids: f32, component-major, x fastest: `((c*nz + z)*ny + y)*nx + x`;
 //! - complex grids: the same order with interleaved (re, im) f32 pairs;
+//! - half-complex grids (the Hermitian half spectrum of a real grid of dims (nx, ny, nz)):
+//!   (nx/2 + 1) x ny x nz complex values per component, same order;
 //! - index arrays: u32;
 //! - scalars: one f32.
 
@@ -19,6 +21,9 @@ pub enum ValueType {
     RealGrid { dims: [u32; 3], comps: u32 },
     /// A complex grid of `comps` components on `dims` = (nx, ny, nz) cells.
     ComplexGrid { dims: [u32; 3], comps: u32 },
+    /// The spectrum of a real grid of `dims` = (nx, ny, nz) cells, stored as its Hermitian
+    /// half: x wave numbers 0..=nx/2 only (the rest are complex conjugates).
+    HalfComplexGrid { dims: [u32; 3], comps: u32 },
     /// N u32 indices.
     Indices { n: u32 },
     /// One f32.
@@ -39,6 +44,7 @@ impl ValueType {
             ValueType::Particles { n, k } => n as u64 * k as u64,
             ValueType::RealGrid { dims, comps } => cells(dims) * comps as u64,
             ValueType::ComplexGrid { dims, comps } => 2 * cells(dims) * comps as u64,
+            ValueType::HalfComplexGrid { dims, comps } => 2 * cells(half_dims(dims)) * comps as u64,
             ValueType::Indices { n } => n as u64,
             ValueType::Scalar => 1,
         }
@@ -61,6 +67,7 @@ impl ValueType {
             ValueType::Particles { .. } => "particles",
             ValueType::RealGrid { .. } => "real_grid",
             ValueType::ComplexGrid { .. } => "complex_grid",
+            ValueType::HalfComplexGrid { .. } => "half_complex_grid",
             ValueType::Indices { .. } => "indices",
             ValueType::Scalar => "scalar",
         }
@@ -91,6 +98,13 @@ impl ValueType {
                 dims[0] as u64,
                 2,
             ],
+            ValueType::HalfComplexGrid { dims, comps } => vec![
+                comps as u64,
+                dims[2] as u64,
+                dims[1] as u64,
+                half_dims(dims)[0] as u64,
+                2,
+            ],
             ValueType::Indices { n } => vec![n as u64],
             ValueType::Scalar => vec![],
         }
@@ -99,6 +113,11 @@ impl ValueType {
 
 fn cells(d: [u32; 3]) -> u64 {
     d[0] as u64 * d[1] as u64 * d[2] as u64
+}
+
+/// Stored dims of the half spectrum of a real grid: (nx/2 + 1, ny, nz).
+pub fn half_dims(d: [u32; 3]) -> [u32; 3] {
+    [d[0] / 2 + 1, d[1], d[2]]
 }
 
 impl fmt::Display for ValueType {
@@ -119,6 +138,11 @@ impl fmt::Display for ValueType {
                     dims[0], dims[1], dims[2]
                 )
             }
+            ValueType::HalfComplexGrid { dims, comps } => write!(
+                f,
+                "half_complex_grid(of {}x{}x{}, {comps} comp)",
+                dims[0], dims[1], dims[2]
+            ),
             ValueType::Indices { n } => write!(f, "indices({n})"),
             ValueType::Scalar => write!(f, "scalar"),
         }
@@ -132,6 +156,7 @@ pub enum PortType {
     Particles(Option<u32>),
     RealGrid,
     ComplexGrid,
+    HalfComplexGrid,
     Indices,
     Scalar,
     /// Any f32 value that is not a complex grid: particles, real grid or scalar.
@@ -145,6 +170,7 @@ impl PortType {
             (PortType::Particles(Some(k)), ValueType::Particles { k: kk, .. }) => k == kk,
             (PortType::RealGrid, ValueType::RealGrid { .. }) => true,
             (PortType::ComplexGrid, ValueType::ComplexGrid { .. }) => true,
+            (PortType::HalfComplexGrid, ValueType::HalfComplexGrid { .. }) => true,
             (PortType::Indices, ValueType::Indices { .. }) => true,
             (PortType::Scalar, ValueType::Scalar) => true,
             (
@@ -163,6 +189,7 @@ impl fmt::Display for PortType {
             PortType::Particles(Some(k)) => write!(f, "particles(N x {k})"),
             PortType::RealGrid => write!(f, "real_grid"),
             PortType::ComplexGrid => write!(f, "complex_grid"),
+            PortType::HalfComplexGrid => write!(f, "half_complex_grid"),
             PortType::Indices => write!(f, "indices"),
             PortType::Scalar => write!(f, "scalar"),
             PortType::RealArray => write!(f, "particles | real_grid | scalar"),
@@ -285,6 +312,12 @@ mod tests {
         };
         assert_eq!(c.words(), 2 * 120 * 3);
         assert_eq!(c.npy_shape(), vec![3, 6, 5, 4, 2]);
+        let h = ValueType::HalfComplexGrid {
+            dims: [9, 5, 6],
+            comps: 3,
+        };
+        assert_eq!(h.words(), 2 * 5 * 5 * 6 * 3);
+        assert_eq!(h.npy_shape(), vec![3, 6, 5, 5, 2]);
         assert_eq!(ValueType::Scalar.npy_shape(), Vec::<u64>::new());
     }
 

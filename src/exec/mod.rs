@@ -241,6 +241,7 @@ impl<'a> Program<'a> {
                 inputs,
                 outputs,
                 scratch,
+                ..
             } => {
                 let inst = &g.nodes[*node];
                 let io = NodeIo {

@@ -12,6 +12,7 @@ use super::{
 };
 use crate::expr::{self, ParamValue, Scope};
 use crate::node::{Registry, check_params, edit_distance};
+use crate::value::ValueType;
 
 /// Names every graph sees without declaring them.
 pub const BUILTIN_PARAMS: [&str; 2] = ["steps", "seed"];
@@ -926,15 +927,22 @@ fn input_shape(decl: &InputDecl, sizes: &[String], values: &Scope) -> Result<Inp
         "indices" => Ok(InputShape::Indices { rows: rows()? }),
         "real_grid" => {
             let (dims, comps) = grid()?;
-            Ok(InputShape::RealGrid { dims, comps })
+            Ok(InputShape::Fixed(ValueType::RealGrid { dims, comps }))
         }
         "complex_grid" => {
             let (dims, comps) = grid()?;
-            Ok(InputShape::ComplexGrid { dims, comps })
+            Ok(InputShape::Fixed(ValueType::ComplexGrid { dims, comps }))
         }
-        "scalar" => Ok(InputShape::Scalar),
+        "half_complex_grid" => {
+            let (dims, comps) = grid()?;
+            Ok(InputShape::Fixed(ValueType::HalfComplexGrid {
+                dims,
+                comps,
+            }))
+        }
+        "scalar" => Ok(InputShape::Fixed(ValueType::Scalar)),
         other => Err(format!(
-            "unknown input type `{other}` (types: particles, real_grid, complex_grid, indices, scalar)"
+            "unknown input type `{other}` (types: particles, real_grid, complex_grid, half_complex_grid, indices, scalar)"
         )),
     }
 }

@@ -136,11 +136,15 @@ pub enum Dim {
 /// The declared shape of a graph input.
 #[derive(Clone, Debug, PartialEq)]
 pub enum InputShape {
-    Particles { rows: Dim, cols: u32 },
-    Indices { rows: Dim },
-    RealGrid { dims: [u32; 3], comps: u32 },
-    ComplexGrid { dims: [u32; 3], comps: u32 },
-    Scalar,
+    Particles {
+        rows: Dim,
+        cols: u32,
+    },
+    Indices {
+        rows: Dim,
+    },
+    /// Grids and scalars: the declaration gives the whole type.
+    Fixed(ValueType),
 }
 
 impl InputShape {
@@ -153,14 +157,7 @@ impl InputShape {
             (InputShape::Indices { rows }, ValueType::Indices { n }) => {
                 !matches!(rows, Dim::Fixed(r) if r != n)
             }
-            (InputShape::RealGrid { dims, comps }, ValueType::RealGrid { dims: d, comps: c }) => {
-                dims == d && comps == c
-            }
-            (
-                InputShape::ComplexGrid { dims, comps },
-                ValueType::ComplexGrid { dims: d, comps: c },
-            ) => dims == d && comps == c,
-            (InputShape::Scalar, ValueType::Scalar) => true,
+            (InputShape::Fixed(want), t) => want == t,
             _ => false,
         };
         if ok {
@@ -183,15 +180,7 @@ impl InputShape {
                 k: *cols,
             },
             InputShape::Indices { rows } => ValueType::Indices { n: dim(rows)? },
-            InputShape::RealGrid { dims, comps } => ValueType::RealGrid {
-                dims: *dims,
-                comps: *comps,
-            },
-            InputShape::ComplexGrid { dims, comps } => ValueType::ComplexGrid {
-                dims: *dims,
-                comps: *comps,
-            },
-            InputShape::Scalar => ValueType::Scalar,
+            InputShape::Fixed(t) => *t,
         })
     }
 
@@ -204,19 +193,7 @@ impl InputShape {
         match self {
             InputShape::Particles { rows, cols } => format!("particles({}x{cols})", dim(rows)),
             InputShape::Indices { rows } => format!("indices({})", dim(rows)),
-            InputShape::RealGrid { dims, comps } => {
-                format!(
-                    "real_grid({}x{}x{}, {comps} comp)",
-                    dims[0], dims[1], dims[2]
-                )
-            }
-            InputShape::ComplexGrid { dims, comps } => {
-                format!(
-                    "complex_grid({}x{}x{}, {comps} comp)",
-                    dims[0], dims[1], dims[2]
-                )
-            }
-            InputShape::Scalar => "scalar".into(),
+            InputShape::Fixed(t) => t.to_string(),
         }
     }
 }

@@ -92,6 +92,8 @@ pub enum Launch {
         inputs: Vec<Option<ValueId>>,
         outputs: Vec<ValueId>,
         scratch: Vec<ValueId>,
+        /// The node's own decisions for these inputs (see `Node::notes`).
+        notes: Vec<String>,
     },
     /// One generated kernel for a chain of element-wise nodes.
     Fused(FusedKernel),
@@ -800,11 +802,14 @@ impl Builder {
                         )
                     })
                     .collect();
+                let input_types: Vec<Option<ValueType>> =
+                    inst.inputs.iter().map(|s| p.source_type(*s)).collect();
                 Launch::Node {
                     node: n,
                     inputs,
                     outputs,
                     scratch,
+                    notes: inst.node.notes(&input_types),
                 }
             }
             fuse::Unit::Group(members) => {

@@ -49,9 +49,13 @@ fn launch_lines(out: &mut String, g: &Graph, plan: &Plan, launches: &[Launch]) {
                 inputs,
                 outputs,
                 scratch,
+                notes,
             } => {
                 let n = &g.nodes[*node];
                 writeln!(out, "  {:>3}. {} ({})", i + 1, n.id, n.kind).unwrap();
+                for note in notes {
+                    writeln!(out, "         note   {note}").unwrap();
+                }
                 for v in inputs.iter().flatten() {
                     writeln!(out, "         reads  {}", value(plan, *v)).unwrap();
                 }

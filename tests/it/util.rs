@@ -73,6 +73,10 @@ pub fn input_decl(t: &ValueType) -> String {
                 dims[0], dims[1], dims[2]
             )
         }
+        ValueType::HalfComplexGrid { dims, comps } => format!(
+            r#"{{"type": "half_complex_grid", "dims": [{}, {}, {}], "comps": {comps}}}"#,
+            dims[0], dims[1], dims[2]
+        ),
         ValueType::ComplexGrid { dims, comps } => {
             format!(
                 r#"{{"type": "complex_grid", "dims": [{}, {}, {}], "comps": {comps}}}"#,
