@@ -8,34 +8,96 @@ use crate::node::{
 };
 use crate::value::{PortType, RefArray, ValueType};
 
-/// One element-wise kind.
-pub struct PointwiseKind {
-    name: &'static str,
-    doc: &'static str,
-    /// (name, doc, optional). An absent optional input reads as 0.
-    inputs: &'static [(&'static str, &'static str, bool)],
-    params: fn() -> Vec<ParamSpec>,
-    /// Param values handed to the body as p0, p1, ...
-    flatten: fn(&Params) -> Vec<f64>,
-    /// Extra shape check against the param values (per-component kinds).
-    check: fn(&ValueType, &[f64]) -> Result<(), String>,
-    body: &'static str,
-    /// The params are one value per component, padded to MAX_COMPONENTS for the body.
-    per_component: bool,
-    /// f64 reference of one element: (inputs, component, params).
-    reference: fn(&[f64], u32, &[f64]) -> f64,
+/// A param value handed to a body: a number (f32 on the GPU), or 32 raw bits that the
+/// body reads back with `bitcast<u32>(pK)` (seeds and stream ids must stay exact).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Param {
+    Number(f64),
+    Bits(u32),
 }
+
+impl Param {
+    fn gpu(self) -> f32 {
+        match self {
+            Param::Number(x) => x as f32,
+            Param::Bits(b) => f32::from_bits(b),
+        }
+    }
+
+    fn host(self) -> f64 {
+        match self {
+            Param::Number(x) => x,
+            Param::Bits(b) => b as f64,
+        }
+    }
+}
+
+/// Where an element sits, as the CPU reference of a body sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct ElemCtx {
+    /// Flat element (4-byte word) index.
+    pub idx: u64,
+    /// Component (see `ValueType::component_of`).
+    pub comp: u32,
+    /// The time step.
+    pub step: u64,
+}
+
+/// One element-wise kind: a table row.
+pub struct PointwiseKind {
+    pub(crate) name: &'static str,
+    pub(crate) doc: &'static str,
+    /// (name, doc, optional). An absent optional input reads as 0.
+    pub(crate) inputs: &'static [(&'static str, &'static str, bool)],
+    pub(crate) params: fn() -> Vec<ParamSpec>,
+    /// Param values handed to the body as p0, p1, ...
+    pub(crate) flatten: fn(&Params) -> Vec<Param>,
+    /// Extra shape check against the param values (per-component kinds).
+    pub(crate) check: fn(&ValueType, &[f64]) -> Result<(), String>,
+    /// Output type when no array input gives one (generators); `None`: a scalar.
+    pub(crate) shape: fn(&Params) -> Option<ValueType>,
+    /// WGSL function body; sees the inputs by port name, `idx`, `comp`, `step`, `p0`...
+    pub(crate) body: &'static str,
+    /// Shader files the body calls into.
+    pub(crate) imports: &'static [&'static str],
+    /// The body reads `step` (the engine clock is bound).
+    pub(crate) uses_step: bool,
+    /// The params are one value per component, padded to MAX_COMPONENTS for the body.
+    pub(crate) per_component: bool,
+    /// f64 reference of one element: (inputs, where, params).
+    pub(crate) reference: fn(&[f64], ElemCtx, &[f64]) -> f64,
+}
+
+/// Defaults for table rows (`..BASE`).
+pub(crate) const BASE: PointwiseKind = PointwiseKind {
+    name: "",
+    doc: "",
+    inputs: &[],
+    params: no_params,
+    flatten: nothing,
+    check: any_shape,
+    shape: no_shape,
+    body: "",
+    imports: &[],
+    uses_step: false,
+    per_component: false,
+    reference: |_, _, _| 0.0,
+};
 
 fn no_params() -> Vec<ParamSpec> {
     Vec::new()
 }
 
-fn nothing(_: &Params) -> Vec<f64> {
+fn nothing(_: &Params) -> Vec<Param> {
     Vec::new()
 }
 
 fn any_shape(_: &ValueType, _: &[f64]) -> Result<(), String> {
     Ok(())
+}
+
+fn no_shape(_: &Params) -> Option<ValueType> {
+    None
 }
 
 fn components_match(t: &ValueType, p: &[f64]) -> Result<(), String> {
@@ -67,8 +129,8 @@ fn per_component_param(name: &'static str, doc: &'static str) -> ParamSpec {
     }
 }
 
-fn flatten_numbers(name: &'static str) -> impl Fn(&Params) -> Vec<f64> {
-    move |p| p.numbers(name).to_vec()
+fn numbers(p: &Params, names: &[&str]) -> Vec<Param> {
+    names.iter().map(|n| Param::Number(p.number(n))).collect()
 }
 
 /// Per-component kinds read p[comp] from an array of this many params.
@@ -89,55 +151,42 @@ pub static KINDS: &[PointwiseKind] = &[
                 "the factor",
             )]
         },
-        flatten: |p| vec![p.number("factor")],
-        check: any_shape,
+        flatten: |p| numbers(p, &["factor"]),
         body: "return p0 * x;",
-        per_component: false,
         reference: |i, _, p| p[0] * i[0],
+        ..BASE
     },
     PointwiseKind {
         name: "add",
         doc: "out = a + b, element-wise (a scalar operand is broadcast; absent b reads as 0)",
         inputs: &[("a", "first term", false), ("b", "second term", true)],
-        params: no_params,
-        flatten: nothing,
-        check: any_shape,
         body: "return a + b;",
-        per_component: false,
         reference: |i, _, _| i[0] + i[1],
+        ..BASE
     },
     PointwiseKind {
         name: "sub",
         doc: "out = a - b, element-wise (a scalar operand is broadcast)",
         inputs: &[("a", "minuend", false), ("b", "subtrahend", false)],
-        params: no_params,
-        flatten: nothing,
-        check: any_shape,
         body: "return a - b;",
-        per_component: false,
         reference: |i, _, _| i[0] - i[1],
+        ..BASE
     },
     PointwiseKind {
         name: "multiply",
         doc: "out = a * b, element-wise (a scalar operand is broadcast)",
         inputs: &[("a", "first factor", false), ("b", "second factor", false)],
-        params: no_params,
-        flatten: nothing,
-        check: any_shape,
         body: "return a * b;",
-        per_component: false,
         reference: |i, _, _| i[0] * i[1],
+        ..BASE
     },
     PointwiseKind {
         name: "divide",
         doc: "out = a / b, element-wise (a scalar operand is broadcast)",
         inputs: &[("a", "numerator", false), ("b", "denominator", false)],
-        params: no_params,
-        flatten: nothing,
-        check: any_shape,
         body: "return a / b;",
-        per_component: false,
         reference: |i, _, _| i[0] / i[1],
+        ..BASE
     },
     PointwiseKind {
         name: "axpy",
@@ -152,11 +201,10 @@ pub static KINDS: &[PointwiseKind] = &[
                 "factor on x",
             )]
         },
-        flatten: |p| vec![p.number("alpha")],
-        check: any_shape,
+        flatten: |p| numbers(p, &["alpha"]),
         body: "return fma(p0, x, y);",
-        per_component: false,
         reference: |i, _, p| p[0] * i[0] + i[1],
+        ..BASE
     },
     PointwiseKind {
         name: "axpby",
@@ -168,11 +216,10 @@ pub static KINDS: &[PointwiseKind] = &[
                 ParamSpec::number("beta", None, f64::MIN, f64::MAX, "factor on y"),
             ]
         },
-        flatten: |p| vec![p.number("alpha"), p.number("beta")],
-        check: any_shape,
+        flatten: |p| numbers(p, &["alpha", "beta"]),
         body: "return fma(p0, x, p1 * y);",
-        per_component: false,
         reference: |i, _, p| p[0] * i[0] + p[1] * i[1],
+        ..BASE
     },
     PointwiseKind {
         name: "affine",
@@ -184,11 +231,10 @@ pub static KINDS: &[PointwiseKind] = &[
                 ParamSpec::number("offset", Some(0.0), f64::MIN, f64::MAX, "added constant"),
             ]
         },
-        flatten: |p| vec![p.number("scale"), p.number("offset")],
-        check: any_shape,
+        flatten: |p| numbers(p, &["scale", "offset"]),
         body: "return fma(p0, x, p1);",
-        per_component: false,
         reference: |i, _, p| p[0] * i[0] + p[1],
+        ..BASE
     },
     PointwiseKind {
         name: "scale_components",
@@ -200,11 +246,17 @@ pub static KINDS: &[PointwiseKind] = &[
                 "one factor per component, at most 4",
             )]
         },
-        flatten: |p| flatten_numbers("factors")(p),
+        flatten: |p| {
+            p.numbers("factors")
+                .iter()
+                .map(|&x| Param::Number(x))
+                .collect()
+        },
         check: components_match,
         body: "var t = array<f32, 4>(p0, p1, p2, p3); return x * t[min(comp, 3u)];",
         per_component: true,
-        reference: |i, c, p| i[0] * p[c as usize],
+        reference: |i, e, p| i[0] * p[e.comp as usize],
+        ..BASE
     },
     PointwiseKind {
         name: "offset_components",
@@ -216,11 +268,17 @@ pub static KINDS: &[PointwiseKind] = &[
                 "one offset per component, at most 4",
             )]
         },
-        flatten: |p| flatten_numbers("offsets")(p),
+        flatten: |p| {
+            p.numbers("offsets")
+                .iter()
+                .map(|&x| Param::Number(x))
+                .collect()
+        },
         check: components_match,
         body: "var t = array<f32, 4>(p0, p1, p2, p3); return x + t[min(comp, 3u)];",
         per_component: true,
-        reference: |i, c, p| i[0] + p[c as usize],
+        reference: |i, e, p| i[0] + p[e.comp as usize],
+        ..BASE
     },
 ];
 
@@ -263,14 +321,15 @@ impl NodeKind for &'static PointwiseKind {
                 values.len()
             ));
         }
-        let mut gpu_params: Vec<f32> = values.iter().map(|&x| x as f32).collect();
+        let mut gpu_params: Vec<f32> = values.iter().map(|v| v.gpu()).collect();
         if self.per_component {
             gpu_params.resize(MAX_COMPONENTS, 0.0);
         }
         Ok(Box::new(PointwiseNode {
             kind: self,
-            values,
+            values: values.iter().map(|v| v.host()).collect(),
             gpu_params,
+            generated: (self.shape)(params),
         }))
     }
 }
@@ -279,6 +338,7 @@ struct PointwiseNode {
     kind: &'static PointwiseKind,
     values: Vec<f64>,
     gpu_params: Vec<f32>,
+    generated: Option<ValueType>,
 }
 
 impl Node for PointwiseNode {
@@ -303,9 +363,12 @@ impl Node for PointwiseNode {
                 _ => {}
             }
         }
-        let out = shape.map(|(_, t)| t).unwrap_or(ValueType::Scalar);
-        (self.kind.check)(&out, &self.values)
-            .map_err(|e| PortError::new(self.kind.inputs[0].0, e))?;
+        let out = shape
+            .map(|(_, t)| t)
+            .or(self.generated)
+            .unwrap_or(ValueType::Scalar);
+        let port = self.kind.inputs.first().map(|p| p.0).unwrap_or("out");
+        (self.kind.check)(&out, &self.values).map_err(|e| PortError::new(port, e))?;
         Ok(Signature::outputs(vec![out]))
     }
 
@@ -313,10 +376,12 @@ impl Node for PointwiseNode {
         Lowering::Pointwise(PointwiseBody {
             body: self.kind.body.to_string(),
             params: self.gpu_params.clone(),
+            imports: self.kind.imports.iter().map(|s| s.to_string()).collect(),
+            uses_step: self.kind.uses_step,
         })
     }
 
-    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _cx: RefCtx) {
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
         let out = &mut outputs[0];
         let mut args = vec![0.0; inputs.len()];
         for idx in 0..out.data.len() {
@@ -327,8 +392,12 @@ impl Node for PointwiseNode {
                     Some(r) => r.data[idx],
                 };
             }
-            out.data[idx] =
-                (self.kind.reference)(&args, out.ty.component_of(idx as u64), &self.values);
+            let at = ElemCtx {
+                idx: idx as u64,
+                comp: out.ty.component_of(idx as u64),
+                step: cx.step,
+            };
+            out.data[idx] = (self.kind.reference)(&args, at, &self.values);
         }
     }
 }

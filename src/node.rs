@@ -352,11 +352,16 @@ impl Signature {
 /// The body is a WGSL function body returning the output element. It sees its inputs as
 /// f32 arguments named after the input ports (scalar-typed inputs are broadcast), `idx`
 /// (flat element index, u32), `comp` (component: the column of a particle array, the
-/// component of a grid), and its params as `p0`, `p1`, ... (f32).
+/// component of a grid), `step` (the time step, when `uses_step`), and its params as
+/// `p0`, `p1`, ... (f32; integer params travel as raw bits, read with `bitcast<u32>`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PointwiseBody {
     pub body: String,
     pub params: Vec<f32>,
+    /// Shader files whose functions the body calls (`common/philox.wgsl`).
+    pub imports: Vec<String>,
+    /// The body reads `step`, so the kernel binds the engine clock.
+    pub uses_step: bool,
 }
 
 /// How a node turns into GPU work.

@@ -285,6 +285,9 @@ impl<'a> Program<'a> {
                     format!("fused[{}]", ids.join(", "))
                 };
                 let mut bindings = vec![Binding::StorageRead];
+                if k.uses_clock {
+                    bindings.push(Binding::StorageRead);
+                }
                 bindings.extend(k.inputs.iter().map(|_| Binding::StorageRead));
                 bindings.extend(k.outputs.iter().map(|_| Binding::StorageReadWrite));
                 let spec = KernelSpec::new(
@@ -298,6 +301,9 @@ impl<'a> Program<'a> {
                 })?;
                 let params = cx.table("pointwise params", bytemuck::cast_slice(&k.params));
                 let mut bufs: Vec<&wgpu::Buffer> = vec![&params];
+                if k.uses_clock {
+                    bufs.push(cx.clock);
+                }
                 bufs.extend(k.inputs.iter().map(|&v| self.buffer(v, parity)));
                 bufs.extend(k.outputs.iter().map(|&v| self.buffer(v, parity)));
                 let d = cx.dispatch(&kernel, &bufs, cx.grid_1d(k.len, WG_1D));

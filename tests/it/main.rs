@@ -7,6 +7,8 @@ mod cli;
 mod graph_files;
 mod nodes;
 mod plan;
+mod random;
+mod reduce;
 mod run;
 mod shaders;
 mod util;

@@ -1,0 +1,195 @@
+//! Philox random numbers: the GPU draws equal the Rust implementation bit for bit, do not
+//! depend on dispatch shape or fusion, and pass statistical tests.
+
+use std::collections::BTreeMap;
+
+use mesoflow::nodes::random;
+use mesoflow::value::{HostArray, HostData, ValueType};
+
+use crate::util::{gpu, load, run_graph, tmpdir, write_graph};
+
+fn graph(nodes: &str, outputs: &str) -> String {
+    format!(r#"{{"mesoflow": 1, "nodes": [{nodes}], "outputs": {{{outputs}}}}}"#)
+}
+
+fn run(json: &str, steps: u64, fuse: bool) -> BTreeMap<String, HostArray> {
+    let gpu = gpu().expect("checked by the caller");
+    let dir = tmpdir("random");
+    let g = load(&write_graph(&dir, "g.json", json));
+    run_graph(&gpu, &g, &BTreeMap::new(), None, steps, fuse)
+}
+
+fn words(a: &HostArray) -> Vec<u32> {
+    match &a.data {
+        HostData::U32(v) => v.clone(),
+        other => panic!("expected u32 data, got {other:?}"),
+    }
+}
+
+fn floats(a: &HostArray) -> Vec<f32> {
+    match &a.data {
+        HostData::F32(v) => v.clone(),
+        other => panic!("expected f32 data, got {other:?}"),
+    }
+}
+
+/// Seeds whose halves are NaN bit patterns as f32 (they travel through f32 params).
+const SEEDS: [u64; 3] = [0, 42, random::MAX_SEED as u64];
+
+#[test]
+fn gpu_words_equal_rust_bit_for_bit() {
+    if gpu().is_none() {
+        return;
+    }
+    for seed in SEEDS {
+        for (stream, steps) in [(0u32, 1u64), (7, 6), (u32::MAX, 2)] {
+            let n = 4099; // not a multiple of 4 nor of the workgroup size
+            let json = graph(
+                &format!(
+                    r#"{{"id": "r", "kind": "random_bits", "params": {{"seed": {seed}, "stream": {stream}, "count": {n}}}}}"#
+                ),
+                r#""w": "r.out""#,
+            );
+            let got = words(&run(&json, steps, true)["w"]);
+            for (i, w) in got.iter().enumerate() {
+                let want = random::bits(i as u64, steps - 1, seed, stream);
+                assert_eq!(
+                    *w,
+                    want,
+                    "seed {seed} stream {stream} step {} element {i}",
+                    steps - 1
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn uniforms_are_exact_and_normals_match_the_f64_reference() {
+    if gpu().is_none() {
+        return;
+    }
+    for seed in SEEDS {
+        let json = graph(
+            &format!(
+                r#"{{"id": "u", "kind": "random_uniform", "params": {{"seed": {seed}, "stream": 3, "rows": 1001, "cols": 3}}}},
+                   {{"id": "g", "kind": "random_normal", "params": {{"seed": {seed}, "stream": 4, "rows": 1001, "cols": 3, "mean": 1, "std": 2}}}}"#
+            ),
+            r#""u": "u.out", "g": "g.out""#,
+        );
+        let out = run(&json, 3, true);
+        let step = 2;
+        for (i, u) in floats(&out["u"]).iter().enumerate() {
+            // 24-bit uniforms are exact in f32.
+            assert_eq!(
+                *u as f64,
+                random::uniform(i as u64, step, seed, 3),
+                "uniform {i}"
+            );
+        }
+        for (i, g) in floats(&out["g"]).iter().enumerate() {
+            let want = 1.0 + 2.0 * random::normal(i as u64, step, seed, 4);
+            // f32 log, sqrt, cos and sin on the GPU: a few 1e-6 of the spread (std 2).
+            assert!(
+                (*g as f64 - want).abs() < 2e-5 * 2.0 * (1.0 + want.abs()),
+                "normal {i}: {g} vs {want}"
+            );
+        }
+    }
+}
+
+#[test]
+fn draws_depend_on_step_and_stream_and_not_on_fusion() {
+    if gpu().is_none() {
+        return;
+    }
+    // The same normals alone and fused into an axpy; rerunning reproduces them exactly.
+    let json = graph(
+        r#"{"id": "g", "kind": "random_normal", "params": {"seed": 9, "rows": 777, "cols": 3}},
+           {"id": "h", "kind": "random_normal", "params": {"seed": 9, "stream": 1, "rows": 777, "cols": 3}},
+           {"id": "y", "kind": "axpy", "params": {"alpha": 1}, "inputs": {"x": "g.out", "y": "h.out"}}"#,
+        r#""g": "g.out", "y": "y.out""#,
+    );
+    let fused = run(&json, 4, true);
+    let unfused = run(&json, 4, false);
+    assert_eq!(
+        floats(&fused["g"]),
+        floats(&unfused["g"]),
+        "fusion changes no draw"
+    );
+    assert_eq!(floats(&fused["y"]), floats(&unfused["y"]));
+    assert_eq!(
+        floats(&fused["g"]),
+        floats(&run(&json, 4, true)["g"]),
+        "reruns reproduce"
+    );
+    assert_ne!(
+        floats(&fused["g"]),
+        floats(&run(&json, 3, true)["g"]),
+        "steps differ"
+    );
+}
+
+/// erfc with relative error below 1.2e-7 (Numerical Recipes, Chebyshev fit): enough for a
+/// KS distance resolved at 1e-3.
+fn erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let r = t
+        * (-z * z - 1.26551223
+            + t * (1.00002368
+                + t * (0.37409196
+                    + t * (0.09678418
+                        + t * (-0.18628806
+                            + t * (0.27886807
+                                + t * (-1.13520398
+                                    + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277)))))))))
+            .exp();
+    if x >= 0.0 { r } else { 2.0 - r }
+}
+
+#[test]
+fn normals_pass_statistical_tests() {
+    if gpu().is_none() {
+        return;
+    }
+    let n = 1_000_000u64;
+    let json = graph(
+        &format!(
+            r#"{{"id": "a", "kind": "random_normal", "params": {{"seed": 123, "stream": 0, "rows": {n}}}}},
+               {{"id": "b", "kind": "random_normal", "params": {{"seed": 123, "stream": 1, "rows": {n}}}}}"#
+        ),
+        r#""a": "a.out", "b": "b.out""#,
+    );
+    let out = run(&json, 1, true);
+    let a: Vec<f64> = floats(&out["a"]).iter().map(|&x| x as f64).collect();
+    let b: Vec<f64> = floats(&out["b"]).iter().map(|&x| x as f64).collect();
+    let nf = n as f64;
+    let mean = a.iter().sum::<f64>() / nf;
+    let var = a.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (nf - 1.0);
+    // Standard errors: 1/sqrt(n) for the mean, sqrt(2/n) for the variance; 5 sigma.
+    assert!(mean.abs() < 5.0 / nf.sqrt(), "mean {mean}");
+    assert!(
+        (var - 1.0).abs() < 5.0 * (2.0 / nf).sqrt(),
+        "variance {var}"
+    );
+    // Kolmogorov-Smirnov against the normal CDF; 1.95/sqrt(n) is the 0.1% critical value.
+    let mut s = a.clone();
+    s.sort_by(|x, y| x.total_cmp(y));
+    let mut d: f64 = 0.0;
+    for (i, x) in s.iter().enumerate() {
+        let cdf = 0.5 * erfc(-x / std::f64::consts::SQRT_2);
+        d = d
+            .max((cdf - i as f64 / nf).abs())
+            .max(((i + 1) as f64 / nf - cdf).abs());
+    }
+    eprintln!("normals: mean {mean:.2e}, variance {var:.6}, KS distance {d:.2e} (n = {n})");
+    assert!(d < 1.95 / nf.sqrt(), "KS distance {d}");
+    // Neighbouring streams, and neighbouring elements within a stream, are uncorrelated.
+    let corr =
+        |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>() / x.len() as f64;
+    let r_streams = corr(&a, &b);
+    let r_lag1 = corr(&a[..a.len() - 1], &a[1..]);
+    eprintln!("correlation between streams {r_streams:.2e}, lag 1 {r_lag1:.2e}");
+    assert!(r_streams.abs() < 5.0 / nf.sqrt() && r_lag1.abs() < 5.0 / nf.sqrt());
+}
