@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use mesoflow::nodes::random;
-use mesoflow::value::{HostArray, HostData, ValueType};
+use mesoflow::value::{HostArray, HostData};
 
 use crate::util::{gpu, load, run_graph, tmpdir, write_graph};
 
