@@ -1,5 +1,7 @@
 //! Node implementations, each beside its f64 CPU reference. Kernels live in `shaders/`.
 
+pub mod cells;
+pub mod permute;
 pub mod pointwise;
 pub mod random;
 pub mod reduce;
@@ -9,6 +11,8 @@ use crate::node::Registry;
 /// Adds every shipped node kind to the registry.
 pub fn register_all(r: &mut Registry) {
     pointwise::register(r);
+    cells::register(r);
+    permute::register(r);
     random::register(r);
     reduce::register(r);
 }

@@ -161,6 +161,8 @@ pub enum PortType {
     Scalar,
     /// Any f32 value that is not a complex grid: particles, real grid or scalar.
     RealArray,
+    /// Rows: particles (N x k) or indices (N).
+    Rows,
 }
 
 impl PortType {
@@ -177,6 +179,7 @@ impl PortType {
                 PortType::RealArray,
                 ValueType::Particles { .. } | ValueType::RealGrid { .. } | ValueType::Scalar,
             ) => true,
+            (PortType::Rows, ValueType::Particles { .. } | ValueType::Indices { .. }) => true,
             _ => false,
         }
     }
@@ -193,6 +196,7 @@ impl fmt::Display for PortType {
             PortType::Indices => write!(f, "indices"),
             PortType::Scalar => write!(f, "scalar"),
             PortType::RealArray => write!(f, "particles | real_grid | scalar"),
+            PortType::Rows => write!(f, "particles | indices"),
         }
     }
 }

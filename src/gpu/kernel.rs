@@ -293,6 +293,23 @@ impl CompileCtx<'_> {
         }
     }
 
+    /// A dispatch that sets the first `words` 4-byte words of `buffer` to `value` (a
+    /// node's first dispatch before accumulating into an output, say).
+    pub fn fill(
+        &mut self,
+        buffer: &wgpu::Buffer,
+        words: u64,
+        value: u32,
+    ) -> Result<Dispatch, CompileError> {
+        let kernel = self.kernel(&KernelSpec::new(
+            "fill",
+            self.shader("engine/fill.wgsl")?,
+            &[Binding::StorageReadWrite, Binding::Uniform],
+        ))?;
+        let params = self.uniform("fill", bytemuck::cast_slice(&[words as u32, value]));
+        Ok(self.dispatch(&kernel, &[buffer, &params], self.grid_1d(words, WG_1D)))
+    }
+
     /// Workgroup counts covering `items` threads in groups of `wg`, folded into (x, y)
     /// because one dimension holds at most `max_workgroups_per_dim` groups. Kernels
     /// rebuild the flat index as `(wid.y * nwg.x + wid.x) * wg + lid`.

@@ -1,0 +1,255 @@
+//! Gather and scatter of rows by index, so any particle array can follow a permutation
+//! (the `perm` of a sort: `gather(values, perm)` reorders, `scatter(values, perm)` undoes).
+//! Rows are copied as raw 4-byte words, so f32 particle arrays and u32 index arrays alike.
+
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::node::{
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
+    Signature,
+};
+use crate::value::{PortType, RefArray, ValueType};
+
+/// Rows and words per row of a rows-typed value.
+fn rows_of(t: ValueType) -> (u32, u32) {
+    match t {
+        ValueType::Particles { n, k } => (n, k),
+        ValueType::Indices { n } => (n, 1),
+        other => unreachable!("port type is Rows, got {other}"),
+    }
+}
+
+/// The same kind of value with `rows` rows.
+fn with_rows(t: ValueType, rows: u32) -> ValueType {
+    match t {
+        ValueType::Particles { k, .. } => ValueType::Particles { n: rows, k },
+        ValueType::Indices { .. } => ValueType::Indices { n: rows },
+        other => unreachable!("port type is Rows, got {other}"),
+    }
+}
+
+pub struct GatherKind;
+
+impl NodeKind for GatherKind {
+    fn name(&self) -> &'static str {
+        "gather"
+    }
+
+    fn doc(&self) -> &'static str {
+        "out[i] = values[index[i]] row by row (an index past the last row gives zeros)"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new("values", PortType::Rows, "rows to pick from"),
+            PortSpec::new(
+                "index",
+                PortType::Indices,
+                "which row of `values` each output row takes",
+            ),
+        ]
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![PortSpec::new("out", PortType::Rows, "one row per index")]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        Vec::new()
+    }
+
+    fn build(&self, _: &Params) -> Result<Box<dyn Node>, String> {
+        Ok(Box::new(Gather))
+    }
+}
+
+struct Gather;
+
+impl Node for Gather {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let values = inputs[0].expect("required");
+        let Some(ValueType::Indices { n }) = inputs[1] else {
+            unreachable!("port type checked")
+        };
+        Ok(Signature::outputs(vec![with_rows(values, n)]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let values = inputs[0].as_ref().expect("required");
+        let index = &inputs[1].as_ref().expect("required").data;
+        let (rows, k) = rows_of(values.ty);
+        let k = k as usize;
+        for (i, &src) in index.iter().enumerate() {
+            for c in 0..k {
+                outputs[0].data[i * k + c] = if src < rows as f64 {
+                    values.data[src as usize * k + c]
+                } else {
+                    0.0
+                };
+            }
+        }
+    }
+}
+
+impl GpuKernels for Gather {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let values = io.inputs[0].expect("required");
+        let index = io.inputs[1].expect("required");
+        let (in_rows, k) = rows_of(values.ty);
+        let (out_rows, _) = rows_of(io.outputs[0].ty);
+        let kernel = cx.kernel(&KernelSpec::new(
+            "gather",
+            cx.shader("permute/gather.wgsl")?,
+            &[
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
+        ))?;
+        let shape = cx.uniform(
+            "gather shape",
+            bytemuck::cast_slice(&[out_rows, in_rows, k]),
+        );
+        let groups = cx.grid_1d(out_rows as u64 * k as u64, WG_1D);
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &[values.buffer, index.buffer, io.outputs[0].buffer, &shape],
+            groups,
+        )])
+    }
+}
+
+pub struct ScatterKind;
+
+impl NodeKind for ScatterKind {
+    fn name(&self) -> &'static str {
+        "scatter"
+    }
+
+    fn doc(&self) -> &'static str {
+        "out[index[i]] = values[i] row by row (unwritten rows are 0; indices should be distinct)"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new("values", PortType::Rows, "rows to place"),
+            PortSpec::new(
+                "index",
+                PortType::Indices,
+                "destination row of each row of `values`",
+            ),
+        ]
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![PortSpec::new("out", PortType::Rows, "the placed rows")]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        vec![ParamSpec::integer(
+            "rows",
+            Some(0.0),
+            0.0,
+            u32::MAX as f64,
+            "rows of the output (0: as many as `values`); indices past it are skipped",
+        )]
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        Ok(Box::new(Scatter {
+            rows: p.number("rows") as u32,
+        }))
+    }
+}
+
+struct Scatter {
+    rows: u32,
+}
+
+impl Node for Scatter {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let values = inputs[0].expect("required");
+        let Some(ValueType::Indices { n }) = inputs[1] else {
+            unreachable!("port type checked")
+        };
+        let (rows, _) = rows_of(values);
+        if n != rows {
+            return Err(PortError::new(
+                "index",
+                format!("has {n} entries for {rows} rows of `values`"),
+            ));
+        }
+        let out_rows = if self.rows == 0 { rows } else { self.rows };
+        Ok(Signature::outputs(vec![with_rows(values, out_rows)]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let values = inputs[0].as_ref().expect("required");
+        let index = &inputs[1].as_ref().expect("required").data;
+        let (_, k) = rows_of(values.ty);
+        let (out_rows, _) = rows_of(outputs[0].ty);
+        let k = k as usize;
+        outputs[0].data.fill(0.0);
+        for (i, &dst) in index.iter().enumerate() {
+            if dst < out_rows as f64 {
+                for c in 0..k {
+                    outputs[0].data[dst as usize * k + c] = values.data[i * k + c];
+                }
+            }
+        }
+    }
+}
+
+impl GpuKernels for Scatter {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let values = io.inputs[0].expect("required");
+        let index = io.inputs[1].expect("required");
+        let out = io.outputs[0];
+        let (in_rows, k) = rows_of(values.ty);
+        let (out_rows, _) = rows_of(out.ty);
+        let kernel = cx.kernel(&KernelSpec::new(
+            "scatter",
+            cx.shader("permute/scatter.wgsl")?,
+            &[
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
+        ))?;
+        let shape = cx.uniform(
+            "scatter shape",
+            bytemuck::cast_slice(&[in_rows, out_rows, k]),
+        );
+        let groups = cx.grid_1d(in_rows as u64 * k as u64, WG_1D);
+        Ok(vec![
+            cx.fill(out.buffer, out.ty.words(), 0)?,
+            cx.dispatch(
+                &kernel,
+                &[values.buffer, index.buffer, out.buffer, &shape],
+                groups,
+            ),
+        ])
+    }
+}
+
+pub fn register(r: &mut Registry) {
+    r.add(GatherKind);
+    r.add(ScatterKind);
+}
