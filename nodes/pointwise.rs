@@ -139,6 +139,41 @@ const MAX_COMPONENTS: usize = 4;
 /// The element-wise kinds mesoflow ships.
 pub static KINDS: &[PointwiseKind] = &[
     PointwiseKind {
+        name: "constant",
+        doc: "a constant value: a scalar, or a particle array when rows > 0 (or shaped like `like`)",
+        inputs: &[("like", "shape template (its values are not read)", true)],
+        params: || {
+            vec![
+                ParamSpec::number("value", None, f64::MIN, f64::MAX, "the value"),
+                ParamSpec::integer(
+                    "rows",
+                    Some(0.0),
+                    0.0,
+                    u32::MAX as f64,
+                    "particle count (0: a scalar) when `like` is not connected",
+                ),
+                ParamSpec::integer(
+                    "cols",
+                    Some(1.0),
+                    1.0,
+                    1024.0,
+                    "values per particle when `like` is not connected",
+                ),
+            ]
+        },
+        flatten: |p| numbers(p, &["value"]),
+        shape: |p| {
+            let rows = p.number("rows") as u32;
+            (rows > 0).then(|| ValueType::Particles {
+                n: rows,
+                k: p.number("cols") as u32,
+            })
+        },
+        body: "return p0;",
+        reference: |_, _, p| p[0],
+        ..BASE
+    },
+    PointwiseKind {
         name: "scale",
         doc: "out = factor * x, element-wise",
         inputs: &[("x", "values to scale", false)],

@@ -80,6 +80,8 @@ pub enum Command {
         #[arg(long)]
         dot: bool,
     },
+    /// Show the GPU adapter mesoflow would use and what it can do.
+    Info,
     /// List every node kind with its ports, params and a one-line doc.
     Nodes {
         /// Show only this kind.
@@ -172,6 +174,11 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             &registry, &graph, &sets, &inputs, &outputs, steps, !no_fuse, dot,
         ),
         Command::Nodes { kind } => nodes(&registry, kind.as_deref()),
+        Command::Info => {
+            let gpu = GpuContext::new()?;
+            println!("{}", gpu.caps.summary());
+            Ok(())
+        }
         Command::Bench { which } => crate::bench::run(which),
     }
 }
