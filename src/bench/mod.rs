@@ -5,6 +5,8 @@
 //! Node benchmarks go through the engine like any graph: [`time_graph`] plans and
 //! compiles a graph file and times each launch with GPU timestamps.
 
+mod reduce;
+
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
@@ -110,6 +112,13 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 50)]
         reps: u64,
     },
+    /// Sum (blocked and compensated), dot and max of n f32.
+    Reduce {
+        #[arg(long, default_value_t = 100_000_000)]
+        n: u32,
+        #[arg(long, default_value_t = 20)]
+        reps: u64,
+    },
 }
 
 pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
@@ -119,6 +128,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             elements,
             reps,
         } => overhead(nodes, elements, reps),
+        BenchCommand::Reduce { n, reps } => reduce::run(n, reps),
     }
 }
 
