@@ -252,3 +252,37 @@ fn run_writes_outputs_and_accepts_float64_and_flat_inputs() {
         assert!((g - factor * x).abs() < 1e-5, "{g} vs {}", factor * x);
     }
 }
+
+#[test]
+fn missing_or_unknown_adapters_are_clear_errors() {
+    // No Vulkan driver at all: the loader finds none through a driver list that is empty.
+    let o = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+        .arg("info")
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("no Vulkan adapter found") && t.contains("mesa-vulkan-drivers"),
+        "{t}"
+    );
+    assert!(!t.contains("panicked"), "{t}");
+    if gpu().is_some() {
+        let o = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+            .arg("info")
+            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+            .env("MESOFLOW_ADAPTER", "no-such-gpu")
+            .output()
+            .unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{t}");
+        assert!(
+            t.contains("no Vulkan adapter matches MESOFLOW_ADAPTER=\"no-such-gpu\"")
+                && t.contains("adapters found:"),
+            "{t}"
+        );
+    }
+}

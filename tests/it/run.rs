@@ -174,3 +174,36 @@ fn every_example_runs() {
     }
     assert!(n >= 1);
 }
+
+#[test]
+fn identical_kernels_share_one_pipeline() {
+    let Some(gpu) = gpu() else { return };
+    use mesoflow::exec::Program;
+    use mesoflow::gpu::KernelCache;
+    use mesoflow::plan::{self, PlanOptions};
+    let dir = tmpdir("pipeline-cache");
+    let g = load(&write_graph(
+        &dir,
+        "chain.json",
+        &mesoflow::bench::chain_graph(20),
+    ));
+    let ty = ValueType::Particles { n: 64, k: 1 };
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: [("x".to_string(), ty)].into_iter().collect(),
+        fuse: false,
+    };
+    let p = plan::plan(&g, &opts, &gpu.caps).unwrap();
+    let mut cache = KernelCache::default();
+    let program = Program::compile(&gpu, &g, &p, &mut cache).unwrap();
+    // Twenty unfused scale nodes: one pointwise pipeline, plus the clock tick and the copy.
+    assert!(
+        program.kernels_built <= 3,
+        "{} pipelines built",
+        program.kernels_built
+    );
+    assert_eq!(program.dispatches_per_step(), 21);
+    // A second program over the same cache builds nothing new.
+    let again = Program::compile(&gpu, &g, &p, &mut cache).unwrap();
+    assert_eq!(again.kernels_built, 0);
+}
