@@ -5,6 +5,7 @@ pub mod permute;
 pub mod pointwise;
 pub mod random;
 pub mod reduce;
+pub mod spread;
 
 use crate::node::Registry;
 
@@ -15,4 +16,5 @@ pub fn register_all(r: &mut Registry) {
     permute::register(r);
     random::register(r);
     reduce::register(r);
+    spread::register(r);
 }

@@ -12,4 +12,5 @@ mod random;
 mod reduce;
 mod run;
 mod shaders;
+mod spread;
 mod util;

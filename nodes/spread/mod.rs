@@ -1,0 +1,614 @@
+//! Spreading (particles to grid) and interpolation (grid to particles) with a separable
+//! window from the library in `window.rs`.
+//!
+//! Conventions (UAMMD thesis section 21, digest section 1.2): spreading adds the window
+//! times the value, f_j = sum_i delta(r_j - q_i) F_i; interpolation integrates against it,
+//! u_i = sum_j delta(q_i - r_j) v_j dV_j with dV the cell volume or per-cell quadrature
+//! weights. Both nodes build their stencil from the same [`GridWindow`], so
+//! <S F, v>_dV = <F, J v> by construction. Grid cells are centred at -L/2 + (j + 1/2) h.
+
+pub mod window;
+
+use crate::expr::ParamValue;
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo};
+use crate::node::{
+    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
+    RefCtx, Registry, Signature,
+};
+use crate::value::{PortType, RefArray, ValueType};
+use window::Window;
+
+/// Values per particle the kernels carry at once.
+pub const MAX_COMPS: u32 = 4;
+
+/// A periodic grid over a box centred at the origin, with the window used on it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GridWindow {
+    pub lengths: Vec<f64>,
+    pub cells: Vec<u32>,
+    pub window: Window,
+}
+
+impl GridWindow {
+    pub fn dims(&self) -> usize {
+        self.cells.len()
+    }
+
+    pub fn h(&self, a: usize) -> f64 {
+        self.lengths[a] / self.cells[a] as f64
+    }
+
+    /// The grid as a value type with `comps` components (nz = 1 in 2D).
+    pub fn grid_type(&self, comps: u32) -> ValueType {
+        let mut dims = [1u32; 3];
+        dims[..self.dims()].copy_from_slice(&self.cells);
+        ValueType::RealGrid { dims, comps }
+    }
+
+    /// First support cell (unwrapped) and the window weights (per unit length) along axis
+    /// `a` for coordinate x, in f64: the reference twin of the kernels' stencil.
+    pub fn stencil(&self, x: f64, a: usize) -> (i64, Vec<f64>) {
+        let l = self.lengths[a];
+        let h = self.h(a);
+        let ns = self.window.support() as f64;
+        let folded = x - l * (x / l + 0.5).floor();
+        let t = (folded + 0.5 * l) / h - 0.5;
+        let j0 = (t - 0.5 * ns).floor() + 1.0;
+        let w = (0..self.window.support())
+            .map(|k| self.window.phi(j0 + k as f64 - t, h) / h)
+            .collect();
+        (j0 as i64, w)
+    }
+
+    /// Every support cell of a particle at `q` with its weight delta(r_cell - q).
+    pub fn support(&self, q: &[f64]) -> Vec<(usize, f64)> {
+        let d = self.dims();
+        let st: Vec<(i64, Vec<f64>)> = (0..d).map(|a| self.stencil(q[a], a)).collect();
+        let ns = self.window.support() as usize;
+        let count = ns.pow(d as u32);
+        let mut out = Vec::with_capacity(count);
+        for j in 0..count {
+            let idx = [j % ns, (j / ns) % ns, j / (ns * ns)];
+            let mut w = 1.0;
+            let mut cell = 0usize;
+            for a in (0..d).rev() {
+                let n = self.cells[a] as i64;
+                let c = (st[a].0 + idx[a] as i64).rem_euclid(n) as usize;
+                cell = cell * n as usize + c;
+                w *= st[a].1[idx[a]];
+            }
+            out.push((cell, w));
+        }
+        out
+    }
+
+    fn cell_count(&self) -> usize {
+        self.cells.iter().map(|&c| c as usize).product()
+    }
+
+    fn cell_volume(&self) -> f64 {
+        (0..self.dims()).map(|a| self.h(a)).product()
+    }
+}
+
+fn grid_params() -> Vec<ParamSpec> {
+    vec![
+        ParamSpec {
+            name: "box",
+            kind: ParamKind::Numbers {
+                len: None,
+                min: f64::MIN_POSITIVE,
+                max: f64::MAX,
+            },
+            default: None,
+            doc: "box lengths per axis (2 or 3 values), centred at the origin, periodic",
+        },
+        ParamSpec {
+            name: "grid",
+            kind: ParamKind::Numbers {
+                len: None,
+                min: 1.0,
+                max: 65536.0,
+            },
+            default: None,
+            doc: "cells per axis",
+        },
+        ParamSpec::choice(
+            "window",
+            "gaussian",
+            window::NAMES,
+            "the window (smoothing kernel)",
+        ),
+        ParamSpec::number(
+            "width",
+            Some(0.0),
+            0.0,
+            f64::MAX,
+            "Gaussian: standard deviation (length units)",
+        ),
+        ParamSpec::integer(
+            "support",
+            Some(0.0),
+            0.0,
+            window::MAX_SUPPORT as f64,
+            "cells per axis (0: from the tolerance; fixed for Peskin windows)",
+        ),
+        ParamSpec::number(
+            "beta",
+            Some(0.0),
+            0.0,
+            f64::MAX,
+            "ES: shape parameter (0: 2.3 x support)",
+        ),
+        ParamSpec::number(
+            "tolerance",
+            Some(1e-3),
+            1e-15,
+            0.5,
+            "Gaussian and ES: truncation tolerance that sets the support",
+        ),
+        ParamSpec::choice(
+            "variant",
+            "auto",
+            &["auto", "atomic", "portable"],
+            "spreading: float atomics, or compare-and-swap for adapters without them (auto: atomics when available)",
+        ),
+    ]
+}
+
+fn grid_window(p: &Params) -> Result<GridWindow, String> {
+    let lengths = p.numbers("box").to_vec();
+    let grid = p.numbers("grid");
+    if !(2..=3).contains(&lengths.len()) || grid.len() != lengths.len() {
+        return Err(format!(
+            "`box` and `grid` need 2 or 3 values each, got {} and {}",
+            lengths.len(),
+            grid.len()
+        ));
+    }
+    if grid.iter().any(|g| g.fract() != 0.0) {
+        return Err(format!(
+            "`grid` must be whole numbers of cells, got {grid:?}"
+        ));
+    }
+    let cells: Vec<u32> = grid.iter().map(|&g| g as u32).collect();
+    let h_min = lengths
+        .iter()
+        .zip(&cells)
+        .map(|(l, &n)| l / n as f64)
+        .fold(f64::INFINITY, f64::min);
+    let window = Window::from_params(
+        p.text("window"),
+        p.number("width"),
+        p.number("support") as u32,
+        p.number("beta"),
+        p.number("tolerance"),
+        h_min,
+    )?;
+    if let Some(a) = (0..cells.len()).find(|&a| cells[a] < window.support()) {
+        return Err(format!(
+            "{} cells along axis {a} are fewer than the window's support of {} cells",
+            cells[a],
+            window.support()
+        ));
+    }
+    Ok(GridWindow {
+        lengths,
+        cells,
+        window,
+    })
+}
+
+fn use_atomics(p: &Params, cx_atomics: bool) -> Result<bool, CompileError> {
+    match p.get("variant") {
+        Some(ParamValue::Text(v)) if v == "atomic" => {
+            if cx_atomics {
+                Ok(true)
+            } else {
+                Err(CompileError::Unsupported("variant \"atomic\" needs float atomics (SHADER_FLOAT32_ATOMIC), which this adapter lacks; use \"portable\" or \"auto\"".into()))
+            }
+        }
+        Some(ParamValue::Text(v)) if v == "portable" => Ok(false),
+        _ => Ok(cx_atomics),
+    }
+}
+
+/// Layout of `Geometry` in shaders/spread/geometry.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct GeometryUniform {
+    n: [u32; 4],
+    inv_h: [f32; 4],
+    box_len: [f32; 4],
+    inv_box: [f32; 4],
+    win: [[f32; 4]; 3],
+    count: u32,
+    dv: f32,
+    pad: [u32; 2],
+}
+
+fn geometry(gw: &GridWindow, count: u32) -> GeometryUniform {
+    let mut u = GeometryUniform {
+        n: [1, 1, 1, gw.cell_count() as u32],
+        inv_h: [1.0; 4],
+        box_len: [1.0; 4],
+        inv_box: [1.0; 4],
+        win: [[0.0; 4]; 3],
+        count,
+        dv: gw.cell_volume() as f32,
+        pad: [0; 2],
+    };
+    for a in 0..gw.dims() {
+        u.n[a] = gw.cells[a];
+        u.inv_h[a] = (1.0 / gw.h(a)) as f32;
+        u.box_len[a] = gw.lengths[a] as f32;
+        u.inv_box[a] = (1.0 / gw.lengths[a]) as f32;
+        u.win[a] = gw.window.gpu_params(gw.h(a));
+    }
+    u
+}
+
+/// Dispatch shape of one workgroup per particle (folded over (x, y)).
+fn per_particle(cx: &CompileCtx, count: u32) -> [u32; 3] {
+    cx.grid_1d(count as u64, 1)
+}
+
+fn check_positions(gw: &GridWindow, t: Option<ValueType>) -> Result<u32, PortError> {
+    let Some(ValueType::Particles { n, k }) = t else {
+        unreachable!("port type checked")
+    };
+    if k as usize != gw.dims() {
+        return Err(PortError::new(
+            "positions",
+            format!("has {k} columns but the box has {} axes", gw.dims()),
+        ));
+    }
+    Ok(n)
+}
+
+pub struct SpreadKind;
+
+impl NodeKind for SpreadKind {
+    fn name(&self) -> &'static str {
+        "spread"
+    }
+
+    fn doc(&self) -> &'static str {
+        "spread particle values onto a periodic grid with a window: f_j = sum_i delta(r_j - q_i) F_i"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new(
+                "positions",
+                PortType::Particles(None),
+                "positions (N x 2 or N x 3)",
+            ),
+            PortSpec::new(
+                "values",
+                PortType::Particles(None),
+                "values per particle (N x C, C <= 4)",
+            ),
+        ]
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![PortSpec::new(
+            "out",
+            PortType::RealGrid,
+            "the grid, C components",
+        )]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        grid_params()
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        Ok(Box::new(Spread {
+            gw: grid_window(p)?,
+            params: p.clone(),
+        }))
+    }
+}
+
+struct Spread {
+    gw: GridWindow,
+    params: Params,
+}
+
+impl Node for Spread {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let n = check_positions(&self.gw, inputs[0])?;
+        let Some(ValueType::Particles { n: m, k: comps }) = inputs[1] else {
+            unreachable!("port type checked")
+        };
+        if m != n {
+            return Err(PortError::new(
+                "values",
+                format!("has {m} rows for {n} positions"),
+            ));
+        }
+        if comps > MAX_COMPS {
+            return Err(PortError::new(
+                "values",
+                format!("has {comps} columns; at most {MAX_COMPS} are spread at once"),
+            ));
+        }
+        Ok(Signature::outputs(vec![self.gw.grid_type(comps)]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
+        vec![format!(
+            "{} on a {:?} grid of cells {:?}",
+            self.gw.window.describe(),
+            self.gw.cells,
+            (0..self.gw.dims())
+                .map(|a| self.gw.h(a))
+                .collect::<Vec<_>>()
+        )]
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let pos = &inputs[0].as_ref().expect("required").data;
+        let vals = inputs[1].as_ref().expect("required");
+        let ValueType::Particles { n, k } = vals.ty else {
+            unreachable!()
+        };
+        let d = self.gw.dims();
+        let cells = self.gw.cell_count();
+        outputs[0].data.fill(0.0);
+        for i in 0..n as usize {
+            for (cell, w) in self.gw.support(&pos[i * d..(i + 1) * d]) {
+                for c in 0..k as usize {
+                    outputs[0].data[c * cells + cell] += w * vals.data[i * k as usize + c];
+                }
+            }
+        }
+    }
+}
+
+impl GpuKernels for Spread {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let pos = io.inputs[0].expect("required");
+        let vals = io.inputs[1].expect("required");
+        let ValueType::Particles { n, k: comps } = vals.ty else {
+            unreachable!()
+        };
+        let out = io.outputs[0];
+        let atomics = use_atomics(&self.params, cx.caps().f32_atomics)?;
+        let add = if atomics {
+            "spread/add_atomic.wgsl"
+        } else {
+            "spread/add_cas.wgsl"
+        };
+        let source = format!(
+            "{}{}{}",
+            cx.shader(self.gw.window.shader())?,
+            cx.shader(add)?,
+            cx.shader("spread/spread.wgsl")?
+        );
+        let kernel = cx.kernel(
+            &KernelSpec::new(
+                format!("spread ({})", self.gw.window.shader()),
+                source,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                ],
+            )
+            .constant("NS", self.gw.window.support() as f64)
+            .constant("DIMS", self.gw.dims() as f64)
+            .constant("COMPS", comps as f64),
+        )?;
+        let geo = cx.uniform(
+            "spread geometry",
+            bytemuck::bytes_of(&geometry(&self.gw, n)),
+        );
+        Ok(vec![
+            cx.fill(out.buffer, out.ty.words(), 0)?,
+            cx.dispatch(
+                &kernel,
+                &[pos.buffer, vals.buffer, out.buffer, &geo],
+                per_particle(cx, n),
+            ),
+        ])
+    }
+}
+
+pub struct InterpolateKind;
+
+impl NodeKind for InterpolateKind {
+    fn name(&self) -> &'static str {
+        "interpolate"
+    }
+
+    fn doc(&self) -> &'static str {
+        "interpolate a periodic grid at particles with a window (the adjoint of spread): u_i = sum_j delta(q_i - r_j) v_j dV_j"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new(
+                "grid",
+                PortType::RealGrid,
+                "the field, C components (C <= 4)",
+            ),
+            PortSpec::new(
+                "positions",
+                PortType::Particles(None),
+                "positions (N x 2 or N x 3)",
+            ),
+            PortSpec::new(
+                "weights",
+                PortType::RealGrid,
+                "per-cell quadrature weights dV (default: the cell volume)",
+            )
+            .optional(),
+        ]
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![PortSpec::new(
+            "out",
+            PortType::Particles(None),
+            "values per particle (N x C)",
+        )]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        grid_params()
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        Ok(Box::new(Interpolate {
+            gw: grid_window(p)?,
+        }))
+    }
+}
+
+struct Interpolate {
+    gw: GridWindow,
+}
+
+impl Node for Interpolate {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let Some(ValueType::RealGrid { dims, comps }) = inputs[0] else {
+            unreachable!("port type checked")
+        };
+        if self.gw.grid_type(comps) != inputs[0].expect("required") {
+            return Err(PortError::new(
+                "grid",
+                format!("is {dims:?} cells but the params say {:?}", self.gw.cells),
+            ));
+        }
+        if comps > MAX_COMPS {
+            return Err(PortError::new(
+                "grid",
+                format!("has {comps} components; at most {MAX_COMPS} are interpolated at once"),
+            ));
+        }
+        if let Some(w) = inputs[2]
+            && w != self.gw.grid_type(1)
+        {
+            return Err(PortError::new(
+                "weights",
+                format!(
+                    "is {w} but must be {} (one weight per cell)",
+                    self.gw.grid_type(1)
+                ),
+            ));
+        }
+        let n = check_positions(&self.gw, inputs[1])?;
+        Ok(Signature::outputs(vec![ValueType::Particles {
+            n,
+            k: comps,
+        }]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
+        vec![format!(
+            "{} on a {:?} grid",
+            self.gw.window.describe(),
+            self.gw.cells
+        )]
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let grid = inputs[0].as_ref().expect("required");
+        let pos = &inputs[1].as_ref().expect("required").data;
+        let weights = inputs[2].as_ref().map(|w| &w.data);
+        let ValueType::RealGrid { comps, .. } = grid.ty else {
+            unreachable!()
+        };
+        let d = self.gw.dims();
+        let cells = self.gw.cell_count();
+        let dv = self.gw.cell_volume();
+        let k = comps as usize;
+        for (i, row) in outputs[0].data.chunks_mut(k).enumerate() {
+            row.fill(0.0);
+            for (cell, w) in self.gw.support(&pos[i * d..(i + 1) * d]) {
+                let q = weights.map(|ws| ws[cell]).unwrap_or(dv);
+                for (c, r) in row.iter_mut().enumerate() {
+                    *r += w * q * grid.data[c * cells + cell];
+                }
+            }
+        }
+    }
+}
+
+impl GpuKernels for Interpolate {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let grid = io.inputs[0].expect("required");
+        let pos = io.inputs[1].expect("required");
+        let weights = io.inputs[2];
+        let ValueType::RealGrid { comps, .. } = grid.ty else {
+            unreachable!()
+        };
+        let ValueType::Particles { n, .. } = pos.ty else {
+            unreachable!()
+        };
+        let source = format!(
+            "{}{}",
+            cx.shader(self.gw.window.shader())?,
+            cx.shader("spread/interpolate.wgsl")?
+        );
+        let kernel = cx.kernel(
+            &KernelSpec::new(
+                format!("interpolate ({})", self.gw.window.shader()),
+                source,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                ],
+            )
+            .constant("NS", self.gw.window.support() as f64)
+            .constant("DIMS", self.gw.dims() as f64)
+            .constant("COMPS", comps as f64)
+            .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some()))),
+        )?;
+        let geo = cx.uniform(
+            "interpolate geometry",
+            bytemuck::bytes_of(&geometry(&self.gw, n)),
+        );
+        // Without weights the binding still needs a buffer; the kernel never reads it.
+        let quadrature = weights.map(|w| w.buffer).unwrap_or(grid.buffer);
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &[
+                pos.buffer,
+                grid.buffer,
+                quadrature,
+                io.outputs[0].buffer,
+                &geo,
+            ],
+            per_particle(cx, n),
+        )])
+    }
+}
+
+pub fn register(r: &mut Registry) {
+    r.add(SpreadKind);
+    r.add(InterpolateKind);
+}

@@ -1,0 +1,368 @@
+//! Spreading and interpolation against f64 references: single particles (the separable
+//! product exactly), random particles in 2D and 3D, every window, both variants,
+//! conservation, adjointness, periodic wrap, faces and edges, empty input.
+
+use std::collections::BTreeMap;
+
+use mesoflow::value::{HostArray, ValueType};
+
+use crate::util::{
+    Rng, gpu, load, reference, rel_max_err, run_graph, single_node_graph, tmpdir, write_graph,
+};
+
+fn run_node(
+    kind: &str,
+    params: &str,
+    inputs: &[(&str, HostArray)],
+) -> (HostArray, mesoflow::value::RefArray) {
+    let gpu = gpu().expect("checked by the caller");
+    let types: Vec<(&str, ValueType)> = inputs.iter().map(|(n, a)| (*n, a.ty)).collect();
+    let dir = tmpdir(&format!("spread-{kind}"));
+    let g = load(&write_graph(
+        &dir,
+        "g.json",
+        &single_node_graph(kind, params, &types),
+    ));
+    let data: BTreeMap<String, HostArray> = inputs
+        .iter()
+        .map(|(n, a)| (n.to_string(), a.clone()))
+        .collect();
+    let out = run_graph(&gpu, &g, &data, None, 1, true);
+    let args: Vec<Option<&HostArray>> = g.nodes[0]
+        .input_ports
+        .iter()
+        .map(|p| data.get(p.name))
+        .collect();
+    let mut refs = reference(kind, params, &args);
+    (out["out"].clone(), refs.remove(0))
+}
+
+fn positions(rng: &mut Rng, n: u32, lengths: &[f64]) -> HostArray {
+    let d = lengths.len();
+    let v = (0..n as usize * d)
+        .map(|i| rng.uniform(-0.5 * lengths[i % d], 0.5 * lengths[i % d]) as f32)
+        .collect();
+    HostArray::f32(ValueType::Particles { n, k: d as u32 }, v)
+}
+
+/// Window params used across the tests: (name, extra params).
+const WINDOWS: &[(&str, &str)] = &[
+    ("gaussian", r#""width": 0.6, "tolerance": 1e-4"#),
+    ("es", r#""support": 6"#),
+    ("peskin3", ""),
+    ("peskin4", ""),
+    ("peskin6", ""),
+];
+
+fn params(window: &str, extra: &str, lengths: &[f64], cells: &[u32], variant: &str) -> String {
+    let sep = if extra.is_empty() { "" } else { ", " };
+    format!(
+        r#"{{"box": {lengths:?}, "grid": {cells:?}, "window": "{window}"{sep}{extra}, "variant": "{variant}"}}"#
+    )
+}
+
+/// f32 window weights and accumulation against f64: relative to the largest value.
+const TOL: f64 = 2e-6;
+
+#[test]
+fn a_single_particle_spreads_the_separable_product() {
+    if gpu().is_none() {
+        return;
+    }
+    let lengths = [16.0, 12.0, 10.0];
+    let cells = [16u32, 24, 10];
+    // Inside, on a cell face, on a cell centre, at -L/2 and +L/2 (which wrap together).
+    for q in [
+        [0.3, -2.7, 4.1],
+        [1.0, 0.5, 0.0],
+        [0.5, 0.25, 0.5],
+        [-8.0, -6.0, -5.0],
+        [8.0, 6.0, 5.0],
+    ] {
+        let pos = HostArray::f32(ValueType::Particles { n: 1, k: 3 }, q.to_vec());
+        let vals = HostArray::f32(ValueType::Particles { n: 1, k: 2 }, vec![1.5, -0.5]);
+        for (w, extra) in WINDOWS {
+            let p = params(w, extra, &lengths, &cells, "auto");
+            let (g, r) = run_node(
+                "spread",
+                &p,
+                &[("positions", pos.clone()), ("values", vals.clone())],
+            );
+            let (err, at) = rel_max_err(&g, &r);
+            assert!(err < TOL, "{w} at {q:?}: error {err:e} at cell {at}");
+        }
+    }
+}
+
+#[test]
+fn many_particles_spread_and_interpolate_like_the_reference() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(17);
+    // 3D non-cubic, and 2D.
+    for (lengths, cells) in [
+        (vec![20.0, 14.0, 9.0], vec![32u32, 20, 12]),
+        (vec![30.0, 10.0], vec![48u32, 16]),
+    ] {
+        let n = 300;
+        let pos = positions(&mut rng, n, &lengths);
+        let vals = rng.array(ValueType::Particles { n, k: 3 }, -1.0, 1.0);
+        let mut dims = [1u32; 3];
+        dims[..cells.len()].copy_from_slice(&cells);
+        let field = rng.array(ValueType::RealGrid { dims, comps: 3 }, -1.0, 1.0);
+        let quad = rng.array(ValueType::RealGrid { dims, comps: 1 }, 0.5, 1.5);
+        for (w, extra) in WINDOWS {
+            for variant in ["atomic", "portable"] {
+                let p = params(w, extra, &lengths, &cells, variant);
+                let (g, r) = run_node(
+                    "spread",
+                    &p,
+                    &[("positions", pos.clone()), ("values", vals.clone())],
+                );
+                let (err, at) = rel_max_err(&g, &r);
+                // Hundreds of f32 atomic adds per cell, in any order.
+                assert!(
+                    err < 1e-5,
+                    "spread {w} {variant} {lengths:?}: error {err:e} at {at}"
+                );
+            }
+            let p = params(w, extra, &lengths, &cells, "auto");
+            let (g, r) = run_node(
+                "interpolate",
+                &p,
+                &[("grid", field.clone()), ("positions", pos.clone())],
+            );
+            let (err, at) = rel_max_err(&g, &r);
+            assert!(
+                err < 1e-5,
+                "interpolate {w} {lengths:?}: error {err:e} at {at}"
+            );
+            let (g, r) = run_node(
+                "interpolate",
+                &p,
+                &[
+                    ("grid", field.clone()),
+                    ("positions", pos.clone()),
+                    ("weights", quad.clone()),
+                ],
+            );
+            let (err, at) = rel_max_err(&g, &r);
+            assert!(
+                err < 1e-5,
+                "interpolate {w} with weights: error {err:e} at {at}"
+            );
+        }
+    }
+}
+
+#[test]
+fn atomic_and_portable_spreading_agree() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(3);
+    let lengths = [8.0, 8.0, 8.0];
+    let cells = [16u32, 16, 16];
+    // Dense and overlapping: many particles in one spot, plus coincident pairs.
+    let mut pos = positions(&mut rng, 500, &lengths);
+    if let mesoflow::value::HostData::F32(v) = &mut pos.data {
+        for i in 0..100 {
+            v[3 * i] = 0.01;
+            v[3 * i + 1] = 0.02;
+            v[3 * i + 2] = -0.03;
+        }
+    }
+    let vals = rng.array(ValueType::Particles { n: 500, k: 1 }, 0.0, 1.0);
+    let p_atomic = params("peskin4", "", &lengths, &cells, "atomic");
+    let p_cas = params("peskin4", "", &lengths, &cells, "portable");
+    let (a, r) = run_node(
+        "spread",
+        &p_atomic,
+        &[("positions", pos.clone()), ("values", vals.clone())],
+    );
+    let (b, _) = run_node("spread", &p_cas, &[("positions", pos), ("values", vals)]);
+    let (err, _) = rel_max_err(&a, &r);
+    assert!(err < 1e-5, "{err}");
+    let (diff, at) = rel_max_err(&a, &mesoflow::value::RefArray::new(b.ty, b.data.to_f64()));
+    assert!(
+        diff < 1e-5,
+        "variants differ by {diff:e} at {at} (f32 summation order only)"
+    );
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+#[test]
+fn spreading_conserves_and_interpolation_is_its_adjoint() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(23);
+    let lengths = [12.0, 9.0, 15.0];
+    let cells = [24u32, 18, 30];
+    let dv: f64 = (0..3).map(|a| lengths[a] / cells[a] as f64).product();
+    let n = 400;
+    let pos = positions(&mut rng, n, &lengths);
+    let f = rng.array(ValueType::Particles { n, k: 2 }, -1.0, 1.0);
+    let g = rng.array(
+        ValueType::RealGrid {
+            dims: [24, 18, 30],
+            comps: 2,
+        },
+        -1.0,
+        1.0,
+    );
+    for (w, extra) in WINDOWS {
+        let p = params(w, extra, &lengths, &cells, "auto");
+        let (sf, _) = run_node(
+            "spread",
+            &p,
+            &[("positions", pos.clone()), ("values", f.clone())],
+        );
+        let (jg, _) = run_node(
+            "interpolate",
+            &p,
+            &[("grid", g.clone()), ("positions", pos.clone())],
+        );
+        let (sf, jg, fv, gv) = (
+            sf.data.to_f64(),
+            jg.data.to_f64(),
+            f.data.to_f64(),
+            g.data.to_f64(),
+        );
+        // <S f, g>_dV = <f, J g>: the same weights on both sides, so f32 rounding only.
+        let lhs = dv * dot(&sf, &gv);
+        let rhs = dot(&fv, &jg);
+        let scale = dv * sf.iter().zip(&gv).map(|(x, y)| (x * y).abs()).sum::<f64>();
+        assert!(
+            (lhs - rhs).abs() < 1e-5 * scale,
+            "{w}: <Sf,g> = {lhs}, <f,Jg> = {rhs}"
+        );
+        // Conservation per component: sum_j (S f)_j dV = sum_i f_i. Peskin windows have
+        // unit discrete mass exactly; the Gaussian and ES windows to their tolerance.
+        let cells_n = sf.len() / 2;
+        for c in 0..2 {
+            let grid_total: f64 = sf[c * cells_n..(c + 1) * cells_n].iter().sum::<f64>() * dv;
+            let particle_total: f64 = fv.iter().skip(c).step_by(2).sum();
+            let abs_total: f64 = fv.iter().skip(c).step_by(2).map(|x| x.abs()).sum();
+            let tol = if w.starts_with("peskin") { 1e-6 } else { 2e-4 };
+            assert!(
+                (grid_total - particle_total).abs() < tol * abs_total,
+                "{w} component {c}: grid {grid_total} vs particles {particle_total}"
+            );
+        }
+    }
+}
+
+#[test]
+fn unwrapped_positions_wrap_like_their_images() {
+    if gpu().is_none() {
+        return;
+    }
+    let lengths = [10.0, 10.0, 10.0];
+    let cells = [20u32, 20, 20];
+    let base = [1.3f32, -2.2, 4.9];
+    let shifted: Vec<f32> = base
+        .iter()
+        .zip([3.0f32, -2.0, 7.0])
+        .map(|(x, k)| x + k * 10.0)
+        .collect();
+    let vals = HostArray::f32(ValueType::Particles { n: 1, k: 1 }, vec![1.0]);
+    let p = params("peskin6", "", &lengths, &cells, "auto");
+    let (a, _) = run_node(
+        "spread",
+        &p,
+        &[
+            (
+                "positions",
+                HostArray::f32(ValueType::Particles { n: 1, k: 3 }, base.to_vec()),
+            ),
+            ("values", vals.clone()),
+        ],
+    );
+    let (b, _) = run_node(
+        "spread",
+        &p,
+        &[
+            (
+                "positions",
+                HostArray::f32(ValueType::Particles { n: 1, k: 3 }, shifted),
+            ),
+            ("values", vals),
+        ],
+    );
+    let (diff, at) = rel_max_err(&a, &mesoflow::value::RefArray::new(b.ty, b.data.to_f64()));
+    assert!(diff < 1e-5, "images differ by {diff:e} at {at}");
+}
+
+#[test]
+fn no_particles_give_an_empty_grid_and_no_values() {
+    if gpu().is_none() {
+        return;
+    }
+    let lengths = [4.0, 4.0, 4.0];
+    let cells = [8u32, 8, 8];
+    let p = params("peskin4", "", &lengths, &cells, "auto");
+    let pos = HostArray::f32(ValueType::Particles { n: 0, k: 3 }, vec![]);
+    let vals = HostArray::f32(ValueType::Particles { n: 0, k: 1 }, vec![]);
+    let (g, _) = run_node(
+        "spread",
+        &p,
+        &[("positions", pos.clone()), ("values", vals)],
+    );
+    assert!(g.data.to_f64().iter().all(|&x| x == 0.0));
+    let field = HostArray::f32(
+        ValueType::RealGrid {
+            dims: [8, 8, 8],
+            comps: 1,
+        },
+        vec![1.0; 512],
+    );
+    let (u, _) = run_node("interpolate", &p, &[("grid", field), ("positions", pos)]);
+    assert!(u.data.is_empty());
+}
+
+#[test]
+fn bad_spread_params_are_plan_errors() {
+    let dir = tmpdir("spread-params");
+    let pos = ValueType::Particles { n: 4, k: 3 };
+    let vals = ValueType::Particles { n: 4, k: 5 };
+    for (params, inputs, want) in [
+        (
+            r#"{"box": [4, 4, 4], "grid": [8, 8, 8], "window": "gaussian"}"#,
+            [("positions", pos), ("values", pos)],
+            "needs `width`",
+        ),
+        (
+            r#"{"box": [4, 4, 4], "grid": [4, 4, 4], "window": "peskin6"}"#,
+            [("positions", pos), ("values", pos)],
+            "fewer than the window's support",
+        ),
+        (
+            r#"{"box": [4, 4, 4], "grid": [8, 8, 8], "window": "peskin4"}"#,
+            [("positions", pos), ("values", vals)],
+            "at most 4 are spread",
+        ),
+        (
+            r#"{"box": [4, 4], "grid": [8, 8], "window": "peskin4"}"#,
+            [("positions", pos), ("values", pos)],
+            "has 3 columns but the box has 2 axes",
+        ),
+        (
+            r#"{"box": [4, 4, 4], "grid": [8, 8, 8], "window": "gaussian", "width": 2, "tolerance": 1e-14}"#,
+            [("positions", pos), ("values", pos)],
+            "more than the 32 supported",
+        ),
+    ] {
+        let path = write_graph(
+            &dir,
+            "g.json",
+            &single_node_graph("spread", params, &inputs),
+        );
+        let e = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
+        assert!(e.contains(want), "{params}: {e}");
+    }
+}
