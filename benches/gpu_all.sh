@@ -8,7 +8,7 @@ source .gpu/gpu-env.sh
 export PYTHONUNBUFFERED=1
 bin=.gpu/mesoflow
 want=("$@")
-[ ${#want[@]} -eq 0 ] && want=(overhead reduce sort scan fft torch)
+[ ${#want[@]} -eq 0 ] && want=(overhead reduce sort scan spread fft torch)
 log=${OUT:-/tmp}/bench.log
 : > "$log"
 has() { [[ " ${want[*]} " == *" $1 "* ]]; }
@@ -19,6 +19,7 @@ has overhead && run $bin bench overhead --nodes 1000 --reps 50
 has reduce && run $bin bench reduce --n 100000000 --reps 20
 has sort && $bin bench sort --help >/dev/null 2>&1 && run $bin bench sort --n 10000000 --reps 20
 has scan && $bin bench scan --help >/dev/null 2>&1 && run $bin bench scan --n 100000000 --reps 20
+has spread && run $bin bench spread --cells 128 --reps 20
 has fft && $bin bench fft --help >/dev/null 2>&1 && run $bin bench fft --comps 3 --reps 20
 if has torch; then
   for s in benches/torch_*.py; do [ -f "$s" ] && run python3 "$s"; done

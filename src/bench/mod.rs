@@ -6,6 +6,7 @@
 //! compiles a graph file and times each launch with GPU timestamps.
 
 mod reduce;
+mod spread;
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -112,6 +113,13 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 50)]
         reps: u64,
     },
+    /// Spreading and interpolation per particle (UAMMD's setups) on an n^3 grid.
+    Spread {
+        #[arg(long, default_value_t = 128)]
+        cells: u32,
+        #[arg(long, default_value_t = 20)]
+        reps: u64,
+    },
     /// Sum (blocked and compensated), dot and max of n f32.
     Reduce {
         #[arg(long, default_value_t = 100_000_000)]
@@ -129,6 +137,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             reps,
         } => overhead(nodes, elements, reps),
         BenchCommand::Reduce { n, reps } => reduce::run(n, reps),
+        BenchCommand::Spread { cells, reps } => spread::run(cells, reps),
     }
 }
 
