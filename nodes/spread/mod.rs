@@ -248,9 +248,17 @@ fn geometry(gw: &GridWindow, count: u32) -> GeometryUniform {
     u
 }
 
-/// Dispatch shape of one workgroup per particle (folded over (x, y)).
-fn per_particle(cx: &CompileCtx, count: u32) -> [u32; 3] {
-    cx.grid_1d(count as u64, 1)
+/// Dispatch shape for `count` particles: see shaders/spread/stencil.wgsl. Particles are
+/// served in CHUNKS interleaved runs, by 64-thread workgroups holding 64 / SEG particles
+/// (SEG = support^2 rounded up to a power of two, at most 64).
+fn per_particle(cx: &CompileCtx, count: u32, support: u32) -> [u32; 3] {
+    const CHUNKS: u64 = 1024;
+    let seg = (support as u64 * support as u64)
+        .next_power_of_two()
+        .min(64);
+    let per_workgroup = 64 / seg;
+    let slots = CHUNKS * (count as u64).div_ceil(CHUNKS);
+    cx.grid_1d(slots.div_ceil(per_workgroup), 1)
 }
 
 fn check_positions(gw: &GridWindow, t: Option<ValueType>) -> Result<u32, PortError> {
@@ -420,7 +428,7 @@ impl GpuKernels for Spread {
             cx.dispatch(
                 &kernel,
                 &[pos.buffer, vals.buffer, out.buffer, &geo],
-                per_particle(cx, n),
+                per_particle(cx, n, self.gw.window.support()),
             ),
         ])
     }
@@ -603,7 +611,7 @@ impl GpuKernels for Interpolate {
                 io.outputs[0].buffer,
                 &geo,
             ],
-            per_particle(cx, n),
+            per_particle(cx, n, self.gw.window.support()),
         )])
     }
 }
