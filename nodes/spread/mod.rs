@@ -18,8 +18,8 @@ use crate::node::{
 use crate::value::{PortType, RefArray, ValueType};
 use window::Window;
 
-/// Values per particle the kernels carry at once.
-pub const MAX_COMPS: u32 = 4;
+/// Components one dispatch carries; more go in several dispatches.
+pub const CHUNK_COMPS: u32 = 4;
 
 /// A periodic grid over a box centred at the origin, with the window used on it.
 #[derive(Clone, Debug, PartialEq)]
@@ -224,7 +224,8 @@ struct GeometryUniform {
     win: [[f32; 4]; 3],
     count: u32,
     dv: f32,
-    pad: [u32; 2],
+    comp_offset: u32,
+    pad: u32,
 }
 
 fn geometry(gw: &GridWindow, count: u32) -> GeometryUniform {
@@ -236,7 +237,8 @@ fn geometry(gw: &GridWindow, count: u32) -> GeometryUniform {
         win: [[0.0; 4]; 3],
         count,
         dv: gw.cell_volume() as f32,
-        pad: [0; 2],
+        comp_offset: 0,
+        pad: 0,
     };
     for a in 0..gw.dims() {
         u.n[a] = gw.cells[a];
@@ -295,7 +297,7 @@ impl NodeKind for SpreadKind {
             PortSpec::new(
                 "values",
                 PortType::Particles(None),
-                "values per particle (N x C, C <= 4)",
+                "values per particle (N x C)",
             ),
         ]
     }
@@ -335,12 +337,6 @@ impl Node for Spread {
             return Err(PortError::new(
                 "values",
                 format!("has {m} rows for {n} positions"),
-            ));
-        }
-        if comps > MAX_COMPS {
-            return Err(PortError::new(
-                "values",
-                format!("has {comps} columns; at most {MAX_COMPS} are spread at once"),
             ));
         }
         Ok(Signature::outputs(vec![self.gw.grid_type(comps)]))
@@ -404,33 +400,40 @@ impl GpuKernels for Spread {
             cx.shader(add)?,
             cx.shader("spread/spread.wgsl")?
         );
-        let kernel = cx.kernel(
-            &KernelSpec::new(
-                format!("spread ({})", self.gw.window.shader()),
-                source,
-                &[
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::Uniform,
-                ],
-            )
-            .constant("NS", self.gw.window.support() as f64)
-            .constant("DIMS", self.gw.dims() as f64)
-            .constant("COMPS", comps as f64),
-        )?;
-        let geo = cx.uniform(
-            "spread geometry",
-            bytemuck::bytes_of(&geometry(&self.gw, n)),
-        );
-        Ok(vec![
-            cx.fill(out.buffer, out.ty.words(), 0)?,
-            cx.dispatch(
+        let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
+        for first in (0..comps).step_by(CHUNK_COMPS as usize) {
+            let chunk = CHUNK_COMPS.min(comps - first);
+            let kernel = cx.kernel(
+                &KernelSpec::new(
+                    format!("spread ({})", self.gw.window.shader()),
+                    source.clone(),
+                    &[
+                        Binding::StorageRead,
+                        Binding::StorageRead,
+                        Binding::StorageReadWrite,
+                        Binding::Uniform,
+                    ],
+                )
+                .constant("NS", self.gw.window.support() as f64)
+                .constant("DIMS", self.gw.dims() as f64)
+                .constant("COMPS", chunk as f64)
+                .constant("TOTAL", comps as f64),
+            )?;
+            let geo = cx.uniform(
+                "spread geometry",
+                bytemuck::bytes_of(&GeometryUniform {
+                    comp_offset: first,
+                    ..geometry(&self.gw, n)
+                }),
+            );
+            let groups = per_particle(cx, n, self.gw.window.support());
+            dispatches.push(cx.dispatch(
                 &kernel,
                 &[pos.buffer, vals.buffer, out.buffer, &geo],
-                per_particle(cx, n, self.gw.window.support()),
-            ),
-        ])
+                groups,
+            ));
+        }
+        Ok(dispatches)
     }
 }
 
@@ -447,11 +450,7 @@ impl NodeKind for InterpolateKind {
 
     fn inputs(&self) -> Vec<PortSpec> {
         vec![
-            PortSpec::new(
-                "grid",
-                PortType::RealGrid,
-                "the field, C components (C <= 4)",
-            ),
+            PortSpec::new("grid", PortType::RealGrid, "the field, C components"),
             PortSpec::new(
                 "positions",
                 PortType::Particles(None),
@@ -498,12 +497,6 @@ impl Node for Interpolate {
             return Err(PortError::new(
                 "grid",
                 format!("is {dims:?} cells but the params say {:?}", self.gw.cells),
-            ));
-        }
-        if comps > MAX_COMPS {
-            return Err(PortError::new(
-                "grid",
-                format!("has {comps} components; at most {MAX_COMPS} are interpolated at once"),
             ));
         }
         if let Some(w) = inputs[2]
@@ -579,40 +572,50 @@ impl GpuKernels for Interpolate {
             cx.shader(self.gw.window.shader())?,
             cx.shader("spread/interpolate.wgsl")?
         );
-        let kernel = cx.kernel(
-            &KernelSpec::new(
-                format!("interpolate ({})", self.gw.window.shader()),
-                source,
-                &[
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::Uniform,
-                ],
-            )
-            .constant("NS", self.gw.window.support() as f64)
-            .constant("DIMS", self.gw.dims() as f64)
-            .constant("COMPS", comps as f64)
-            .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some()))),
-        )?;
-        let geo = cx.uniform(
-            "interpolate geometry",
-            bytemuck::bytes_of(&geometry(&self.gw, n)),
-        );
         // Without weights the binding still needs a buffer; the kernel never reads it.
         let quadrature = weights.map(|w| w.buffer).unwrap_or(grid.buffer);
-        Ok(vec![cx.dispatch(
-            &kernel,
-            &[
-                pos.buffer,
-                grid.buffer,
-                quadrature,
-                io.outputs[0].buffer,
-                &geo,
-            ],
-            per_particle(cx, n, self.gw.window.support()),
-        )])
+        let mut dispatches = Vec::new();
+        for first in (0..comps).step_by(CHUNK_COMPS as usize) {
+            let chunk = CHUNK_COMPS.min(comps - first);
+            let kernel = cx.kernel(
+                &KernelSpec::new(
+                    format!("interpolate ({})", self.gw.window.shader()),
+                    source.clone(),
+                    &[
+                        Binding::StorageRead,
+                        Binding::StorageRead,
+                        Binding::StorageRead,
+                        Binding::StorageReadWrite,
+                        Binding::Uniform,
+                    ],
+                )
+                .constant("NS", self.gw.window.support() as f64)
+                .constant("DIMS", self.gw.dims() as f64)
+                .constant("COMPS", chunk as f64)
+                .constant("TOTAL", comps as f64)
+                .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some()))),
+            )?;
+            let geo = cx.uniform(
+                "interpolate geometry",
+                bytemuck::bytes_of(&GeometryUniform {
+                    comp_offset: first,
+                    ..geometry(&self.gw, n)
+                }),
+            );
+            let groups = per_particle(cx, n, self.gw.window.support());
+            dispatches.push(cx.dispatch(
+                &kernel,
+                &[
+                    pos.buffer,
+                    grid.buffer,
+                    quadrature,
+                    io.outputs[0].buffer,
+                    &geo,
+                ],
+                groups,
+            ));
+        }
+        Ok(dispatches)
     }
 }
 

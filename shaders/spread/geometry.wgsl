@@ -8,8 +8,8 @@ struct Geometry {
     win: array<vec4<f32>, 3>, // window params per axis
     count: u32,            // particles
     dv: f32,               // uniform quadrature weight h_x h_y (h_z)
-    pad0: u32,
-    pad1: u32,
+    comp_offset: u32,      // first component of this dispatch (components go 4 at a time)
+    pad: u32,
 }
 
 fn wrap_cell(i: i32, n: u32) -> u32 {

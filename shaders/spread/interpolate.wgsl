@@ -10,7 +10,8 @@
 
 override NS: u32 = 4u;
 override DIMS: u32 = 3u;
-override COMPS: u32 = 1u;
+override COMPS: u32 = 1u;   // components in this dispatch (at most 4)
+override TOTAL: u32 = 1u;   // components per particle
 override HAS_WEIGHTS: bool = false;
 
 @group(0) @binding(0) var<storage, read> pos: array<f32>;
@@ -29,7 +30,7 @@ fn sample(cell: u32, w: f32, acc: vec4<f32>) -> vec4<f32> {
     var r = acc;
     let cells = geo.n.w;
     for (var c = 0u; c < COMPS; c = c + 1u) {
-        r[c] = r[c] + w * dv * grid[c * cells + cell];
+        r[c] = r[c] + w * dv * grid[(geo.comp_offset + c) * cells + cell];
     }
     return r;
 }
@@ -70,7 +71,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         let slot = lid / COMPS;
         let p = stencil_p[slot];
         if (p < geo.count) {
-            out[p * COMPS + lid % COMPS] = partial[slot * seg][lid % COMPS];
+            out[p * TOTAL + geo.comp_offset + lid % COMPS] = partial[slot * seg][lid % COMPS];
         }
     }
 }

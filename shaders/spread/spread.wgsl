@@ -8,7 +8,8 @@
 
 override NS: u32 = 4u;
 override DIMS: u32 = 3u;
-override COMPS: u32 = 1u;
+override COMPS: u32 = 1u;   // components in this dispatch (at most 4)
+override TOTAL: u32 = 1u;   // components per particle
 
 @group(0) @binding(0) var<storage, read> pos: array<f32>;
 @group(0) @binding(1) var<storage, read> vals: array<f32>;
@@ -25,7 +26,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     if (lid < ppw * COMPS) {
         let p = stencil_p[lid / COMPS];
         if (p < geo.count) {
-            value[lid] = vals[p * COMPS + lid % COMPS];
+            value[lid] = vals[p * TOTAL + geo.comp_offset + lid % COMPS];
         }
     }
     workgroupBarrier();
@@ -42,14 +43,14 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         let oxy = stencil_o[tw + ix] + stencil_o[tw + MAX_NS + iy];
         if (DIMS == 2u) {
             for (var c = 0u; c < COMPS; c = c + 1u) {
-                grid_add(c * cells + oxy, wxy * value[s * COMPS + c]);
+                grid_add((geo.comp_offset + c) * cells + oxy, wxy * value[s * COMPS + c]);
             }
         } else {
             for (var iz = 0u; iz < NS; iz = iz + 1u) {
                 let w = wxy * stencil_w[tw + 2u * MAX_NS + iz];
                 let cell = oxy + stencil_o[tw + 2u * MAX_NS + iz];
                 for (var c = 0u; c < COMPS; c = c + 1u) {
-                    grid_add(c * cells + cell, w * value[s * COMPS + c]);
+                    grid_add((geo.comp_offset + c) * cells + cell, w * value[s * COMPS + c]);
                 }
             }
         }
