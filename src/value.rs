@@ -136,6 +136,9 @@ pub enum PortType {
     Scalar,
     /// Any f32 value that is not a complex grid: particles, real grid or scalar.
     RealArray,
+    /// A [`PortType::RealArray`] value or an index array: any array of real words
+    /// (f32 or u32), for nodes that treat values as flat sequences (scan).
+    RealOrIndices,
 }
 
 impl PortType {
@@ -150,6 +153,13 @@ impl PortType {
             (
                 PortType::RealArray,
                 ValueType::Particles { .. } | ValueType::RealGrid { .. } | ValueType::Scalar,
+            ) => true,
+            (
+                PortType::RealOrIndices,
+                ValueType::Particles { .. }
+                | ValueType::RealGrid { .. }
+                | ValueType::Scalar
+                | ValueType::Indices { .. },
             ) => true,
             _ => false,
         }
@@ -166,6 +176,7 @@ impl fmt::Display for PortType {
             PortType::Indices => write!(f, "indices"),
             PortType::Scalar => write!(f, "scalar"),
             PortType::RealArray => write!(f, "particles | real_grid | scalar"),
+            PortType::RealOrIndices => write!(f, "indices | particles | real_grid | scalar"),
         }
     }
 }
@@ -295,5 +306,10 @@ mod tests {
         assert!(!PortType::Particles(Some(1)).accepts(&p3));
         assert!(PortType::RealArray.accepts(&ValueType::Scalar));
         assert!(!PortType::RealArray.accepts(&ValueType::Indices { n: 3 }));
+        assert!(PortType::RealOrIndices.accepts(&ValueType::Indices { n: 3 }));
+        assert!(!PortType::RealOrIndices.accepts(&ValueType::ComplexGrid {
+            dims: [2, 2, 2],
+            comps: 1
+        }));
     }
 }
