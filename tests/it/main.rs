@@ -8,5 +8,7 @@ mod graph_files;
 mod nodes;
 mod plan;
 mod run;
+mod scan;
 mod shaders;
+mod sort;
 mod util;
