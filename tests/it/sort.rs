@@ -163,3 +163,32 @@ fn auto_runs_without_subgroups_and_subgroup_fails_clearly() {
         },
     );
 }
+
+#[test]
+fn the_subgroup_path_follows_the_reported_subgroup_sizes() {
+    let Some(mut gpu) = gpu() else { return };
+    let Some((min, _)) = gpu.caps.subgroups else {
+        return;
+    };
+    let keys = random(3 * SUBGROUP_TILE + 17, 10);
+    // Subgroups that may be wider than 32 lanes: four-word ballot masks, same result.
+    with_caps(
+        &mut gpu,
+        |c| c.subgroups = Some((min, 128)),
+        |gpu| check_on(gpu, &keys, 32, "subgroup"),
+    );
+    // Too little workgroup memory for the counters of 4-lane subgroups: auto falls back.
+    with_caps(
+        &mut gpu,
+        |c| {
+            c.subgroups = Some((4, 128));
+            c.max_workgroup_storage = 32 << 10;
+        },
+        |gpu| {
+            check_on(gpu, &keys, 32, "auto");
+            let inputs = [("keys".to_string(), keys_array(&keys))].into();
+            let err = compile_error(gpu, "sort", r#"{"variant": "subgroup"}"#, &inputs);
+            assert!(err.contains("bytes of workgroup memory"), "{err}");
+        },
+    );
+}
