@@ -139,6 +139,23 @@ pub fn run_graph(
     program.read_outputs().unwrap().into_iter().collect()
 }
 
+/// Writes and loads a graph of one `kind` node whose inputs are `inputs` (graph inputs
+/// named after its input ports), in a folder of its own.
+fn load_single_node(
+    kind: &str,
+    params: &str,
+    inputs: &BTreeMap<String, HostArray>,
+) -> (PathBuf, Graph) {
+    static GRAPHS: AtomicUsize = AtomicUsize::new(0);
+    let types: Vec<(&str, ValueType)> = inputs.iter().map(|(n, a)| (n.as_str(), a.ty)).collect();
+    let dir = tmpdir(&format!(
+        "{kind}-{}",
+        GRAPHS.fetch_add(1, Ordering::Relaxed)
+    ));
+    let path = write_graph(&dir, "g.json", &single_node_graph(kind, params, &types));
+    (dir, load(&path))
+}
+
 /// Runs a graph of one `kind` node whose inputs are `inputs` (named after its input
 /// ports) and returns its outputs by port name.
 pub fn run_node(
@@ -147,11 +164,7 @@ pub fn run_node(
     params: &str,
     inputs: &BTreeMap<String, HostArray>,
 ) -> BTreeMap<String, HostArray> {
-    static RUNS: AtomicUsize = AtomicUsize::new(0);
-    let types: Vec<(&str, ValueType)> = inputs.iter().map(|(n, a)| (n.as_str(), a.ty)).collect();
-    let dir = tmpdir(&format!("{kind}-{}", RUNS.fetch_add(1, Ordering::Relaxed)));
-    let path = write_graph(&dir, "g.json", &single_node_graph(kind, params, &types));
-    let g = load(&path);
+    let (dir, g) = load_single_node(kind, params, inputs);
     let out = run_graph(gpu, &g, inputs, None, 1, true);
     let _ = std::fs::remove_dir_all(&dir);
     out
@@ -164,21 +177,20 @@ pub fn compile_error(
     params: &str,
     inputs: &BTreeMap<String, HostArray>,
 ) -> String {
-    let types: Vec<(&str, ValueType)> = inputs.iter().map(|(n, a)| (n.as_str(), a.ty)).collect();
-    let dir = tmpdir(&format!("{kind}-compile-error"));
-    let path = write_graph(&dir, "g.json", &single_node_graph(kind, params, &types));
-    let g = load(&path);
+    let (dir, g) = load_single_node(kind, params, inputs);
     let opts = PlanOptions {
         outputs: None,
-        inputs: types.iter().map(|(n, t)| (n.to_string(), *t)).collect(),
+        inputs: inputs.iter().map(|(n, a)| (n.clone(), a.ty)).collect(),
         fuse: true,
     };
     let p = plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
     let mut cache = KernelCache::default();
-    match Program::compile(gpu, &g, &p, &mut cache) {
+    let err = match Program::compile(gpu, &g, &p, &mut cache) {
         Ok(_) => panic!("{kind} {params} compiled"),
         Err(e) => e.to_string(),
-    }
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    err
 }
 
 /// Runs `f` with the device's capabilities altered by `change` (restored afterwards, also
