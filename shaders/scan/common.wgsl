@@ -32,6 +32,12 @@ fn tiles() -> u32 {
     return (params.len + TILE - 1u) / TILE;
 }
 
+// Whether a tile holds TILE elements: then its loads and stores skip the tail checks, so
+// that all of a thread's vec4 loads can be in flight at once.
+fn tile_is_full(tile: u32) -> bool {
+    return params.len - tile * TILE >= TILE;
+}
+
 // The q-th group of four elements, zero past the end (buffers are padded to 16 bytes,
 // so the vec4 that holds the last element is inside the binding).
 fn load4(q: u32) -> vec4<Elem> {

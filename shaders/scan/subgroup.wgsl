@@ -37,9 +37,19 @@ fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
         return;
     }
     let q = first_vec(tile, sg, lane, sg_size);
+    var v: array<vec4<Elem>, ROWS>;
+    if (tile_is_full(tile)) {
+        for (var r = 0u; r < ROWS; r++) {
+            v[r] = src[q + r * sg_size];
+        }
+    } else {
+        for (var r = 0u; r < ROWS; r++) {
+            v[r] = load4(q + r * sg_size);
+        }
+    }
     var s = Elem(0);
     for (var r = 0u; r < ROWS; r++) {
-        s += sum4(load4(q + r * sg_size));
+        s += sum4(v[r]);
     }
     let t = subgroupAdd(s);
     if (lane == 0u) {
@@ -61,11 +71,20 @@ fn downsweep(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg
         return;
     }
     let q = first_vec(tile, sg, lane, sg_size);
+    let full = tile_is_full(tile);
     var v: array<vec4<Elem>, ROWS>;
+    if (full) {
+        for (var r = 0u; r < ROWS; r++) {
+            v[r] = src[q + r * sg_size];
+        }
+    } else {
+        for (var r = 0u; r < ROWS; r++) {
+            v[r] = load4(q + r * sg_size);
+        }
+    }
     var ex: array<Elem, ROWS>;
     var carry = Elem(0);
     for (var r = 0u; r < ROWS; r++) {
-        v[r] = load4(q + r * sg_size);
         let s = sum4(v[r]);
         ex[r] = carry + subgroupExclusiveAdd(s);
         carry += subgroupAdd(s);
@@ -79,7 +98,13 @@ fn downsweep(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg
     }
     workgroupBarrier();
     base += partial_sum_below(sg, nsg, lane, sg_size);
-    for (var r = 0u; r < ROWS; r++) {
-        store4(q + r * sg_size, prefix4(base + ex[r], v[r]));
+    if (full) {
+        for (var r = 0u; r < ROWS; r++) {
+            dst[q + r * sg_size] = prefix4(base + ex[r], v[r]);
+        }
+    } else {
+        for (var r = 0u; r < ROWS; r++) {
+            store4(q + r * sg_size, prefix4(base + ex[r], v[r]));
+        }
     }
 }
