@@ -25,7 +25,10 @@ fn walk(dir: &Path, root: &Path, out: &mut Vec<String>) {
 }
 
 fn main() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+    // Read at run time, not with env!(): a build-script binary reused from another
+    // checkout (a copied target folder) would otherwise embed that checkout's shaders.
+    let manifest = std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR");
+    let root = Path::new(&manifest).join("shaders");
     println!("cargo:rerun-if-changed=shaders");
     let mut files = Vec::new();
     walk(&root, &root, &mut files);

@@ -5,6 +5,8 @@ pub mod permute;
 pub mod pointwise;
 pub mod random;
 pub mod reduce;
+pub mod scan;
+pub mod sort;
 pub mod spread;
 
 use crate::node::Registry;
@@ -17,4 +19,6 @@ pub fn register_all(r: &mut Registry) {
     random::register(r);
     reduce::register(r);
     spread::register(r);
+    scan::register(r);
+    sort::register(r);
 }

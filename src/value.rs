@@ -163,6 +163,9 @@ pub enum PortType {
     RealArray,
     /// Rows: particles (N x k) or indices (N).
     Rows,
+    /// A [`PortType::RealArray`] value or an index array: any array of real words
+    /// (f32 or u32), for nodes that treat values as flat sequences (scan).
+    RealOrIndices,
 }
 
 impl PortType {
@@ -180,6 +183,13 @@ impl PortType {
                 ValueType::Particles { .. } | ValueType::RealGrid { .. } | ValueType::Scalar,
             ) => true,
             (PortType::Rows, ValueType::Particles { .. } | ValueType::Indices { .. }) => true,
+            (
+                PortType::RealOrIndices,
+                ValueType::Particles { .. }
+                | ValueType::RealGrid { .. }
+                | ValueType::Scalar
+                | ValueType::Indices { .. },
+            ) => true,
             _ => false,
         }
     }
@@ -197,6 +207,7 @@ impl fmt::Display for PortType {
             PortType::Scalar => write!(f, "scalar"),
             PortType::RealArray => write!(f, "particles | real_grid | scalar"),
             PortType::Rows => write!(f, "particles | indices"),
+            PortType::RealOrIndices => write!(f, "indices | particles | real_grid | scalar"),
         }
     }
 }
@@ -332,5 +343,10 @@ mod tests {
         assert!(!PortType::Particles(Some(1)).accepts(&p3));
         assert!(PortType::RealArray.accepts(&ValueType::Scalar));
         assert!(!PortType::RealArray.accepts(&ValueType::Indices { n: 3 }));
+        assert!(PortType::RealOrIndices.accepts(&ValueType::Indices { n: 3 }));
+        assert!(!PortType::RealOrIndices.accepts(&ValueType::ComplexGrid {
+            dims: [2, 2, 2],
+            comps: 1
+        }));
     }
 }

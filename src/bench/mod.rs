@@ -5,6 +5,7 @@
 //! Node benchmarks go through the engine like any graph: [`time_graph`] plans and
 //! compiles a graph file and times each launch with GPU timestamps.
 
+mod primitives;
 mod reduce;
 mod spread;
 
@@ -127,6 +128,26 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 20)]
         reps: u64,
     },
+    /// Stable radix sort of n random u32 keys with their permutation (the `sort` node).
+    Sort {
+        #[arg(long, default_value_t = 10_000_000)]
+        n: u32,
+        #[arg(long, default_value_t = 20)]
+        reps: u64,
+        /// Kernel path: auto, subgroup or portable.
+        #[arg(long, default_value = "auto")]
+        variant: String,
+    },
+    /// Exclusive scan of n random u32 (the `scan` node).
+    Scan {
+        #[arg(long, default_value_t = 100_000_000)]
+        n: u32,
+        #[arg(long, default_value_t = 20)]
+        reps: u64,
+        /// Kernel path: auto, subgroup or portable.
+        #[arg(long, default_value = "auto")]
+        variant: String,
+    },
 }
 
 pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
@@ -138,6 +159,8 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
         } => overhead(nodes, elements, reps),
         BenchCommand::Reduce { n, reps } => reduce::run(n, reps),
         BenchCommand::Spread { cells, reps } => spread::run(cells, reps),
+        BenchCommand::Sort { n, reps, variant } => primitives::sort(n, reps, &variant),
+        BenchCommand::Scan { n, reps, variant } => primitives::scan(n, reps, &variant),
     }
 }
 

@@ -11,6 +11,8 @@ mod plan;
 mod random;
 mod reduce;
 mod run;
+mod scan;
 mod shaders;
+mod sort;
 mod spread;
 mod util;

@@ -3,10 +3,11 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
 use mesoflow::exec::{Program, RunOptions};
-use mesoflow::gpu::{GpuContext, KernelCache};
+use mesoflow::gpu::{DeviceCaps, GpuContext, KernelCache};
 use mesoflow::graph::{self, Graph, LoadOptions};
 use mesoflow::node::{RefCtx, Registry, check_params};
 use mesoflow::plan::{self, PlanOptions};
@@ -140,6 +141,80 @@ pub fn run_graph(
         })
         .unwrap_or_else(|e| panic!("{e}"));
     program.read_outputs().unwrap().into_iter().collect()
+}
+
+/// Writes and loads a graph of one `kind` node whose inputs are `inputs` (graph inputs
+/// named after its input ports), in a folder of its own.
+fn load_single_node(
+    kind: &str,
+    params: &str,
+    inputs: &BTreeMap<String, HostArray>,
+) -> (PathBuf, Graph) {
+    static GRAPHS: AtomicUsize = AtomicUsize::new(0);
+    let types: Vec<(&str, ValueType)> = inputs.iter().map(|(n, a)| (n.as_str(), a.ty)).collect();
+    let dir = tmpdir(&format!(
+        "{kind}-{}",
+        GRAPHS.fetch_add(1, Ordering::Relaxed)
+    ));
+    let path = write_graph(&dir, "g.json", &single_node_graph(kind, params, &types));
+    (dir, load(&path))
+}
+
+/// Runs a graph of one `kind` node whose inputs are `inputs` (named after its input
+/// ports) and returns its outputs by port name.
+pub fn run_node(
+    gpu: &GpuContext,
+    kind: &str,
+    params: &str,
+    inputs: &BTreeMap<String, HostArray>,
+) -> BTreeMap<String, HostArray> {
+    let (dir, g) = load_single_node(kind, params, inputs);
+    let out = run_graph(gpu, &g, inputs, None, 1, true);
+    let _ = std::fs::remove_dir_all(&dir);
+    out
+}
+
+/// The error of compiling a one-`kind`-node graph for `gpu` (which must fail).
+pub fn compile_error(
+    gpu: &GpuContext,
+    kind: &str,
+    params: &str,
+    inputs: &BTreeMap<String, HostArray>,
+) -> String {
+    let (dir, g) = load_single_node(kind, params, inputs);
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: inputs.iter().map(|(n, a)| (n.clone(), a.ty)).collect(),
+        fuse: true,
+    };
+    let p = plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
+    let mut cache = KernelCache::default();
+    let err = match Program::compile(gpu, &g, &p, &mut cache) {
+        Ok(_) => panic!("{kind} {params} compiled"),
+        Err(e) => e.to_string(),
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    err
+}
+
+/// Runs `f` with the device's capabilities altered by `change` (restored afterwards, also
+/// when `f` panics): a lower workgroup cap makes small inputs take the folded (x, y)
+/// dispatches of huge ones; hiding subgroups takes the paths of devices without them.
+pub fn with_caps<R>(
+    gpu: &mut GpuContext,
+    change: impl FnOnce(&mut DeviceCaps),
+    f: impl FnOnce(&GpuContext) -> R,
+) -> R {
+    struct Restore<'a>(&'a mut GpuContext, DeviceCaps);
+    impl Drop for Restore<'_> {
+        fn drop(&mut self) {
+            self.0.caps = self.1.clone();
+        }
+    }
+    let saved = gpu.caps.clone();
+    change(&mut gpu.caps);
+    let r = Restore(gpu, saved);
+    f(&*r.0)
 }
 
 /// A small deterministic generator for test data (xorshift), so tests need no seed plumbing.

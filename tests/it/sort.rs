@@ -1,0 +1,194 @@
+//! `sort` against its CPU reference (a stable sort by the low `bits` bits) on the GPU, on
+//! both kernel paths: sorted keys and permutation must match exactly.
+
+use std::collections::BTreeMap;
+
+use mesoflow::gpu::GpuContext;
+use mesoflow::value::{HostArray, ValueType};
+
+use crate::util::{Rng, compile_error, gpu, reference, run_node, with_caps};
+
+const PATHS: [&str; 2] = ["subgroup", "portable"];
+
+/// Keys per tile of the two paths (nodes/sort.rs).
+const SUBGROUP_TILE: usize = 3840;
+const PORTABLE_TILE: usize = 2048;
+
+fn keys_array(keys: &[u32]) -> HostArray {
+    HostArray::u32(
+        ValueType::Indices {
+            n: keys.len() as u32,
+        },
+        keys.to_vec(),
+    )
+}
+
+/// Sorts `keys` by their low `bits` bits on the given path and compares keys and
+/// permutation with the reference, element by element.
+fn check_on(gpu: &GpuContext, keys: &[u32], bits: u32, path: &str) {
+    let params = format!(r#"{{"bits": {bits}, "variant": "{path}"}}"#);
+    let x = keys_array(keys);
+    let inputs: BTreeMap<String, HostArray> = [("keys".to_string(), x.clone())].into();
+    let got = run_node(gpu, "sort", &params, &inputs);
+    let want = reference("sort", &params, &[Some(&x)]);
+    for (port, w) in ["keys", "perm"].iter().zip(&want) {
+        let g = &got[*port];
+        let w = w.to_host();
+        assert_eq!(g.ty, w.ty, "{port}");
+        if g.data != w.data {
+            let (mesoflow::value::HostData::U32(g), mesoflow::value::HostData::U32(w)) =
+                (&g.data, &w.data)
+            else {
+                panic!("sort outputs are index arrays");
+            };
+            let i = (0..g.len()).find(|&i| g[i] != w[i]).unwrap_or(0);
+            panic!(
+                "sort ({path}, bits {bits}) of {} keys: {port}[{i}] is {}, expected {}",
+                keys.len(),
+                g[i],
+                w[i]
+            );
+        }
+    }
+}
+
+fn check(keys: &[u32], bits: u32, path: &str) {
+    if let Some(gpu) = gpu() {
+        check_on(&gpu, keys, bits, path);
+    }
+}
+
+fn random(n: usize, seed: u64) -> Vec<u32> {
+    let mut rng = Rng::new(seed);
+    (0..n).map(|_| rng.next_u64() as u32).collect()
+}
+
+#[test]
+fn random_keys_at_every_tile_boundary() {
+    let mut sizes = vec![0, 1, 2, 3, 100, 1000];
+    for tile in [SUBGROUP_TILE, PORTABLE_TILE] {
+        for k in [1, 2, 3] {
+            sizes.extend([k * tile - 1, k * tile, k * tile + 1]);
+        }
+    }
+    for path in PATHS {
+        for (i, &n) in sizes.iter().enumerate() {
+            check(&random(n, i as u64), 32, path);
+        }
+    }
+}
+
+#[test]
+fn equal_keys_keep_their_input_order() {
+    for path in PATHS {
+        for key in [0, 7, u32::MAX] {
+            check(&vec![key; 10_000], 32, path);
+        }
+        // Few distinct keys: long runs of equal ones in every tile.
+        let few: Vec<u32> = random(50_000, 3).iter().map(|k| k % 5).collect();
+        check(&few, 32, path);
+    }
+}
+
+#[test]
+fn extreme_sorted_and_reversed_keys() {
+    let mut rng = Rng::new(4);
+    let extremes: Vec<u32> = (0..5000)
+        .map(|_| [0, 1, u32::MAX - 1, u32::MAX][(rng.next_u64() % 4) as usize])
+        .collect();
+    let ascending: Vec<u32> = (0..9000).collect();
+    let descending: Vec<u32> = (0..9000).rev().map(|k| k * 477_211).collect();
+    for path in PATHS {
+        check(&extremes, 32, path);
+        check(&ascending, 32, path);
+        check(&descending, 32, path);
+        check(&[u32::MAX, 0], 32, path);
+    }
+}
+
+#[test]
+fn fewer_bits_sort_by_the_low_bits_only() {
+    // Full-range keys: the bits above `bits` are set and must be ignored, yet kept.
+    let keys = random(20_000, 5);
+    for path in PATHS {
+        for bits in [1, 3, 4, 5, 8, 9, 20, 31] {
+            check(&keys, bits, path);
+        }
+    }
+}
+
+#[test]
+fn many_tiles() {
+    for path in PATHS {
+        check(&random(300_000, 6), 32, path);
+    }
+    // A cell-hash-like sort: 22-bit keys, many particles per cell.
+    let cells: Vec<u32> = random(200_000, 7).iter().map(|k| k >> 14).collect();
+    check(&cells, 22, "auto");
+}
+
+#[test]
+fn sorts_fold_their_dispatches_past_the_workgroup_cap() {
+    let Some(mut gpu) = gpu() else { return };
+    // 8 subgroup tiles or 14 portable tiles on 3 workgroups per dimension.
+    let keys = random(7 * SUBGROUP_TILE + 5, 8);
+    with_caps(
+        &mut gpu,
+        |c| c.max_workgroups_per_dim = 3,
+        |gpu| {
+            for path in PATHS {
+                check_on(gpu, &keys, 32, path);
+                check_on(gpu, &keys, 12, path);
+            }
+        },
+    );
+}
+
+#[test]
+fn auto_runs_without_subgroups_and_subgroup_fails_clearly() {
+    let Some(mut gpu) = gpu() else { return };
+    let keys = random(5000, 9);
+    with_caps(
+        &mut gpu,
+        |c| c.subgroups = None,
+        |gpu| {
+            check_on(gpu, &keys, 32, "auto");
+            let inputs = [("keys".to_string(), keys_array(&keys))].into();
+            let err = compile_error(gpu, "sort", r#"{"variant": "subgroup"}"#, &inputs);
+            assert!(
+                err.contains("variant `subgroup` cannot run")
+                    && err.contains("no subgroup operations"),
+                "{err}"
+            );
+        },
+    );
+}
+
+#[test]
+fn the_subgroup_path_follows_the_reported_subgroup_sizes() {
+    let Some(mut gpu) = gpu() else { return };
+    let Some((min, _)) = gpu.caps.subgroups else {
+        return;
+    };
+    let keys = random(3 * SUBGROUP_TILE + 17, 10);
+    // Subgroups that may be wider than 32 lanes: four-word ballot masks, same result.
+    with_caps(
+        &mut gpu,
+        |c| c.subgroups = Some((min, 128)),
+        |gpu| check_on(gpu, &keys, 32, "subgroup"),
+    );
+    // Too little workgroup memory for the counters of 4-lane subgroups: auto falls back.
+    with_caps(
+        &mut gpu,
+        |c| {
+            c.subgroups = Some((4, 128));
+            c.max_workgroup_storage = 32 << 10;
+        },
+        |gpu| {
+            check_on(gpu, &keys, 32, "auto");
+            let inputs = [("keys".to_string(), keys_array(&keys))].into();
+            let err = compile_error(gpu, "sort", r#"{"variant": "subgroup"}"#, &inputs);
+            assert!(err.contains("bytes of workgroup memory"), "{err}");
+        },
+    );
+}
