@@ -41,20 +41,21 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let seg = seg_size();
     let ppw = WG / seg;
     stencil_setup((wid.y * nwg.x + wid.x) * ppw, lid, ppw);
+    workgroupBarrier();
     let s = lid / seg;
     var acc = vec4<f32>(0.0);
     if (s < ppw && stencil_p[s] < geo.count) {
-        let tw = s * 3u * MAX_NS;
+        let tw = s * DIMS * NS;
         for (var pair = lid % seg; pair < NS * NS; pair = pair + seg) {
             let ix = pair % NS;
             let iy = pair / NS;
-            let wxy = stencil_w[tw + ix] * stencil_w[tw + MAX_NS + iy];
-            let oxy = stencil_o[tw + ix] + stencil_o[tw + MAX_NS + iy];
+            let wxy = stencil_w[tw + ix] * stencil_w[tw + NS + iy];
+            let oxy = stencil_o[tw + ix] + stencil_o[tw + NS + iy];
             if (DIMS == 2u) {
                 acc = sample(oxy, wxy, acc);
             } else {
                 for (var iz = 0u; iz < NS; iz = iz + 1u) {
-                    acc = sample(oxy + stencil_o[tw + 2u * MAX_NS + iz], wxy * stencil_w[tw + 2u * MAX_NS + iz], acc);
+                    acc = sample(oxy + stencil_o[tw + 2u * NS + iz], wxy * stencil_w[tw + 2u * NS + iz], acc);
                 }
             }
         }

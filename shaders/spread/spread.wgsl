@@ -15,16 +15,17 @@ override TOTAL: u32 = 1u;   // components per particle
 @group(0) @binding(1) var<storage, read> vals: array<f32>;
 @group(0) @binding(3) var<uniform> geo: Geometry;
 
-var<workgroup> value: array<f32, 64>;  // MAX_PPW * 4 components
+var<workgroup> value: array<f32, 64>;  // up to 16 particles x 4 components
 
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let seg = seg_size();
     let ppw = WG / seg;
-    stencil_setup((wid.y * nwg.x + wid.x) * ppw, lid, ppw);
+    let first_slot = (wid.y * nwg.x + wid.x) * ppw;
+    stencil_setup(first_slot, lid, ppw);
     if (lid < ppw * COMPS) {
-        let p = stencil_p[lid / COMPS];
+        let p = slot_particle(first_slot + lid / COMPS);
         if (p < geo.count) {
             value[lid] = vals[p * TOTAL + geo.comp_offset + lid % COMPS];
         }
@@ -34,21 +35,21 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     if (s >= ppw || stencil_p[s] >= geo.count) {
         return;
     }
-    let tw = s * 3u * MAX_NS;
+    let tw = s * DIMS * NS;
     let cells = geo.n.w;
     for (var pair = lid % seg; pair < NS * NS; pair = pair + seg) {
         let ix = pair % NS;
         let iy = pair / NS;
-        let wxy = stencil_w[tw + ix] * stencil_w[tw + MAX_NS + iy];
-        let oxy = stencil_o[tw + ix] + stencil_o[tw + MAX_NS + iy];
+        let wxy = stencil_w[tw + ix] * stencil_w[tw + NS + iy];
+        let oxy = stencil_o[tw + ix] + stencil_o[tw + NS + iy];
         if (DIMS == 2u) {
             for (var c = 0u; c < COMPS; c = c + 1u) {
                 grid_add((geo.comp_offset + c) * cells + oxy, wxy * value[s * COMPS + c]);
             }
         } else {
             for (var iz = 0u; iz < NS; iz = iz + 1u) {
-                let w = wxy * stencil_w[tw + 2u * MAX_NS + iz];
-                let cell = oxy + stencil_o[tw + 2u * MAX_NS + iz];
+                let w = wxy * stencil_w[tw + 2u * NS + iz];
+                let cell = oxy + stencil_o[tw + 2u * NS + iz];
                 for (var c = 0u; c < COMPS; c = c + 1u) {
                     grid_add((geo.comp_offset + c) * cells + cell, w * value[s * COMPS + c]);
                 }

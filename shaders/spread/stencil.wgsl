@@ -16,12 +16,13 @@
 
 const WG: u32 = 64u;
 const CHUNKS: u32 = 1024u;
-const MAX_NS: u32 = 32u;
-const MAX_PPW: u32 = 16u;
 
-var<workgroup> stencil_w: array<f32, 1536>;   // MAX_PPW * 3 * MAX_NS weights
-var<workgroup> stencil_o: array<u32, 1536>;   // wrapped cell offsets (times the axis stride)
-var<workgroup> stencil_p: array<u32, 16>;     // particle of each slot (count: none)
+// Tables of the workgroup's particles: slot s, axis a, support index k at s*3*NS + a*NS + k.
+// 96 entries suffice: a segment holds at least NS^2 threads, so PPW * NS <= 64 / NS, and
+// PPW * 3 * NS <= 96 for NS >= 2 (for NS > 8, PPW = 1 and NS <= 32).
+var<workgroup> stencil_w: array<f32, 96>;   // window weights per unit length
+var<workgroup> stencil_o: array<u32, 96>;   // wrapped cell offsets (times the axis stride)
+var<workgroup> stencil_p: array<u32, 16>;   // particle of each slot (geo.count: none)
 
 fn seg_size() -> u32 {
     var s = 1u;
@@ -32,25 +33,30 @@ fn seg_size() -> u32 {
     return s;
 }
 
-// Particle served by global slot g, or geo.count when the slot is empty.
+// Particle served by global slot g, or geo.count when the slot is empty. The map is one
+// to one on g < CHUNKS * chunk; the dispatch may round up past that (folded grids), and
+// those slots must stay empty.
 fn slot_particle(g: u32) -> u32 {
     let chunk = (geo.count + CHUNKS - 1u) / CHUNKS;
+    if (g >= CHUNKS * chunk) {
+        return geo.count;
+    }
     let p = (g % CHUNKS) * chunk + g / CHUNKS;
     return select(geo.count, p, p < geo.count);
 }
 
-// Fills the stencil tables of the PPW particles of this workgroup.
+// Fills the stencil tables of the PPW particles of this workgroup. The caller puts one
+// workgroupBarrier() after it (and after any other loads of its own).
 fn stencil_setup(first_slot: u32, lid: u32, ppw: u32) {
     if (lid < ppw) {
         stencil_p[lid] = slot_particle(first_slot + lid);
     }
-    workgroupBarrier();
     let per = DIMS * NS;
     for (var e = lid; e < ppw * per; e = e + WG) {
         let s = e / per;
         let a = (e / NS) % DIMS;
         let k = e % NS;
-        let p = stencil_p[s];
+        let p = slot_particle(first_slot + s);
         var w = 0.0;
         var off = 0u;
         if (p < geo.count) {
@@ -62,8 +68,7 @@ fn stencil_setup(first_slot: u32, lid: u32, ppw: u32) {
             if (a == 2u) { stride = geo.n.x * geo.n.y; }
             off = wrap_cell(i32(j0) + i32(k), geo.n[a]) * stride;
         }
-        stencil_w[s * 3u * MAX_NS + a * MAX_NS + k] = w;
-        stencil_o[s * 3u * MAX_NS + a * MAX_NS + k] = off;
+        stencil_w[e] = w;
+        stencil_o[e] = off;
     }
-    workgroupBarrier();
 }

@@ -398,3 +398,59 @@ fn bad_spread_params_are_plan_errors() {
         assert!(e.contains(want), "{params}: {e}");
     }
 }
+
+#[test]
+fn folded_dispatches_serve_every_particle_once() {
+    // More workgroups than one dispatch dimension holds fold over (x, y); the grid then
+    // rounds up past the particle slots, and those extra slots must stay empty. A small
+    // dimension cap makes a small problem take that path.
+    let Some(mut gpu) = gpu() else { return };
+    let mut rng = Rng::new(12);
+    let lengths = [8.0, 8.0, 8.0];
+    let cells = [16u32, 16, 16];
+    let pos = positions(&mut rng, 50, &lengths);
+    let vals = rng.array(ValueType::Particles { n: 50, k: 1 }, 0.5, 1.5);
+    let field = rng.array(
+        ValueType::RealGrid {
+            dims: [16, 16, 16],
+            comps: 1,
+        },
+        -1.0,
+        1.0,
+    );
+    let data_s: BTreeMap<String, HostArray> = [
+        ("positions".into(), pos.clone()),
+        ("values".into(), vals.clone()),
+    ]
+    .into_iter()
+    .collect();
+    let data_i: BTreeMap<String, HostArray> = [
+        ("grid".into(), field.clone()),
+        ("positions".into(), pos.clone()),
+    ]
+    .into_iter()
+    .collect();
+    for (w, extra) in [("peskin6", ""), ("peskin3", "")] {
+        let p = params(w, extra, &lengths, &cells, "auto");
+        let (s, i) = crate::util::with_caps(
+            &mut gpu,
+            |c| c.max_workgroups_per_dim = 3,
+            |g| {
+                (
+                    crate::util::run_node(g, "spread", &p, &data_s),
+                    crate::util::run_node(g, "interpolate", &p, &data_i),
+                )
+            },
+        );
+        let rs = reference("spread", &p, &[Some(&pos), Some(&vals)]).remove(0);
+        let ri = reference("interpolate", &p, &[Some(&field), Some(&pos), None]).remove(0);
+        assert!(
+            rel_max_err(&s["out"], &rs).0 < 1e-5,
+            "{w}: spread with folded dispatch"
+        );
+        assert!(
+            rel_max_err(&i["out"], &ri).0 < 1e-5,
+            "{w}: interpolate with folded dispatch"
+        );
+    }
+}
