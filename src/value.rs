@@ -161,6 +161,8 @@ pub enum PortType {
     Scalar,
     /// Any f32 value that is not a complex grid: particles, real grid or scalar.
     RealArray,
+    /// A spectrum: a complex grid or a half complex grid.
+    Spectrum,
 }
 
 impl PortType {
@@ -176,6 +178,10 @@ impl PortType {
             (
                 PortType::RealArray,
                 ValueType::Particles { .. } | ValueType::RealGrid { .. } | ValueType::Scalar,
+            ) => true,
+            (
+                PortType::Spectrum,
+                ValueType::ComplexGrid { .. } | ValueType::HalfComplexGrid { .. },
             ) => true,
             _ => false,
         }
@@ -193,6 +199,7 @@ impl fmt::Display for PortType {
             PortType::Indices => write!(f, "indices"),
             PortType::Scalar => write!(f, "scalar"),
             PortType::RealArray => write!(f, "particles | real_grid | scalar"),
+            PortType::Spectrum => write!(f, "complex_grid | half_complex_grid"),
         }
     }
 }

@@ -4,6 +4,7 @@
 //! skipping them.
 
 mod cli;
+mod fft;
 mod graph_files;
 mod nodes;
 mod plan;
