@@ -10,8 +10,8 @@
 use std::f64::consts::PI;
 
 use crate::node::{
-    Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec, RefCtx,
-    Registry, Signature, SpectralBody,
+    Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
+    Signature, SpectralBody,
 };
 use crate::value::{PortType, RefArray, ValueType, half_dims};
 
@@ -119,11 +119,11 @@ static KINDS: &[SpectralKind] = &[
             if k2 == 0.0 {
                 return;
             }
-            for part in 0..2 {
-                let d = (0..3).map(|i| k[i] * v[i][part]).sum::<f64>() / k2;
-                for i in 0..3 {
-                    v[i][part] -= k[i] * d;
-                }
+            // k is real: project the real and imaginary parts alike.
+            let d = [0, 1].map(|part| (0..3).map(|i| k[i] * v[i][part]).sum::<f64>() / k2);
+            for (ki, vi) in k.iter().zip(v.iter_mut()) {
+                vi[0] -= ki * d[0];
+                vi[1] -= ki * d[1];
             }
         },
     },

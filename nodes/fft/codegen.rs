@@ -295,7 +295,12 @@ pub fn source(p: &Pass, fold: Option<&Fold>) -> String {
     }
     writeln!(w, "    let ib = {};", line_base("ln", p.in_len, p.in_inner)).unwrap();
     if !via_shared_out {
-        writeln!(w, "    let ob = {};", line_base("ln", p.out_len, p.out_inner)).unwrap();
+        writeln!(
+            w,
+            "    let ob = {};",
+            line_base("ln", p.out_len, p.out_inner)
+        )
+        .unwrap();
     }
     let regs = stages
         .iter()
@@ -430,7 +435,9 @@ pub fn source(p: &Pass, fold: Option<&Fold>) -> String {
                             n / 2
                         ),
                         Store::Real => format!("dst[ob + {pos}] = {reg}.x{scale};"),
-                        Store::HalfPacked => unreachable!("packed stores go through workgroup memory"),
+                        Store::HalfPacked => {
+                            unreachable!("packed stores go through workgroup memory")
+                        }
                     }
                 };
                 writeln!(w, "        {store}").unwrap();
@@ -465,7 +472,10 @@ fn output_phase(w: &mut String, p: &Pass, fold: Option<&Fold>, scale: &str, post
         writeln!(w, "      if (item < {items}u) {{").unwrap();
         match p.layout {
             Layout::Contiguous => {
-                writeln!(w, "        let ls = item / {count}u; let q = item % {count}u;")
+                writeln!(
+                    w,
+                    "        let ls = item / {count}u; let q = item % {count}u;"
+                )
             }
             Layout::Strided => writeln!(w, "        let ls = item % {bs}u; let q = item / {bs}u;"),
         }

@@ -25,8 +25,8 @@ pub use plan::{is_friendly, next_friendly};
 
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx,
-    Registry, Signature, SpectralBody,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
+    Signature, SpectralBody,
 };
 use crate::value::{PortType, RefArray, ValueType};
 use plan::{Buf, Key, Kind, Limits, MAX_LENGTH};
@@ -68,7 +68,11 @@ impl NodeKind for FftKind {
     }
 
     fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("x", self.port_types().0, "the grid to transform")]
+        vec![PortSpec::new(
+            "x",
+            self.port_types().0,
+            "the grid to transform",
+        )]
     }
 
     fn outputs(&self) -> Vec<PortSpec> {
@@ -184,7 +188,9 @@ impl FftNode {
                     Buf::Input => Ok(input.buffer),
                     Buf::Output => Ok(io.outputs[0].buffer),
                     Buf::Scratch => io.scratch.first().copied().ok_or_else(|| {
-                        CompileError::Unsupported("the transform's scratch buffer is missing".into())
+                        CompileError::Unsupported(
+                            "the transform's scratch buffer is missing".into(),
+                        )
                     }),
                 }
             };
@@ -215,7 +221,10 @@ impl Node for FftNode {
             if n == 0 {
                 return Err(PortError::new(
                     "x",
-                    format!("size 0 along {}: a transform needs at least one cell", AXIS[a]),
+                    format!(
+                        "size 0 along {}: a transform needs at least one cell",
+                        AXIS[a]
+                    ),
                 ));
             }
             if !self.axes[a] || n == 1 {
@@ -249,10 +258,11 @@ impl Node for FftNode {
         let mut sig = Signature::outputs(vec![out]);
         // The inverse real transform keeps its input intact, and its real output is too
         // small for the spectrum, so the passes before the last go through scratch.
-        if self.kind == Kind::RealInverse && (self.axes[1] && dims[1] > 1 || self.axes[2] && dims[2] > 1) {
-            sig.scratch.push(
-                ValueType::HalfComplexGrid { dims, comps }.bytes(),
-            );
+        if self.kind == Kind::RealInverse
+            && (self.axes[1] && dims[1] > 1 || self.axes[2] && dims[2] > 1)
+        {
+            sig.scratch
+                .push(ValueType::HalfComplexGrid { dims, comps }.bytes());
         }
         Ok(sig)
     }
@@ -269,7 +279,7 @@ impl Node for FftNode {
             .filter(|&a| self.axes[a] && dims[a] > 1)
             .map(|a| {
                 let real = matches!(self.kind, Kind::RealForward | Kind::RealInverse);
-                let n = if a == 0 && real && dims[0] % 2 == 0 {
+                let n = if a == 0 && real && dims[0].is_multiple_of(2) {
                     dims[0] / 2
                 } else {
                     dims[a]

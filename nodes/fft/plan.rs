@@ -33,7 +33,7 @@ pub fn is_friendly(n: u32) -> bool {
     }
     let mut m = n;
     for p in [2, 3, 5, 7] {
-        while m % p == 0 {
+        while m.is_multiple_of(p) {
             m /= p;
         }
     }
@@ -54,7 +54,7 @@ pub fn radices(n: u32) -> Vec<u32> {
     debug_assert!(is_friendly(n));
     let mut m = n;
     let mut twos = 0;
-    while m % 2 == 0 {
+    while m.is_multiple_of(2) {
         m /= 2;
         twos += 1;
     }
@@ -72,7 +72,7 @@ pub fn radices(n: u32) -> Vec<u32> {
         }
     }
     for p in [7, 5, 3] {
-        while m % p == 0 {
+        while m.is_multiple_of(p) {
             m /= p;
             out.push(p);
         }
@@ -411,7 +411,8 @@ pub struct Key {
 
 /// The recipe for `key`, built once per process.
 pub fn recipe(key: &Key) -> Result<Arc<Recipe>, String> {
-    static MEMO: OnceLock<Mutex<HashMap<Key, Result<Arc<Recipe>, String>>>> = OnceLock::new();
+    type Memo = Mutex<HashMap<Key, Result<Arc<Recipe>, String>>>;
+    static MEMO: OnceLock<Memo> = OnceLock::new();
     let memo = MEMO.get_or_init(Default::default);
     if let Some(r) = memo.lock().map_err(|_| "FFT plan cache poisoned")?.get(key) {
         return r.clone();
@@ -425,9 +426,7 @@ pub fn recipe(key: &Key) -> Result<Arc<Recipe>, String> {
 
 /// Axes that get a pass, in order.
 fn active_axes(key: &Key) -> Vec<usize> {
-    (0..3)
-        .filter(|&a| key.axes[a] && key.dims[a] > 1)
-        .collect()
+    (0..3).filter(|&a| key.axes[a] && key.dims[a] > 1).collect()
 }
 
 fn build(key: &Key) -> Result<Recipe, String> {
@@ -435,11 +434,7 @@ fn build(key: &Key) -> Result<Recipe, String> {
     let comps = key.comps;
     let inverse = key.kind.inverse();
     let real = matches!(key.kind, Kind::RealForward | Kind::RealInverse);
-    let stored = if real {
-        crate::value::half_dims(d)
-    } else {
-        d
-    };
+    let stored = if real { crate::value::half_dims(d) } else { d };
     let cells = |dims: [u32; 3]| dims[0] as u64 * dims[1] as u64 * dims[2] as u64;
     // Complex transforms along y and z, over the stored spectrum.
     let c2c = |axis: usize| -> PassShape {
@@ -528,7 +523,7 @@ struct PassShape {
 fn real_x(d: [u32; 3], inverse: bool) -> PassShape {
     let nx = d[0];
     let half = nx / 2 + 1;
-    let even = nx % 2 == 0;
+    let even = nx.is_multiple_of(2);
     let n = if even { nx / 2 } else { nx };
     let (load, store, in_len, out_len) = match (inverse, even) {
         (false, true) => (Load::Complex, Store::HalfPacked, n, half),
@@ -603,8 +598,7 @@ fn tile(
     let lim = key.limits;
     let radices = radices(s.n);
     let tile_comps = if spectral { key.comps } else { 1 };
-    let (threads, registers) =
-        threads_per_line(s.n, &radices, (lim.threads / tile_comps).max(1));
+    let (threads, registers) = threads_per_line(s.n, &radices, (lim.threads / tile_comps).max(1));
     let layout = if s.in_inner == 1 && s.out_inner == 1 {
         Layout::Contiguous
     } else {
@@ -658,10 +652,12 @@ fn tile(
             if !needs_shared {
                 break Some((bs, false, 0));
             }
-            let fit = [layout == Layout::Contiguous, false].into_iter().find_map(|padded| {
-                let len = shared_len(lines_in_tile, pass.shared_line(), layout, padded);
-                (8 * len <= lim.shared_bytes).then_some((bs, padded, len))
-            });
+            let fit = [layout == Layout::Contiguous, false]
+                .into_iter()
+                .find_map(|padded| {
+                    let len = shared_len(lines_in_tile, pass.shared_line(), layout, padded);
+                    (8 * len <= lim.shared_bytes).then_some((bs, padded, len))
+                });
             if fit.is_some() {
                 break fit;
             }

@@ -76,11 +76,8 @@ pub fn transform(kind: Kind, axes: [bool; 3], input: &RefArray, output: &mut Ref
             output.data = words(&v);
         }
         Kind::RealForward => {
-            let mut v: Vec<Complex64> = input
-                .data
-                .iter()
-                .map(|&x| Complex64::new(x, 0.0))
-                .collect();
+            let mut v: Vec<Complex64> =
+                input.data.iter().map(|&x| Complex64::new(x, 0.0)).collect();
             c2c(&mut v, d, comps, axes, false);
             let h = usize3(half_dims(dims));
             let mut out = Vec::with_capacity(h[0] * h[1] * h[2] * comps);

@@ -38,7 +38,10 @@ pub enum Unit {
     /// Pointwise members in order, each with whether its output must be stored.
     Group(Vec<(usize, bool)>),
     /// A transform that applies a spectral node in its last pass (see `spectral.rs`).
-    Folded { transform: usize, spectral: usize },
+    Folded {
+        transform: usize,
+        spectral: usize,
+    },
 }
 
 /// A generated element-wise kernel.

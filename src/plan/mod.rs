@@ -909,9 +909,9 @@ impl Launch {
     /// The graph nodes it runs.
     pub fn nodes(&self) -> Vec<usize> {
         match self {
-            Launch::Node { node, spectral, .. } => {
-                std::iter::once(*node).chain(spectral.map(|f| f.node)).collect()
-            }
+            Launch::Node { node, spectral, .. } => std::iter::once(*node)
+                .chain(spectral.map(|f| f.node))
+                .collect(),
             Launch::Fused(k) => k.nodes.clone(),
             Launch::Copy { .. } => vec![],
         }

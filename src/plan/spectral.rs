@@ -34,7 +34,11 @@ pub fn fold(
             *readers.entry(*s).or_default() += 1;
         }
     }
-    let single = |n: usize| units.iter().any(|u| matches!(u, Unit::Single(m) if *m == n));
+    let single = |n: usize| {
+        units
+            .iter()
+            .any(|u| matches!(u, Unit::Single(m) if *m == n))
+    };
     let mut folds: BTreeMap<usize, usize> = BTreeMap::new();
     for &b in ctx.order {
         let inst = &ctx.g.nodes[b];
