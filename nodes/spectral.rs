@@ -29,8 +29,8 @@ fn box_param() -> ParamSpec {
         name: "box",
         kind: ParamKind::Numbers {
             len: Some(3),
-            min: f64::MIN_POSITIVE,
-            max: f64::MAX,
+            min: 0.0,
+            max: f64::INFINITY,
         },
         default: Some(crate::expr::ParamValue::Numbers(vec![1.0, 1.0, 1.0])),
         doc: "periodic box lengths (Lx, Ly, Lz): k = 2 pi (kx/Lx, ky/Ly, kz/Lz)",
@@ -61,7 +61,13 @@ static KINDS: &[SpectralKind] = &[
         doc: "Gaussian filter of a spectrum: every component times exp(-sigma^2 |k|^2 / 2), k in units of the box",
         params: || {
             vec![
-                ParamSpec::number("sigma", None, 0.0, f64::MAX, "filter width (a length)"),
+                ParamSpec::number(
+                    "sigma",
+                    None,
+                    0.0,
+                    f64::INFINITY,
+                    "filter width (a length)",
+                ),
                 box_param(),
             ]
         },
@@ -160,6 +166,12 @@ impl NodeKind for &'static SpectralKind {
 
     fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
         let values = (self.values)(params);
+        if values[..3].iter().any(|&l| l <= 0.0) {
+            return Err(format!(
+                "box lengths must be positive, got {:?}",
+                &values[..3]
+            ));
+        }
         Ok(Box::new(SpectralNode {
             kind: self,
             body: SpectralBody {
