@@ -230,6 +230,15 @@ impl Node for FftNode {
             if !self.axes[a] || n == 1 {
                 continue;
             }
+            if n > MAX_LENGTH {
+                return Err(PortError::new(
+                    "x",
+                    format!(
+                        "size {n} along {} is longer than {MAX_LENGTH}, the longest line an FFT node transforms (lines live in one workgroup's memory)",
+                        AXIS[a]
+                    ),
+                ));
+            }
             if !is_friendly(n) {
                 return Err(PortError::new(
                     "x",
@@ -237,15 +246,6 @@ impl Node for FftNode {
                         "size {n} along {} is not a product of 2, 3, 5, 7; the next friendly size is {}",
                         AXIS[a],
                         next_friendly(n)
-                    ),
-                ));
-            }
-            if n > MAX_LENGTH {
-                return Err(PortError::new(
-                    "x",
-                    format!(
-                        "size {n} along {} is longer than {MAX_LENGTH}, the longest line an FFT node transforms",
-                        AXIS[a]
                     ),
                 ));
             }

@@ -40,12 +40,20 @@ pub fn is_friendly(n: u32) -> bool {
     m == 1
 }
 
+/// The largest friendly u32: 2 * 3^6 * 5^2 * 7^6 = 4 288 306 050.
+pub const LARGEST_FRIENDLY: u32 = 4_288_306_050;
+
 /// The smallest size >= `n` whose prime factors are all 2, 3, 5 or 7: the grid size a
-/// planner should pick for an FFT axis of at least `n` cells.
+/// planner should pick for an FFT axis of at least `n` cells. Panics for `n` above
+/// [`LARGEST_FRIENDLY`] (no u32 answers; FFT lines are far shorter anyway).
 pub fn next_friendly(n: u32) -> u32 {
-    (n.max(1)..=u32::MAX)
+    assert!(
+        n <= LARGEST_FRIENDLY,
+        "no friendly FFT size >= {n} fits in a u32"
+    );
+    (n.max(1)..=LARGEST_FRIENDLY)
         .find(|&m| is_friendly(m))
-        .expect("friendly sizes are unbounded below u32::MAX")
+        .unwrap_or(LARGEST_FRIENDLY)
 }
 
 /// The radix sequence of a friendly length: eights (then a four or two for the rest of
@@ -706,6 +714,8 @@ mod tests {
         assert_eq!(next_friendly(0), 1);
         assert_eq!(next_friendly(121), 125);
         assert_eq!(next_friendly(256), 256);
+        assert!(is_friendly(LARGEST_FRIENDLY));
+        assert_eq!(next_friendly(LARGEST_FRIENDLY - 1), LARGEST_FRIENDLY);
     }
 
     #[test]
