@@ -230,10 +230,10 @@ impl Pass {
 
     /// Output values per line.
     pub fn out_count(&self) -> u32 {
-        if self.store == Store::HalfPacked {
-            self.n + 1
-        } else {
-            self.n
+        match self.store {
+            Store::HalfPacked => self.n + 1,
+            Store::Half => self.n / 2 + 1,
+            Store::Complex | Store::Real => self.n,
         }
     }
 

@@ -493,6 +493,16 @@ fn spectral_nodes_fold_into_the_forward_transform() {
                 comps: 3,
             },
         ),
+        (
+            "rfft",
+            "spectral_filter",
+            r#"{"sigma": 0.1}"#,
+            "irfft",
+            ValueType::RealGrid {
+                dims: [15, 1, 1],
+                comps: 2,
+            },
+        ),
     ];
     for &(fwd, spectral, params, inv, ty) in cases {
         let dir = tmpdir("fft-fold");
