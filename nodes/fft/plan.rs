@@ -605,7 +605,7 @@ fn tile(
 ) -> Result<Pass, String> {
     let lim = key.limits;
     let radices = radices(s.n);
-    let tile_comps = if spectral { key.comps } else { 1 };
+    let tile_comps = if spectral { key.comps.max(1) } else { 1 };
     let (threads, registers) = threads_per_line(s.n, &radices, (lim.threads / tile_comps).max(1));
     let layout = if s.in_inner == 1 && s.out_inner == 1 {
         Layout::Contiguous
@@ -677,16 +677,20 @@ fn tile(
     };
     let Some((bs, padded, shared)) = chosen else {
         return Err(format!(
-            "a {}-point line along {} needs {} bytes of workgroup memory{}; this device has {}",
+            "{} {}-point line{} along {} need{} {} bytes of workgroup memory and {} threads; this device has {} bytes and {} threads per workgroup",
+            tile_comps,
             s.n,
-            ["x", "y", "z"][s.axis],
-            8 * tile_comps * pass.shared_line(),
-            if spectral {
-                format!(" for its {tile_comps} components together")
+            if tile_comps > 1 {
+                "s (one per component)"
             } else {
-                String::new()
+                ""
             },
-            lim.shared_bytes
+            ["x", "y", "z"][s.axis],
+            if tile_comps > 1 { "" } else { "s" },
+            8 * tile_comps * pass.shared_line(),
+            tile_comps * threads,
+            lim.shared_bytes,
+            lim.threads
         ));
     };
     pass.tile_lines = bs;

@@ -357,6 +357,21 @@ fn recipes_fit_the_device_and_read_and_write_each_line_once_per_axis() {
         let last = r.passes.last().unwrap();
         assert!(last.spectral && last.tile_comps == 3, "{n}: {last:?}");
     }
+    // Lines longer than the device's workgroup memory are a clear error.
+    let key = plan::Key {
+        kind: plan::Kind::Forward,
+        dims: [4096, 1, 1],
+        comps: 1,
+        axes: [true; 3],
+        spectral: false,
+        limits: plan::Limits::of(&DeviceCaps::baseline()),
+    };
+    let e = plan::recipe(&key).unwrap_err();
+    assert!(
+        e.contains("1 4096-point line along x needs 32768 bytes of workgroup memory")
+            && e.contains("this device has 16384 bytes"),
+        "{e}"
+    );
     // The inverse real transform goes through scratch (its input stays intact).
     let r = recipe(plan::Kind::RealInverse, [64, 64, 64], false, &nvidia);
     assert_eq!(r.scratch, 8 * 33 * 64 * 64 * 3);
