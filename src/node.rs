@@ -380,6 +380,14 @@ impl SpectralBody {
     /// The WGSL function for `comps` components. A kernel using it declares
     /// `spectral_params: array<f32>` as a read-only storage binding holding `params` and
     /// imports `common/wave.wgsl` for `wave_number`.
+    /// The params as the `spectral_params` binding holds them: at least one word, since
+    /// a binding cannot be empty.
+    pub fn param_words(&self) -> Vec<f32> {
+        let mut p = self.params.clone();
+        p.resize(p.len().max(1), 0.0);
+        p
+    }
+
     pub fn function(&self, comps: u32) -> String {
         format!(
             "const SPECTRAL_COMPS: u32 = {comps}u;\nfn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>, SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS> {{\n    {}\n}}\n",

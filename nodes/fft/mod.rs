@@ -152,15 +152,8 @@ impl FftNode {
             .map_err(CompileError::Unsupported)?;
         let input = io.inputs[0]
             .ok_or_else(|| CompileError::Unsupported("the transform needs an input".into()))?;
-        let params = spectral.map(|b| {
-            // An empty table still needs a binding of at least one word.
-            let p = if b.params.is_empty() {
-                vec![0.0]
-            } else {
-                b.params.clone()
-            };
-            cx.table("spectral params", bytemuck::cast_slice(&p))
-        });
+        let params =
+            spectral.map(|b| cx.table("spectral params", bytemuck::cast_slice(&b.param_words())));
         let fold = spectral.map(|body| codegen::Fold {
             body,
             dims: recipe.dims,
@@ -203,11 +196,9 @@ impl FftNode {
             if let (true, Some(p)) = (pass.spectral, &params) {
                 buffers.push(p);
             }
-            // Workgroups folded over (x, y): one dimension holds at most
-            // max_workgroups_per_dim; the kernel rebuilds wid.y * nwg.x + wid.x.
-            let max = cx.caps().max_workgroups_per_dim;
-            let x = pass.groups.min(max);
-            let groups = [x, pass.groups.div_ceil(x.max(1)), 1];
+            // Workgroups folded over (x, y) as 1-D kernels fold them; the pass rebuilds
+            // its group index as wid.y * nwg.x + wid.x.
+            let groups = cx.grid_1d(pass.groups as u64, 1);
             out.push(cx.dispatch(&kernel, &buffers, groups));
         }
         Ok(out)

@@ -654,10 +654,7 @@ fn spectral_dispatch(
             Binding::StorageReadWrite,
         ],
     ))?;
-    // A binding holds at least one word, even without params.
-    let mut params = body.params.clone();
-    params.resize(params.len().max(1), 0.0);
-    let params = cx.table("spectral params", bytemuck::cast_slice(&params));
+    let params = cx.table("spectral params", bytemuck::cast_slice(&body.param_words()));
     let cells = match out.ty {
         ValueType::ComplexGrid { comps, .. } | ValueType::HalfComplexGrid { comps, .. } => {
             out.ty.words() / 2 / comps.max(1) as u64
