@@ -377,9 +377,6 @@ pub struct SpectralBody {
 }
 
 impl SpectralBody {
-    /// The WGSL function for `comps` components. A kernel using it declares
-    /// `spectral_params: array<f32>` as a read-only storage binding holding `params` and
-    /// imports `common/wave.wgsl` for `wave_number`.
     /// The params as the `spectral_params` binding holds them: at least one word, since
     /// a binding cannot be empty.
     pub fn param_words(&self) -> Vec<f32> {
@@ -388,6 +385,9 @@ impl SpectralBody {
         p
     }
 
+    /// The WGSL function for `comps` components. A kernel using it declares
+    /// `spectral_params: array<f32>` as a read-only storage binding holding
+    /// [`SpectralBody::param_words`] and imports `common/wave.wgsl` for `wave_number`.
     pub fn function(&self, comps: u32) -> String {
         format!(
             "const SPECTRAL_COMPS: u32 = {comps}u;\nfn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>, SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS> {{\n    {}\n}}\n",
