@@ -1,18 +1,21 @@
 //! Node implementations, each beside its f64 CPU reference. Kernels live in `shaders/`.
 
 pub mod cells;
+pub mod fft;
 pub mod permute;
 pub mod pointwise;
 pub mod random;
 pub mod reduce;
 pub mod scan;
 pub mod sort;
+pub mod spectral;
 pub mod spread;
 
 use crate::node::Registry;
 
 /// Adds every shipped node kind to the registry.
 pub fn register_all(r: &mut Registry) {
+    fft::register(r);
     pointwise::register(r);
     cells::register(r);
     permute::register(r);
@@ -21,4 +24,5 @@ pub fn register_all(r: &mut Registry) {
     spread::register(r);
     scan::register(r);
     sort::register(r);
+    spectral::register(r);
 }

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::expr::ParamValue;
-use crate::gpu::{CompileCtx, CompileError, Dispatch, NodeIo};
+use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, NodeIo};
 use crate::value::{PortType, RefArray, ValueType};
 
 /// One input or output port of a node kind.
@@ -364,12 +364,51 @@ pub struct PointwiseBody {
     pub uses_step: bool,
 }
 
+/// An operation on all components of a spectrum at one wave vector (a Green function
+/// that mixes components, a filter, a projection). The planner folds it into the last
+/// pass of the forward transform that produces its input when it can (see
+/// [`GpuKernels::folds_spectral`]), so it costs no pass over the grid of its own;
+/// otherwise it runs as a kernel of its own through the same function.
+///
+/// The body is the WGSL body of `fn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>,
+/// SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS>`: `k` holds the signed wave
+/// numbers (index i on an axis of n points is i for i <= n/2, else i - n), `n` the dims of
+/// the real-space grid, `v` the components at k as (re, im). Params are read as
+/// `spectral_params[i]` (f32).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpectralBody {
+    pub body: String,
+    pub params: Vec<f32>,
+}
+
+impl SpectralBody {
+    /// The params as the `spectral_params` binding holds them: at least one word, since
+    /// a binding cannot be empty.
+    pub fn param_words(&self) -> Vec<f32> {
+        let mut p = self.params.clone();
+        p.resize(p.len().max(1), 0.0);
+        p
+    }
+
+    /// The WGSL function for `comps` components. A kernel using it declares
+    /// `spectral_params: array<f32>` as a read-only storage binding holding
+    /// [`SpectralBody::param_words`] and imports `common/wave.wgsl` for `wave_number`.
+    pub fn function(&self, comps: u32) -> String {
+        format!(
+            "const SPECTRAL_COMPS: u32 = {comps}u;\nfn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>, SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS> {{\n    {}\n}}\n",
+            self.body.trim()
+        )
+    }
+}
+
 /// How a node turns into GPU work.
 pub enum Lowering<'a> {
     /// An element-wise body the planner compiles, fused or alone.
     Pointwise(PointwiseBody),
     /// The node records its own dispatches.
     Kernels(&'a dyn GpuKernels),
+    /// A spectral operation the planner folds into a transform or runs alone.
+    Spectral(SpectralBody),
 }
 
 /// A node that records its own dispatches.
@@ -383,6 +422,40 @@ pub trait GpuKernels {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError>;
+
+    /// Decisions that depend on the device (an FFT's workgroup tiling, chosen from its
+    /// limits), shown by `mesoflow inspect` after [`Node::notes`]; `folded`: with a
+    /// spectral node folded in.
+    fn device_notes(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+        folded: bool,
+    ) -> Vec<String> {
+        let _ = (inputs, caps, folded);
+        Vec::new()
+    }
+
+    /// Whether [`GpuKernels::compile_spectral`] can apply a spectral node to this node's
+    /// only output, for these input types on this device.
+    fn folds_spectral(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> bool {
+        let _ = (inputs, caps);
+        false
+    }
+
+    /// `compile` with `spectral` applied to the results before they are stored;
+    /// `io.outputs[0]` is then the spectral node's output.
+    fn compile_spectral(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+        spectral: &SpectralBody,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let _ = (cx, io, spectral);
+        Err(CompileError::Unsupported(
+            "this node cannot fold a spectral node".into(),
+        ))
+    }
 }
 
 /// Context given to CPU references.

@@ -166,6 +166,8 @@ pub enum PortType {
     /// A [`PortType::RealArray`] value or an index array: any array of real words
     /// (f32 or u32), for nodes that treat values as flat sequences (scan).
     RealOrIndices,
+    /// A spectrum: a complex grid or a half complex grid.
+    Spectrum,
 }
 
 impl PortType {
@@ -190,6 +192,10 @@ impl PortType {
                 | ValueType::Scalar
                 | ValueType::Indices { .. },
             ) => true,
+            (
+                PortType::Spectrum,
+                ValueType::ComplexGrid { .. } | ValueType::HalfComplexGrid { .. },
+            ) => true,
             _ => false,
         }
     }
@@ -208,6 +214,7 @@ impl fmt::Display for PortType {
             PortType::RealArray => write!(f, "particles | real_grid | scalar"),
             PortType::Rows => write!(f, "particles | indices"),
             PortType::RealOrIndices => write!(f, "indices | particles | real_grid | scalar"),
+            PortType::Spectrum => write!(f, "complex_grid | half_complex_grid"),
         }
     }
 }

@@ -5,6 +5,7 @@
 //! Node benchmarks go through the engine like any graph: [`time_graph`] plans and
 //! compiles a graph file and times each launch with GPU timestamps.
 
+mod fft;
 mod primitives;
 mod reduce;
 mod spread;
@@ -148,6 +149,25 @@ pub enum BenchCommand {
         #[arg(long, default_value = "auto")]
         variant: String,
     },
+    /// 3-D real FFTs (rfft then irfft) on cubic grids, with their error against rustfft.
+    Fft {
+        /// Cubic grid sizes.
+        #[arg(long, value_delimiter = ',', default_values_t = [64, 96, 128, 162, 189, 192, 216, 256, 375, 384])]
+        sizes: Vec<u32>,
+        /// Components transformed together.
+        #[arg(long, default_value_t = 3)]
+        comps: u32,
+        /// Timed runs per size (the median is reported).
+        #[arg(long, default_value_t = 20)]
+        reps: u64,
+        /// Largest size whose forward error is checked against the f64 host reference
+        /// (seconds and gigabytes of host work at 384).
+        #[arg(long, default_value_t = 512)]
+        max_ref: u32,
+        /// Fold a spectral_filter between the transforms (a convolution's cost).
+        #[arg(long)]
+        filter: bool,
+    },
 }
 
 pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
@@ -161,6 +181,13 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
         BenchCommand::Spread { cells, reps } => spread::run(cells, reps),
         BenchCommand::Sort { n, reps, variant } => primitives::sort(n, reps, &variant),
         BenchCommand::Scan { n, reps, variant } => primitives::scan(n, reps, &variant),
+        BenchCommand::Fft {
+            sizes,
+            comps,
+            reps,
+            max_ref,
+            filter,
+        } => fft::run(&sizes, comps, reps, max_ref, filter),
     }
 }
 

@@ -17,9 +17,9 @@ use crate::gpu::{
     NodeIo, Slot, WG_1D,
 };
 use crate::graph::Graph;
-use crate::node::Lowering;
+use crate::node::{Lowering, SpectralBody};
 use crate::plan::{Launch, Phase, Plan, Storage, ValueId};
-use crate::value::HostArray;
+use crate::value::{HostArray, ValueType};
 
 #[derive(Debug, Error)]
 #[non_exhaustive]
@@ -241,9 +241,15 @@ impl<'a> Program<'a> {
                 inputs,
                 outputs,
                 scratch,
+                spectral,
                 ..
             } => {
                 let inst = &g.nodes[*node];
+                // A transform that folds a spectral node writes the latter's output.
+                let outputs = match spectral {
+                    Some(f) => std::slice::from_ref(&f.output),
+                    None => outputs.as_slice(),
+                };
                 let io = NodeIo {
                     inputs: inputs
                         .iter()
@@ -263,18 +269,37 @@ impl<'a> Program<'a> {
                         .collect(),
                     scratch: scratch.iter().map(|&v| self.buffer(v, parity)).collect(),
                 };
-                let Lowering::Kernels(k) = inst.node.lowering() else {
-                    panic!("pointwise node `{}` scheduled as a single launch", inst.id)
-                };
-                let dispatches = k.compile(cx, &io).map_err(|source| ExecError::Compile {
+                let err = |source| ExecError::Compile {
                     node: inst.id.clone(),
                     source,
-                })?;
-                Ok(Compiled {
-                    label: inst.id.clone(),
-                    kinds: inst.kind.to_string(),
-                    dispatches,
-                })
+                };
+                match (inst.node.lowering(), spectral) {
+                    (Lowering::Kernels(k), None) => Ok(Compiled {
+                        label: inst.id.clone(),
+                        kinds: inst.kind.to_string(),
+                        dispatches: k.compile(cx, &io).map_err(err)?,
+                    }),
+                    (Lowering::Kernels(k), Some(f)) => {
+                        let s = &g.nodes[f.node];
+                        let Lowering::Spectral(body) = s.node.lowering() else {
+                            panic!("folded node `{}` is not spectral", s.id)
+                        };
+                        Ok(Compiled {
+                            label: format!("{} + {}", inst.id, s.id),
+                            kinds: format!("{}+{}", inst.kind, s.kind),
+                            dispatches: k.compile_spectral(cx, &io, &body).map_err(err)?,
+                        })
+                    }
+                    (Lowering::Spectral(body), None) => Ok(Compiled {
+                        label: inst.id.clone(),
+                        kinds: inst.kind.to_string(),
+                        dispatches: vec![spectral_dispatch(cx, &body, &io).map_err(err)?],
+                    }),
+                    _ => panic!(
+                        "node `{}` scheduled as a single launch cannot run as one",
+                        inst.id
+                    ),
+                }
             }
             Launch::Fused(k) => {
                 let ids: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].id.as_str()).collect();
@@ -613,6 +638,40 @@ impl<'a> Program<'a> {
             .chain(self.step[0].iter().map(|c| (Phase::Step, c.label.clone())))
             .collect()
     }
+}
+
+/// A spectral node that is not folded into a transform: its function over every wave
+/// vector of its input.
+fn spectral_dispatch(
+    cx: &mut CompileCtx,
+    body: &SpectralBody,
+    io: &NodeIo,
+) -> Result<Dispatch, CompileError> {
+    let input = io.inputs[0]
+        .ok_or_else(|| CompileError::Unsupported("a spectral node needs its input".into()))?;
+    let out = io.outputs[0];
+    let source = crate::plan::spectral::standalone_source(body, &out.ty);
+    let kernel = cx.kernel(&KernelSpec::new(
+        "spectral",
+        source,
+        &[
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+        ],
+    ))?;
+    let params = cx.table("spectral params", bytemuck::cast_slice(&body.param_words()));
+    let cells = match out.ty {
+        ValueType::ComplexGrid { comps, .. } | ValueType::HalfComplexGrid { comps, .. } => {
+            out.ty.words() / 2 / comps.max(1) as u64
+        }
+        _ => 0,
+    };
+    Ok(cx.dispatch(
+        &kernel,
+        &[&params, input.buffer, out.buffer],
+        cx.grid_1d(cells, WG_1D),
+    ))
 }
 
 fn engine_err(source: CompileError) -> ExecError {

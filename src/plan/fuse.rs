@@ -37,6 +37,11 @@ pub enum Unit {
     Single(usize),
     /// Pointwise members in order, each with whether its output must be stored.
     Group(Vec<(usize, bool)>),
+    /// A transform that applies a spectral node in its last pass (see `spectral.rs`).
+    Folded {
+        transform: usize,
+        spectral: usize,
+    },
 }
 
 /// A generated element-wise kernel.

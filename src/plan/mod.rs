@@ -8,6 +8,7 @@
 mod fuse;
 mod memory;
 mod show;
+pub mod spectral;
 
 use std::cmp::Reverse;
 use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
@@ -17,6 +18,7 @@ pub use show::{human_bytes, to_dot, to_text};
 
 use crate::gpu::DeviceCaps;
 use crate::graph::{Graph, Problem, Problems, Source};
+use crate::node::Lowering;
 use crate::value::ValueType;
 
 /// What the caller asks of the planner.
@@ -83,17 +85,27 @@ pub struct PlanBuffer {
     pub holds: Vec<String>,
 }
 
+/// A spectral node folded into the transform that produces its input.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FoldedSpectral {
+    pub node: usize,
+    /// Its output, written by the transform's last pass.
+    pub output: ValueId,
+}
+
 /// One unit of GPU work.
 #[derive(Clone, Debug)]
 pub enum Launch {
-    /// A node that records its own dispatches.
+    /// A node that records its own dispatches (or a spectral node's kernel).
     Node {
         node: usize,
         inputs: Vec<Option<ValueId>>,
+        /// With `spectral`, the node's own output is never stored (a register value).
         outputs: Vec<ValueId>,
         scratch: Vec<ValueId>,
         /// The node's own decisions for these inputs (see `Node::notes`).
         notes: Vec<String>,
+        spectral: Option<FoldedSpectral>,
     },
     /// One generated kernel for a chain of element-wise nodes.
     Fused(FusedKernel),
@@ -608,6 +620,14 @@ impl<'g> Planner<'g> {
                 },
             };
             let units = fuse::group(&ctx);
+            let input_types = |n: usize| -> Vec<Option<ValueType>> {
+                g.nodes[n]
+                    .inputs
+                    .iter()
+                    .map(|s| self.source_type(*s))
+                    .collect()
+            };
+            let units = spectral::fold(&ctx, units, self.caps, &input_types);
             let mut launches = Vec::new();
             for unit in units {
                 launches.push(b.lower(g, &self, phase, unit, &next_claimed, &output_sources));
@@ -771,8 +791,12 @@ impl Builder {
                 Storage::Register
             }
         };
+        let folded = match unit {
+            fuse::Unit::Folded { spectral, .. } => Some(spectral),
+            _ => None,
+        };
         match unit {
-            fuse::Unit::Single(n) => {
+            fuse::Unit::Single(n) | fuse::Unit::Folded { transform: n, .. } => {
                 let inst = &g.nodes[n];
                 let types = p.node_types[n].clone().flatten().expect("present node");
                 let inputs = inst
@@ -783,10 +807,24 @@ impl Builder {
                 let mut outputs = Vec::new();
                 for (port, t) in types.iter().enumerate() {
                     let src = Source::Node { node: n, port };
-                    let st = storage_for(src, true);
+                    // A transform that folds a spectral node stores only the latter.
+                    let st = if folded.is_some() {
+                        Storage::Register
+                    } else {
+                        storage_for(src, true)
+                    };
                     let name = g.source_name(src);
                     outputs.push(self.add(src, phase, name, *t, st));
                 }
+                let spectral = folded.map(|b| {
+                    let src = Source::Node { node: b, port: 0 };
+                    let t = p.node_types[b].clone().flatten().expect("present node")[0];
+                    let st = storage_for(src, true);
+                    FoldedSpectral {
+                        node: b,
+                        output: self.add(src, phase, g.source_name(src), t, st),
+                    }
+                });
                 let scratch = p.scratch[n]
                     .iter()
                     .enumerate()
@@ -804,12 +842,23 @@ impl Builder {
                     .collect();
                 let input_types: Vec<Option<ValueType>> =
                     inst.inputs.iter().map(|s| p.source_type(*s)).collect();
+                let mut notes = inst.node.notes(&input_types);
+                if let Lowering::Kernels(k) = inst.node.lowering() {
+                    notes.extend(k.device_notes(&input_types, p.caps, folded.is_some()));
+                }
+                if let Some(b) = folded {
+                    notes.push(format!(
+                        "folds spectral node `{}` ({}) into its last pass",
+                        g.nodes[b].id, g.nodes[b].kind
+                    ));
+                }
                 Launch::Node {
                     node: n,
                     inputs,
                     outputs,
                     scratch,
-                    notes: inst.node.notes(&input_types),
+                    notes,
+                    spectral,
                 }
             }
             fuse::Unit::Group(members) => {
@@ -842,8 +891,16 @@ impl Launch {
     pub fn writes(&self) -> Vec<ValueId> {
         match self {
             Launch::Node {
-                outputs, scratch, ..
-            } => outputs.iter().chain(scratch).copied().collect(),
+                outputs,
+                scratch,
+                spectral,
+                ..
+            } => outputs
+                .iter()
+                .chain(scratch)
+                .copied()
+                .chain(spectral.map(|f| f.output))
+                .collect(),
             Launch::Fused(k) => k.outputs.clone(),
             Launch::Copy { dst, .. } => vec![*dst],
         }
@@ -852,7 +909,9 @@ impl Launch {
     /// The graph nodes it runs.
     pub fn nodes(&self) -> Vec<usize> {
         match self {
-            Launch::Node { node, .. } => vec![*node],
+            Launch::Node { node, spectral, .. } => std::iter::once(*node)
+                .chain(spectral.map(|f| f.node))
+                .collect(),
             Launch::Fused(k) => k.nodes.clone(),
             Launch::Copy { .. } => vec![],
         }

@@ -50,9 +50,15 @@ fn launch_lines(out: &mut String, g: &Graph, plan: &Plan, launches: &[Launch]) {
                 outputs,
                 scratch,
                 notes,
+                spectral,
             } => {
                 let n = &g.nodes[*node];
-                writeln!(out, "  {:>3}. {} ({})", i + 1, n.id, n.kind).unwrap();
+                write!(out, "  {:>3}. {} ({})", i + 1, n.id, n.kind).unwrap();
+                if let Some(f) = spectral {
+                    let s = &g.nodes[f.node];
+                    write!(out, " + {} ({}), folded", s.id, s.kind).unwrap();
+                }
+                writeln!(out).unwrap();
                 for note in notes {
                     writeln!(out, "         note   {note}").unwrap();
                 }
@@ -61,6 +67,9 @@ fn launch_lines(out: &mut String, g: &Graph, plan: &Plan, launches: &[Launch]) {
                 }
                 for v in outputs.iter().chain(scratch) {
                     writeln!(out, "         writes {}", value(plan, *v)).unwrap();
+                }
+                if let Some(f) = spectral {
+                    writeln!(out, "         writes {}", value(plan, f.output)).unwrap();
                 }
             }
             Launch::Fused(k) => {

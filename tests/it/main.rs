@@ -5,6 +5,7 @@
 
 mod cells;
 mod cli;
+mod fft;
 mod graph_files;
 mod nodes;
 mod plan;

@@ -1,0 +1,178 @@
+//! `mesoflow bench fft`: 3-D real transforms of `comps` components on cubic grids, rfft
+//! then irfft, through the engine like any graph (per-launch GPU timestamp medians), with
+//! the forward transform's error against rustfft in f64. `benches/torch_fft.py` prints
+//! the same columns for cuFFT (through PyTorch) on the same machine.
+
+use std::collections::BTreeMap;
+
+use super::{runtime, time_graph};
+use crate::cli::CliError;
+use crate::gpu::GpuContext;
+use crate::node::{RefCtx, Registry, check_params};
+use crate::value::{HostArray, RefArray, ValueType, half_dims};
+
+/// The graph: rfft -> (spectral_filter, folded into the rfft's last pass) -> irfft.
+fn graph(n: u32, comps: u32, filter: bool) -> String {
+    let (spectrum, extra) = if filter {
+        (
+            "g.out",
+            r#"{"id": "g", "kind": "spectral_filter", "params": {"sigma": 0.01}, "inputs": {"x": "f.out"}},"#,
+        )
+    } else {
+        ("f.out", "")
+    };
+    format!(
+        r#"{{"mesoflow": 1, "doc": "rfft + irfft of {comps} x {n}^3",
+  "inputs": {{"x": {{"type": "real_grid", "dims": [{n}, {n}, {n}], "comps": {comps}}}}},
+  "nodes": [
+    {{"id": "f", "kind": "rfft", "inputs": {{"x": "inputs.x"}}}},
+    {extra}
+    {{"id": "i", "kind": "irfft", "inputs": {{"x": "{spectrum}"}}}}
+  ],
+  "outputs": {{"spectrum": "{spectrum}", "y": "i.out"}}}}"#
+    )
+}
+
+/// Uniform values in [-1, 1) from a fixed xorshift sequence (reproducible inputs).
+fn random(len: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    (0..len)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            ((s >> 40) as f64 / (1u64 << 23) as f64 - 1.0) as f32
+        })
+        .collect()
+}
+
+fn rel_l2(got: impl Iterator<Item = f64>, want: impl Iterator<Item = f64>) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (a, b) in got.zip(want) {
+        num += (a - b) * (a - b);
+        den += b * b;
+    }
+    (num / den.max(f64::MIN_POSITIVE)).sqrt()
+}
+
+/// Relative L2 error of component 0 of the GPU spectrum against rustfft (the components
+/// are independent, and one keeps the host reference affordable).
+fn forward_error(x: &[f32], spectrum: &HostArray, n: u32) -> Result<f64, CliError> {
+    let dims = [n, n, n];
+    let cells = (n as usize).pow(3);
+    let half = half_dims(dims);
+    let half_words = 2 * (half[0] * half[1] * half[2]) as usize;
+    let kind = Registry::standard()
+        .get("rfft")
+        .cloned()
+        .ok_or_else(|| runtime("no rfft kind"))?;
+    let params = check_params(&kind.params(), &BTreeMap::new())
+        .map_err(|e| runtime(format!("rfft params: {e:?}")))?;
+    let node = kind.build(&params).map_err(runtime)?;
+    let input = RefArray::new(
+        ValueType::RealGrid { dims, comps: 1 },
+        x[..cells].iter().map(|&v| v as f64).collect(),
+    );
+    let ty = ValueType::HalfComplexGrid { dims, comps: 1 };
+    let mut out = vec![RefArray::new(ty, vec![0.0; half_words])];
+    node.cpu_reference(&[Some(input)], &mut out, RefCtx::default());
+    let gpu = spectrum.data.to_f64();
+    Ok(rel_l2(
+        gpu[..half_words].iter().copied(),
+        out[0].data.iter().copied(),
+    ))
+}
+
+/// Bytes a pass-per-axis transform pair moves: per component and direction, the x pass
+/// reads the real grid and writes the half spectrum, the y and z passes read and write
+/// the half spectrum.
+fn bytes_moved(n: u32, comps: u32) -> f64 {
+    let n = n as f64;
+    let real = 4.0 * n * n * n;
+    let half = 8.0 * ((n / 2.0).floor() + 1.0) * n * n;
+    2.0 * comps as f64 * (real + 5.0 * half)
+}
+
+pub fn run(
+    sizes: &[u32],
+    comps: u32,
+    reps: u64,
+    max_ref: u32,
+    filter: bool,
+) -> Result<(), CliError> {
+    if sizes.is_empty() || comps == 0 || reps == 0 {
+        return Err(CliError::Input(
+            "--sizes, --comps and --reps must be non-empty and positive".into(),
+        ));
+    }
+    for &n in sizes {
+        if n < 2 || !crate::nodes::fft::is_friendly(n) {
+            return Err(CliError::Input(format!(
+                "--sizes: {n} is not a product of 2, 3, 5, 7 (the next friendly size is {})",
+                crate::nodes::fft::next_friendly(n)
+            )));
+        }
+    }
+    let gpu = GpuContext::new().map_err(runtime)?;
+    println!("adapter: {}", gpu.caps.summary());
+    println!(
+        "rfft + irfft over x, y, z of {comps} components (f32), median of {reps} GPU-timed runs{}",
+        if filter {
+            "; with a spectral_filter folded into the rfft"
+        } else {
+            ""
+        }
+    );
+    println!(
+        "{:>6} {:>12} {:>10} {:>10} {:>10} {:>14} {:>12}",
+        "size", "mesoflow ms", "rfft ms", "irfft ms", "GB/s", "error vs f64", "round trip"
+    );
+    for &n in sizes {
+        let ty = ValueType::RealGrid {
+            dims: [n, n, n],
+            comps,
+        };
+        let x = random(ty.words() as usize, n as u64);
+        let inputs = [("x".to_string(), HostArray::f32(ty, x.clone()))]
+            .into_iter()
+            .collect();
+        let timed = time_graph(&gpu, &graph(n, comps, filter), &inputs, reps, true)?;
+        let ms = |label: &str| {
+            timed
+                .timings
+                .iter()
+                .find(|t| t.label == label || t.label.starts_with(&format!("{label} +")))
+                .map(|t| t.median.as_secs_f64() * 1e3)
+                .unwrap_or(f64::NAN)
+        };
+        let total = timed.step_time().as_secs_f64() * 1e3;
+        let spectrum = timed
+            .outputs
+            .get("spectrum")
+            .ok_or_else(|| runtime("no spectrum output"))?;
+        let error = if n <= max_ref && !filter {
+            format!("{:.2e}", forward_error(&x, spectrum, n)?)
+        } else {
+            "-".into()
+        };
+        let y = timed.outputs.get("y").ok_or_else(|| runtime("no output"))?;
+        let round_trip = if filter {
+            "-".into()
+        } else {
+            format!(
+                "{:.2e}",
+                rel_l2(y.data.to_f64().into_iter(), x.iter().map(|&v| v as f64))
+            )
+        };
+        println!(
+            "{n:>6} {total:>12.4} {:>10.4} {:>10.4} {:>10.1} {error:>14} {round_trip:>12}",
+            ms("f"),
+            ms("i"),
+            bytes_moved(n, comps) / (total * 1e-3) / 1e9,
+        );
+    }
+    println!(
+        "GB/s: bytes a pass-per-axis scheme moves (each pass reads and writes the grid once) over the time"
+    );
+    Ok(())
+}
