@@ -9,7 +9,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use crate::exec::{Program, RunOptions, RunStats};
+use crate::exec::{Profile, Program, RunOptions, RunStats};
 use crate::expr::ParamValue;
 use crate::gpu::{DeviceCaps, GpuContext, KernelCache};
 use crate::graph::{self, Dim, Graph, InputShape, LoadOptions};
@@ -52,6 +52,9 @@ pub enum Command {
         /// Print GPU time per node.
         #[arg(long)]
         profile: bool,
+        /// Print GPU time per dispatch (each in a pass of its own): the passes inside nodes.
+        #[arg(long)]
+        profile_dispatches: bool,
         /// Do not fuse element-wise nodes.
         #[arg(long)]
         no_fuse: bool,
@@ -157,10 +160,18 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             steps,
             seed,
             profile,
+            profile_dispatches,
             no_fuse,
-        } => run(
-            &registry, &graph, &sets, &inputs, &outputs, steps, seed, profile, !no_fuse,
-        ),
+        } => {
+            let profile = match (profile, profile_dispatches) {
+                (_, true) => Profile::Dispatches,
+                (true, false) => Profile::Launches,
+                (false, false) => Profile::Off,
+            };
+            run(
+                &registry, &graph, &sets, &inputs, &outputs, steps, seed, profile, !no_fuse,
+            )
+        }
         Command::Validate { graphs } => validate(&registry, &graphs),
         Command::Inspect {
             graph,
@@ -265,7 +276,7 @@ fn run(
     output_args: &[String],
     steps: u64,
     seed: Option<u64>,
-    profile: bool,
+    profile: Profile,
     fuse: bool,
 ) -> Result<(), CliError> {
     if steps == 0 {
@@ -376,7 +387,7 @@ fn run(
         plan::human_bytes(p.memory.total()),
         plan::human_bytes(program.table_bytes),
     );
-    if profile {
+    if profile != Profile::Off {
         print_profile(&stats);
     }
     for (name, arr) in &results {
@@ -449,6 +460,20 @@ fn print_profile(stats: &RunStats) {
             },
             if total > 0.0 { 100.0 * t / total } else { 0.0 }
         );
+        for (kernel, samples) in &r.dispatch_samples {
+            if samples.is_empty() {
+                continue;
+            }
+            let d: f64 = samples.iter().map(|d| d.as_secs_f64()).sum();
+            println!(
+                "    {:<38} {:<28} {:>6} {:>12.4} {:>12.2}",
+                "",
+                kernel,
+                samples.len(),
+                d * 1e3,
+                d * 1e6 / samples.len() as f64
+            );
+        }
     }
     println!(
         "  {:<40} {:<28} {:>6} {:>12.4}",

@@ -250,16 +250,23 @@ fn geometry(gw: &GridWindow, count: u32) -> GeometryUniform {
     u
 }
 
+/// Interleaved runs the particles are served in (see shaders/spread/stencil.wgsl): up to
+/// 65536, more than the slots a large GPU runs at once, so concurrent workgroups work far
+/// apart; at least 4 particles a run, so small problems launch no empty workgroups.
+fn chunks(count: u32) -> u32 {
+    (count / 4).clamp(1, 65536)
+}
+
 /// Dispatch shape for `count` particles: see shaders/spread/stencil.wgsl. Particles are
-/// served in CHUNKS interleaved runs, by 64-thread workgroups holding 64 / SEG particles
+/// served in `chunks(count)` interleaved runs, by 64-thread workgroups holding 64 / SEG particles
 /// (SEG = support^2 rounded up to a power of two, at most 64).
 fn per_particle(cx: &CompileCtx, count: u32, support: u32) -> [u32; 3] {
-    const CHUNKS: u64 = 1024;
     let seg = (support as u64 * support as u64)
         .next_power_of_two()
         .min(64);
     let per_workgroup = 64 / seg;
-    let slots = CHUNKS * (count as u64).div_ceil(CHUNKS);
+    let c = chunks(count) as u64;
+    let slots = c * (count as u64).div_ceil(c);
     cx.grid_1d(slots.div_ceil(per_workgroup), 1)
 }
 
@@ -417,7 +424,8 @@ impl GpuKernels for Spread {
                 .constant("NS", self.gw.window.support() as f64)
                 .constant("DIMS", self.gw.dims() as f64)
                 .constant("COMPS", chunk as f64)
-                .constant("TOTAL", comps as f64),
+                .constant("TOTAL", comps as f64)
+                .constant("CHUNKS", chunks(n) as f64),
             )?;
             let geo = cx.uniform(
                 "spread geometry",
@@ -593,6 +601,7 @@ impl GpuKernels for Interpolate {
                 .constant("DIMS", self.gw.dims() as f64)
                 .constant("COMPS", chunk as f64)
                 .constant("TOTAL", comps as f64)
+                .constant("CHUNKS", chunks(n) as f64)
                 .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some()))),
             )?;
             let geo = cx.uniform(

@@ -12,10 +12,11 @@
 // Particles are taken in a decorrelated order: slot g serves particle
 // (g % CHUNKS) * chunk + g / CHUNKS, so workgroups running at the same time work far apart
 // even when the particles are sorted in space (sorted input otherwise piles every
-// concurrent access onto the same few cache lines).
+// concurrent access onto the same few cache lines). CHUNKS must exceed the slots a GPU
+// runs at once (about 17k on an H100); it comes from the host, which sizes the dispatch.
 
 const WG: u32 = 64u;
-const CHUNKS: u32 = 1024u;
+override CHUNKS: u32 = 65536u;
 
 // Tables of the workgroup's particles: slot s, axis a, support index k at s*3*NS + a*NS + k.
 // 96 entries suffice: a segment holds at least NS^2 threads, so PPW * NS <= 64 / NS, and

@@ -170,6 +170,9 @@ pub fn run(
             ms("i"),
             bytes_moved(n, comps) / (total * 1e-3) / 1e9,
         );
+        for t in &timed.timings {
+            print!("{}", t.breakdown());
+        }
     }
     println!(
         "GB/s: bytes a pass-per-axis scheme moves (each pass reads and writes the grid once) over the time"

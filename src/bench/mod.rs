@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 use clap::Subcommand;
 
 use crate::cli::CliError;
-use crate::exec::{Program, RunOptions};
+use crate::exec::{Profile, Program, RunOptions};
 use crate::gpu::{Binding, CompileCtx, GpuContext, KernelCache, KernelSpec, WG_1D};
 use crate::graph::{self, LoadOptions};
 use crate::node::Registry;
@@ -29,6 +29,33 @@ pub struct Timing {
     pub label: String,
     pub median: Duration,
     pub min: Duration,
+    /// With MESOFLOW_BENCH_DISPATCHES set: each dispatch's kernel and median time (each
+    /// in a pass of its own, so their sum is a little above `median`).
+    pub dispatches: Vec<(String, Duration)>,
+}
+
+impl Timing {
+    /// The per-dispatch breakdown as indented lines (empty without it).
+    pub fn breakdown(&self) -> String {
+        self.dispatches
+            .iter()
+            .enumerate()
+            .map(|(i, (k, d))| {
+                format!(
+                    "      {} #{i:<2} {:<44} {:>10.4} ms\n",
+                    self.label,
+                    k,
+                    d.as_secs_f64() * 1e3
+                )
+            })
+            .collect()
+    }
+}
+
+fn median_duration(samples: &[Duration]) -> Duration {
+    let mut s = samples.to_vec();
+    s.sort();
+    s.get(s.len() / 2).copied().unwrap_or_default()
 }
 
 /// A timed graph run: per-launch GPU times and the outputs of the last step.
@@ -72,17 +99,30 @@ pub fn time_graph(
     program
         .run(&RunOptions {
             steps: 2,
-            profile: false,
+            profile: Profile::Off,
             progress: false,
         })
         .map_err(runtime)?;
     let stats = program
         .run(&RunOptions {
             steps: reps,
-            profile: true,
+            profile: Profile::Launches,
             progress: false,
         })
         .map_err(runtime)?;
+    // Per-dispatch medians on request (a second, separately timed run).
+    let per_dispatch = if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
+        program
+            .run(&RunOptions {
+                steps: reps,
+                profile: Profile::Dispatches,
+                progress: false,
+            })
+            .map_err(runtime)?
+            .profile
+    } else {
+        Vec::new()
+    };
     let outputs = program
         .read_outputs()
         .map_err(runtime)?
@@ -96,6 +136,16 @@ pub fn time_graph(
             label: r.label.clone(),
             median: r.median(),
             min: r.samples.iter().min().copied().unwrap_or_default(),
+            dispatches: per_dispatch
+                .iter()
+                .find(|d| d.label == r.label)
+                .map(|d| {
+                    d.dispatch_samples
+                        .iter()
+                        .map(|(kernel, samples)| (kernel.clone(), median_duration(samples)))
+                        .collect()
+                })
+                .unwrap_or_default(),
         })
         .collect();
     Ok(TimedRun { timings, outputs })
@@ -248,7 +298,7 @@ fn overhead(nodes: usize, elements: u32, reps: u64) -> Result<(), CliError> {
     let run = |program: &mut Program, steps: u64| {
         program.run(&RunOptions {
             steps,
-            profile: false,
+            profile: Profile::Off,
             progress: false,
         })
     };

@@ -89,6 +89,9 @@ pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
     let inputs: BTreeMap<String, HostArray> =
         [("keys".to_string(), HostArray::u32(ty, keys.clone()))].into();
     let run = time_graph(&gpu, &graph, &inputs, reps, true)?;
+    for t in &run.timings {
+        print!("{}", t.breakdown());
+    }
 
     let sorted = u32s(&run, "keys")?;
     let perm = u32s(&run, "perm")?;

@@ -34,12 +34,22 @@ pub enum ExecError {
     Run(String),
 }
 
+/// What `--profile` times.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Profile {
+    Off,
+    /// Each launch in a compute pass of its own, timed with timestamps.
+    Launches,
+    /// Each dispatch in a compute pass of its own (the passes of an FFT, say).
+    Dispatches,
+}
+
 /// How to run.
 #[derive(Clone, Debug)]
 pub struct RunOptions {
     pub steps: u64,
-    /// Time every launch on the GPU (timestamp queries; one host round trip per step).
-    pub profile: bool,
+    /// Time launches or dispatches on the GPU (one host round trip per step).
+    pub profile: Profile,
     /// Draw a progress bar (on a terminal only).
     pub progress: bool,
 }
@@ -54,6 +64,8 @@ pub struct ProfileRow {
     pub total: Duration,
     /// The time of each call, in order.
     pub samples: Vec<Duration>,
+    /// With `Profile::Dispatches`: each dispatch's kernel label and its time per call.
+    pub dispatch_samples: Vec<(String, Vec<Duration>)>,
 }
 
 impl ProfileRow {
@@ -431,10 +443,10 @@ impl<'a> Program<'a> {
         }
         let t0 = Instant::now();
         self.start()?;
-        let stats = if opts.profile {
-            self.run_profiled(opts.steps)?
-        } else {
-            self.run_batched(opts)?
+        let stats = match opts.profile {
+            Profile::Off => self.run_batched(opts)?,
+            Profile::Launches => self.run_profiled(opts.steps, false)?,
+            Profile::Dispatches => self.run_profiled(opts.steps, true)?,
         };
         Ok(RunStats {
             wall: t0.elapsed(),
@@ -508,7 +520,7 @@ impl<'a> Program<'a> {
 
     /// Runs steps one launch per compute pass with timestamps around each pass (or with a
     /// wait after each launch where the device has no timestamp queries).
-    fn run_profiled(&mut self, steps: u64) -> Result<RunStats, ExecError> {
+    fn run_profiled(&mut self, steps: u64, per_dispatch: bool) -> Result<RunStats, ExecError> {
         let launches = self.step[0].len();
         let mut rows: Vec<ProfileRow> = self.step[0]
             .iter()
@@ -519,10 +531,26 @@ impl<'a> Program<'a> {
                 calls: 0,
                 total: Duration::ZERO,
                 samples: Vec::new(),
+                dispatch_samples: c
+                    .dispatches
+                    .iter()
+                    .map(|d| (d.kernel.label.clone(), Vec::new()))
+                    .collect(),
             })
             .collect();
         let use_gpu = self.gpu.caps.timestamps;
-        let count = (2 * launches).max(2) as u32;
+        // Timed units: launches, or every dispatch of every launch.
+        let units: Vec<(usize, Option<usize>)> = if per_dispatch {
+            self.step[0]
+                .iter()
+                .enumerate()
+                .flat_map(|(i, c)| (0..c.dispatches.len()).map(move |d| (i, Some(d))))
+                .collect()
+        } else {
+            (0..launches).map(|i| (i, None)).collect()
+        };
+        let timed = units.len();
+        let count = (2 * timed).max(2) as u32;
         let queries = use_gpu.then(|| {
             self.gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("profile"),
@@ -541,33 +569,44 @@ impl<'a> Program<'a> {
             let parity = ((self.steps_done + s) % 2) as usize;
             if let Some(qs) = &queries {
                 let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-                for (i, c) in self.step[parity].iter().enumerate() {
+                for (u, &(i, d)) in units.iter().enumerate() {
+                    let c = &self.step[parity][i];
                     let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                         label: Some(&c.label),
                         timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
                             query_set: qs,
-                            beginning_of_pass_write_index: Some(2 * i as u32),
-                            end_of_pass_write_index: Some(2 * i as u32 + 1),
+                            beginning_of_pass_write_index: Some(2 * u as u32),
+                            end_of_pass_write_index: Some(2 * u as u32 + 1),
                         }),
                     });
-                    Self::record(&mut pass, &c.dispatches);
+                    match d {
+                        Some(d) => Self::record(&mut pass, std::slice::from_ref(&c.dispatches[d])),
+                        None => Self::record(&mut pass, &c.dispatches),
+                    }
                 }
                 {
                     let mut pass = enc.begin_compute_pass(&Default::default());
                     Self::record(&mut pass, std::slice::from_ref(&self.clock_tick));
                 }
-                if launches > 0 {
-                    enc.resolve_query_set(qs, 0..2 * launches as u32, &resolve, 0);
+                if timed > 0 {
+                    enc.resolve_query_set(qs, 0..2 * timed as u32, &resolve, 0);
                 }
                 let idx = self.gpu.queue.submit([enc.finish()]);
                 self.gpu.wait(idx)?;
-                if launches > 0 {
-                    let bytes = self.gpu.read_buffer(&resolve, 16 * launches as u64)?;
+                if timed > 0 {
+                    let bytes = self.gpu.read_buffer(&resolve, 16 * timed as u64)?;
                     let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
-                    for (i, row) in rows.iter_mut().enumerate() {
+                    let mut per_launch = vec![Duration::ZERO; launches];
+                    for (u, &(i, d)) in units.iter().enumerate() {
                         let dt = Duration::from_nanos(
-                            (ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period) as u64,
+                            (ticks[2 * u + 1].saturating_sub(ticks[2 * u]) as f64 * period) as u64,
                         );
+                        per_launch[i] += dt;
+                        if let Some(d) = d {
+                            rows[i].dispatch_samples[d].1.push(dt);
+                        }
+                    }
+                    for (row, dt) in rows.iter_mut().zip(per_launch) {
                         row.total += dt;
                         row.samples.push(dt);
                         row.calls += 1;

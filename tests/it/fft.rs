@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::sync::{Mutex, OnceLock};
 
-use mesoflow::exec::{Program, RunOptions};
+use mesoflow::exec::{Profile, Program, RunOptions};
 use mesoflow::gpu::{DeviceCaps, GpuContext, KernelCache};
 use mesoflow::graph::Graph;
 use mesoflow::nodes::fft::{codegen, next_friendly, plan};
@@ -46,7 +46,7 @@ fn run(
     program
         .run(&RunOptions {
             steps: 1,
-            profile: false,
+            profile: Profile::Off,
             progress: false,
         })
         .unwrap_or_else(|e| panic!("{e}"));

@@ -408,8 +408,9 @@ fn folded_dispatches_serve_every_particle_once() {
     let mut rng = Rng::new(12);
     let lengths = [8.0, 8.0, 8.0];
     let cells = [16u32, 16, 16];
-    let pos = positions(&mut rng, 50, &lengths);
-    let vals = rng.array(ValueType::Particles { n: 50, k: 1 }, 0.5, 1.5);
+    // 54 particles: 13 runs of 5 slots, 65 slots, which 3-wide rows round up to 66.
+    let pos = positions(&mut rng, 54, &lengths);
+    let vals = rng.array(ValueType::Particles { n: 54, k: 1 }, 0.5, 1.5);
     let field = rng.array(
         ValueType::RealGrid {
             dims: [16, 16, 16],

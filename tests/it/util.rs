@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
-use mesoflow::exec::{Program, RunOptions};
+use mesoflow::exec::{Profile, Program, RunOptions};
 use mesoflow::gpu::{DeviceCaps, GpuContext, KernelCache};
 use mesoflow::graph::{self, Graph, LoadOptions};
 use mesoflow::node::{RefCtx, Registry, check_params};
@@ -136,7 +136,7 @@ pub fn run_graph(
     program
         .run(&RunOptions {
             steps,
-            profile: false,
+            profile: Profile::Off,
             progress: false,
         })
         .unwrap_or_else(|e| panic!("{e}"));
