@@ -71,8 +71,28 @@ impl TimedRun {
     }
 }
 
+/// Runs the program back to back for at least half a second, doubling the steps, so the
+/// GPU's clocks are up before timing: a GPU that idled while the host prepared data runs
+/// its first milliseconds of work at reduced clocks (seen on an H100: a 3-D FFT timed 4x
+/// slower right after the host had built its input).
+fn warm_up(program: &mut Program) -> Result<(), CliError> {
+    let start = Instant::now();
+    let mut steps = 2;
+    while start.elapsed() < Duration::from_millis(500) {
+        program
+            .run(&RunOptions {
+                steps,
+                profile: Profile::Off,
+                progress: false,
+            })
+            .map_err(runtime)?;
+        steps = (steps * 2).min(1 << 14);
+    }
+    Ok(())
+}
+
 /// Plans, compiles and runs `graph_json` for `reps` steps with per-launch GPU timestamps
-/// (after two untimed warm-up steps).
+/// (after a warm-up of at least half a second of back-to-back runs).
 pub fn time_graph(
     gpu: &GpuContext,
     graph_json: &str,
@@ -96,13 +116,7 @@ pub fn time_graph(
     let mut cache = KernelCache::default();
     let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(runtime)?;
     program.upload(inputs).map_err(runtime)?;
-    program
-        .run(&RunOptions {
-            steps: 2,
-            profile: Profile::Off,
-            progress: false,
-        })
-        .map_err(runtime)?;
+    warm_up(&mut program)?;
     let stats = program
         .run(&RunOptions {
             steps: reps,
