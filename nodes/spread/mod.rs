@@ -27,6 +27,8 @@ pub struct GridWindow {
     pub lengths: Vec<f64>,
     pub cells: Vec<u32>,
     pub window: Window,
+    /// Threads per workgroup of the kernels (64, 128 or 256): a tuning knob.
+    pub workgroup: u32,
 }
 
 impl GridWindow {
@@ -148,6 +150,12 @@ fn grid_params() -> Vec<ParamSpec> {
             "Gaussian and ES: truncation tolerance that sets the support",
         ),
         ParamSpec::choice(
+            "workgroup",
+            "64",
+            &["64", "128", "256"],
+            "threads per workgroup (tuning: the workgroup serves workgroup / support^2 particles)",
+        ),
+        ParamSpec::choice(
             "variant",
             "auto",
             &["auto", "atomic", "portable"],
@@ -196,6 +204,8 @@ fn grid_window(p: &Params) -> Result<GridWindow, String> {
         lengths,
         cells,
         window,
+        // The choice list admits only 64, 128 and 256.
+        workgroup: p.text("workgroup").parse().unwrap_or(64),
     })
 }
 
@@ -260,11 +270,11 @@ fn chunks(count: u32) -> u32 {
 /// Dispatch shape for `count` particles: see shaders/spread/stencil.wgsl. Particles are
 /// served in `chunks(count)` interleaved runs, by 64-thread workgroups holding 64 / SEG particles
 /// (SEG = support^2 rounded up to a power of two, at most 64).
-fn per_particle(cx: &CompileCtx, count: u32, support: u32) -> [u32; 3] {
+fn per_particle(cx: &CompileCtx, count: u32, support: u32, wg: u32) -> [u32; 3] {
     let seg = (support as u64 * support as u64)
         .next_power_of_two()
         .min(64);
-    let per_workgroup = 64 / seg;
+    let per_workgroup = wg as u64 / seg;
     let c = chunks(count) as u64;
     let slots = c * (count as u64).div_ceil(c);
     cx.grid_1d(slots.div_ceil(per_workgroup), 1)
@@ -425,7 +435,8 @@ impl GpuKernels for Spread {
                 .constant("DIMS", self.gw.dims() as f64)
                 .constant("COMPS", chunk as f64)
                 .constant("TOTAL", comps as f64)
-                .constant("CHUNKS", chunks(n) as f64),
+                .constant("CHUNKS", chunks(n) as f64)
+                .constant("WG", self.gw.workgroup as f64),
             )?;
             let geo = cx.uniform(
                 "spread geometry",
@@ -434,7 +445,7 @@ impl GpuKernels for Spread {
                     ..geometry(&self.gw, n)
                 }),
             );
-            let groups = per_particle(cx, n, self.gw.window.support());
+            let groups = per_particle(cx, n, self.gw.window.support(), self.gw.workgroup);
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[pos.buffer, vals.buffer, out.buffer, &geo],
@@ -602,6 +613,7 @@ impl GpuKernels for Interpolate {
                 .constant("COMPS", chunk as f64)
                 .constant("TOTAL", comps as f64)
                 .constant("CHUNKS", chunks(n) as f64)
+                .constant("WG", self.gw.workgroup as f64)
                 .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some()))),
             )?;
             let geo = cx.uniform(
@@ -611,7 +623,7 @@ impl GpuKernels for Interpolate {
                     ..geometry(&self.gw, n)
                 }),
             );
-            let groups = per_particle(cx, n, self.gw.window.support());
+            let groups = per_particle(cx, n, self.gw.window.support(), self.gw.workgroup);
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[

@@ -20,7 +20,7 @@ override HAS_WEIGHTS: bool = false;
 @group(0) @binding(3) var<storage, read_write> out: array<f32>;
 @group(0) @binding(4) var<uniform> geo: Geometry;
 
-var<workgroup> partial: array<vec4<f32>, 64>;
+var<workgroup> partial: array<vec4<f32>, 256>;
 
 fn sample(cell: u32, w: f32, acc: vec4<f32>) -> vec4<f32> {
     var dv = geo.dv;
@@ -35,7 +35,7 @@ fn sample(cell: u32, w: f32, acc: vec4<f32>) -> vec4<f32> {
     return r;
 }
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let seg = seg_size();

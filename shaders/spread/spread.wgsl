@@ -15,9 +15,9 @@ override TOTAL: u32 = 1u;   // components per particle
 @group(0) @binding(1) var<storage, read> vals: array<f32>;
 @group(0) @binding(3) var<uniform> geo: Geometry;
 
-var<workgroup> value: array<f32, 64>;  // up to 16 particles x 4 components
+var<workgroup> value: array<f32, 512>;  // up to 128 particles x 4 components
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let seg = seg_size();

@@ -3,8 +3,9 @@
 //
 // Stencil set-up shared by spreading and interpolation.
 //
-// A workgroup of 64 threads serves PPW particles: each particle gets a segment of SEG
-// threads (SEG = NS^2 rounded up to a power of two, at most 64), and each thread of a
+// A workgroup of WG threads (64, 128 or 256) serves PPW = WG / SEG particles: each
+// particle gets a segment of SEG threads (SEG = NS^2 rounded up to a power of two, at
+// most 64), and each thread of a
 // segment owns one (x, y) column of the NS^3 support and walks it along z. The window
 // weights and the wrapped cell offsets of every axis are computed once per particle into
 // workgroup memory, so the inner loop is two loads, a multiply and an add per cell.
@@ -15,20 +16,21 @@
 // concurrent access onto the same few cache lines). CHUNKS must exceed the slots a GPU
 // runs at once (about 17k on an H100); it comes from the host, which sizes the dispatch.
 
-const WG: u32 = 64u;
+override WG: u32 = 64u;
 override CHUNKS: u32 = 65536u;
 
-// Tables of the workgroup's particles: slot s, axis a, support index k at s*3*NS + a*NS + k.
-// 96 entries suffice: a segment holds at least NS^2 threads, so PPW * NS <= 64 / NS, and
-// PPW * 3 * NS <= 96 for NS >= 2 (for NS > 8, PPW = 1 and NS <= 32).
-var<workgroup> stencil_w: array<f32, 96>;   // window weights per unit length
-var<workgroup> stencil_o: array<u32, 96>;   // wrapped cell offsets (times the axis stride)
-var<workgroup> stencil_p: array<u32, 16>;   // particle of each slot (geo.count: none)
+// Tables of the workgroup's particles: slot s, axis a, support index k at
+// s*DIMS*NS + a*NS + k. 384 entries suffice: a segment holds at least NS^2 threads (or
+// 64), so PPW * NS <= WG / NS and PPW * 3 * NS <= 3 * 256 / 2 = 384 (for NS > 8, PPW <= 4
+// and NS <= 32).
+var<workgroup> stencil_w: array<f32, 384>;  // window weights per unit length
+var<workgroup> stencil_o: array<u32, 384>;  // wrapped cell offsets (times the axis stride)
+var<workgroup> stencil_p: array<u32, 128>;  // particle of each slot (geo.count: none)
 
 fn seg_size() -> u32 {
     var s = 1u;
     loop {
-        if (s >= NS * NS || s >= WG) { break; }
+        if (s >= NS * NS || s >= 64u) { break; }
         s = s * 2u;
     }
     return s;

@@ -185,6 +185,9 @@ pub enum BenchCommand {
         cells: u32,
         #[arg(long, default_value_t = 20)]
         reps: u64,
+        /// Workgroup sizes to time (64, 128, 256).
+        #[arg(long, value_delimiter = ',', default_values_t = [64])]
+        workgroups: Vec<u32>,
     },
     /// Sum (blocked and compensated), dot and max of n f32.
     Reduce {
@@ -242,7 +245,11 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             reps,
         } => overhead(nodes, elements, reps),
         BenchCommand::Reduce { n, reps } => reduce::run(n, reps),
-        BenchCommand::Spread { cells, reps } => spread::run(cells, reps),
+        BenchCommand::Spread {
+            cells,
+            reps,
+            workgroups,
+        } => spread::run(cells, reps, &workgroups),
         BenchCommand::Sort { n, reps, variant } => primitives::sort(n, reps, &variant),
         BenchCommand::Scan { n, reps, variant } => primitives::scan(n, reps, &variant),
         BenchCommand::Fft {

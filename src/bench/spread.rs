@@ -1,6 +1,7 @@
 //! `mesoflow bench spread`: spreading and interpolation per particle on a 128^3 grid,
 //! Gaussian support 8 (and 4), densities 1 and 0.1 particles per cell, random and
-//! pre-sorted positions, 1 and 3 components (the setups of UAMMD's benchmark).
+//! pre-sorted positions, 1 and 3 components (the setups of UAMMD's benchmark), for each
+//! workgroup size asked for.
 
 use std::collections::BTreeMap;
 
@@ -13,81 +14,37 @@ fn runtime(e: impl std::fmt::Display) -> CliError {
     CliError::Runtime(e.to_string())
 }
 
-struct Case {
-    support: u32,
-    density: f64,
-    sorted: bool,
-    comps: u32,
-}
+/// (support, particles per cell, sorted, components)
+const CASES: [(u32, f64, bool, u32); 8] = [
+    (8, 1.0, false, 1),
+    (8, 1.0, true, 1),
+    (8, 0.1, false, 1),
+    (8, 0.1, true, 1),
+    (4, 1.0, false, 1),
+    (4, 1.0, true, 1),
+    (8, 1.0, false, 3),
+    (8, 1.0, true, 3),
+];
 
-pub fn run(n_cells: u32, reps: u64) -> Result<(), CliError> {
+pub fn run(n_cells: u32, reps: u64, workgroups: &[u32]) -> Result<(), CliError> {
     let gpu = GpuContext::new().map_err(runtime)?;
     let l = n_cells as f64;
-    let cases = [
-        Case {
-            support: 8,
-            density: 1.0,
-            sorted: false,
-            comps: 1,
-        },
-        Case {
-            support: 8,
-            density: 1.0,
-            sorted: true,
-            comps: 1,
-        },
-        Case {
-            support: 8,
-            density: 0.1,
-            sorted: false,
-            comps: 1,
-        },
-        Case {
-            support: 8,
-            density: 0.1,
-            sorted: true,
-            comps: 1,
-        },
-        Case {
-            support: 4,
-            density: 1.0,
-            sorted: false,
-            comps: 1,
-        },
-        Case {
-            support: 4,
-            density: 1.0,
-            sorted: true,
-            comps: 1,
-        },
-        Case {
-            support: 8,
-            density: 1.0,
-            sorted: false,
-            comps: 3,
-        },
-        Case {
-            support: 8,
-            density: 1.0,
-            sorted: true,
-            comps: 3,
-        },
-    ];
     println!("adapter: {}", gpu.caps.summary());
     println!(
         "{n_cells}^3 grid (h = 1); support 8: Gaussian, support 4: Peskin 4-point; median GPU time of {reps} runs per launch"
     );
     println!(
-        "{:>7} {:>7} {:>9} {:>6} {:>5} {:>12} {:>12} {:>12} {:>12}",
+        "{:>7} {:>7} {:>9} {:>6} {:>5} {:>4} {:>11} {:>11} {:>11} {:>11}",
         "support",
         "density",
         "N",
         "sorted",
         "comps",
+        "wg",
         "spread ms",
-        "ns/particle",
+        "ns/part.",
         "interp ms",
-        "ns/particle"
+        "ns/part."
     );
     let mut s = 0x9E37_79B9_7F4A_7C15u64;
     let mut next = move || {
@@ -96,12 +53,12 @@ pub fn run(n_cells: u32, reps: u64) -> Result<(), CliError> {
         s ^= s << 17;
         (s >> 11) as f64 / (1u64 << 53) as f64
     };
-    for c in &cases {
-        let n = (c.density * l * l * l) as u32;
+    for (support, density, sorted, comps) in CASES {
+        let n = (density * l * l * l) as u32;
         let mut pos: Vec<[f32; 3]> = (0..n)
             .map(|_| [0, 1, 2].map(|_| ((next() - 0.5) * l) as f32))
             .collect();
-        if c.sorted {
+        if sorted {
             // Linear cell order: what a cell-list sort produces.
             let cell = |p: &[f32; 3]| {
                 let i = |x: f32| {
@@ -111,10 +68,11 @@ pub fn run(n_cells: u32, reps: u64) -> Result<(), CliError> {
             };
             pos.sort_by_key(cell);
         }
-        let vals: Vec<f32> = (0..n * c.comps).map(|_| (next() - 0.5) as f32).collect();
-        let field: Vec<f32> = (0..n_cells.pow(3) * c.comps)
+        let vals: Vec<f32> = (0..n * comps).map(|_| (next() - 0.5) as f32).collect();
+        let field: Vec<f32> = (0..n_cells.pow(3) * comps)
             .map(|_| (next() - 0.5) as f32)
             .collect();
+        let want: f64 = vals.iter().map(|&v| v as f64).sum();
         let inputs: BTreeMap<String, HostArray> = [
             (
                 "positions".to_string(),
@@ -122,14 +80,14 @@ pub fn run(n_cells: u32, reps: u64) -> Result<(), CliError> {
             ),
             (
                 "values".to_string(),
-                HostArray::f32(ValueType::Particles { n, k: c.comps }, vals),
+                HostArray::f32(ValueType::Particles { n, k: comps }, vals),
             ),
             (
                 "field".to_string(),
                 HostArray::f32(
                     ValueType::RealGrid {
                         dims: [n_cells; 3],
-                        comps: c.comps,
+                        comps,
                     },
                     field,
                 ),
@@ -140,54 +98,49 @@ pub fn run(n_cells: u32, reps: u64) -> Result<(), CliError> {
         // Gaussian sigma = 0.9375 h with tolerance 1e-4 gives support 8 (UAMMD's rule); the
         // support-4 rows use Peskin's 4-point window (unit discrete mass, so the mass check
         // below stays exact; the window's cost is 12 evaluations per particle either way).
-        let window = if c.support == 8 {
+        let window = if support == 8 {
             r#""window": "gaussian", "width": 0.9375, "tolerance": 1e-4"#
         } else {
             r#""window": "peskin4""#
         };
-        let params = format!(
-            r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}}}"#
-        );
-        let graph = format!(
-            r#"{{"mesoflow": 1,
-              "inputs": {{"positions": {{"type": "particles", "cols": 3}}, "values": {{"type": "particles", "cols": {k}}},
-                         "field": {{"type": "real_grid", "dims": [{n_cells}, {n_cells}, {n_cells}], "comps": {k}}}}},
-              "nodes": [
-                {{"id": "spread", "kind": "spread", "params": {params}, "inputs": {{"positions": "inputs.positions", "values": "inputs.values"}}}},
-                {{"id": "interpolate", "kind": "interpolate", "params": {params}, "inputs": {{"grid": "inputs.field", "positions": "inputs.positions"}}}}
-              ],
-              "outputs": {{"grid": "spread.out", "u": "interpolate.out"}}}}"#,
-            k = c.comps
-        );
-        let run = time_graph(&gpu, &graph, &inputs, reps, true)?;
-        let t = |label: &str| {
-            run.timings
-                .iter()
-                .find(|t| t.label == label)
-                .map(|t| t.median.as_secs_f64())
-                .unwrap_or(f64::NAN)
-        };
-        let (ts, ti) = (t("spread"), t("interpolate"));
-        // Mass check: the grid integrates to the sum of the values (a wrong kernel fails).
-        let total: f64 = run.outputs["grid"].data.to_f64().iter().sum();
-        let want: f64 = inputs["values"].data.to_f64().iter().sum();
-        let mass = if (total - want).abs() > 1e-3 * want.abs().max(1.0) + 1e-2 {
-            "  MASS MISMATCH"
-        } else {
-            ""
-        };
-        println!(
-            "{:>7} {:>7} {:>9} {:>6} {:>5} {:>12.4} {:>12.3} {:>12.4} {:>12.3}{mass}",
-            c.support,
-            c.density,
-            n,
-            c.sorted,
-            c.comps,
-            ts * 1e3,
-            ts * 1e9 / n as f64,
-            ti * 1e3,
-            ti * 1e9 / n as f64
-        );
+        for &wg in workgroups {
+            let params = format!(
+                r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, "workgroup": "{wg}"}}"#
+            );
+            let graph = format!(
+                r#"{{"mesoflow": 1,
+                  "inputs": {{"positions": {{"type": "particles", "cols": 3}}, "values": {{"type": "particles", "cols": {comps}}},
+                             "field": {{"type": "real_grid", "dims": [{n_cells}, {n_cells}, {n_cells}], "comps": {comps}}}}},
+                  "nodes": [
+                    {{"id": "spread", "kind": "spread", "params": {params}, "inputs": {{"positions": "inputs.positions", "values": "inputs.values"}}}},
+                    {{"id": "interpolate", "kind": "interpolate", "params": {params}, "inputs": {{"grid": "inputs.field", "positions": "inputs.positions"}}}}
+                  ],
+                  "outputs": {{"grid": "spread.out", "u": "interpolate.out"}}}}"#
+            );
+            let run = time_graph(&gpu, &graph, &inputs, reps, true)?;
+            let t = |label: &str| {
+                run.timings
+                    .iter()
+                    .find(|t| t.label == label)
+                    .map(|t| t.median.as_secs_f64())
+                    .unwrap_or(f64::NAN)
+            };
+            let (ts, ti) = (t("spread"), t("interpolate"));
+            // Mass check: the grid integrates to the sum of the values (a wrong kernel fails).
+            let total: f64 = run.outputs["grid"].data.to_f64().iter().sum();
+            let mass = if (total - want).abs() > 1e-3 * want.abs().max(1.0) + 1e-2 {
+                "  MASS MISMATCH"
+            } else {
+                ""
+            };
+            println!(
+                "{support:>7} {density:>7} {n:>9} {sorted:>6} {comps:>5} {wg:>4} {:>11.4} {:>11.3} {:>11.4} {:>11.3}{mass}",
+                ts * 1e3,
+                ts * 1e9 / n as f64,
+                ti * 1e3,
+                ti * 1e9 / n as f64
+            );
+        }
     }
     Ok(())
 }

@@ -455,3 +455,48 @@ fn folded_dispatches_serve_every_particle_once() {
         );
     }
 }
+
+#[test]
+fn every_workgroup_size_gives_the_same_grid() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(77);
+    let lengths = [12.0, 10.0, 8.0];
+    let cells = [24u32, 20, 16];
+    let pos = positions(&mut rng, 700, &lengths);
+    let vals = rng.array(ValueType::Particles { n: 700, k: 2 }, -1.0, 1.0);
+    let field = rng.array(
+        ValueType::RealGrid {
+            dims: [24, 20, 16],
+            comps: 2,
+        },
+        -1.0,
+        1.0,
+    );
+    for (w, extra) in WINDOWS {
+        for wg in ["128", "256"] {
+            let extra = if extra.is_empty() {
+                format!(r#""workgroup": "{wg}""#)
+            } else {
+                format!(r#"{extra}, "workgroup": "{wg}""#)
+            };
+            let p = params(w, &extra, &lengths, &cells, "auto");
+            let (g, r) = run_node(
+                "spread",
+                &p,
+                &[("positions", pos.clone()), ("values", vals.clone())],
+            );
+            assert!(rel_max_err(&g, &r).0 < 1e-5, "spread {w} workgroup {wg}");
+            let (g, r) = run_node(
+                "interpolate",
+                &p,
+                &[("grid", field.clone()), ("positions", pos.clone())],
+            );
+            assert!(
+                rel_max_err(&g, &r).0 < 1e-5,
+                "interpolate {w} workgroup {wg}"
+            );
+        }
+    }
+}
