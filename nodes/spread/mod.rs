@@ -151,7 +151,7 @@ fn grid_params() -> Vec<ParamSpec> {
         ),
         ParamSpec::choice(
             "workgroup",
-            "64",
+            "256",
             &["64", "128", "256"],
             "threads per workgroup (tuning: the workgroup serves workgroup / support^2 particles)",
         ),
@@ -205,7 +205,7 @@ fn grid_window(p: &Params) -> Result<GridWindow, String> {
         cells,
         window,
         // The choice list admits only 64, 128 and 256.
-        workgroup: p.text("workgroup").parse().unwrap_or(64),
+        workgroup: p.text("workgroup").parse().unwrap_or(256),
     })
 }
 

@@ -186,7 +186,7 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 20)]
         reps: u64,
         /// Workgroup sizes to time (64, 128, 256).
-        #[arg(long, value_delimiter = ',', default_values_t = [64])]
+        #[arg(long, value_delimiter = ',', default_values_t = [256])]
         workgroups: Vec<u32>,
     },
     /// Sum (blocked and compensated), dot and max of n f32.

@@ -475,7 +475,7 @@ fn every_workgroup_size_gives_the_same_grid() {
         1.0,
     );
     for (w, extra) in WINDOWS {
-        for wg in ["128", "256"] {
+        for wg in ["64", "128"] {
             let extra = if extra.is_empty() {
                 format!(r#""workgroup": "{wg}""#)
             } else {
