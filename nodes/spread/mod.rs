@@ -155,6 +155,12 @@ fn grid_params() -> Vec<ParamSpec> {
             &["64", "128", "256"],
             "threads per workgroup (tuning: the workgroup serves workgroup / support^2 particles)",
         ),
+        ParamSpec {
+            name: "sorted_input",
+            kind: ParamKind::Bool,
+            default: Some(ParamValue::Bool(false)),
+            doc: "spreading: particles come sorted by cell (Morton order best): accumulate runs of them in workgroup memory first (fewer grid atomics)",
+        },
         ParamSpec::choice(
             "variant",
             "auto",
@@ -411,33 +417,57 @@ impl GpuKernels for Spread {
         } else {
             "spread/add_cas.wgsl"
         };
+        let tiled = self.params.get("sorted_input") == Some(&ParamValue::Bool(true));
+        let kernel_file = if tiled {
+            "spread/spread_tiled.wgsl"
+        } else {
+            "spread/spread.wgsl"
+        };
         let source = format!(
             "{}{}{}",
             cx.shader(self.gw.window.shader())?,
             cx.shader(add)?,
-            cx.shader("spread/spread.wgsl")?
+            cx.shader(kernel_file)?
         );
+        let ns = self.gw.window.support();
         let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
-        for first in (0..comps).step_by(CHUNK_COMPS as usize) {
-            let chunk = CHUNK_COMPS.min(comps - first);
-            let kernel = cx.kernel(
-                &KernelSpec::new(
-                    format!("spread ({})", self.gw.window.shader()),
-                    source.clone(),
-                    &[
-                        Binding::StorageRead,
-                        Binding::StorageRead,
-                        Binding::StorageReadWrite,
-                        Binding::Uniform,
-                    ],
+        // The tiled kernel spreads one component per dispatch; the other four at a time.
+        let step = if tiled { 1 } else { CHUNK_COMPS };
+        for first in (0..comps).step_by(step as usize) {
+            let chunk = step.min(comps - first);
+            let bindings = [
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ];
+            let spec = KernelSpec::new(
+                format!(
+                    "spread ({}{})",
+                    self.gw.window.shader(),
+                    if tiled { ", tiled" } else { "" }
+                ),
+                source.clone(),
+                &bindings,
+            )
+            .constant("NS", ns as f64)
+            .constant("DIMS", self.gw.dims() as f64)
+            .constant("TOTAL", comps as f64);
+            let (spec, groups) = if tiled {
+                let per_workgroup = tiled_particles(self.gw.dims() as u32, ns);
+                (
+                    spec.constant("P", per_workgroup as f64),
+                    cx.grid_1d((n as u64).div_ceil(per_workgroup as u64), 1),
                 )
-                .constant("NS", self.gw.window.support() as f64)
-                .constant("DIMS", self.gw.dims() as f64)
-                .constant("COMPS", chunk as f64)
-                .constant("TOTAL", comps as f64)
-                .constant("CHUNKS", chunks(n) as f64)
-                .constant("WG", self.gw.workgroup as f64),
-            )?;
+            } else {
+                (
+                    spec.constant("COMPS", chunk as f64)
+                        .constant("CHUNKS", chunks(n) as f64)
+                        .constant("WG", self.gw.workgroup as f64),
+                    per_particle(cx, n, ns, self.gw.workgroup),
+                )
+            };
+            let kernel = cx.kernel(&spec)?;
             let geo = cx.uniform(
                 "spread geometry",
                 bytemuck::bytes_of(&GeometryUniform {
@@ -445,7 +475,6 @@ impl GpuKernels for Spread {
                     ..geometry(&self.gw, n)
                 }),
             );
-            let groups = per_particle(cx, n, self.gw.window.support(), self.gw.workgroup);
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[pos.buffer, vals.buffer, out.buffer, &geo],
@@ -454,6 +483,12 @@ impl GpuKernels for Spread {
         }
         Ok(dispatches)
     }
+}
+
+/// Particles per workgroup of the tiled kernel (shaders/spread/spread_tiled.wgsl): 32,
+/// or fewer so that their weight tables fit 1536 entries.
+fn tiled_particles(dims: u32, support: u32) -> u32 {
+    (1536 / (dims * support)).min(32)
 }
 
 pub struct InterpolateKind;
