@@ -59,12 +59,18 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32]) -> Result<(), CliError> 
             .map(|_| [0, 1, 2].map(|_| ((next() - 0.5) * l) as f32))
             .collect();
         if sorted {
-            // Linear cell order: what a cell-list sort produces.
+            // Morton order of the cells: what cell_hash (order morton) + sort produce.
             let cell = |p: &[f32; 3]| {
                 let i = |x: f32| {
                     (((x as f64 / l + 0.5) * n_cells as f64).floor() as u64).min(n_cells as u64 - 1)
                 };
-                i(p[0]) + n_cells as u64 * (i(p[1]) + n_cells as u64 * i(p[2]))
+                let mut k = 0u64;
+                for (a, c) in [i(p[0]), i(p[1]), i(p[2])].into_iter().enumerate() {
+                    for b in 0..11 {
+                        k |= ((c >> b) & 1) << (3 * b + a);
+                    }
+                }
+                k
             };
             pos.sort_by_key(cell);
         }
@@ -103,9 +109,17 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32]) -> Result<(), CliError> 
         } else {
             r#""window": "peskin4""#
         };
-        for &wg in workgroups {
+        // Sorted input also runs the tiled kernel (sorted_input), shown as wg "tile".
+        let mut runs: Vec<(String, String)> = workgroups
+            .iter()
+            .map(|wg| (wg.to_string(), format!(r#""workgroup": "{wg}""#)))
+            .collect();
+        if sorted {
+            runs.push(("tile".into(), r#""sorted_input": true"#.into()));
+        }
+        for (wg, extra) in runs {
             let params = format!(
-                r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, "workgroup": "{wg}"}}"#
+                r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, {extra}}}"#
             );
             let graph = format!(
                 r#"{{"mesoflow": 1,
