@@ -534,12 +534,14 @@ impl NodeKind for InterpolateKind {
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
         Ok(Box::new(Interpolate {
             gw: grid_window(p)?,
+            params: p.clone(),
         }))
     }
 }
 
 struct Interpolate {
     gw: GridWindow,
+    params: Params,
 }
 
 impl Node for Interpolate {
@@ -621,10 +623,18 @@ impl GpuKernels for Interpolate {
         let ValueType::Particles { n, .. } = pos.ty else {
             unreachable!()
         };
+        // Subgroup shuffles reduce each particle's threads when the adapter has them
+        // (variant "portable" forces the workgroup-memory tree).
+        let portable = self.params.get("variant") == Some(&ParamValue::Text("portable".into()));
+        let file = if cx.caps().subgroups.is_some() && !portable {
+            "spread/interpolate_subgroup.wgsl"
+        } else {
+            "spread/interpolate.wgsl"
+        };
         let source = format!(
             "{}{}",
             cx.shader(self.gw.window.shader())?,
-            cx.shader("spread/interpolate.wgsl")?
+            cx.shader(file)?
         );
         // Without weights the binding still needs a buffer; the kernel never reads it.
         let quadrature = weights.map(|w| w.buffer).unwrap_or(grid.buffer);

@@ -1,66 +1,17 @@
 // template: composed with a window file (window_phi).
 //
-// Interpolation: u[c] = sum over the support of delta(q - r_cell) v[c][cell] dV(cell),
-// the adjoint of spreading with the same window and stencil (dV: per-cell weights when
-// HAS_WEIGHTS, else the uniform cell volume). Each segment of threads reduces its
-// particle's sum in workgroup memory (segments are powers of two).
-#import common/index.wgsl
-#import spread/geometry.wgsl
-#import spread/stencil.wgsl
-
-override NS: u32 = 4u;
-override DIMS: u32 = 3u;
-override COMPS: u32 = 1u;   // components in this dispatch (at most 4)
-override TOTAL: u32 = 1u;   // components per particle
-override HAS_WEIGHTS: bool = false;
-
-@group(0) @binding(0) var<storage, read> pos: array<f32>;
-@group(0) @binding(1) var<storage, read> grid: array<f32>;
-@group(0) @binding(2) var<storage, read> quadrature: array<f32>;
-@group(0) @binding(3) var<storage, read_write> out: array<f32>;
-@group(0) @binding(4) var<uniform> geo: Geometry;
-
-var<workgroup> partial: array<vec4<f32>, 256>;
-
-fn sample(cell: u32, w: f32, acc: vec4<f32>) -> vec4<f32> {
-    var dv = geo.dv;
-    if (HAS_WEIGHTS) {
-        dv = quadrature[cell];
-    }
-    var r = acc;
-    let cells = geo.n.w;
-    for (var c = 0u; c < COMPS; c = c + 1u) {
-        r[c] = r[c] + w * dv * grid[(geo.comp_offset + c) * cells + cell];
-    }
-    return r;
-}
+// Interpolation with a workgroup-memory tree per particle segment (any adapter).
+#import spread/interpolate_common.wgsl
 
 @compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let seg = seg_size();
     let ppw = WG / seg;
-    stencil_setup((wid.y * nwg.x + wid.x) * ppw, lid, ppw);
+    let first_slot = (wid.y * nwg.x + wid.x) * ppw;
+    stencil_setup(first_slot, lid, ppw);
     workgroupBarrier();
-    let s = lid / seg;
-    var acc = vec4<f32>(0.0);
-    if (s < ppw && stencil_p[s] < geo.count) {
-        let tw = s * DIMS * NS;
-        for (var pair = lid % seg; pair < NS * NS; pair = pair + seg) {
-            let ix = pair % NS;
-            let iy = pair / NS;
-            let wxy = stencil_w[tw + ix] * stencil_w[tw + NS + iy];
-            let oxy = stencil_o[tw + ix] + stencil_o[tw + NS + iy];
-            if (DIMS == 2u) {
-                acc = sample(oxy, wxy, acc);
-            } else {
-                for (var iz = 0u; iz < NS; iz = iz + 1u) {
-                    acc = sample(oxy + stencil_o[tw + 2u * NS + iz], wxy * stencil_w[tw + 2u * NS + iz], acc);
-                }
-            }
-        }
-    }
-    partial[lid] = acc;
+    partial[lid] = column_sums(lid, seg, ppw);
     workgroupBarrier();
     for (var h = seg / 2u; h > 0u; h = h >> 1u) {
         if (lid % seg < h) {
@@ -70,9 +21,6 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     if (lid < ppw * COMPS) {
         let slot = lid / COMPS;
-        let p = stencil_p[slot];
-        if (p < geo.count) {
-            out[p * TOTAL + geo.comp_offset + lid % COMPS] = partial[slot * seg][lid % COMPS];
-        }
+        store(slot, lid % COMPS, partial[slot * seg][lid % COMPS]);
     }
 }

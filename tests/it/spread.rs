@@ -602,3 +602,54 @@ fn tiled_boxes_wrap_across_the_periodic_faces() {
         assert!(rel_max_err(&g, &r).0 < 1e-5, "{w}");
     }
 }
+
+#[test]
+fn interpolation_reductions_agree_on_every_segment_width() {
+    if gpu().is_none() {
+        return;
+    }
+    // Segments of 4 (support 2) to 64 threads: narrower than a subgroup (the shuffle-only
+    // path, taken at support <= 5 on 32-wide subgroups), wider (shuffles plus one
+    // workgroup step), and the workgroup-memory tree of the portable variant.
+    let mut rng = Rng::new(99);
+    let lengths = [10.0, 10.0, 10.0];
+    let cells = [20u32, 20, 20];
+    let pos = positions(&mut rng, 400, &lengths);
+    let field = rng.array(
+        ValueType::RealGrid {
+            dims: [20, 20, 20],
+            comps: 3,
+        },
+        -1.0,
+        1.0,
+    );
+    let windows = [
+        ("gaussian", r#""width": 0.25, "support": 2"#),
+        ("peskin3", ""),
+        ("peskin4", ""),
+        ("gaussian", r#""width": 0.6, "support": 8"#),
+        ("gaussian", r#""width": 0.9, "support": 11"#),
+    ];
+    for (w, extra) in windows {
+        for variant in ["auto", "portable"] {
+            for wg in ["64", "256"] {
+                let extra = if extra.is_empty() {
+                    format!(r#""workgroup": "{wg}""#)
+                } else {
+                    format!(r#"{extra}, "workgroup": "{wg}""#)
+                };
+                let p = params(w, &extra, &lengths, &cells, variant);
+                let (g, r) = run_node(
+                    "interpolate",
+                    &p,
+                    &[("grid", field.clone()), ("positions", pos.clone())],
+                );
+                let (err, at) = rel_max_err(&g, &r);
+                assert!(
+                    err < 1e-5,
+                    "interpolate {w} {extra} {variant}: error {err:e} at {at}"
+                );
+            }
+        }
+    }
+}
