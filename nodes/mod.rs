@@ -1,8 +1,10 @@
 //! Node implementations, each beside its f64 CPU reference. Kernels live in `shaders/`.
 
 pub mod cells;
+pub mod fcm;
 pub mod fft;
 pub mod permute;
+pub mod planners;
 pub mod pointwise;
 pub mod random;
 pub mod reduce;

@@ -113,7 +113,7 @@ impl fmt::Display for ParamValue {
 pub type Scope = BTreeMap<String, ParamValue>;
 
 /// Resolves a param as written in a graph file: a literal, a `$name` reference, or an
-/// `= expression`.
+/// `= expression` (a number or an array of numbers).
 pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, String> {
     if let serde_json::Value::String(s) = v {
         if let Some(name) = s.strip_prefix('$') {
@@ -124,7 +124,7 @@ pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, Strin
                 .ok_or_else(|| unknown_name(name, scope));
         }
         if let Some(expr) = s.strip_prefix('=') {
-            return eval(expr, scope).map(ParamValue::Number);
+            return evaluate(expr, scope);
         }
     }
     ParamValue::from_json(v)
@@ -138,14 +138,36 @@ fn unknown_name(name: &str, scope: &Scope) -> String {
     )
 }
 
-/// Evaluates an arithmetic expression in f64.
+/// A function graph expressions may call besides the arithmetic ones: the host-side f64
+/// planners of node families (an FFT-friendly size, an FCM grid from a radius).
+pub struct HostFunction {
+    pub name: &'static str,
+    /// Shown in docs: the arguments and what comes back.
+    pub doc: &'static str,
+    pub call: fn(&[ParamValue]) -> Result<ParamValue, String>,
+}
+
+/// Evaluates an expression to a number.
 ///
 /// Grammar: numbers, names of graph params, `+ - * / ^` (power, right-associative),
-/// unary minus, parentheses, indexing of array params (`box[0]`), the constant `pi`, and
-/// the functions sqrt, cbrt, exp, log (natural), log10, sin, cos, tan, atan, abs, floor,
-/// ceil, round, pow(x, y), min(...), max(...), sum(...), prod(...) (the last four also
-/// take arrays).
+/// unary minus, parentheses, indexing of array params (`box[0]`), array literals
+/// (`[a, b, c]`), strings in single quotes, the constant `pi`, the functions sqrt, cbrt,
+/// exp, log (natural), log10, sin, cos, tan, atan, abs, floor, ceil, round, pow(x, y),
+/// min(...), max(...), sum(...), prod(...) (the last four also take arrays), and the host
+/// planners of `crate::nodes::planners`.
 pub fn eval(text: &str, scope: &Scope) -> Result<f64, String> {
+    match evaluate(text, scope)? {
+        ParamValue::Number(x) => Ok(x),
+        other => Err(format!(
+            "expression `{}` gives {} where a number is needed",
+            text.trim(),
+            other.type_name()
+        )),
+    }
+}
+
+/// Evaluates an expression to a number or an array of numbers.
+pub fn evaluate(text: &str, scope: &Scope) -> Result<ParamValue, String> {
     let mut p = Parser {
         src: text,
         toks: lex(text)?,
@@ -160,17 +182,32 @@ pub fn eval(text: &str, scope: &Scope) -> Result<f64, String> {
             text.trim()
         ));
     }
-    let x = v.number(text)?;
-    if !x.is_finite() {
-        return Err(format!("expression `{}` is not finite ({x})", text.trim()));
+    let finite = |x: f64| {
+        if x.is_finite() {
+            Ok(x)
+        } else {
+            Err(format!("expression `{}` is not finite ({x})", text.trim()))
+        }
+    };
+    match v {
+        V::Num(x) => finite(x).map(ParamValue::Number),
+        V::Arr(a) => a
+            .into_iter()
+            .map(finite)
+            .collect::<Result<Vec<_>, _>>()
+            .map(ParamValue::Numbers),
+        V::Text(_) => Err(format!(
+            "expression `{}` gives a string; write the string itself instead",
+            text.trim()
+        )),
     }
-    Ok(x)
 }
 
 #[derive(Clone, Debug, PartialEq)]
 enum Tok {
     Num(f64),
     Name(String),
+    Str(String),
     Op(char),
 }
 
@@ -179,6 +216,7 @@ impl Tok {
         match self {
             Tok::Num(x) => x.to_string(),
             Tok::Name(s) => s.clone(),
+            Tok::Str(s) => format!("'{s}'"),
             Tok::Op(c) => c.to_string(),
         }
     }
@@ -221,6 +259,14 @@ fn lex(s: &str) -> Result<Vec<Tok>, String> {
                 i += 1;
             }
             out.push(Tok::Name(s[start..i].to_string()));
+        } else if c == '\'' {
+            let start = i + 1;
+            let end = s[start..]
+                .find('\'')
+                .map(|e| start + e)
+                .ok_or_else(|| format!("unterminated string in expression `{}`", s.trim()))?;
+            out.push(Tok::Str(s[start..end].to_string()));
+            i = end + 1;
         } else if "+-*/^(),[]".contains(c) {
             out.push(Tok::Op(c));
             i += 1;
@@ -234,10 +280,13 @@ fn lex(s: &str) -> Result<Vec<Tok>, String> {
     Ok(out)
 }
 
-/// An intermediate value: expressions compute numbers, but names may denote arrays.
+/// An intermediate value: expressions compute numbers, but names and literals may be
+/// arrays or strings (as arguments of functions).
+#[derive(Clone)]
 enum V {
     Num(f64),
     Arr(Vec<f64>),
+    Text(String),
 }
 
 impl V {
@@ -248,6 +297,18 @@ impl V {
                 "expression `{}` gives an array where a number is needed",
                 src.trim()
             )),
+            V::Text(_) => Err(format!(
+                "a string cannot be used in arithmetic in expression `{}`",
+                src.trim()
+            )),
+        }
+    }
+
+    fn param(self) -> ParamValue {
+        match self {
+            V::Num(x) => ParamValue::Number(x),
+            V::Arr(a) => ParamValue::Numbers(a),
+            V::Text(t) => ParamValue::Text(t),
         }
     }
 }
@@ -337,9 +398,9 @@ impl Parser<'_> {
             self.expect(']')?;
             let arr = match v {
                 V::Arr(a) => a,
-                V::Num(_) => {
+                _ => {
                     return Err(format!(
-                        "indexing a number in expression `{}`",
+                        "indexing something that is not an array in expression `{}`",
                         self.src.trim()
                     ));
                 }
@@ -356,6 +417,22 @@ impl Parser<'_> {
         Ok(v)
     }
 
+    fn list(&mut self, close: char) -> Result<Vec<V>, String> {
+        let mut items = Vec::new();
+        if !self.peek_op(close) {
+            loop {
+                items.push(self.expr()?);
+                if self.peek_op(',') {
+                    self.pos += 1;
+                } else {
+                    break;
+                }
+            }
+        }
+        self.expect(close)?;
+        Ok(items)
+    }
+
     fn atom(&mut self) -> Result<V, String> {
         let tok = self
             .toks
@@ -365,38 +442,34 @@ impl Parser<'_> {
         self.pos += 1;
         match tok {
             Tok::Num(x) => Ok(V::Num(x)),
+            Tok::Str(s) => Ok(V::Text(s)),
             Tok::Op('(') => {
                 let v = self.expr()?;
                 self.expect(')')?;
                 Ok(v)
             }
+            Tok::Op('[') => {
+                let src = self.src;
+                let items = self.list(']')?;
+                items
+                    .into_iter()
+                    .map(|v| v.number(src))
+                    .collect::<Result<Vec<_>, _>>()
+                    .map(V::Arr)
+            }
             Tok::Name(name) => {
                 if self.peek_op('(') {
                     self.pos += 1;
-                    let mut args = Vec::new();
-                    if !self.peek_op(')') {
-                        loop {
-                            args.push(self.expr()?);
-                            if self.peek_op(',') {
-                                self.pos += 1;
-                            } else {
-                                break;
-                            }
-                        }
-                    }
-                    self.expect(')')?;
+                    let args = self.list(')')?;
                     return self.call(&name, args);
                 }
                 if let Some(v) = self.scope.get(&name) {
-                    return match v {
-                        ParamValue::Number(x) => Ok(V::Num(*x)),
-                        ParamValue::Numbers(a) => Ok(V::Arr(a.clone())),
-                        ParamValue::Bool(b) => Ok(V::Num(if *b { 1.0 } else { 0.0 })),
-                        ParamValue::Text(_) => Err(format!(
-                            "param `{name}` is a string and cannot be used in expression `{}`",
-                            self.src.trim()
-                        )),
-                    };
+                    return Ok(match v {
+                        ParamValue::Number(x) => V::Num(*x),
+                        ParamValue::Numbers(a) => V::Arr(a.clone()),
+                        ParamValue::Bool(b) => V::Num(if *b { 1.0 } else { 0.0 }),
+                        ParamValue::Text(t) => V::Text(t.clone()),
+                    });
                 }
                 if name == "pi" {
                     return Ok(V::Num(std::f64::consts::PI));
@@ -416,13 +489,18 @@ impl Parser<'_> {
 
     fn call(&self, name: &str, args: Vec<V>) -> Result<V, String> {
         let src = self.src.trim();
-        let flat = |args: Vec<V>| -> Vec<f64> {
-            args.into_iter()
-                .flat_map(|a| match a {
-                    V::Num(x) => vec![x],
-                    V::Arr(v) => v,
-                })
-                .collect()
+        let flat = |args: Vec<V>| -> Result<Vec<f64>, String> {
+            let mut out = Vec::new();
+            for a in args {
+                match a {
+                    V::Num(x) => out.push(x),
+                    V::Arr(v) => out.extend(v),
+                    V::Text(_) => {
+                        return Err(format!("`{name}` takes numbers in expression `{src}`"));
+                    }
+                }
+            }
+            Ok(out)
         };
         let unary = |args: Vec<V>, f: fn(f64) -> f64| -> Result<V, String> {
             if args.len() != 1 {
@@ -451,14 +529,14 @@ impl Parser<'_> {
             "ceil" => unary(args, f64::ceil),
             "round" => unary(args, f64::round),
             "pow" => {
-                let v = flat(args);
+                let v = flat(args)?;
                 if v.len() != 2 {
                     return Err(format!("`pow` takes two arguments in expression `{src}`"));
                 }
                 Ok(V::Num(v[0].powf(v[1])))
             }
             "min" | "max" | "sum" | "prod" => {
-                let v = flat(args);
+                let v = flat(args)?;
                 if v.is_empty() {
                     return Err(format!(
                         "`{name}` needs at least one value in expression `{src}`"
@@ -471,7 +549,20 @@ impl Parser<'_> {
                     _ => v.iter().product(),
                 }))
             }
-            _ => Err(format!("unknown function `{name}` in expression `{src}`")),
+            _ => match crate::nodes::planners::lookup(name) {
+                Some(f) => {
+                    let params: Vec<ParamValue> = args.into_iter().map(V::param).collect();
+                    let out = (f.call)(&params)
+                        .map_err(|e| format!("{name}: {e} (in expression `{src}`)"))?;
+                    Ok(match out {
+                        ParamValue::Number(x) => V::Num(x),
+                        ParamValue::Numbers(a) => V::Arr(a),
+                        ParamValue::Text(t) => V::Text(t),
+                        ParamValue::Bool(b) => V::Num(if b { 1.0 } else { 0.0 }),
+                    })
+                }
+                None => Err(format!("unknown function `{name}` in expression `{src}`")),
+            },
         }
     }
 }
@@ -520,6 +611,7 @@ mod tests {
         assert!(eval("box[3]", &s).unwrap_err().contains("out of range"));
         assert!(eval("box", &s).unwrap_err().contains("array"));
         assert!(eval("kernel + 1", &s).unwrap_err().contains("string"));
+        assert!(eval("'a", &s).unwrap_err().contains("unterminated"));
         assert!(eval("1 +", &s).unwrap_err().contains("ends too early"));
         assert!(eval("(1", &s).unwrap_err().contains("expected `)`"));
         assert!(eval("1/0", &s).unwrap_err().contains("not finite"));
@@ -554,6 +646,24 @@ mod tests {
         );
         assert!(resolve(&j("\"$nope\""), &s).is_err());
         assert!(resolve(&j("null"), &s).is_err());
+    }
+
+    #[test]
+    fn arrays_and_strings() {
+        let s = scope();
+        assert_eq!(
+            evaluate("[1, 2 * 3, box[2]]", &s).unwrap(),
+            ParamValue::Numbers(vec![1.0, 6.0, 16.0])
+        );
+        assert_eq!(evaluate("[]", &s).unwrap(), ParamValue::Numbers(vec![]));
+        assert!(
+            evaluate("kernel", &s)
+                .unwrap_err()
+                .contains("gives a string")
+        );
+        assert!(evaluate("['a']", &s).unwrap_err().contains("arithmetic"));
+        assert_eq!(eval("next_fft(97)", &s).unwrap(), 98.0);
+        assert!(eval("next_fft('x')", &s).unwrap_err().contains("next_fft"));
     }
 
     #[test]
