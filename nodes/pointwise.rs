@@ -64,6 +64,9 @@ pub struct PointwiseKind {
     pub(crate) uses_step: bool,
     /// The params are one value per component, padded to MAX_COMPONENTS for the body.
     pub(crate) per_component: bool,
+    /// Real-linear in its array inputs (sums, real factors): spectra are accepted too,
+    /// since such an operation acts on real and imaginary parts alike.
+    pub(crate) linear: bool,
     /// f64 reference of one element: (inputs, where, params).
     pub(crate) reference: fn(&[f64], ElemCtx, &[f64]) -> f64,
 }
@@ -81,6 +84,7 @@ pub(crate) const BASE: PointwiseKind = PointwiseKind {
     imports: &[],
     uses_step: false,
     per_component: false,
+    linear: false,
     reference: |_, _, _| 0.0,
 };
 
@@ -189,6 +193,7 @@ pub static KINDS: &[PointwiseKind] = &[
         flatten: |p| numbers(p, &["factor"]),
         body: "return p0 * x;",
         reference: |i, _, p| p[0] * i[0],
+        linear: true,
         ..BASE
     },
     PointwiseKind {
@@ -197,6 +202,7 @@ pub static KINDS: &[PointwiseKind] = &[
         inputs: &[("a", "first term", false), ("b", "second term", true)],
         body: "return a + b;",
         reference: |i, _, _| i[0] + i[1],
+        linear: true,
         ..BASE
     },
     PointwiseKind {
@@ -205,6 +211,7 @@ pub static KINDS: &[PointwiseKind] = &[
         inputs: &[("a", "minuend", false), ("b", "subtrahend", false)],
         body: "return a - b;",
         reference: |i, _, _| i[0] - i[1],
+        linear: true,
         ..BASE
     },
     PointwiseKind {
@@ -239,6 +246,7 @@ pub static KINDS: &[PointwiseKind] = &[
         flatten: |p| numbers(p, &["alpha"]),
         body: "return fma(p0, x, y);",
         reference: |i, _, p| p[0] * i[0] + i[1],
+        linear: true,
         ..BASE
     },
     PointwiseKind {
@@ -254,6 +262,7 @@ pub static KINDS: &[PointwiseKind] = &[
         flatten: |p| numbers(p, &["alpha", "beta"]),
         body: "return fma(p0, x, p1 * y);",
         reference: |i, _, p| p[0] * i[0] + p[1] * i[1],
+        linear: true,
         ..BASE
     },
     PointwiseKind {
@@ -330,7 +339,12 @@ impl NodeKind for &'static PointwiseKind {
         self.inputs
             .iter()
             .map(|&(n, d, opt)| {
-                let p = PortSpec::new(n, PortType::RealArray, d);
+                let ty = if self.linear {
+                    PortType::Linear
+                } else {
+                    PortType::RealArray
+                };
+                let p = PortSpec::new(n, ty, d);
                 if opt { p.optional() } else { p }
             })
             .collect()
@@ -339,7 +353,11 @@ impl NodeKind for &'static PointwiseKind {
     fn outputs(&self) -> Vec<PortSpec> {
         vec![PortSpec::new(
             "out",
-            PortType::RealArray,
+            if self.linear {
+                PortType::Linear
+            } else {
+                PortType::RealArray
+            },
             "result, shaped like the non-scalar inputs",
         )]
     }
@@ -402,6 +420,16 @@ impl Node for PointwiseNode {
             .map(|(_, t)| t)
             .or(self.generated)
             .unwrap_or(ValueType::Scalar);
+        if matches!(
+            out,
+            ValueType::ComplexGrid { .. } | ValueType::HalfComplexGrid { .. }
+        ) && let Some(i) = inputs.iter().position(|t| *t == Some(ValueType::Scalar))
+        {
+            return Err(PortError::new(
+                self.kind.inputs[i].0,
+                format!("a scalar cannot be broadcast over the complex values of {out}"),
+            ));
+        }
         let port = self.kind.inputs.first().map(|p| p.0).unwrap_or("out");
         (self.kind.check)(&out, &self.values).map_err(|e| PortError::new(port, e))?;
         Ok(Signature::outputs(vec![out]))

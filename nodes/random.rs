@@ -83,7 +83,7 @@ pub fn normal(idx: u64, step: u64, seed: u64, stream: u32) -> f64 {
     }
 }
 
-fn seed_param() -> ParamSpec {
+pub(crate) fn seed_param() -> ParamSpec {
     ParamSpec::integer(
         "seed",
         Some(0.0),
@@ -93,7 +93,7 @@ fn seed_param() -> ParamSpec {
     )
 }
 
-fn stream_param() -> ParamSpec {
+pub(crate) fn stream_param() -> ParamSpec {
     ParamSpec::integer(
         "stream",
         Some(0.0),

@@ -9,9 +9,10 @@
 
 use std::f64::consts::PI;
 
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
-    Signature, SpectralBody,
+    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
+    RefCtx, Registry, Signature, SpectralBody,
 };
 use crate::value::{PortType, RefArray, ValueType, half_dims};
 
@@ -37,9 +38,33 @@ fn box_param() -> ParamSpec {
     }
 }
 
-/// The f64 operation at one wave vector (physical units) on the components, with the
-/// kind's own params (after the box lengths).
-type Apply = fn(k: [f64; 3], p: &[f64], v: &mut [[f64; 2]]);
+/// One wave vector as the f64 references see it.
+#[derive(Clone, Copy, Debug)]
+pub struct Mode {
+    /// The wave vector in physical units: 2 pi (kx/Lx, ky/Ly, kz/Lz).
+    pub k: [f64; 3],
+    /// Signed wave numbers (kx in 0..=nx/2 on a half spectrum).
+    pub wave: [i64; 3],
+    /// Real-space grid dims.
+    pub dims: [u32; 3],
+    /// Box lengths.
+    pub lengths: [f64; 3],
+    /// The time step.
+    pub step: u64,
+}
+
+impl Mode {
+    /// Whether the wave number on `axis` is an unpaired Nyquist index (n/2 of an even n),
+    /// where odd operators (derivatives) have no consistent real value.
+    pub fn nyquist(&self, axis: usize) -> bool {
+        let n = self.dims[axis] as i64;
+        n % 2 == 0 && self.wave[axis].abs() == n / 2 && n > 1
+    }
+}
+
+/// The f64 operation at one wave vector on the components, with the kind's own params
+/// (after the box lengths).
+type Apply = fn(at: &Mode, p: &[f64], v: &mut [[f64; 2]]);
 
 struct SpectralKind {
     name: &'static str,
@@ -49,10 +74,234 @@ struct SpectralKind {
     comps: Option<u32>,
     /// f64 params of the reference: the box lengths, then the kind's own.
     values: fn(&Params) -> Vec<f64>,
-    /// f32 params of the WGSL body (computed in f64 from `values`, rounded once).
-    gpu_params: fn(&[f64]) -> Vec<f32>,
-    body: &'static str,
+    /// The WGSL body with its f32 params (computed in f64 from `values`, rounded once).
+    gpu: fn(&[f64]) -> SpectralBody,
+    /// Checks the input spectrum against the values (a noisy Green function needs a half
+    /// spectrum, whose Hermitian pairs it knows).
+    check: fn(&[f64], &ValueType) -> Result<(), String>,
     apply: Apply,
+}
+
+fn any_spectrum(_: &[f64], _: &ValueType) -> Result<(), String> {
+    Ok(())
+}
+
+fn inverse_lengths(v: &[f64]) -> Vec<f32> {
+    v[..3].iter().map(|l| (1.0 / l) as f32).collect()
+}
+
+fn body(text: &str, params: Vec<f32>) -> SpectralBody {
+    SpectralBody {
+        body: text.to_string(),
+        params,
+        ..Default::default()
+    }
+}
+
+/// Index of the `stokes` values: box (3), viscosity, noise, seed, stream, with_forces.
+mod stokes {
+    pub const VISCOSITY: usize = 3;
+    pub const NOISE: usize = 4;
+    pub const SEED: usize = 5;
+    pub const STREAM: usize = 6;
+    pub const FORCES: usize = 7;
+}
+
+/// The Stokes solution operator with Fourier-space fluctuations: values are the box,
+/// viscosity, noise scale, seed, stream and whether the deterministic part is applied.
+/// f32 params: 1/L (3), 1/(4 pi^2 eta), noise / (2 pi sqrt(eta V)), seed bits (2),
+/// stream bits; with q = k / (2 pi) the mobility is p3 / q^2 and the noise amplitude
+/// p4 N / |q| (N cells, V the box volume).
+fn stokes_body(v: &[f64]) -> SpectralBody {
+    let eta = v[stokes::VISCOSITY];
+    let noise = v[stokes::NOISE];
+    let volume = v[0] * v[1] * v[2];
+    let seed = v[stokes::SEED] as u64;
+    let mut params = inverse_lengths(v);
+    params.push((1.0 / (4.0 * PI * PI * eta)) as f32);
+    params.push((noise / (2.0 * PI * (eta * volume).sqrt())) as f32);
+    params.push(f32::from_bits(seed as u32));
+    params.push(f32::from_bits((seed >> 32) as u32));
+    params.push(f32::from_bits(v[stokes::STREAM] as u32));
+    let mut text = String::from(
+        "let q = vec3<f32>(k) * vec3<f32>(spectral_params[0], spectral_params[1], spectral_params[2]);
+    let q2 = dot(q, q);
+    var u: array<vec2<f32>, 3>;
+    if (q2 == 0.0) {
+        return u;
+    }
+    let inv = 1.0 / q2;
+",
+    );
+    if v[stokes::FORCES] != 0.0 {
+        text.push_str(
+            "    let d = (q.x * v[0] + q.y * v[1] + q.z * v[2]) * inv;
+    let b = spectral_params[3] * inv;
+    u[0] = b * (v[0] - q.x * d);
+    u[1] = b * (v[1] - q.y * d);
+    u[2] = b * (v[2] - q.z * d);
+",
+        );
+    }
+    let noisy = noise != 0.0;
+    if noisy {
+        text.push_str(
+            "    let z = fourier_normal(k, n, step, bitcast<u32>(spectral_params[5]), bitcast<u32>(spectral_params[6]), bitcast<u32>(spectral_params[7]));
+    let dz = (q.x * z[0] + q.y * z[1] + q.z * z[2]) * inv;
+    let c = spectral_params[4] * f32(n.x * n.y * n.z) * sqrt(inv);
+    u[0] += c * (z[0] - q.x * dz);
+    u[1] += c * (z[1] - q.y * dz);
+    u[2] += c * (z[2] - q.z * dz);
+",
+        );
+    }
+    text.push_str("    return u;");
+    SpectralBody {
+        body: text,
+        params,
+        imports: if noisy {
+            vec!["random/fourier_normal.wgsl".into()]
+        } else {
+            Vec::new()
+        },
+        uses_step: noisy,
+    }
+}
+
+fn stokes_apply(at: &Mode, p: &[f64], v: &mut [[f64; 2]]) {
+    // p: viscosity, noise, seed, stream, with_forces (after the box).
+    let (eta, noise, forces) = (p[0], p[1], p[4] != 0.0);
+    let k = at.k;
+    let k2 = k[0] * k[0] + k[1] * k[1] + k[2] * k[2];
+    let mut u = [[0.0; 2]; 3];
+    if k2 > 0.0 {
+        let project = |x: &[[f64; 2]], scale: f64, u: &mut [[f64; 2]; 3]| {
+            for part in 0..2 {
+                let d = (0..3).map(|i| k[i] * x[i][part]).sum::<f64>() / k2;
+                for i in 0..3 {
+                    u[i][part] += scale * (x[i][part] - k[i] * d);
+                }
+            }
+        };
+        if forces {
+            project(v, 1.0 / (eta * k2), &mut u);
+        }
+        if noise != 0.0 {
+            let cells = at.dims.iter().map(|&d| d as f64).product::<f64>();
+            let volume = at.lengths.iter().product::<f64>();
+            let z = fourier_normal(at.wave, at.dims, at.step, p[2] as u64, p[3] as u32);
+            project(
+                &z,
+                noise * cells / (volume.sqrt() * (eta * k2).sqrt()),
+                &mut u,
+            );
+        }
+    }
+    v.copy_from_slice(&u);
+}
+
+/// Complex standard normals for stored mode `wave` of a half spectrum of real grid
+/// `dims`, three components: the f64 twin of `fourier_normal` in
+/// shaders/random/fourier_normal.wgsl (see there for the pairing rules).
+pub fn fourier_normal(
+    wave: [i64; 3],
+    dims: [u32; 3],
+    step: u64,
+    seed: u64,
+    stream: u32,
+) -> [[f64; 2]; 3] {
+    let [nx, ny, nz] = dims.map(|d| d as u64);
+    let sx = nx / 2 + 1;
+    let ix = wave[0] as u64;
+    let iy = wave[1].rem_euclid(ny as i64) as u64;
+    let iz = wave[2].rem_euclid(nz as i64) as u64;
+    let mut m = ix + sx * (iy + ny * iz);
+    let (mut conj, mut real) = (false, false);
+    if ix == 0 || (nx % 2 == 0 && ix == nx / 2) {
+        let pm = ix + sx * ((ny - iy) % ny + ny * ((nz - iz) % nz));
+        real = pm == m;
+        conj = pm < m;
+        m = m.min(pm);
+    }
+    [0, 1, 2].map(|c| {
+        let re = crate::nodes::random::normal(8 * m + 2 * c, step, seed, stream);
+        let im = crate::nodes::random::normal(8 * m + 2 * c + 1, step, seed, stream);
+        if real {
+            [re, 0.0]
+        } else {
+            let h = std::f64::consts::FRAC_1_SQRT_2;
+            [h * re, if conj { -h * im } else { h * im }]
+        }
+    })
+}
+
+fn curl_body(v: &[f64]) -> SpectralBody {
+    let params: Vec<f32> = v[..3]
+        .iter()
+        .map(|l| (2.0 * PI * v[3] / l) as f32)
+        .collect();
+    body(
+        "// Unpaired Nyquist wave numbers carry no derivative.
+    let even = (n % vec3<u32>(2u)) == vec3<u32>(0u);
+    let ny = (even & (vec3<u32>(abs(k)) == n / vec3<u32>(2u))) & (n > vec3<u32>(1u));
+    let q = select(vec3<f32>(k), vec3<f32>(0.0), ny) * vec3<f32>(spectral_params[0], spectral_params[1], spectral_params[2]);
+    let w0 = q.y * v[2] - q.z * v[1];
+    let w1 = q.z * v[0] - q.x * v[2];
+    let w2 = q.x * v[1] - q.y * v[0];
+    var u = v;
+    u[0] = vec2<f32>(-w0.y, w0.x);
+    u[1] = vec2<f32>(-w1.y, w1.x);
+    u[2] = vec2<f32>(-w2.y, w2.x);
+    return u;",
+        params,
+    )
+}
+
+fn curl_apply(at: &Mode, p: &[f64], v: &mut [[f64; 2]]) {
+    let q = [0, 1, 2].map(|a| if at.nyquist(a) { 0.0 } else { p[0] * at.k[a] });
+    let x = [v[0], v[1], v[2]];
+    for (a, out) in v.iter_mut().enumerate() {
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        // (q x v)_a = q_b v_c - q_c v_b, then times i.
+        let w = [0, 1].map(|part| q[b] * x[c][part] - q[c] * x[b][part]);
+        *out = [-w[1], w[0]];
+    }
+}
+
+fn stokes_params(noise_default: f64) -> Vec<ParamSpec> {
+    vec![
+        box_param(),
+        ParamSpec::number(
+            "viscosity",
+            None,
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            "solvent viscosity eta",
+        ),
+        ParamSpec::number(
+            "noise",
+            Some(noise_default),
+            0.0,
+            f64::MAX,
+            "factor on the fluctuating velocity M^(1/2) W (0: none, and no random numbers are drawn)",
+        ),
+        crate::nodes::random::seed_param(),
+        crate::nodes::random::stream_param(),
+    ]
+}
+
+fn stokes_values(p: &Params, forces: bool) -> Vec<f64> {
+    let b = p.numbers("box");
+    vec![
+        b[0],
+        b[1],
+        b[2],
+        p.number("viscosity"),
+        p.number("noise"),
+        p.number("seed"),
+        p.number("stream"),
+        if forces { 1.0 } else { 0.0 },
+    ]
 }
 
 static KINDS: &[SpectralKind] = &[
@@ -61,13 +310,7 @@ static KINDS: &[SpectralKind] = &[
         doc: "Gaussian filter of a spectrum: every component times exp(-sigma^2 |k|^2 / 2), k in units of the box",
         params: || {
             vec![
-                ParamSpec::number(
-                    "sigma",
-                    None,
-                    0.0,
-                    f64::INFINITY,
-                    "filter width (a length)",
-                ),
+                ParamSpec::number("sigma", None, 0.0, f64::INFINITY, "filter width (a length)"),
                 box_param(),
             ]
         },
@@ -77,22 +320,23 @@ static KINDS: &[SpectralKind] = &[
             vec![b[0], b[1], b[2], p.number("sigma")]
         },
         // p0 = -sigma^2 (2 pi)^2 / 2, p1..3 = 1/L: exp(p0 |k/L|^2) with integer k.
-        gpu_params: |v| {
-            vec![
-                (-0.5 * v[3] * v[3] * 4.0 * PI * PI) as f32,
-                (1.0 / v[0]) as f32,
-                (1.0 / v[1]) as f32,
-                (1.0 / v[2]) as f32,
-            ]
-        },
-        body: "let q = vec3<f32>(k) * vec3<f32>(spectral_params[1], spectral_params[2], spectral_params[3]);
+        gpu: |v| {
+            let mut params = vec![(-0.5 * v[3] * v[3] * 4.0 * PI * PI) as f32];
+            params.extend(inverse_lengths(v));
+            body(
+                "let q = vec3<f32>(k) * vec3<f32>(spectral_params[1], spectral_params[2], spectral_params[3]);
     let g = exp(spectral_params[0] * dot(q, q));
     var u = v;
     for (var c = 0u; c < SPECTRAL_COMPS; c++) {
         u[c] = u[c] * g;
     }
     return u;",
-        apply: |k, p, v| {
+                params,
+            )
+        },
+        check: any_spectrum,
+        apply: |at, p, v| {
+            let k = at.k;
             let g = (-0.5 * p[0] * p[0] * (k[0] * k[0] + k[1] * k[1] + k[2] * k[2])).exp();
             for x in v.iter_mut() {
                 x[0] *= g;
@@ -107,8 +351,9 @@ static KINDS: &[SpectralKind] = &[
         comps: Some(3),
         values: |p| p.numbers("box").to_vec(),
         // Only the direction of k matters: k/L without 2 pi.
-        gpu_params: |v| v.iter().map(|l| (1.0 / l) as f32).collect(),
-        body: "let q = vec3<f32>(k) * vec3<f32>(spectral_params[0], spectral_params[1], spectral_params[2]);
+        gpu: |v| {
+            body(
+                "let q = vec3<f32>(k) * vec3<f32>(spectral_params[0], spectral_params[1], spectral_params[2]);
     let q2 = dot(q, q);
     if (q2 == 0.0) {
         return v;
@@ -120,7 +365,12 @@ static KINDS: &[SpectralKind] = &[
     u[1] = v[1] - h.y * d;
     u[2] = v[2] - h.z * d;
     return u;",
-        apply: |k, _, v| {
+                inverse_lengths(v),
+            )
+        },
+        check: any_spectrum,
+        apply: |at, _, v| {
+            let k = at.k;
             let k2 = k[0] * k[0] + k[1] * k[1] + k[2] * k[2];
             if k2 == 0.0 {
                 return;
@@ -132,6 +382,39 @@ static KINDS: &[SpectralKind] = &[
                 vi[1] -= ki * d[1];
             }
         },
+    },
+    SpectralKind {
+        name: "curl",
+        doc: "scale * i k x f of a 3-component spectrum (the curl of the field; unpaired Nyquist wave numbers carry no derivative)",
+        params: || {
+            vec![
+                box_param(),
+                ParamSpec::number("scale", Some(1.0), f64::MIN, f64::MAX, "factor on the curl"),
+            ]
+        },
+        comps: Some(3),
+        values: |p| {
+            let b = p.numbers("box");
+            vec![b[0], b[1], b[2], p.number("scale")]
+        },
+        gpu: curl_body,
+        check: any_spectrum,
+        apply: curl_apply,
+    },
+    SpectralKind {
+        name: "stokes",
+        doc: "periodic Stokes flow of a force density: u = (I - k k^T / k^2) f / (eta k^2), k = 0 mode zero; plus noise * M^(1/2) W drawn in Fourier space (FCM's fluctuating stress) when noise > 0",
+        params: || stokes_params(0.0),
+        comps: Some(3),
+        values: |p| stokes_values(p, true),
+        gpu: stokes_body,
+        check: |v, t| match t {
+            ValueType::ComplexGrid { .. } if v[stokes::NOISE] != 0.0 => Err(format!(
+                "noise needs the half spectrum of a real field (rfft), got {t}"
+            )),
+            _ => Ok(()),
+        },
+        apply: stokes_apply,
     },
 ];
 
@@ -174,10 +457,7 @@ impl NodeKind for &'static SpectralKind {
         }
         Ok(Box::new(SpectralNode {
             kind: self,
-            body: SpectralBody {
-                body: self.body.to_string(),
-                params: (self.gpu_params)(&values),
-            },
+            body: (self.gpu)(&values),
             values,
         }))
     }
@@ -210,6 +490,7 @@ impl Node for SpectralNode {
                 format!("{} needs {c} components, got {t}", self.kind.name),
             ));
         }
+        (self.kind.check)(&self.values, &t).map_err(|e| PortError::new("x", e))?;
         Ok(Signature::outputs(vec![t]))
     }
 
@@ -217,39 +498,171 @@ impl Node for SpectralNode {
         Lowering::Spectral(self.body.clone())
     }
 
-    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _cx: RefCtx) {
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
         let Some(x) = &inputs[0] else { return };
-        let (dims, comps, half) = match x.ty {
-            ValueType::ComplexGrid { dims, comps } => (dims, comps as usize, false),
-            ValueType::HalfComplexGrid { dims, comps } => (dims, comps as usize, true),
-            _ => return,
+        outputs[0].data.copy_from_slice(&x.data);
+        apply_reference(&self.values, self.kind.apply, &mut outputs[0], cx.step);
+    }
+}
+
+/// Applies `apply` in f64 to every stored wave vector of the spectrum `out` in place;
+/// `values` starts with the box lengths.
+fn apply_reference(values: &[f64], apply: Apply, out: &mut RefArray, step: u64) {
+    let (dims, comps, half) = match out.ty {
+        ValueType::ComplexGrid { dims, comps } => (dims, comps as usize, false),
+        ValueType::HalfComplexGrid { dims, comps } => (dims, comps as usize, true),
+        _ => return,
+    };
+    let s = if half { half_dims(dims) } else { dims };
+    let cells = (s[0] * s[1] * s[2]) as usize;
+    let lengths = [values[0], values[1], values[2]];
+    let mut v = vec![[0.0; 2]; comps];
+    for cell in 0..cells {
+        let c32 = cell as u32;
+        let (ix, iy, iz) = (c32 % s[0], (c32 / s[0]) % s[1], c32 / (s[0] * s[1]));
+        let kx = if half {
+            ix as i64
+        } else {
+            wave_number(ix, dims[0])
         };
-        let s = if half { half_dims(dims) } else { dims };
-        let cells = (s[0] * s[1] * s[2]) as usize;
-        let out = &mut outputs[0].data;
-        out.copy_from_slice(&x.data);
-        let mut v = vec![[0.0; 2]; comps];
-        for cell in 0..cells {
-            let c32 = cell as u32;
-            let (ix, iy, iz) = (c32 % s[0], (c32 / s[0]) % s[1], c32 / (s[0] * s[1]));
-            let kx = if half {
-                ix as i64
-            } else {
-                wave_number(ix, dims[0])
-            };
-            let ki = [kx, wave_number(iy, dims[1]), wave_number(iz, dims[2])];
-            let k = [0, 1, 2].map(|a| 2.0 * PI * ki[a] as f64 / self.values[a]);
-            for (c, vc) in v.iter_mut().enumerate() {
-                let i = 2 * (c * cells + cell);
-                *vc = [x.data[i], x.data[i + 1]];
-            }
-            (self.kind.apply)(k, &self.values[3..], &mut v);
-            for (c, vc) in v.iter().enumerate() {
-                let i = 2 * (c * cells + cell);
-                out[i] = vc[0];
-                out[i + 1] = vc[1];
-            }
+        let wave = [kx, wave_number(iy, dims[1]), wave_number(iz, dims[2])];
+        let at = Mode {
+            k: [0, 1, 2].map(|a| 2.0 * PI * wave[a] as f64 / lengths[a]),
+            wave,
+            dims,
+            lengths,
+            step,
+        };
+        for (c, vc) in v.iter_mut().enumerate() {
+            let i = 2 * (c * cells + cell);
+            *vc = [out.data[i], out.data[i + 1]];
         }
+        apply(&at, &values[3..], &mut v);
+        for (c, vc) in v.iter().enumerate() {
+            let i = 2 * (c * cells + cell);
+            out.data[i] = vc[0];
+            out.data[i + 1] = vc[1];
+        }
+    }
+}
+
+/// `stokes_noise`: the fluctuating part of `stokes` alone, as a half spectrum generated
+/// from nothing (its inverse transform, interpolated, is M^(1/2) W). It draws the same
+/// numbers as a `stokes` node with the same seed, stream and step.
+pub struct StokesNoiseKind;
+
+impl NodeKind for StokesNoiseKind {
+    fn name(&self) -> &'static str {
+        "stokes_noise"
+    }
+
+    fn doc(&self) -> &'static str {
+        "the half spectrum of noise * M^(1/2) W for periodic Stokes flow (the fluctuating part of `stokes`, with the same draws): its inverse rfft, interpolated, has covariance noise^2 M"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        Vec::new()
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![PortSpec::new(
+            "out",
+            PortType::HalfComplexGrid,
+            "half spectrum of the fluctuating velocity, 3 components",
+        )]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        let mut p = stokes_params(1.0);
+        p.insert(
+            1,
+            ParamSpec {
+                name: "grid",
+                kind: ParamKind::Numbers {
+                    len: Some(3),
+                    min: 1.0,
+                    max: 65536.0,
+                },
+                default: None,
+                doc: "cells per axis of the real-space grid",
+            },
+        );
+        p
+    }
+
+    fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
+        let values = stokes_values(params, false);
+        let grid = params.numbers("grid");
+        if grid.iter().any(|g| g.fract() != 0.0) {
+            return Err(format!(
+                "`grid` must be whole numbers of cells, got {grid:?}"
+            ));
+        }
+        Ok(Box::new(StokesNoiseNode {
+            dims: [grid[0] as u32, grid[1] as u32, grid[2] as u32],
+            body: stokes_body(&values),
+            values,
+        }))
+    }
+}
+
+struct StokesNoiseNode {
+    dims: [u32; 3],
+    values: Vec<f64>,
+    body: SpectralBody,
+}
+
+impl StokesNoiseNode {
+    fn ty(&self) -> ValueType {
+        ValueType::HalfComplexGrid {
+            dims: self.dims,
+            comps: 3,
+        }
+    }
+}
+
+impl Node for StokesNoiseNode {
+    fn infer(&self, _: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        Ok(Signature::outputs(vec![self.ty()]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, _: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
+        outputs[0].data.fill(0.0);
+        apply_reference(&self.values, stokes_apply, &mut outputs[0], cx.step);
+    }
+}
+
+impl GpuKernels for StokesNoiseNode {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let ty = self.ty();
+        let source = crate::plan::spectral::standalone_source(&self.body, &ty, false);
+        let mut bindings = vec![Binding::StorageRead, Binding::StorageReadWrite];
+        if self.body.uses_step {
+            bindings.push(Binding::StorageRead);
+        }
+        let kernel = cx.kernel(&KernelSpec::new("stokes_noise", source, &bindings))?;
+        let params = cx.table(
+            "stokes_noise params",
+            bytemuck::cast_slice(&self.body.param_words()),
+        );
+        let mut buffers = vec![&params, io.outputs[0].buffer];
+        if self.body.uses_step {
+            buffers.push(cx.clock);
+        }
+        let modes = ty.words() / 2 / 3;
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &buffers,
+            cx.grid_1d(modes, WG_1D),
+        )])
     }
 }
 
@@ -257,4 +670,5 @@ pub fn register(r: &mut Registry) {
     for k in KINDS {
         r.add(k);
     }
+    r.add(StokesNoiseKind);
 }

@@ -374,11 +374,15 @@ pub struct PointwiseBody {
 /// SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS>`: `k` holds the signed wave
 /// numbers (index i on an axis of n points is i for i <= n/2, else i - n), `n` the dims of
 /// the real-space grid, `v` the components at k as (re, im). Params are read as
-/// `spectral_params[i]` (f32).
-#[derive(Clone, Debug, PartialEq)]
+/// `spectral_params[i]` (f32); a body with `uses_step` reads the time step as `step`.
+#[derive(Clone, Debug, PartialEq, Default)]
 pub struct SpectralBody {
     pub body: String,
     pub params: Vec<f32>,
+    /// Shader files whose functions the body calls (`common/philox.wgsl`).
+    pub imports: Vec<String>,
+    /// The body reads `step`: the kernel hosting it binds the engine clock as `clock`.
+    pub uses_step: bool,
 }
 
 impl SpectralBody {
@@ -390,14 +394,25 @@ impl SpectralBody {
         p
     }
 
-    /// The WGSL function for `comps` components. A kernel using it declares
-    /// `spectral_params: array<f32>` as a read-only storage binding holding
-    /// [`SpectralBody::param_words`] and imports `common/wave.wgsl` for `wave_number`.
+    /// The WGSL function for `comps` components, preceded by its imports. A kernel using
+    /// it declares `spectral_params: array<f32>` as a read-only storage binding holding
+    /// [`SpectralBody::param_words`], `clock: array<u32>` (the engine clock) when
+    /// `uses_step`, and imports `common/wave.wgsl` for `wave_number`.
     pub fn function(&self, comps: u32) -> String {
-        format!(
-            "const SPECTRAL_COMPS: u32 = {comps}u;\nfn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>, SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS> {{\n    {}\n}}\n",
+        let mut w = String::new();
+        for i in &self.imports {
+            w.push_str(&format!("#import {i}\n"));
+        }
+        let step = if self.uses_step {
+            "let step = clock[0];\n    "
+        } else {
+            ""
+        };
+        w.push_str(&format!(
+            "const SPECTRAL_COMPS: u32 = {comps}u;\nfn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>, SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS> {{\n    {step}{}\n}}\n",
             self.body.trim()
-        )
+        ));
+        w
     }
 }
 

@@ -168,6 +168,9 @@ pub enum PortType {
     RealOrIndices,
     /// A spectrum: a complex grid or a half complex grid.
     Spectrum,
+    /// Any f32 value, spectra included: for real-linear element-wise operations (sums,
+    /// real factors), which act on the real and imaginary parts alike.
+    Linear,
 }
 
 impl PortType {
@@ -196,6 +199,14 @@ impl PortType {
                 PortType::Spectrum,
                 ValueType::ComplexGrid { .. } | ValueType::HalfComplexGrid { .. },
             ) => true,
+            (
+                PortType::Linear,
+                ValueType::Particles { .. }
+                | ValueType::RealGrid { .. }
+                | ValueType::Scalar
+                | ValueType::ComplexGrid { .. }
+                | ValueType::HalfComplexGrid { .. },
+            ) => true,
             _ => false,
         }
     }
@@ -215,6 +226,10 @@ impl fmt::Display for PortType {
             PortType::Rows => write!(f, "particles | indices"),
             PortType::RealOrIndices => write!(f, "indices | particles | real_grid | scalar"),
             PortType::Spectrum => write!(f, "complex_grid | half_complex_grid"),
+            PortType::Linear => write!(
+                f,
+                "particles | real_grid | scalar | complex_grid | half_complex_grid"
+            ),
         }
     }
 }

@@ -30,8 +30,9 @@ pub struct Fold<'a> {
 }
 
 /// The bindings of a pass, in order: source (unless in place), destination, twiddles,
-/// then the folded spectral node's params.
-pub fn bindings(p: &Pass) -> Vec<Binding> {
+/// then the folded spectral node's params and, when its body reads the step, the engine
+/// clock.
+pub fn bindings(p: &Pass, fold: Option<&Fold>) -> Vec<Binding> {
     let mut b = Vec::new();
     if p.src != p.dst {
         b.push(Binding::StorageRead);
@@ -40,6 +41,9 @@ pub fn bindings(p: &Pass) -> Vec<Binding> {
     b.push(Binding::StorageRead);
     if p.spectral {
         b.push(Binding::StorageRead);
+        if fold.is_some_and(|f| f.body.uses_step) {
+            b.push(Binding::StorageRead);
+        }
     }
     b
 }
@@ -243,6 +247,9 @@ pub fn source(p: &Pass, fold: Option<&Fold>) -> String {
     bind(&mut w, "read", "tw", "vec2<f32>");
     if p.spectral {
         bind(&mut w, "read", "spectral_params", "f32");
+        if fold.is_some_and(|f| f.body.uses_step) {
+            bind(&mut w, "read", "clock", "u32");
+        }
     }
     if p.shared > 0 {
         writeln!(w, "var<workgroup> sh: array<vec2<f32>, {}>;", p.shared).unwrap();
@@ -453,7 +460,9 @@ pub fn source(p: &Pass, fold: Option<&Fold>) -> String {
         output_phase(&mut w, p, fold, &scale, post);
     }
     writeln!(w, "}}").unwrap();
-    crate::gpu::shaders::resolve(&w).expect("fft/common.wgsl and common/wave.wgsl are embedded")
+    // A folded body's imports name embedded files (its node's tests compile it).
+    crate::gpu::shaders::resolve(&w)
+        .expect("fft/common.wgsl, common/wave.wgsl and the folded body's imports are embedded")
 }
 
 /// Results from workgroup memory to global memory, one (line, point) item per thread at a

@@ -172,7 +172,7 @@ impl FftNode {
             let spec = KernelSpec::new(
                 label,
                 codegen::source(pass, fold.as_ref()),
-                &codegen::bindings(pass),
+                &codegen::bindings(pass, fold.as_ref()),
             );
             let kernel = cx.kernel(&spec)?;
             let twiddles = cx.table("fft twiddles", bytemuck::cast_slice(&pass.twiddles()));
@@ -195,6 +195,9 @@ impl FftNode {
             buffers.push(&twiddles);
             if let (true, Some(p)) = (pass.spectral, &params) {
                 buffers.push(p);
+                if spectral.is_some_and(|b| b.uses_step) {
+                    buffers.push(cx.clock);
+                }
             }
             // Workgroups folded over (x, y) as 1-D kernels fold them; the pass rebuilds
             // its group index as wid.y * nwg.x + wid.x.

@@ -689,16 +689,16 @@ fn spectral_dispatch(
     let input = io.inputs[0]
         .ok_or_else(|| CompileError::Unsupported("a spectral node needs its input".into()))?;
     let out = io.outputs[0];
-    let source = crate::plan::spectral::standalone_source(body, &out.ty);
-    let kernel = cx.kernel(&KernelSpec::new(
-        "spectral",
-        source,
-        &[
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageReadWrite,
-        ],
-    ))?;
+    let source = crate::plan::spectral::standalone_source(body, &out.ty, true);
+    let mut bindings = vec![
+        Binding::StorageRead,
+        Binding::StorageRead,
+        Binding::StorageReadWrite,
+    ];
+    if body.uses_step {
+        bindings.push(Binding::StorageRead);
+    }
+    let kernel = cx.kernel(&KernelSpec::new("spectral", source, &bindings))?;
     let params = cx.table("spectral params", bytemuck::cast_slice(&body.param_words()));
     let cells = match out.ty {
         ValueType::ComplexGrid { comps, .. } | ValueType::HalfComplexGrid { comps, .. } => {
@@ -706,11 +706,11 @@ fn spectral_dispatch(
         }
         _ => 0,
     };
-    Ok(cx.dispatch(
-        &kernel,
-        &[&params, input.buffer, out.buffer],
-        cx.grid_1d(cells, WG_1D),
-    ))
+    let mut buffers = vec![&params, input.buffer, out.buffer];
+    if body.uses_step {
+        buffers.push(cx.clock);
+    }
+    Ok(cx.dispatch(&kernel, &buffers, cx.grid_1d(cells, WG_1D)))
 }
 
 fn engine_err(source: CompileError) -> ExecError {

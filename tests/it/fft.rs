@@ -383,7 +383,7 @@ fn recipes_fit_the_device_and_read_and_write_each_line_once_per_axis() {
 fn generated_passes_validate_with_naga() {
     let body = mesoflow::node::SpectralBody {
         body: "return v;".into(),
-        params: vec![],
+        ..Default::default()
     };
     let nvidia = caps(48 << 10, 1024);
     let mut n = 0;
@@ -505,6 +505,38 @@ fn spectral_nodes_fold_into_the_forward_transform() {
             "irfft",
             ValueType::RealGrid {
                 dims: [16, 1, 1],
+                comps: 3,
+            },
+        ),
+        // Even sizes on every axis: the curl's unpaired Nyquist planes.
+        (
+            "rfft",
+            "curl",
+            r#"{"box": [1.0, 1.5, 2.0], "scale": 0.5}"#,
+            "irfft",
+            ValueType::RealGrid {
+                dims: [16, 12, 10],
+                comps: 3,
+            },
+        ),
+        (
+            "rfft",
+            "stokes",
+            r#"{"box": [1.0, 1.5, 2.0], "viscosity": 0.7}"#,
+            "irfft",
+            ValueType::RealGrid {
+                dims: [16, 12, 9],
+                comps: 3,
+            },
+        ),
+        // With Fourier-space noise (the clock is bound to the folded pass).
+        (
+            "rfft",
+            "stokes",
+            r#"{"box": [2.0, 1.0, 1.5], "viscosity": 1.3, "noise": 0.4, "seed": 77, "stream": 2}"#,
+            "irfft",
+            ValueType::RealGrid {
+                dims: [12, 10, 8],
                 comps: 3,
             },
         ),
