@@ -2,10 +2,12 @@
 // stable ranking of scatter_subgroup.wgsl (8 subgroupBallots per key find the lanes with
 // the same digit; one lane per digit bumps a per-subgroup counter), rebuilt around one
 // constraint: every loop over a thread's keys is written out, so keys, ranks and payload
-// stay in registers with all of a thread's loads in flight at once. A loop over a
-// register array that the driver does not unroll demotes the array to local memory and
-// waits on every load before issuing the next (the subgroup kernel moves only about
-// 500 GB/s on an H100, about one scalar load in flight per thread).
+// stay in registers with all of a thread's loads in flight at once. naga emits every
+// loop with its exit test inside, which drivers often leave rolled (gfx-rs/wgpu#6521);
+// a rolled loop over a register array keeps the array in local memory and waits on each
+// load before issuing the next. The subgroup kernel, written with such loops, moved
+// 430-510 GB/s on an H100, and its payload reads (passes 2 to 4) cost what about one
+// scalar load in flight per thread would.
 //
 // A thread holds 4 * QUADS keys as QUADS vec4 (QUADS = 1..4, a tile of 1024 * QUADS keys):
 //   1. load keys (and this tile's output starts) from global memory, zero the counters;
@@ -15,8 +17,8 @@
 //   5. write the sorted keys out (each digit a contiguous run), keeping their digits;
 //   6. place the payload in the stage by the same ranks and write it out the same way.
 // Bytes per key and pass: 4 read by tile_counts, 8 read and 8 written here (4 read in the
-// first pass, whose payload is the key's index), 8 bytes of counts and offsets per tile
-// and digit. Works for any subgroup size from 4 to 128 that fills its subgroups.
+// first pass, whose payload is the key's index), and 4 per digit and tile for its output
+// start. Works for any subgroup size from 4 to 128 that fills its subgroups.
 #import common/index.wgsl
 #import sort/common.wgsl
 #import sort/ballot.wgsl

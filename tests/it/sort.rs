@@ -207,3 +207,46 @@ fn the_subgroup_path_follows_the_reported_subgroup_sizes() {
         },
     );
 }
+
+#[test]
+fn the_bench_times_and_checks_every_variant() {
+    let bench = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+            .args(args)
+            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+            .output()
+            .expect("run mesoflow")
+    };
+    let o = bench(&["bench", "sort", "--variant", "tile1"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("expected all or one of auto, tile4096"),
+        "{err}"
+    );
+
+    // Holding the shared context keeps the other GPU tests off the CPU meanwhile.
+    let Some(_gpu) = gpu() else { return };
+    let o = bench(&[
+        "bench",
+        "sort",
+        "--n",
+        "5000",
+        "--reps",
+        "2",
+        "--variant",
+        "all",
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    for v in PATHS.iter().chain(&["auto"]) {
+        assert!(
+            out.contains(&format!("sort u32 keys + perm ({v})")),
+            "{v}:\n{out}"
+        );
+    }
+}
