@@ -17,7 +17,7 @@ echo "date: $(date -u +%Y-%m-%dT%H:%MZ)" | tee -a "$log"
 nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,clocks.max.mem --format=csv,noheader | tee -a "$log"
 has overhead && run $bin bench overhead --nodes 1000 --reps 50
 has reduce && run $bin bench reduce --n 100000000 --reps 20
-has sort && $bin bench sort --help >/dev/null 2>&1 && run $bin bench sort --n 10000000 --reps 20
+has sort && $bin bench sort --help >/dev/null 2>&1 && run $bin bench sort --n 10000000 --reps 20 --variant all
 has scan && $bin bench scan --help >/dev/null 2>&1 && run $bin bench scan --n 100000000 --reps 20
 has spread && run $bin bench spread --cells 128 --reps 20
 has fft && $bin bench fft --help >/dev/null 2>&1 && run $bin bench fft --comps 3 --reps 20

@@ -9,6 +9,7 @@
 // placed by (subgroup_id, subgroup_invocation_id), never by local_invocation_index.
 #import common/index.wgsl
 #import sort/common.wgsl
+#import sort/ballot.wgsl
 
 // Keys per thread and per tile (256 * KPT); nodes/sort.rs mirrors TILE.
 const KPT: u32 = 15u;
@@ -16,8 +17,6 @@ const TILE: u32 = 3840u;
 // Words of per-subgroup counters: 128 per subgroup, for 256 / (smallest subgroup size)
 // subgroups (set by nodes/sort.rs from the device's subgroup sizes).
 override COUNTER_WORDS: u32 = 4096u;
-// false when no subgroup is wider than 32 lanes: only the first ballot word is used.
-override WIDE: bool = true;
 
 @group(0) @binding(0) var<storage, read> keys_in: array<u32>;
 @group(0) @binding(1) var<storage, read> vals_in: array<u32>;
@@ -34,52 +33,6 @@ var<workgroup> counts: array<atomic<u32>, COUNTER_WORDS>;
 var<workgroup> stage: array<u32, TILE>;
 // Subgroup totals of the workgroup scan.
 var<workgroup> partial: array<u32, 64>;
-
-// Lanes whose digit equals d: one ballot per digit bit.
-fn peers(d: u32) -> vec4<u32> {
-    var eq = subgroupBallot(true);
-    for (var b = 0u; b < 8u; b++) {
-        let bit = ((d >> b) & 1u) == 1u;
-        let ballot = subgroupBallot(bit);
-        eq &= select(~ballot, ballot, bit);
-    }
-    if (!WIDE) {
-        eq = vec4<u32>(eq.x, 0u, 0u, 0u);
-    }
-    return eq;
-}
-
-fn popcount(m: vec4<u32>) -> u32 {
-    let c = countOneBits(m);
-    return (c.x + c.y) + (c.z + c.w);
-}
-
-fn lowest_lane(m: vec4<u32>) -> u32 {
-    if (m.x != 0u) {
-        return firstTrailingBit(m.x);
-    }
-    if (m.y != 0u) {
-        return 32u + firstTrailingBit(m.y);
-    }
-    if (m.z != 0u) {
-        return 64u + firstTrailingBit(m.z);
-    }
-    return 96u + firstTrailingBit(m.w);
-}
-
-// Ballot mask of the lanes below `lane`.
-fn lanes_below(lane: u32) -> vec4<u32> {
-    var m = vec4<u32>(0u);
-    for (var w = 0u; w < 4u; w++) {
-        let lo = 32u * w;
-        if (lane >= lo + 32u) {
-            m[w] = 0xffffffffu;
-        } else if (lane > lo) {
-            m[w] = (1u << (lane - lo)) - 1u;
-        }
-    }
-    return m;
-}
 
 // Exclusive scan of one u32 per invocation over the workgroup.
 fn wg_exclusive(x: u32, sg: u32, nsg: u32, lane: u32, sg_size: u32) -> u32 {
@@ -146,7 +99,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         if (first + j * sg_size < cfg.n) {
             d = digit_of(key[j], cfg);
         }
-        let eq = peers(d);
+        let eq = peers(d, subgroupBallot(true));
         let lower = popcount(eq & below);
         let sh = (d & 1u) * 16u;
         var before = 0u;

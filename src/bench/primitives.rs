@@ -1,13 +1,14 @@
 //! `mesoflow bench sort` and `mesoflow bench scan`: the `sort` and `scan` nodes on random
 //! u32 data, timed per launch with GPU timestamps ([`time_graph`]). Each result is checked
 //! on the host (sortedness, a valid and stable permutation; every prefix sum), so a fast
-//! wrong kernel cannot pass. benches/torch_primitives.py prints the same table for
-//! PyTorch (CUB) on the same sizes.
+//! wrong kernel cannot pass. `bench sort --variant all` runs every sort variant on the same
+//! keys, one row each. benches/torch_primitives.py prints the same table for PyTorch (CUB)
+//! on the same sizes.
 //!
 //! GB/s counts the operation's own input and output once (sort: 4 bytes of key in, 8 of
-//! key and index out; scan: 4 in, 4 out). The kernels move more (sort: 76 bytes per key
-//! in 4 passes on the subgroup path; scan: 12 per element); the last line gives the rate
-//! of that traffic.
+//! key and index out; scan: 4 in, 4 out). The kernels move more (sort: about 80 bytes per
+//! key in 4 passes, 160 in the portable path's 8, see `sort::traffic_per_key`; scan: 12
+//! per element); the "moved GB/s" column gives the rate of that traffic.
 
 use std::collections::BTreeMap;
 
@@ -15,6 +16,7 @@ use super::{TimedRun, time_graph};
 use crate::cli::CliError;
 use crate::gpu::GpuContext;
 use crate::nodes::scan::Variant;
+use crate::nodes::sort::{self, SortVariant};
 use crate::value::{HostArray, HostData, ValueType};
 
 fn runtime(e: impl std::fmt::Display) -> CliError {
@@ -35,15 +37,9 @@ fn random_u32(n: u32, seed: u64) -> Vec<u32> {
         .collect()
 }
 
-fn check_args(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
+fn check_args(n: u32, reps: u64) -> Result<(), CliError> {
     if n == 0 || reps == 0 {
         return Err(CliError::Input("--n and --reps must be positive".into()));
-    }
-    if !Variant::NAMES.contains(&variant) {
-        return Err(CliError::Input(format!(
-            "--variant {variant}: expected one of {}",
-            Variant::NAMES.join(", ")
-        )));
     }
     Ok(())
 }
@@ -55,94 +51,157 @@ fn u32s<'a>(run: &'a TimedRun, name: &str) -> Result<&'a [u32], CliError> {
     }
 }
 
-/// Prints the shared table (the same columns as benches/torch_primitives.py).
-fn table(gpu: &GpuContext, what: &str, n: u32, run: &TimedRun, bytes_per_elem: f64) {
-    let t = run.step_time().as_secs_f64();
-    let min: f64 = run.timings.iter().map(|t| t.min.as_secs_f64()).sum();
+/// The shared table (the same columns as benches/torch_primitives.py, plus the rate of
+/// the traffic the kernels themselves move): header, then one row per call.
+fn header(gpu: &GpuContext) {
     println!("adapter: {}", gpu.caps.summary());
     println!(
-        "{:<30} {:>11} {:>9} {:>9} {:>9} {:>9}",
-        "op", "n", "ms", "min ms", "G/s", "GB/s"
+        "{:<30} {:>11} {:>9} {:>9} {:>9} {:>9} {:>11}",
+        "op", "n", "ms", "min ms", "G/s", "GB/s", "moved GB/s"
     );
+}
+
+fn row(what: &str, n: u32, run: &TimedRun, bytes_per_elem: f64, moved_per_elem: f64) {
+    let t = run.step_time().as_secs_f64();
+    let min: f64 = run.timings.iter().map(|t| t.min.as_secs_f64()).sum();
     println!(
-        "{:<30} {:>11} {:>9.4} {:>9.4} {:>9.2} {:>9.1}",
+        "{:<30} {:>11} {:>9.4} {:>9.4} {:>9.2} {:>9.1} {:>11.1}",
         what,
         n,
         t * 1e3,
         min * 1e3,
         n as f64 / t / 1e9,
-        bytes_per_elem * n as f64 / t / 1e9
+        bytes_per_elem * n as f64 / t / 1e9,
+        moved_per_elem * n as f64 / t / 1e9
     );
 }
 
-pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
-    check_args(n, reps, variant)?;
-    let gpu = GpuContext::new().map_err(runtime)?;
-    let keys = random_u32(n, 1);
-    let graph = format!(
-        r#"{{"mesoflow": 1, "doc": "bench: stable radix sort of n u32 keys with their permutation",
-  "inputs": {{"keys": {{"type": "indices", "rows": {n}}}}},
-  "nodes": [{{"id": "sort", "kind": "sort", "params": {{"variant": "{variant}"}}, "inputs": {{"keys": "inputs.keys"}}}}],
-  "outputs": {{"keys": "sort.keys", "perm": "sort.perm"}}}}"#
-    );
-    let ty = ValueType::Indices { n };
-    let inputs: BTreeMap<String, HostArray> =
-        [("keys".to_string(), HostArray::u32(ty, keys.clone()))].into();
-    let run = time_graph(&gpu, &graph, &inputs, reps, true)?;
-    for t in &run.timings {
-        print!("{}", t.breakdown());
+/// Checks a sort's outputs on the host: `perm` a permutation, `sorted` the keys it
+/// picks, in ascending order and stable (equal keys in input order).
+fn check_sort(keys: &[u32], run: &TimedRun, variant: &str) -> Result<(), String> {
+    let fail = |msg: String| Err(format!("sort ({variant}): {msg}"));
+    let (Ok(sorted), Ok(perm)) = (u32s(run, "keys"), u32s(run, "perm")) else {
+        return fail("an output is missing".into());
+    };
+    if sorted.len() != keys.len() || perm.len() != keys.len() {
+        return fail(format!(
+            "{} keys and {} indices for {} keys",
+            sorted.len(),
+            perm.len(),
+            keys.len()
+        ));
     }
-
-    let sorted = u32s(&run, "keys")?;
-    let perm = u32s(&run, "perm")?;
-    let mut seen = vec![false; n as usize];
-    for i in 0..n as usize {
+    let mut seen = vec![false; keys.len()];
+    for i in 0..keys.len() {
         let p = perm[i] as usize;
         if p >= seen.len() || std::mem::replace(&mut seen[p], true) {
-            return Err(CliError::Runtime(format!(
-                "sort: perm is not a permutation (perm[{i}] = {p})"
-            )));
+            return fail(format!("perm is not a permutation (perm[{i}] = {p})"));
         }
         if sorted[i] != keys[p] {
-            return Err(CliError::Runtime(format!(
-                "sort: keys[{i}] = {} but the input key at perm[{i}] = {p} is {}",
+            return fail(format!(
+                "keys[{i}] = {} but the input key at perm[{i}] = {p} is {}",
                 sorted[i], keys[p]
-            )));
+            ));
         }
         if i > 0 && (sorted[i - 1], perm[i - 1]) >= (sorted[i], perm[i]) {
-            return Err(CliError::Runtime(format!(
-                "sort: out of order or unstable at {i}: ({}, {}) then ({}, {})",
+            return fail(format!(
+                "out of order or unstable at {i}: ({}, {}) then ({}, {})",
                 sorted[i - 1],
                 perm[i - 1],
                 sorted[i],
                 perm[i]
-            )));
+            ));
         }
     }
-    table(
-        &gpu,
-        &format!("sort u32 keys + perm ({variant})"),
-        n,
-        &run,
-        12.0,
-    );
-    // Passes of 8-bit digits on the subgroup path, of 4-bit digits on the portable one;
-    // each moves 20 bytes per key but the first (16: no payload to read).
-    let passes = if variant == "portable" || gpu.caps.subgroups.is_none() {
-        8.0
-    } else {
-        4.0
-    };
-    let traffic = 20.0 * passes - 4.0;
-    println!(
-        "(checked: sorted, stable, a permutation; radix-sort traffic {traffic} B/key: {:.1} GB/s)",
-        traffic * n as f64 / run.step_time().as_secs_f64() / 1e9
-    );
     Ok(())
 }
 
+/// `variant` is a value of the node's `variant` param, or `all`: every value in turn on
+/// the same keys, one table row each; then a variant the device cannot run is skipped,
+/// and one whose result is wrong is reported after the table (and fails the command)
+/// without hiding the others' times.
+pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
+    check_args(n, reps)?;
+    let all = variant == "all";
+    let variants: Vec<&str> = if all {
+        SortVariant::NAMES.to_vec()
+    } else if SortVariant::NAMES.contains(&variant) {
+        vec![variant]
+    } else {
+        return Err(CliError::Input(format!(
+            "--variant {variant}: expected all or one of {}",
+            SortVariant::NAMES.join(", ")
+        )));
+    };
+    let gpu = GpuContext::new().map_err(runtime)?;
+    let keys = random_u32(n, 1);
+    let ty = ValueType::Indices { n };
+    let inputs: BTreeMap<String, HostArray> =
+        [("keys".to_string(), HostArray::u32(ty, keys.clone()))].into();
+    let mut rows = Vec::new();
+    let mut notes = Vec::new();
+    let mut wrong = Vec::new();
+    for v in variants {
+        let parsed = SortVariant::from_name(v).ok_or_else(|| runtime("unknown variant"))?;
+        let traffic = match sort::traffic_per_key(parsed, &gpu.caps, 32, n as u64) {
+            Ok(t) => t,
+            Err(e) if all => {
+                notes.push(format!("{v} skipped: {e}"));
+                continue;
+            }
+            Err(e) => return Err(CliError::Input(e.to_string())),
+        };
+        let graph = format!(
+            r#"{{"mesoflow": 1, "doc": "bench: stable radix sort of n u32 keys with their permutation",
+  "inputs": {{"keys": {{"type": "indices", "rows": {n}}}}},
+  "nodes": [{{"id": "sort", "kind": "sort", "params": {{"variant": "{v}"}}, "inputs": {{"keys": "inputs.keys"}}}}],
+  "outputs": {{"keys": "sort.keys", "perm": "sort.perm"}}}}"#
+        );
+        let run = time_graph(&gpu, &graph, &inputs, reps, true)?;
+        if run.timings.iter().any(|t| !t.dispatches.is_empty()) {
+            println!("{v}:");
+        }
+        for t in &run.timings {
+            print!("{}", t.breakdown());
+        }
+        match check_sort(&keys, &run, v) {
+            Ok(()) => {
+                notes.push(format!("{v} {traffic:.1} B/key"));
+                rows.push((v, run, traffic));
+            }
+            Err(e) => wrong.push(e),
+        }
+    }
+    header(&gpu);
+    for (v, run, traffic) in &rows {
+        row(
+            &format!("sort u32 keys + perm ({v})"),
+            n,
+            run,
+            12.0,
+            *traffic,
+        );
+    }
+    println!(
+        "(checked: sorted, stable, a permutation; GB/s: 12 B/key, key in, key and index \
+         out; moved: what the passes move, {})",
+        notes.join(", ")
+    );
+    if wrong.is_empty() {
+        Ok(())
+    } else {
+        Err(CliError::Runtime(wrong.join("\n")))
+    }
+}
+
 pub fn scan(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
-    check_args(n, reps, variant)?;
+    check_args(n, reps)?;
+    if !Variant::NAMES.contains(&variant) {
+        return Err(CliError::Input(format!(
+            "--variant {variant}: expected one of {}",
+            Variant::NAMES.join(", ")
+        )));
+    }
     let gpu = GpuContext::new().map_err(runtime)?;
     // Full-range words, so the sums wrap (as documented) many times.
     let x = random_u32(n, 2);
@@ -167,16 +226,14 @@ pub fn scan(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
         }
         acc = acc.wrapping_add(v);
     }
-    table(
-        &gpu,
+    header(&gpu);
+    row(
         &format!("exclusive scan u32 ({variant})"),
         n,
         &run,
         8.0,
+        12.0,
     );
-    println!(
-        "(checked: every element; reduce-then-scan traffic 12 B/element: {:.1} GB/s)",
-        12.0 * n as f64 / run.step_time().as_secs_f64() / 1e9
-    );
+    println!("(checked: every element; moved: reduce-then-scan traffic, 12 B/element)");
     Ok(())
 }

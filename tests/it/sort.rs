@@ -1,5 +1,5 @@
-//! `sort` against its CPU reference (a stable sort by the low `bits` bits) on the GPU, on
-//! both kernel paths: sorted keys and permutation must match exactly.
+//! `sort` against its CPU reference (a stable sort by the low `bits` bits) on the GPU, with
+//! every variant: sorted keys and permutation must match exactly.
 
 use std::collections::BTreeMap;
 
@@ -8,11 +8,12 @@ use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::{Rng, compile_error, gpu, reference, run_node, with_caps};
 
-const PATHS: [&str; 2] = ["subgroup", "portable"];
+/// Every variant but `auto` (which runs one of them).
+const PATHS: [&str; 5] = ["tile4096", "tile3072", "tile2048", "subgroup", "portable"];
 
-/// Keys per tile of the two paths (nodes/sort.rs).
+/// Keys per tile of the variants (nodes/sort.rs).
+const TILES: [usize; 4] = [4096, 3072, 2048, 3840];
 const SUBGROUP_TILE: usize = 3840;
-const PORTABLE_TILE: usize = 2048;
 
 fn keys_array(keys: &[u32]) -> HostArray {
     HostArray::u32(
@@ -66,7 +67,7 @@ fn random(n: usize, seed: u64) -> Vec<u32> {
 #[test]
 fn random_keys_at_every_tile_boundary() {
     let mut sizes = vec![0, 1, 2, 3, 100, 1000];
-    for tile in [SUBGROUP_TILE, PORTABLE_TILE] {
+    for tile in TILES {
         for k in [1, 2, 3] {
             sizes.extend([k * tile - 1, k * tile, k * tile + 1]);
         }
@@ -84,6 +85,10 @@ fn equal_keys_keep_their_input_order() {
         for key in [0, 7, u32::MAX] {
             check(&vec![key; 10_000], 32, path);
         }
+        // One tile's worth of equal keys, then a lone smaller one: every earlier key moves.
+        let mut shifted = vec![9; 4096];
+        shifted.push(3);
+        check(&shifted, 32, path);
         // Few distinct keys: long runs of equal ones in every tile.
         let few: Vec<u32> = random(50_000, 3).iter().map(|k| k % 5).collect();
         check(&few, 32, path);
@@ -130,7 +135,7 @@ fn many_tiles() {
 #[test]
 fn sorts_fold_their_dispatches_past_the_workgroup_cap() {
     let Some(mut gpu) = gpu() else { return };
-    // 8 subgroup tiles or 14 portable tiles on 3 workgroups per dimension.
+    // 7 to 14 tiles on 3 workgroups per dimension (and 256 `offsets` workgroups).
     let keys = random(7 * SUBGROUP_TILE + 5, 8);
     with_caps(
         &mut gpu,
@@ -154,12 +159,15 @@ fn auto_runs_without_subgroups_and_subgroup_fails_clearly() {
         |gpu| {
             check_on(gpu, &keys, 32, "auto");
             let inputs = [("keys".to_string(), keys_array(&keys))].into();
-            let err = compile_error(gpu, "sort", r#"{"variant": "subgroup"}"#, &inputs);
-            assert!(
-                err.contains("variant `subgroup` cannot run")
-                    && err.contains("no subgroup operations"),
-                "{err}"
-            );
+            for v in ["subgroup", "tile4096"] {
+                let params = format!(r#"{{"variant": "{v}"}}"#);
+                let err = compile_error(gpu, "sort", &params, &inputs);
+                assert!(
+                    err.contains(&format!("variant `{v}` cannot run"))
+                        && err.contains("no subgroup operations"),
+                    "{err}"
+                );
+            }
         },
     );
 }
@@ -175,7 +183,11 @@ fn the_subgroup_path_follows_the_reported_subgroup_sizes() {
     with_caps(
         &mut gpu,
         |c| c.subgroups = Some((min, 128)),
-        |gpu| check_on(gpu, &keys, 32, "subgroup"),
+        |gpu| {
+            for path in ["tile4096", "tile2048", "subgroup"] {
+                check_on(gpu, &keys, 32, path);
+            }
+        },
     );
     // Too little workgroup memory for the counters of 4-lane subgroups: auto falls back.
     with_caps(
@@ -187,8 +199,54 @@ fn the_subgroup_path_follows_the_reported_subgroup_sizes() {
         |gpu| {
             check_on(gpu, &keys, 32, "auto");
             let inputs = [("keys".to_string(), keys_array(&keys))].into();
-            let err = compile_error(gpu, "sort", r#"{"variant": "subgroup"}"#, &inputs);
-            assert!(err.contains("bytes of workgroup memory"), "{err}");
+            for v in ["subgroup", "tile4096"] {
+                let params = format!(r#"{{"variant": "{v}"}}"#);
+                let err = compile_error(gpu, "sort", &params, &inputs);
+                assert!(err.contains("bytes of workgroup memory"), "{err}");
+            }
         },
     );
+}
+
+#[test]
+fn the_bench_times_and_checks_every_variant() {
+    let bench = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+            .args(args)
+            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+            .output()
+            .expect("run mesoflow")
+    };
+    let o = bench(&["bench", "sort", "--variant", "tile1"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("expected all or one of auto, tile4096"),
+        "{err}"
+    );
+
+    // Holding the shared context keeps the other GPU tests off the CPU meanwhile.
+    let Some(_gpu) = gpu() else { return };
+    let o = bench(&[
+        "bench",
+        "sort",
+        "--n",
+        "5000",
+        "--reps",
+        "2",
+        "--variant",
+        "all",
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    for v in PATHS.iter().chain(&["auto"]) {
+        assert!(
+            out.contains(&format!("sort u32 keys + perm ({v})")),
+            "{v}:\n{out}"
+        );
+    }
 }
