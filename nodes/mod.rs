@@ -7,6 +7,7 @@ pub mod permute;
 pub mod planners;
 pub mod pointwise;
 pub mod random;
+pub mod record;
 pub mod reduce;
 pub mod scan;
 pub mod sort;
@@ -22,6 +23,7 @@ pub fn register_all(r: &mut Registry) {
     cells::register(r);
     permute::register(r);
     random::register(r);
+    record::register(r);
     reduce::register(r);
     spread::register(r);
     scan::register(r);

@@ -67,28 +67,59 @@ pub static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "fcm_grid",
-        doc: "fcm_grid(box, radius, tolerance, kernel): FFT-friendly cells per axis for FCM",
+        doc: "fcm_grid(box, radius, tolerance, kernel[, rotation]): FFT-friendly cells per axis for FCM; with rotation true, fine enough for the torque Gaussian too (Gaussian kernel only)",
         call: |a| {
-            arity(a, 4)?;
-            let g = plan::grid(
+            if !(4..=5).contains(&a.len()) {
+                return Err(format!("takes 4 or 5 arguments, got {}", a.len()));
+            }
+            let rotation = a.len() == 5 && number(a, 4, "rotation")? != 0.0;
+            let g = plan::grid_for(
                 numbers(a, 0, "box")?,
                 number(a, 1, "radius")?,
                 number(a, 2, "tolerance")?,
                 text(a, 3, "kernel")?,
+                rotation,
             )?;
             Ok(ParamValue::Numbers(g.into_iter().map(f64::from).collect()))
         },
     },
     HostFunction {
-        name: "fcm_support",
-        doc: "fcm_support(tolerance, kernel): the window support in cells FCM uses for the ES window (0: the window's own rule)",
+        name: "fcm_upsampling",
+        doc: "fcm_upsampling(tolerance): the cells a Gaussian's standard deviation must span for FCM at this tolerance, g_u = min(0.55 - 0.11 log10(3 tol), 1.65)",
         call: |a| {
-            arity(a, 2)?;
+            arity(a, 1)?;
+            Ok(ParamValue::Number(plan::gaussian_upsampling(number(
+                a,
+                0,
+                "tolerance",
+            )?)))
+        },
+    },
+    HostFunction {
+        name: "fcm_support",
+        doc: "fcm_support(tolerance, kernel, width, box, grid): the window support in cells FCM uses: ES by its tolerance rule, the Gaussian (standard deviation width) cut at the same number of standard deviations as on its nominal grid, 0 (the window's own) for Peskin",
+        call: |a| {
+            arity(a, 5)?;
             let t = number(a, 0, "tolerance")?;
-            Ok(ParamValue::Number(if text(a, 1, "kernel")? == "es" {
-                plan::es_support(t) as f64
-            } else {
-                0.0
+            let sigma = number(a, 2, "width")?;
+            let lengths = numbers(a, 3, "box")?;
+            let cells = numbers(a, 4, "grid")?;
+            if lengths.len() != cells.len() {
+                return Err(format!(
+                    "box and grid have {} and {} values",
+                    lengths.len(),
+                    cells.len()
+                ));
+            }
+            let h = lengths
+                .iter()
+                .zip(cells)
+                .map(|(l, n)| l / n)
+                .fold(f64::INFINITY, f64::min);
+            Ok(ParamValue::Number(match text(a, 1, "kernel")? {
+                "es" => plan::es_support(t) as f64,
+                "gaussian" => plan::gaussian_support(t, sigma / h) as f64,
+                _ => 0.0,
             }))
         },
     },
@@ -103,6 +134,41 @@ pub static FUNCTIONS: &[HostFunction] = &[
             } else {
                 0.0
             }))
+        },
+    },
+    HostFunction {
+        name: "fcm_width",
+        doc: "fcm_width(radius, kernel): the Gaussian window's standard deviation radius / sqrt(pi) for FCM forces (0 for other windows, which ignore it)",
+        call: |a| {
+            arity(a, 2)?;
+            let r = number(a, 0, "radius")?;
+            Ok(ParamValue::Number(if text(a, 1, "kernel")? == "gaussian" {
+                r / std::f64::consts::PI.sqrt()
+            } else {
+                0.0
+            }))
+        },
+    },
+    HostFunction {
+        name: "fcm_rotation_upsampling",
+        doc: "fcm_rotation_upsampling(tolerance): the cells FCM's torque Gaussian's standard deviation must span, g_u(tolerance / 10) (rotation has no 1/k^2 to damp aliasing)",
+        call: |a| {
+            arity(a, 1)?;
+            Ok(ParamValue::Number(plan::rotation_upsampling(number(
+                a,
+                0,
+                "tolerance",
+            )?)))
+        },
+    },
+    HostFunction {
+        name: "fcm_torque_width",
+        doc: "fcm_torque_width(radius): the standard deviation radius / (6 sqrt(pi))^(1/3) of FCM's torque Gaussian (rotational mobility 1 / (8 pi eta a^3))",
+        call: |a| {
+            arity(a, 1)?;
+            Ok(ParamValue::Number(plan::torque_width(number(
+                a, 0, "radius",
+            )?)))
         },
     },
     HostFunction {

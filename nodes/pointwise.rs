@@ -64,6 +64,9 @@ pub struct PointwiseKind {
     pub(crate) uses_step: bool,
     /// The params are one value per component, padded to MAX_COMPONENTS for the body.
     pub(crate) per_component: bool,
+    /// The input whose value the output is when the others are absent (`add` without
+    /// its optional term): see `Node::forwards`.
+    pub(crate) forwards_alone: Option<usize>,
     /// Real-linear in its array inputs (sums, real factors): spectra are accepted too,
     /// since such an operation acts on real and imaginary parts alike.
     pub(crate) linear: bool,
@@ -84,6 +87,7 @@ pub(crate) const BASE: PointwiseKind = PointwiseKind {
     imports: &[],
     uses_step: false,
     per_component: false,
+    forwards_alone: None,
     linear: false,
     reference: |_, _, _| 0.0,
 };
@@ -203,6 +207,7 @@ pub static KINDS: &[PointwiseKind] = &[
         body: "return a + b;",
         reference: |i, _, _| i[0] + i[1],
         linear: true,
+        forwards_alone: Some(0),
         ..BASE
     },
     PointwiseKind {
@@ -433,6 +438,15 @@ impl Node for PointwiseNode {
         let port = self.kind.inputs.first().map(|p| p.0).unwrap_or("out");
         (self.kind.check)(&out, &self.values).map_err(|e| PortError::new(port, e))?;
         Ok(Signature::outputs(vec![out]))
+    }
+
+    fn forwards(&self, inputs: &[Option<ValueType>]) -> Option<usize> {
+        let i = self.kind.forwards_alone?;
+        let others_absent = inputs
+            .iter()
+            .enumerate()
+            .all(|(j, t)| j == i || t.is_none());
+        (others_absent && inputs.get(i).copied().flatten().is_some()).then_some(i)
     }
 
     fn lowering(&self) -> Lowering<'_> {

@@ -72,6 +72,9 @@ pub enum Command {
         /// Take an input's shape from an NPY file (otherwise the declared sizes' defaults).
         #[arg(long = "input", value_name = "NAME=FILE")]
         inputs: Vec<String>,
+        /// Plan without this optional input (as a run that does not give it).
+        #[arg(long = "without", value_name = "NAME")]
+        without: Vec<String>,
         /// Plan for these outputs only.
         #[arg(long = "output", value_name = "NAME")]
         outputs: Vec<String>,
@@ -177,12 +180,13 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             graph,
             sets,
             inputs,
+            without,
             outputs,
             steps,
             no_fuse,
             dot,
         } => inspect(
-            &registry, &graph, &sets, &inputs, &outputs, steps, !no_fuse, dot,
+            &registry, &graph, &sets, &inputs, &without, &outputs, steps, !no_fuse, dot,
         ),
         Command::Nodes { kind } => nodes(&registry, kind.as_deref()),
         Command::Info => {
@@ -530,6 +534,7 @@ fn inspect(
     path: &Path,
     sets: &[String],
     input_args: &[String],
+    without: &[String],
     outputs: &[String],
     steps: u64,
     fuse: bool,
@@ -548,6 +553,25 @@ fn inspect(
     let mut inputs = declared_input_types(&g);
     for (name, arr) in read_inputs(&g, input_args)? {
         inputs.insert(name, arr.ty);
+    }
+    for name in without {
+        match g.inputs.iter().find(|i| &i.name == name) {
+            Some(i) if i.optional => {
+                inputs.remove(name);
+            }
+            Some(_) => {
+                return Err(CliError::Input(format!(
+                    "--without {name}: input `{name}` is required"
+                )));
+            }
+            None => {
+                let known: Vec<&str> = g.inputs.iter().map(|i| i.name.as_str()).collect();
+                return Err(CliError::Input(format!(
+                    "--without {name}: no such input (inputs: {})",
+                    known.join(", ")
+                )));
+            }
+        }
     }
     let caps = match GpuContext::new() {
         Ok(gpu) => gpu.caps.clone(),

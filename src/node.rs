@@ -495,6 +495,14 @@ pub trait Node: Send + Sync {
         Vec::new()
     }
 
+    /// `Some(i)` when, for these input types, the output is input `i` unchanged (an `add`
+    /// whose optional term is absent): the planner then reads input `i` in its place and
+    /// the node does no work.
+    fn forwards(&self, inputs: &[Option<ValueType>]) -> Option<usize> {
+        let _ = inputs;
+        None
+    }
+
     /// The f64 CPU reference of one evaluation; `outputs` holds the previous contents of
     /// the node's persistent outputs (zeros at the first step).
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx);

@@ -7,6 +7,8 @@
 //! - complex grids: the same order with interleaved (re, im) f32 pairs;
 //! - half-complex grids (the Hermitian half spectrum of a real grid of dims (nx, ny, nz)):
 //!   (nx/2 + 1) x ny x nz complex values per component, same order;
+//! - frames (a trajectory): F frames of N rows of k f32, frame-major (an (F,N,k) NPY
+//!   array as-is);
 //! - index arrays: u32;
 //! - scalars: one f32.
 
@@ -24,6 +26,8 @@ pub enum ValueType {
     /// The spectrum of a real grid of `dims` = (nx, ny, nz) cells, stored as its Hermitian
     /// half: x wave numbers 0..=nx/2 only (the rest are complex conjugates).
     HalfComplexGrid { dims: [u32; 3], comps: u32 },
+    /// `frames` snapshots of N particles with k f32 each (a trajectory).
+    Frames { frames: u32, n: u32, k: u32 },
     /// N u32 indices.
     Indices { n: u32 },
     /// One f32.
@@ -45,6 +49,7 @@ impl ValueType {
             ValueType::RealGrid { dims, comps } => cells(dims) * comps as u64,
             ValueType::ComplexGrid { dims, comps } => 2 * cells(dims) * comps as u64,
             ValueType::HalfComplexGrid { dims, comps } => 2 * cells(half_dims(dims)) * comps as u64,
+            ValueType::Frames { frames, n, k } => frames as u64 * n as u64 * k as u64,
             ValueType::Indices { n } => n as u64,
             ValueType::Scalar => 1,
         }
@@ -68,6 +73,7 @@ impl ValueType {
             ValueType::RealGrid { .. } => "real_grid",
             ValueType::ComplexGrid { .. } => "complex_grid",
             ValueType::HalfComplexGrid { .. } => "half_complex_grid",
+            ValueType::Frames { .. } => "frames",
             ValueType::Indices { .. } => "indices",
             ValueType::Scalar => "scalar",
         }
@@ -78,7 +84,9 @@ impl ValueType {
     /// rule.
     pub fn component_of(&self, idx: u64) -> u32 {
         match *self {
-            ValueType::Particles { k, .. } => (idx % k.max(1) as u64) as u32,
+            ValueType::Particles { k, .. } | ValueType::Frames { k, .. } => {
+                (idx % k.max(1) as u64) as u32
+            }
             ValueType::RealGrid { dims, .. } => (idx / cells(dims).max(1)) as u32,
             _ => 0,
         }
@@ -105,6 +113,7 @@ impl ValueType {
                 half_dims(dims)[0] as u64,
                 2,
             ],
+            ValueType::Frames { frames, n, k } => vec![frames as u64, n as u64, k as u64],
             ValueType::Indices { n } => vec![n as u64],
             ValueType::Scalar => vec![],
         }
@@ -143,6 +152,7 @@ impl fmt::Display for ValueType {
                 "half_complex_grid(of {}x{}x{}, {comps} comp)",
                 dims[0], dims[1], dims[2]
             ),
+            ValueType::Frames { frames, n, k } => write!(f, "frames({frames}x{n}x{k})"),
             ValueType::Indices { n } => write!(f, "indices({n})"),
             ValueType::Scalar => write!(f, "scalar"),
         }
@@ -171,6 +181,8 @@ pub enum PortType {
     /// Any f32 value, spectra included: for real-linear element-wise operations (sums,
     /// real factors), which act on the real and imaginary parts alike.
     Linear,
+    /// A trajectory: frames of particles.
+    Frames,
 }
 
 impl PortType {
@@ -182,6 +194,7 @@ impl PortType {
             (PortType::ComplexGrid, ValueType::ComplexGrid { .. }) => true,
             (PortType::HalfComplexGrid, ValueType::HalfComplexGrid { .. }) => true,
             (PortType::Indices, ValueType::Indices { .. }) => true,
+            (PortType::Frames, ValueType::Frames { .. }) => true,
             (PortType::Scalar, ValueType::Scalar) => true,
             (
                 PortType::RealArray,
@@ -230,6 +243,7 @@ impl fmt::Display for PortType {
                 f,
                 "particles | real_grid | scalar | complex_grid | half_complex_grid"
             ),
+            PortType::Frames => write!(f, "frames(F x N x k)"),
         }
     }
 }

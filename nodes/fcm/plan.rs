@@ -59,25 +59,109 @@ pub fn grid(
     tolerance: f64,
     kernel: &str,
 ) -> Result<Vec<u32>, String> {
+    grid_for(lengths, radius, tolerance, kernel, false)
+}
+
+/// The cells the torque Gaussian's standard deviation must span at a tolerance:
+/// g_u(tol / 10). Rotation has no 1/k^2 to damp the aliased high modes as translation
+/// has, so at the force's g_u(tol) the angular velocity of one sphere is off by about
+/// 3 tol (measured at tol 1e-3, L = 32 a); a tenth of the tolerance brings it under tol.
+pub fn rotation_upsampling(tolerance: f64) -> f64 {
+    gaussian_upsampling(tolerance / 10.0)
+}
+
+/// [`grid`], and with `rotation` fine enough for the torque Gaussian too: its standard
+/// deviation, a / (6 sqrt(pi))^(1/3), must span [`rotation_upsampling`] cells (about
+/// 1.4 times finer per axis than the forces need). Only the Gaussian kernel has a torque
+/// window of its own: the others tie the radius to the cell, and the torque Gaussian of
+/// that radius would always be narrower than the cells resolve.
+pub fn grid_for(
+    lengths: &[f64],
+    radius: f64,
+    tolerance: f64,
+    kernel: &str,
+    rotation: bool,
+) -> Result<Vec<u32>, String> {
     if radius <= 0.0 {
         return Err(format!("the radius must be positive, got {radius}"));
     }
     let h = radius / radius_per_cell(kernel, tolerance)?;
+    // The torque Gaussian's spacing is a bound (the guard `min_width_cells` checks it),
+    // so its cell count rounds up; the force grid rounds down as UAMMD's does.
+    let h_rotation = if rotation {
+        if kernel != "gaussian" {
+            return Err(format!(
+                "rotation (torques and angular velocities) needs the gaussian kernel, not `{kernel}`: its window ties the radius to the cell size, and the torque Gaussian of that radius is narrower than the cells resolve"
+            ));
+        }
+        Some(torque_width(radius) / rotation_upsampling(tolerance))
+    } else {
+        None
+    };
     lengths
         .iter()
         .map(|&l| {
             if l <= 0.0 {
                 return Err(format!("box lengths must be positive, got {l}"));
             }
-            let n = (l / h).floor().max(1.0);
+            let mut n = (l / h).floor().max(1.0);
+            if let Some(hr) = h_rotation {
+                n = n.max((l / hr).ceil());
+            }
             if n > 4096.0 {
                 return Err(format!(
-                    "a box length of {l} needs {n} cells of {h:.4} for radius {radius}; more than the 4096 an FFT axis takes"
+                    "a box length of {l} needs {n} cells of {:.4} for radius {radius}; more than the 4096 an FFT axis takes",
+                    l / n
                 ));
             }
             Ok(next_friendly(n as u32))
         })
         .collect()
+}
+
+/// Complementary error function, relative error below 1.2e-7 (Numerical Recipes'
+/// Chebyshev fit); enough for support rules, which round up to whole cells.
+pub fn erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let poly = -z * z - 1.265_512_23
+        + t * (1.000_023_68
+            + t * (0.374_091_96
+                + t * (0.096_784_18
+                    + t * (-0.186_288_06
+                        + t * (0.278_868_07
+                            + t * (-1.135_203_98
+                                + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
+    let r = t * poly.exp();
+    if x >= 0.0 { r } else { 2.0 - r }
+}
+
+/// The x >= 0 with erfc(x) = y, for 0 < y <= 1 (bisection).
+pub fn erfc_inverse(y: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, 10.0);
+    for _ in 0..80 {
+        let mid = 0.5 * (lo + hi);
+        if erfc(mid) > y {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Support in cells of an FCM Gaussian whose standard deviation spans `sigma_cells`
+/// cells: the window is cut where the particle's nearest support edge, (S - 1) / 2
+/// cells away, leaves a tail of at most 2 tol per axis, S = ceil(1 + 2 sqrt(2)
+/// (sigma / h) erfc^-1(2 tol)), at least 3. On the nominal grids (sigma = g_u h) this
+/// is UAMMD's support at tolerances 1e-2 and 1e-4 (5 and 8 cells) and one more at 1e-3
+/// (7, not 6): with 6 the worst self-mobility error over random positions was 1.4e-3
+/// (5.6e-4 with 7; L = 16 a). It scales with sigma / h, so a finer grid (rotation, or set
+/// by hand) cuts the window at the same number of standard deviations.
+pub fn gaussian_support(tolerance: f64, sigma_cells: f64) -> u32 {
+    let s = 1.0 + 2.0 * std::f64::consts::SQRT_2 * sigma_cells * erfc_inverse(2.0 * tolerance);
+    // Round down what is a cell above a whole number only by rounding error.
+    ((s - 1e-9).ceil() as u32).max(3)
 }
 
 /// The hydrodynamic radius the window has on the actual grid (cubic cells for the
@@ -99,6 +183,12 @@ pub fn effective_radius(
         .sum::<f64>()
         / lengths.len() as f64;
     Ok(h.exp() * radius_per_cell(kernel, tolerance)?)
+}
+
+/// The standard deviation of FCM's torque Gaussian, a / (6 sqrt(pi))^(1/3): the
+/// rotational mobility of an isolated sphere is then 1 / (8 pi eta a^3) (thesis Eq. 20.9).
+pub fn torque_width(radius: f64) -> f64 {
+    radius / (6.0 * std::f64::consts::PI.sqrt()).cbrt()
 }
 
 /// Hasimoto's self-mobility of a sphere in a cubic periodic box, times 6 pi eta a
@@ -146,6 +236,41 @@ mod tests {
                 "{tol}"
             );
         }
+    }
+
+    #[test]
+    fn erfc_and_its_inverse() {
+        for (x, want) in [
+            (0.0, 1.0),
+            (0.5, 0.479_500_122),
+            (1.0, 0.157_299_207),
+            (2.0, 4.677_734_981e-3),
+            (3.0, 2.209_049_700e-5),
+            (-1.0, 1.842_700_793),
+        ] {
+            assert!(
+                (erfc(x) / want - 1.0).abs() < 2e-7,
+                "erfc({x}) = {}",
+                erfc(x)
+            );
+        }
+        for y in [0.5, 1e-2, 1e-5, 1e-9] {
+            assert!((erfc(erfc_inverse(y)) / y - 1.0).abs() < 1e-6, "{y}");
+        }
+    }
+
+    /// The FCM Gaussian support on the nominal grids (sigma = g_u h).
+    #[test]
+    fn fcm_gaussian_supports() {
+        for (tol, s) in [(1e-2, 5), (1e-3, 7), (1e-4, 8), (1e-5, 10)] {
+            assert_eq!(
+                gaussian_support(tol, gaussian_upsampling(tol)),
+                s,
+                "tolerance {tol}"
+            );
+        }
+        // Twice as many cells per sigma, about twice the support.
+        assert_eq!(gaussian_support(1e-3, 2.0 * gaussian_upsampling(1e-3)), 12);
     }
 
     /// UAMMD's grids for the benchmark boxes (a = 1, Gaussian).

@@ -29,6 +29,9 @@ pub struct GridWindow {
     pub window: Window,
     /// Threads per workgroup of the kernels (64, 128 or 256): a tuning knob.
     pub workgroup: u32,
+    /// Gaussian window: the fewest cells its standard deviation may span (0: no check).
+    /// Checked when the node is planned, not built, so an unused node never fails.
+    pub min_width_cells: f64,
 }
 
 impl GridWindow {
@@ -38,6 +41,25 @@ impl GridWindow {
 
     pub fn h(&self, a: usize) -> f64 {
         self.lengths[a] / self.cells[a] as f64
+    }
+
+    /// The accuracy guard `min_width_cells` for a Gaussian window on this grid.
+    pub fn check_resolution(&self, port: &str) -> Result<(), PortError> {
+        let Window::Gaussian { sigma, .. } = self.window else {
+            return Ok(());
+        };
+        let h = (0..self.dims()).map(|a| self.h(a)).fold(0.0, f64::max);
+        if sigma / h < self.min_width_cells {
+            return Err(PortError::new(
+                port,
+                format!(
+                    "the Gaussian window (sigma = {sigma:.6}) spans {:.4} cells of {h:.6}, fewer than min_width_cells = {:.4}: the grid is too coarse for this window at the accuracy asked for",
+                    sigma / h,
+                    self.min_width_cells
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// The grid as a value type with `comps` components (nz = 1 in 2D).
@@ -149,6 +171,13 @@ fn grid_params() -> Vec<ParamSpec> {
             0.5,
             "Gaussian and ES: truncation tolerance that sets the support",
         ),
+        ParamSpec::number(
+            "min_width_cells",
+            Some(0.0),
+            0.0,
+            f64::MAX,
+            "Gaussian: fail at planning when sigma spans fewer cells than this (an accuracy guard; 0: none)",
+        ),
         ParamSpec::choice(
             "workgroup",
             "256",
@@ -212,6 +241,7 @@ fn grid_window(p: &Params) -> Result<GridWindow, String> {
         window,
         // The choice list admits only 64, 128 and 256.
         workgroup: p.text("workgroup").parse().unwrap_or(256),
+        min_width_cells: p.number("min_width_cells"),
     })
 }
 
@@ -362,6 +392,7 @@ impl Node for Spread {
                 format!("has {m} rows for {n} positions"),
             ));
         }
+        self.gw.check_resolution("values")?;
         Ok(Signature::outputs(vec![self.gw.grid_type(comps)]))
     }
 
@@ -567,6 +598,7 @@ impl Node for Interpolate {
             ));
         }
         let n = check_positions(&self.gw, inputs[1])?;
+        self.gw.check_resolution("grid")?;
         Ok(Signature::outputs(vec![ValueType::Particles {
             n,
             k: comps,

@@ -638,7 +638,7 @@ impl Loader<'_> {
                 input_ports,
                 output_ports,
                 inputs: Vec::new(),
-                node,
+                node: node.into(),
             },
             refs,
         });

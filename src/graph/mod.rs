@@ -9,8 +9,10 @@
 mod load;
 mod schema;
 
+use std::collections::HashMap;
 use std::fmt;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 pub use load::{LoadOptions, load};
 pub use schema::SCHEMA_VERSION;
@@ -221,7 +223,8 @@ pub struct OutputDef {
     pub doc: String,
 }
 
-/// A node of the flattened graph.
+/// A node of the flattened graph. Cloning shares the built node.
+#[derive(Clone)]
 pub struct NodeInst {
     /// Full id: `parent/child` for nodes that came from subgraphs.
     pub id: String,
@@ -233,10 +236,11 @@ pub struct NodeInst {
     pub output_ports: Vec<PortSpec>,
     /// One source per input port; [`Source::Absent`] for an unconnected optional port.
     pub inputs: Vec<Source>,
-    pub node: Box<dyn Node>,
+    pub node: Arc<dyn Node>,
 }
 
 /// A loaded, validated, flattened graph.
+#[derive(Clone)]
 pub struct Graph {
     pub file: PathBuf,
     pub doc: String,
@@ -268,5 +272,34 @@ impl Graph {
             }
             Source::Absent => "(absent)".into(),
         }
+    }
+
+    /// The graph with every read of a forwarded node's output replaced by what it
+    /// forwards (`forwards[node]`: the source its output equals), through chains of them.
+    /// The forwarded nodes stay, unread, so node indices keep their meaning.
+    pub fn forwarding(&self, forwards: &HashMap<usize, Source>) -> Graph {
+        let resolve = |mut s: Source| {
+            while let Source::Node { node, port: 0 } = s {
+                match forwards.get(&node) {
+                    Some(&to) => s = to,
+                    None => break,
+                }
+            }
+            s
+        };
+        let mut g = self.clone();
+        for n in &mut g.nodes {
+            for s in &mut n.inputs {
+                *s = resolve(*s);
+            }
+        }
+        for st in &mut g.states {
+            st.init = resolve(st.init);
+            st.next = resolve(st.next);
+        }
+        for o in &mut g.outputs {
+            o.source = resolve(o.source);
+        }
+        g
     }
 }

@@ -64,10 +64,16 @@ fn out_type(ctx: &FuseCtx, n: usize) -> Option<ValueType> {
     ctx.types[n].as_ref()?.as_ref()?.first().copied()
 }
 
+/// Values element-wise kernels run over as flat f32 words: spectra too (only real-linear
+/// kinds accept them, and those act on real and imaginary parts alike).
 fn real_array(t: &ValueType) -> bool {
     matches!(
         t,
-        ValueType::Particles { .. } | ValueType::RealGrid { .. } | ValueType::Scalar
+        ValueType::Particles { .. }
+            | ValueType::RealGrid { .. }
+            | ValueType::Scalar
+            | ValueType::ComplexGrid { .. }
+            | ValueType::HalfComplexGrid { .. }
     )
 }
 

@@ -159,6 +159,9 @@ pub struct Plan {
     pub memory: MemoryReport,
     /// Nodes the graph has but this plan does not run.
     pub pruned: Vec<usize>,
+    /// Nodes read through: for these inputs their output is one of their inputs
+    /// unchanged (see `Node::forwards`), so they do no work.
+    pub forwarded: Vec<usize>,
 }
 
 impl Plan {
@@ -356,6 +359,30 @@ impl<'g> Planner<'g> {
         }
         if !self.problems.is_empty() {
             return Err(Problems(self.problems));
+        }
+
+        // Nodes that forward an input unchanged (for these types) are read through:
+        // plan the graph with their readers rewired, where they are unread.
+        let forwards: HashMap<usize, Source> = step_nodes
+            .iter()
+            .chain(&prologue_nodes)
+            .filter_map(|&n| {
+                let inst = &g.nodes[n];
+                let Some(Some(_)) = &self.node_types[n] else {
+                    return None;
+                };
+                let types: Vec<Option<ValueType>> =
+                    inst.inputs.iter().map(|s| self.source_type(*s)).collect();
+                let i = inst.node.forwards(&types)?;
+                Some((n, inst.inputs[i]))
+            })
+            .collect();
+        if !forwards.is_empty() {
+            let mut p = plan(&g.forwarding(&forwards), self.opts, self.caps)?;
+            p.pruned.retain(|n| !forwards.contains_key(n));
+            p.forwarded.extend(forwards.keys());
+            p.forwarded.sort_unstable();
+            return Ok(p);
         }
 
         // Absent nodes drop out of the schedule.
@@ -713,6 +740,7 @@ impl<'g> Planner<'g> {
             outputs,
             memory: MemoryReport::default(),
             pruned,
+            forwarded: Vec::new(),
         };
         memory::assign(&mut plan);
         Ok(plan)

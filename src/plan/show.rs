@@ -162,6 +162,19 @@ pub fn to_text(g: &Graph, plan: &Plan) -> String {
         )
         .unwrap();
     }
+    if !plan.forwarded.is_empty() {
+        let ids: Vec<&str> = plan
+            .forwarded
+            .iter()
+            .map(|&n| g.nodes[n].id.as_str())
+            .collect();
+        writeln!(
+            out,
+            "read through (their output is an input unchanged, e.g. a sum whose optional term is absent)\n  {}",
+            ids.join(", ")
+        )
+        .unwrap();
+    }
     writeln!(out, "buffers").unwrap();
     for (i, b) in plan.buffers.iter().enumerate() {
         let role = match b.role {

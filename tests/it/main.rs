@@ -5,6 +5,7 @@
 
 mod cells;
 mod cli;
+mod fcm;
 mod fft;
 mod graph_files;
 mod nodes;

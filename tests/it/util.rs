@@ -85,6 +85,7 @@ pub fn input_decl(t: &ValueType) -> String {
             )
         }
         ValueType::Scalar => r#"{"type": "scalar"}"#.into(),
+        ValueType::Frames { .. } => panic!("frames are outputs only, not graph inputs"),
     }
 }
 
