@@ -123,6 +123,9 @@ fn stokes_body(v: &[f64]) -> SpectralBody {
     params.push(f32::from_bits(seed as u32));
     params.push(f32::from_bits((seed >> 32) as u32));
     params.push(f32::from_bits(v[stokes::STREAM] as u32));
+    // The projection leaves out unpaired Nyquist wave numbers (n/2 of an even n): a mode
+    // there and its conjugate partner, both stored with +n/2, then get the same
+    // operator, so the result stays the half spectrum of a real field.
     let mut text = String::from(
         "let q = vec3<f32>(k) * vec3<f32>(spectral_params[0], spectral_params[1], spectral_params[2]);
     let q2 = dot(q, q);
@@ -131,15 +134,20 @@ fn stokes_body(v: &[f64]) -> SpectralBody {
         return u;
     }
     let inv = 1.0 / q2;
+    let even = (n % vec3<u32>(2u)) == vec3<u32>(0u);
+    let nyquist = (even & (vec3<u32>(abs(k)) == n / vec3<u32>(2u))) & (n > vec3<u32>(1u));
+    let p = select(q, vec3<f32>(0.0), nyquist);
+    let p2 = dot(p, p);
+    let pinv = select(0.0, 1.0 / p2, p2 > 0.0);
 ",
     );
     if v[stokes::FORCES] != 0.0 {
         text.push_str(
-            "    let d = (q.x * v[0] + q.y * v[1] + q.z * v[2]) * inv;
+            "    let d = (p.x * v[0] + p.y * v[1] + p.z * v[2]) * pinv;
     let b = spectral_params[3] * inv;
-    u[0] = b * (v[0] - q.x * d);
-    u[1] = b * (v[1] - q.y * d);
-    u[2] = b * (v[2] - q.z * d);
+    u[0] = b * (v[0] - p.x * d);
+    u[1] = b * (v[1] - p.y * d);
+    u[2] = b * (v[2] - p.z * d);
 ",
         );
     }
@@ -147,11 +155,11 @@ fn stokes_body(v: &[f64]) -> SpectralBody {
     if noisy {
         text.push_str(
             "    let z = fourier_normal(k, n, step, bitcast<u32>(spectral_params[5]), bitcast<u32>(spectral_params[6]), bitcast<u32>(spectral_params[7]));
-    let dz = (q.x * z[0] + q.y * z[1] + q.z * z[2]) * inv;
+    let dz = (p.x * z[0] + p.y * z[1] + p.z * z[2]) * pinv;
     let c = spectral_params[4] * f32(n.x * n.y * n.z) * sqrt(inv);
-    u[0] += c * (z[0] - q.x * dz);
-    u[1] += c * (z[1] - q.y * dz);
-    u[2] += c * (z[2] - q.z * dz);
+    u[0] += c * (z[0] - p.x * dz);
+    u[1] += c * (z[1] - p.y * dz);
+    u[2] += c * (z[2] - p.z * dz);
 ",
         );
     }
@@ -175,11 +183,18 @@ fn stokes_apply(at: &Mode, p: &[f64], v: &mut [[f64; 2]]) {
     let k2 = k[0] * k[0] + k[1] * k[1] + k[2] * k[2];
     let mut u = [[0.0; 2]; 3];
     if k2 > 0.0 {
+        // Unpaired Nyquist wave numbers are left out of the projection (see stokes_body).
+        let kp = [0, 1, 2].map(|a| if at.nyquist(a) { 0.0 } else { k[a] });
+        let kp2 = kp[0] * kp[0] + kp[1] * kp[1] + kp[2] * kp[2];
         let project = |x: &[[f64; 2]], scale: f64, u: &mut [[f64; 2]; 3]| {
             for part in 0..2 {
-                let d = (0..3).map(|i| k[i] * x[i][part]).sum::<f64>() / k2;
+                let d = if kp2 > 0.0 {
+                    (0..3).map(|i| kp[i] * x[i][part]).sum::<f64>() / kp2
+                } else {
+                    0.0
+                };
                 for i in 0..3 {
-                    u[i][part] += scale * (x[i][part] - k[i] * d);
+                    u[i][part] += scale * (x[i][part] - kp[i] * d);
                 }
             }
         };
@@ -403,7 +418,7 @@ static KINDS: &[SpectralKind] = &[
     },
     SpectralKind {
         name: "stokes",
-        doc: "periodic Stokes flow of a force density: u = (I - k k^T / k^2) f / (eta k^2), k = 0 mode zero; plus noise * M^(1/2) W drawn in Fourier space (FCM's fluctuating stress) when noise > 0",
+        doc: "periodic Stokes flow of a force density: u = (I - k k^T / k^2) f / (eta k^2), k = 0 mode zero (unpaired Nyquist components left out of the projection); plus noise * M^(1/2) W drawn in Fourier space (FCM's fluctuating stress) when noise > 0",
         params: || stokes_params(0.0),
         comps: Some(3),
         values: |p| stokes_values(p, true),

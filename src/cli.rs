@@ -515,16 +515,63 @@ fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
 /// Loads a graph with its defaults and plans all its outputs with the declared inputs.
 pub fn check_graph(registry: &Registry, path: &Path) -> Result<String, String> {
     let g = graph::load(path, registry, &LoadOptions::default()).map_err(|p| p.to_string())?;
-    let opts = PlanOptions {
-        outputs: None,
-        inputs: declared_input_types(&g),
-        fuse: true,
+    let all = declared_input_types(&g);
+    let plan_with = |inputs: &BTreeMap<String, ValueType>, outputs: Option<Vec<String>>| {
+        let opts = PlanOptions {
+            outputs,
+            inputs: inputs.clone(),
+            fuse: true,
+        };
+        plan::plan(&g, &opts, &structural_caps()).map_err(|p| p.to_string())
     };
-    let p = plan::plan(&g, &opts, &structural_caps()).map_err(|p| p.to_string())?;
+    let first_error = match plan_with(&all, None) {
+        Ok(p) => {
+            return Ok(format!(
+                "{} nodes, {} launches per step",
+                g.nodes.len(),
+                p.step.len()
+            ));
+        }
+        Err(e) => e,
+    };
+    // Some outputs or optional inputs may need other params than the defaults (FCM's
+    // rotation needs its finer grid): valid when every output plans in some run, with
+    // the optional inputs or without them; the rest is reported as notes.
+    let required: BTreeMap<String, ValueType> = all
+        .iter()
+        .filter(|(name, _)| g.inputs.iter().any(|i| &i.name == *name && !i.optional))
+        .map(|(k, v)| (k.clone(), *v))
+        .collect();
+    let mut notes = Vec::new();
+    let mut launches = 0;
+    for out in &g.outputs {
+        let only = Some(vec![out.name.clone()]);
+        match plan_with(&all, only.clone()) {
+            Ok(p) => launches = launches.max(p.step.len()),
+            Err(e_all) => match plan_with(&required, only) {
+                Ok(p) => {
+                    launches = launches.max(p.step.len());
+                    notes.push(format!(
+                        "output `{}` plans without the optional inputs only (with the defaults):\n{e_all}",
+                        out.name
+                    ));
+                }
+                Err(_) => {
+                    notes.push(format!(
+                        "output `{}` does not plan with the default params:\n{e_all}",
+                        out.name
+                    ));
+                }
+            },
+        }
+    }
+    if notes.len() == g.outputs.len() || g.outputs.is_empty() {
+        return Err(first_error);
+    }
     Ok(format!(
-        "{} nodes, {} launches per step",
+        "{} nodes, up to {launches} launches per step\nnotes:\n{}",
         g.nodes.len(),
-        p.step.len()
+        notes.join("\n")
     ))
 }
 

@@ -51,8 +51,8 @@ pub fn radius_per_cell(kernel: &str, tolerance: f64) -> Result<f64, String> {
 }
 
 /// FFT-friendly cells per axis: the next friendly size from L / h truncated, as UAMMD
-/// does (so the grids of its benchmarks are the same here); the actual cell size can
-/// exceed the target by less than one cell's worth over the box.
+/// does (so the grids of its benchmarks are the same here), or rounded up where
+/// truncating would make the cells more than 1 % coarser than h (small boxes).
 pub fn grid(
     lengths: &[f64],
     radius: f64,
@@ -104,7 +104,12 @@ pub fn grid_for(
             if l <= 0.0 {
                 return Err(format!("box lengths must be positive, got {l}"));
             }
+            // Down as UAMMD rounds (its benchmark grids), unless that coarsens the cells
+            // by more than 1 % (small boxes: 8.8 cells would become 8).
             let mut n = (l / h).floor().max(1.0);
+            if l / next_friendly(n as u32) as f64 > 1.01 * h {
+                n = (l / h).ceil();
+            }
             if let Some(hr) = h_rotation {
                 n = n.max((l / hr).ceil());
             }

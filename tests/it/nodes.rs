@@ -100,10 +100,66 @@ fn pointwise_kinds_match_their_references() {
             )],
         ),
         ("scale", r#"{"factor": 2}"#, &[("x", ValueType::Scalar)]),
+        // Real-linear kinds on spectra (real and imaginary parts alike).
+        ("add", "{}", &[("a", H), ("b", H)]),
+        (
+            "axpby",
+            r#"{"alpha": 0.5, "beta": -2}"#,
+            &[("x", H), ("y", H)],
+        ),
+        ("scale", r#"{"factor": -3}"#, &[("x", H)]),
     ];
     for (kind, params, inputs) in cases {
         check(kind, params, inputs, ELEMENTWISE_TOL);
     }
+}
+
+const H: ValueType = ValueType::HalfComplexGrid {
+    dims: [6, 5, 4],
+    comps: 3,
+};
+
+#[test]
+fn spectra_take_no_scalar_broadcast() {
+    let dir = tmpdir("node-spectral-scalar");
+    let json = single_node_graph("add", "{}", &[("a", H), ("b", ValueType::Scalar)]);
+    let path = write_graph(&dir, "g.json", &json);
+    let g = load(&path);
+    let opts = mesoflow::plan::PlanOptions {
+        outputs: None,
+        inputs: [("a".to_string(), H), ("b".to_string(), ValueType::Scalar)]
+            .into_iter()
+            .collect(),
+        fuse: true,
+    };
+    let e = mesoflow::plan::plan(&g, &opts, &mesoflow::gpu::DeviceCaps::baseline())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cannot be broadcast"), "{e}");
+}
+
+/// Generators and recorders with no or trivial inputs, against their references.
+#[test]
+fn stokes_noise_and_record_match_their_references() {
+    // Even and odd sizes: the Hermitian pairs on the planes kx = 0 and kx = nx/2.
+    check(
+        "stokes_noise",
+        r#"{"box": [2, 1.5, 1], "grid": [8, 6, 5], "viscosity": 0.8, "noise": 0.3, "seed": 9, "stream": 4}"#,
+        &[],
+        2e-6,
+    );
+    check(
+        "stokes_noise",
+        r#"{"box": [1, 1, 1], "grid": [7, 4, 6], "viscosity": 1.0, "seed": 1}"#,
+        &[],
+        2e-6,
+    );
+    check(
+        "record",
+        r#"{"every": 1, "frames": 3}"#,
+        &[("x", P(17, 3))],
+        0.0,
+    );
 }
 
 #[test]
