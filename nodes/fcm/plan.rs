@@ -10,9 +10,12 @@
 //!   grid the FFT-friendly rounding gives.
 //! - Peskin 3, 4, 6 point: a = 1.00 h, 1.31 h, 1.5195 h (measured, thesis section 21.2);
 //!   the tolerance does not apply, and the radius follows the actual cell size.
-//! - ES: support w = ceil((-log10 tol + 2) / 2) cells (at least 2), beta = 3.6 w, and
-//!   h = 1.36409985665115 w^-0.53028415751646 a (UAMMD's fit of the measured radius).
-//!   The radius follows the actual cell size.
+//! - ES: support w = ceil(-log10 tol) + 2 cells, beta = 2.3 w, and a / h the hydrodynamic
+//!   radius of the continuous window, computed ([`window_radius_cells`]): 1.09, 1.24 and
+//!   1.37 for w = 4, 5, 6. (UAMMD's heuristic, beta = 3.6 w on ceil((2 - log10 tol) / 2)
+//!   cells with its fitted radius, gave self-mobilities 20 to 50 % off here: its
+//!   windows of 2 or 3 cells are narrower than the radius fit assumes.) The radius
+//!   follows the actual cell size.
 
 use crate::nodes::fft::next_friendly;
 
@@ -21,14 +24,84 @@ pub fn gaussian_upsampling(tolerance: f64) -> f64 {
     (0.55 - 0.11 * (3.0 * tolerance).log10()).min(1.65)
 }
 
-/// ES support in cells for a tolerance (UAMMD's FCM rule, at least 2).
+/// ES support in cells for FCM at a tolerance: ceil(-log10 tol) + 2 (4, 5 and 6 cells at
+/// 1e-2, 1e-3 and 1e-4). One cell more than the NUFFT rule of the spread node: FCM ties
+/// the grid to the radius, and what limits it is translational invariance, measured at
+/// about 3e-3, 7e-4 and 2e-4 of the self-mobility for supports 4, 5 and 6 (beta = 2.3 w).
 pub fn es_support(tolerance: f64) -> u32 {
-    (((-tolerance.log10() + 2.0) / 2.0).clamp(1.5, 9.0).ceil() as u32).max(2)
+    ((-tolerance.log10()).ceil().max(0.0) as u32 + 2).max(3)
 }
 
-/// ES shape parameter for a support.
+/// ES shape parameter for a support: Barnett's 2.3 per cell.
 pub fn es_beta(support: u32) -> f64 {
-    3.6 * support as f64
+    2.3 * support as f64
+}
+
+/// The hydrodynamic radius of a separable window in units of its cell, a / h: the
+/// free-space self-mobility of the continuous window, mu = (2/3) int d^3k |phi^(k)|^2 /
+/// ((2 pi)^3 eta k^2), as a = 1 / (6 pi eta mu). With 1/k^2 = int_0^inf exp(-t k^2) dt the
+/// 3-D integral is one over t of the cube of a 1-D one, so it costs milliseconds in f64.
+/// For the Gaussian of standard deviation s cells it is sqrt(pi) s (checked in the tests).
+pub fn window_radius_cells(phi: impl Fn(f64) -> f64, half_width: f64) -> f64 {
+    use std::f64::consts::PI;
+    // phi^(k) = int phi(x) cos(k x) dx by Simpson over the support (phi is even).
+    let nx = 2000;
+    let dx = 2.0 * half_width / nx as f64;
+    let samples: Vec<(f64, f64)> = (0..=nx)
+        .map(|i| {
+            let x = -half_width + i as f64 * dx;
+            let w = if i == 0 || i == nx {
+                1.0
+            } else if i % 2 == 1 {
+                4.0
+            } else {
+                2.0
+            };
+            (x, w * phi(x) * dx / 3.0)
+        })
+        .collect();
+    let norm: f64 = samples.iter().map(|s| s.1).sum();
+    let (kmax, nk) = (80.0, 8000);
+    let dk = kmax / nk as f64;
+    let spectrum: Vec<f64> = (0..=nk)
+        .map(|j| {
+            let k = j as f64 * dk;
+            let f: f64 = samples.iter().map(|&(x, w)| w * (k * x).cos()).sum::<f64>() / norm;
+            f * f
+        })
+        .collect();
+    // I(t) = int_-inf^inf phi^2 exp(-t k^2) dk (trapezoid on k >= 0, doubled).
+    let line = |t: f64| -> f64 {
+        let mut s = 0.0;
+        for (j, p) in spectrum.iter().enumerate() {
+            let k = j as f64 * dk;
+            let w = if j == 0 || j == nk { 0.5 } else { 1.0 };
+            s += w * p * (-t * k * k).exp();
+        }
+        2.0 * s * dk
+    };
+    // t on a log grid from 1e-6 to 1e4 (trapezoid in log t), plus the tail where phi^ = 1:
+    // I = sqrt(pi / t), int_T^inf I^3 dt = 2 pi^(3/2) / sqrt(T).
+    let (t0, t1, nt) = (1e-6f64, 1e4f64, 3000);
+    let step = (t1 / t0).ln() / nt as f64;
+    let mut integral = line(t0).powi(3) * t0; // t < t0, where I is flat
+    let mut prev = line(t0).powi(3) * t0;
+    for i in 1..=nt {
+        let t = t0 * (step * i as f64).exp();
+        let cur = line(t).powi(3) * t;
+        integral += 0.5 * (prev + cur) * step;
+        prev = cur;
+    }
+    integral += 2.0 * PI.powf(1.5) / t1.sqrt();
+    let mu = (2.0 / 3.0) * integral / (2.0 * PI).powi(3);
+    1.0 / (6.0 * PI * mu)
+}
+
+/// a / h of FCM's ES window at a tolerance (support and beta from the rules above).
+pub fn es_radius_per_cell(tolerance: f64) -> f64 {
+    let w = es_support(tolerance);
+    let window = crate::nodes::spread::window::Window::es(es_beta(w), w);
+    window_radius_cells(|x| window.phi(x, 1.0), w as f64 / 2.0)
 }
 
 /// Radius per cell size, a / h, of a window on the actual grid.
@@ -38,10 +111,7 @@ pub fn radius_per_cell(kernel: &str, tolerance: f64) -> Result<f64, String> {
         "peskin3" => 1.0,
         "peskin4" => 1.31,
         "peskin6" => 1.5195,
-        "es" => {
-            1.0 / (1.364_099_856_651_15
-                * (es_support(tolerance) as f64).powf(-0.530_284_157_516_46))
-        }
+        "es" => es_radius_per_cell(tolerance),
         other => {
             return Err(format!(
                 "unknown kernel `{other}` (kernels: gaussian, es, peskin3, peskin4, peskin6)"
@@ -276,6 +346,22 @@ mod tests {
         }
         // Twice as many cells per sigma, about twice the support.
         assert_eq!(gaussian_support(1e-3, 2.0 * gaussian_upsampling(1e-3)), 12);
+    }
+
+    /// The radius integral: sqrt(pi) sigma for a Gaussian; the ES values the self-mobility
+    /// measured on the GPU implies (1.094, 1.235, 1.365 for supports 4, 5, 6 at L = 16 a).
+    #[test]
+    fn window_radii() {
+        let s = 0.9;
+        let g = window_radius_cells(|x| (-0.5 * x * x / (s * s)).exp(), 9.0);
+        assert!(
+            (g / (std::f64::consts::PI.sqrt() * s) - 1.0).abs() < 1e-4,
+            "{g}"
+        );
+        for (tol, want) in [(1e-2, 1.094), (1e-3, 1.235), (1e-4, 1.365)] {
+            let r = es_radius_per_cell(tol);
+            assert!((r / want - 1.0).abs() < 1e-2, "{tol}: {r} vs {want}");
+        }
     }
 
     /// UAMMD's grids for the benchmark boxes (a = 1, Gaussian).

@@ -5,12 +5,14 @@
 //! Node benchmarks go through the engine like any graph: [`time_graph`] plans and
 //! compiles a graph file and times each launch with GPU timestamps.
 
+mod fcm;
 mod fft;
 mod primitives;
 mod reduce;
 mod spread;
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::Subcommand;
@@ -107,14 +109,29 @@ pub fn time_graph(
     let registry = Registry::standard();
     let g = graph::load(&file, &registry, &LoadOptions::default())
         .map_err(|p| CliError::Input(p.to_string()))?;
+    let run = time_loaded(gpu, &g, inputs, None, reps, fuse);
+    let _ = std::fs::remove_dir_all(&dir);
+    run.map(|(run, _)| run)
+}
+
+/// [`time_graph`] for a loaded graph and these outputs (all when `None`); also returns
+/// the plan's memory total in bytes.
+pub fn time_loaded(
+    gpu: &GpuContext,
+    g: &graph::Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    outputs: Option<Vec<String>>,
+    reps: u64,
+    fuse: bool,
+) -> Result<(TimedRun, u64), CliError> {
     let opts = PlanOptions {
-        outputs: None,
+        outputs,
         inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse,
     };
-    let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
+    let p = plan::plan(g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
     let mut cache = KernelCache::default();
-    let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(runtime)?;
+    let mut program = Program::compile(gpu, g, &p, &mut cache).map_err(runtime)?;
     program.upload(inputs).map_err(runtime)?;
     warm_up(&mut program)?;
     let stats = program
@@ -142,7 +159,6 @@ pub fn time_graph(
         .map_err(runtime)?
         .into_iter()
         .collect();
-    let _ = std::fs::remove_dir_all(&dir);
     let timings = stats
         .profile
         .iter()
@@ -162,7 +178,7 @@ pub fn time_graph(
                 .unwrap_or_default(),
         })
         .collect();
-    Ok(TimedRun { timings, outputs })
+    Ok((TimedRun { timings, outputs }, p.memory.total()))
 }
 
 #[derive(Subcommand, Debug)]
@@ -236,6 +252,36 @@ pub enum BenchCommand {
         #[arg(long)]
         filter: bool,
     },
+    /// The FCM graph's speed against its error per kernel and tolerance (UAMMD's sizes by
+    /// default): GPU time of one M F, self- and pair-mobility errors against f64 references.
+    Fcm {
+        /// The FCM graph file.
+        #[arg(long, default_value = "graphs/fcm.json")]
+        graph: PathBuf,
+        /// Kernels (gaussian, es, peskin3, peskin4, peskin6), or `all`.
+        #[arg(long, value_delimiter = ',', default_values_t = ["gaussian".to_string()])]
+        kernels: Vec<String>,
+        #[arg(long, value_delimiter = ',', default_values_t = [1e-2, 1e-3, 1e-4])]
+        tolerances: Vec<f64>,
+        /// Box sides and particle counts as L:N (default: UAMMD's benchmark sizes for each
+        /// tolerance).
+        #[arg(long, value_delimiter = ',')]
+        sizes: Vec<String>,
+        /// Also time M F plus the Fourier-space noise (kT = 1).
+        #[arg(long)]
+        noise: bool,
+        #[arg(long, default_value_t = 20)]
+        reps: u64,
+        /// Side of the cubic box (in radii) the errors are measured in.
+        #[arg(long, default_value_t = 32.0)]
+        error_box: f64,
+        /// Random positions for the self-mobility error.
+        #[arg(long, default_value_t = 16)]
+        error_samples: usize,
+        /// Draw error against time into this SVG file.
+        #[arg(long)]
+        plot: Option<PathBuf>,
+    },
 }
 
 pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
@@ -260,6 +306,50 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             max_ref,
             filter,
         } => fft::run(&sizes, comps, reps, max_ref, filter),
+        BenchCommand::Fcm {
+            graph,
+            kernels,
+            tolerances,
+            sizes,
+            noise,
+            reps,
+            error_box,
+            error_samples,
+            plot,
+        } => {
+            let kernels = if kernels.iter().any(|k| k == "all") {
+                crate::nodes::spread::window::NAMES
+                    .iter()
+                    .map(|s| s.to_string())
+                    .collect()
+            } else {
+                kernels
+            };
+            let sizes = sizes
+                .iter()
+                .map(|s| {
+                    let parsed = s
+                        .split_once(':')
+                        .and_then(|(l, n)| Some((l.parse::<f64>().ok()?, n.parse::<u32>().ok()?)));
+                    parsed.filter(|(l, n)| *l > 0.0 && *n > 0).ok_or_else(|| {
+                        CliError::Input(format!(
+                            "--sizes `{s}`: expected L:N with L > 0 and N > 0 (e.g. 129:100000)"
+                        ))
+                    })
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            fcm::run(&fcm::FcmBench {
+                graph,
+                kernels,
+                tolerances,
+                sizes,
+                noise,
+                reps,
+                error_box,
+                error_samples,
+                plot,
+            })
+        }
     }
 }
 

@@ -1,0 +1,504 @@
+//! `mesoflow bench fcm`: the FCM graph's speed against its error, per kernel and
+//! tolerance: the GPU time of one evaluation M F (and, with `--noise`, M F plus the
+//! Fourier-space noise) for N random particles, and the error reached, measured in a
+//! separate box against f64 references: the self-mobility (Hasimoto's periodic value for
+//! the window's radius; for the Gaussian the exact periodic Gaussian mobility) over
+//! random positions, and for the Gaussian the pair mobility against a direct Fourier sum.
+//! `--plot FILE.svg` draws error against time: the user's guide to kernel and tolerance.
+
+use std::collections::BTreeMap;
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+use super::{runtime, time_loaded};
+use crate::cli::CliError;
+use crate::exec::{Profile, Program, RunOptions};
+use crate::expr::ParamValue;
+use crate::gpu::{GpuContext, KernelCache};
+use crate::graph::{self, Graph, LoadOptions};
+use crate::node::Registry;
+use crate::nodes::fcm::{plan as fcm_plan, reference};
+use crate::plan::{self, PlanOptions};
+use crate::value::{HostArray, ValueType};
+
+/// What to measure.
+pub struct FcmBench {
+    pub graph: PathBuf,
+    pub kernels: Vec<String>,
+    pub tolerances: Vec<f64>,
+    /// (box side L, particles N); empty: UAMMD's benchmark sizes for each tolerance.
+    pub sizes: Vec<(f64, u32)>,
+    pub noise: bool,
+    pub reps: u64,
+    /// Side of the cubic box the errors are measured in.
+    pub error_box: f64,
+    /// Random positions the self-mobility error is measured at.
+    pub error_samples: usize,
+    pub plot: Option<PathBuf>,
+}
+
+/// UAMMD's FCM benchmark (H200, Gaussian, a = 1): (tolerance, L, N, ms).
+pub const UAMMD: [(f64, f64, u32, f64); 9] = [
+    (1e-2, 64.0, 10_000, 0.214),
+    (1e-2, 127.0, 100_000, 1.25),
+    (1e-2, 264.0, 1_000_000, 13.8),
+    (1e-3, 65.0, 10_000, 0.272),
+    (1e-3, 129.0, 100_000, 2.15),
+    (1e-3, 256.0, 1_000_000, 21.5),
+    (1e-4, 65.0, 10_000, 0.372),
+    (1e-4, 130.0, 100_000, 4.02),
+    (1e-4, 260.0, 1_000_000, 34.5),
+];
+
+/// One measured row.
+struct Row {
+    kernel: String,
+    tolerance: f64,
+    l: f64,
+    n: u32,
+    grid: u32,
+    support: String,
+    ms: f64,
+    noise_ms: Option<f64>,
+    self_max: f64,
+    self_mean: f64,
+    pair: Option<f64>,
+    memory: u64,
+}
+
+/// A small deterministic generator (xorshift) for positions and forces.
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn load(path: &Path, sets: &[(&str, ParamValue)], registry: &Registry) -> Result<Graph, CliError> {
+    let overrides = sets
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.clone()))
+        .collect();
+    graph::load(
+        path,
+        registry,
+        &LoadOptions {
+            overrides,
+            steps: 1,
+            seed: 1,
+        },
+    )
+    .map_err(|p| CliError::Input(p.to_string()))
+}
+
+fn param(g: &Graph, name: &str) -> Option<ParamValue> {
+    g.params
+        .iter()
+        .find(|p| p.name == name)
+        .map(|p| p.value.clone())
+}
+
+fn particles(rows: &[[f64; 3]]) -> HostArray {
+    HostArray::f32(
+        ValueType::Particles {
+            n: rows.len() as u32,
+            k: 3,
+        },
+        rows.iter().flatten().map(|&x| x as f32).collect(),
+    )
+}
+
+/// Velocities of `x` under forces `f`, one evaluation of a compiled graph.
+fn velocities(
+    program: &mut Program,
+    x: &[[f64; 3]],
+    f: &[[f64; 3]],
+) -> Result<Vec<[f64; 3]>, CliError> {
+    let data = [
+        ("positions".to_string(), particles(x)),
+        ("forces".to_string(), particles(f)),
+    ]
+    .into_iter()
+    .collect();
+    program.upload(&data).map_err(runtime)?;
+    program
+        .run(&RunOptions {
+            steps: 1,
+            profile: Profile::Off,
+            progress: false,
+        })
+        .map_err(runtime)?;
+    let out = program.read_outputs().map_err(runtime)?;
+    let v = out
+        .iter()
+        .find(|(k, _)| k == "velocities")
+        .map(|(_, v)| v.data.to_f64())
+        .ok_or_else(|| CliError::Runtime("the graph has no `velocities` output".into()))?;
+    Ok(v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
+/// (max, mean) relative self-mobility error over random positions, and for the Gaussian
+/// the largest pair-mobility error (at 2a and 4a) relative to the self-mobility.
+fn accuracy(
+    gpu: &GpuContext,
+    bench: &FcmBench,
+    registry: &Registry,
+    kernel: &str,
+    tolerance: f64,
+) -> Result<(f64, f64, Option<f64>), CliError> {
+    let l = bench.error_box;
+    let g = load(
+        &bench.graph,
+        &[
+            ("box", ParamValue::Numbers(vec![l; 3])),
+            ("tolerance", ParamValue::Number(tolerance)),
+            ("kernel", ParamValue::Text(kernel.into())),
+        ],
+        registry,
+    )?;
+    let a = match param(&g, "effective_radius") {
+        Some(ParamValue::Number(a)) => a,
+        _ => 1.0,
+    };
+    let eta = match param(&g, "viscosity") {
+        Some(ParamValue::Number(e)) => e,
+        _ => 1.0,
+    };
+    let gaussian = kernel == "gaussian";
+    let sigma = a / PI.sqrt();
+    let self_want = if gaussian {
+        reference::periodic_gaussian_mobility([0.0; 3], [l; 3], eta, sigma)[0][0]
+    } else {
+        fcm_plan::hasimoto(a, l) / (6.0 * PI * eta * a)
+    };
+    let mut cache = KernelCache::default();
+    let mut rng = Rng(0x2545_F491_4F6C_DD1D);
+    let mut errors = Vec::new();
+    {
+        let p = plan_for(gpu, &g, 1)?;
+        let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(runtime)?;
+        for _ in 0..bench.error_samples {
+            let x = [0, 1, 2].map(|_| (rng.uniform() - 0.5) * l);
+            for axis in 0..3 {
+                let mut f = [0.0; 3];
+                f[axis] = 1.0;
+                let v = velocities(&mut program, &[x], &[f])?;
+                errors.push((v[0][axis] / self_want - 1.0).abs());
+            }
+        }
+    }
+    let self_max = errors.iter().cloned().fold(0.0, f64::max);
+    let self_mean = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
+    let pair = if gaussian {
+        let p = plan_for(gpu, &g, 2)?;
+        let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(runtime)?;
+        let mut worst: f64 = 0.0;
+        for r in [2.0 * a, 4.0 * a] {
+            for _ in 0..2 {
+                let x0 = [0, 1, 2].map(|_| (rng.uniform() - 0.5) * l);
+                let d = [0, 1, 2].map(|_| rng.uniform() - 0.5);
+                let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                let x1 = [0, 1, 2].map(|c| x0[c] + r * d[c] / norm);
+                let want = reference::periodic_gaussian_mobility(
+                    [0, 1, 2].map(|c| x1[c] - x0[c]),
+                    [l; 3],
+                    eta,
+                    sigma,
+                );
+                for axis in 0..3 {
+                    let mut f = [[0.0; 3]; 2];
+                    f[0][axis] = 1.0;
+                    let v = velocities(&mut program, &[x0, x1], &f)?;
+                    for (c, row) in want.iter().enumerate() {
+                        worst = worst.max((v[1][c] - row[axis]).abs() / self_want);
+                    }
+                }
+            }
+        }
+        Some(worst)
+    } else {
+        None
+    };
+    Ok((self_max, self_mean, pair))
+}
+
+fn plan_for(gpu: &GpuContext, g: &Graph, n: u32) -> Result<plan::Plan, CliError> {
+    let p3 = ValueType::Particles { n, k: 3 };
+    let opts = PlanOptions {
+        outputs: Some(vec!["velocities".into()]),
+        inputs: [("positions".to_string(), p3), ("forces".to_string(), p3)]
+            .into_iter()
+            .collect(),
+        fuse: true,
+    };
+    plan::plan(g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))
+}
+
+/// GPU time of one evaluation of `output` for N random particles in a cube of side L.
+fn timed(
+    gpu: &GpuContext,
+    g: &Graph,
+    l: f64,
+    n: u32,
+    output: &str,
+    reps: u64,
+) -> Result<(f64, u64), CliError> {
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ n as u64);
+    let x: Vec<[f64; 3]> = (0..n)
+        .map(|_| [0, 1, 2].map(|_| (rng.uniform() - 0.5) * l))
+        .collect();
+    let f: Vec<[f64; 3]> = (0..n)
+        .map(|_| [0, 1, 2].map(|_| rng.uniform() - 0.5))
+        .collect();
+    let inputs: BTreeMap<String, HostArray> = [
+        ("positions".to_string(), particles(&x)),
+        ("forces".to_string(), particles(&f)),
+    ]
+    .into_iter()
+    .collect();
+    let (run, memory) = time_loaded(gpu, g, &inputs, Some(vec![output.into()]), reps, true)?;
+    if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
+        for t in &run.timings {
+            print!("{}", t.breakdown());
+        }
+    }
+    Ok((run.step_time().as_secs_f64() * 1e3, memory))
+}
+
+fn support_text(g: &Graph, kernel: &str) -> String {
+    match (kernel, param(g, "support")) {
+        ("peskin3", _) => "3".into(),
+        ("peskin4", _) => "4".into(),
+        ("peskin6", _) => "6".into(),
+        (_, Some(ParamValue::Number(s))) if s > 0.0 => format!("{s}"),
+        _ => "?".into(),
+    }
+}
+
+pub fn run(bench: &FcmBench) -> Result<(), CliError> {
+    if bench.reps == 0 || bench.error_samples == 0 {
+        return Err(CliError::Input(
+            "--reps and --error-samples must be positive".into(),
+        ));
+    }
+    let gpu = GpuContext::new().map_err(runtime)?;
+    let registry = Registry::standard();
+    println!("adapter: {}", gpu.caps.summary());
+    println!(
+        "graph {}; a = 1, eta = 1; time: median GPU time of one evaluation over {} runs (sum of its launches); errors measured in a box of side {} at {} random positions (self) and 4 pairs at 2a and 4a (pair, Gaussian only, relative to the self-mobility)",
+        bench.graph.display(),
+        bench.reps,
+        bench.error_box,
+        bench.error_samples
+    );
+    println!(
+        "{:<8} {:>6} {:>6} {:>8} {:>5} {:>4} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8} {:>9}",
+        "kernel",
+        "tol",
+        "L",
+        "N",
+        "grid",
+        "sup",
+        "ms",
+        "ns/part",
+        "noise ms",
+        "self max",
+        "self mean",
+        "pair max",
+        "MiB",
+        "UAMMD ms"
+    );
+    let mut rows: Vec<Row> = Vec::new();
+    for kernel in &bench.kernels {
+        for &tol in &bench.tolerances {
+            let (self_max, self_mean, pair) = accuracy(&gpu, bench, &registry, kernel, tol)?;
+            let sizes: Vec<(f64, u32)> = if bench.sizes.is_empty() {
+                UAMMD
+                    .iter()
+                    .filter(|u| (u.0 / tol - 1.0).abs() < 1e-9)
+                    .map(|u| (u.1, u.2))
+                    .collect()
+            } else {
+                bench.sizes.clone()
+            };
+            for (l, n) in sizes {
+                let mut sets = vec![
+                    ("box", ParamValue::Numbers(vec![l; 3])),
+                    ("tolerance", ParamValue::Number(tol)),
+                    ("kernel", ParamValue::Text(kernel.clone())),
+                ];
+                let g = load(&bench.graph, &sets, &registry)?;
+                let grid = match param(&g, "grid") {
+                    Some(ParamValue::Numbers(v)) => v[0] as u32,
+                    _ => 0,
+                };
+                let (ms, memory) = timed(&gpu, &g, l, n, "velocities", bench.reps)?;
+                let noise_ms = if bench.noise {
+                    sets.push(("temperature", ParamValue::Number(1.0)));
+                    let g = load(&bench.graph, &sets, &registry)?;
+                    Some(timed(&gpu, &g, l, n, "fluctuating_velocities", bench.reps)?.0)
+                } else {
+                    None
+                };
+                let uammd = UAMMD
+                    .iter()
+                    .find(|u| {
+                        kernel == "gaussian"
+                            && (u.0 / tol - 1.0).abs() < 1e-9
+                            && u.1 == l
+                            && u.2 == n
+                    })
+                    .map(|u| format!("{:.3}", u.3))
+                    .unwrap_or_else(|| "-".into());
+                let row = Row {
+                    kernel: kernel.clone(),
+                    tolerance: tol,
+                    l,
+                    n,
+                    grid,
+                    support: support_text(&g, kernel),
+                    ms,
+                    noise_ms,
+                    self_max,
+                    self_mean,
+                    pair,
+                    memory,
+                };
+                println!(
+                    "{:<8} {:>6.0e} {:>6} {:>8} {:>5} {:>4} {:>9.4} {:>8.2} {:>9} {:>9.2e} {:>9.2e} {:>9} {:>8.0} {:>9}",
+                    row.kernel,
+                    row.tolerance,
+                    row.l,
+                    row.n,
+                    row.grid,
+                    row.support,
+                    row.ms,
+                    row.ms * 1e6 / row.n as f64,
+                    row.noise_ms
+                        .map(|t| format!("{t:.4}"))
+                        .unwrap_or_else(|| "-".into()),
+                    row.self_max,
+                    row.self_mean,
+                    row.pair
+                        .map(|p| format!("{p:.2e}"))
+                        .unwrap_or_else(|| "-".into()),
+                    row.memory as f64 / (1u64 << 20) as f64,
+                    uammd
+                );
+                rows.push(row);
+            }
+        }
+    }
+    if let Some(path) = &bench.plot {
+        plot(path, &rows)
+            .map_err(|e| CliError::Runtime(format!("--plot {}: {e}", path.display())))?;
+        println!("plot: {}", path.display());
+    }
+    Ok(())
+}
+
+/// Error (worst self-mobility) against time, one series per kernel and particle count,
+/// UAMMD's Gaussian figures as crosses at their reported errors.
+fn plot(path: &Path, rows: &[Row]) -> Result<(), String> {
+    use plotters::prelude::*;
+    let err = |e: &dyn std::fmt::Display| e.to_string();
+    // Written next to the target and renamed: never a half-written plot.
+    let tmp = path.with_extension("svg.tmp");
+    {
+        let root = SVGBackend::new(&tmp, (900, 600)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let times: Vec<f64> = rows
+            .iter()
+            .map(|r| r.ms)
+            .chain(UAMMD.iter().map(|u| u.3))
+            .collect();
+        let errors: Vec<f64> = rows.iter().map(|r| r.self_max.max(1e-9)).collect();
+        let (tmin, tmax) = times
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(a, b), &t| (a.min(t), b.max(t)));
+        let (emin, emax) = errors
+            .iter()
+            .chain([2e-3, 8e-4, 4e-5].iter())
+            .fold((f64::INFINITY, 0.0f64), |(a, b), &e| (a.min(e), b.max(e)));
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "FCM: self-mobility error against GPU time per M F",
+                ("sans-serif", 20),
+            )
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(
+                (tmin / 1.5..tmax * 1.5).log_scale(),
+                (emin / 2.0..emax * 2.0).log_scale(),
+            )
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc("GPU time per evaluation (ms)")
+            .y_desc("worst relative self-mobility error")
+            .draw()
+            .map_err(|e| err(&e))?;
+        let palette = [RED, BLUE, GREEN, MAGENTA, CYAN, BLACK];
+        let mut series: Vec<(String, u32)> = Vec::new();
+        for r in rows {
+            if !series.iter().any(|(k, n)| *k == r.kernel && *n == r.n) {
+                series.push((r.kernel.clone(), r.n));
+            }
+        }
+        let kernels: Vec<&String> = {
+            let mut k: Vec<&String> = rows.iter().map(|r| &r.kernel).collect();
+            k.dedup();
+            k
+        };
+        for (kernel, n) in &series {
+            let color =
+                palette[kernels.iter().position(|k| *k == kernel).unwrap_or(0) % palette.len()];
+            let mut pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| &r.kernel == kernel && r.n == *n)
+                .map(|r| (r.ms, r.self_max.max(1e-9)))
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                .map_err(|e| err(&e))?
+                .label(format!("{kernel}, N = {n}"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                .map_err(|e| err(&e))?;
+        }
+        let uammd_err = |tol: f64| {
+            if tol > 5e-3 {
+                2e-3
+            } else if tol > 5e-4 {
+                8e-4
+            } else {
+                4e-5
+            }
+        };
+        chart
+            .draw_series(
+                UAMMD
+                    .iter()
+                    .map(|u| Cross::new((u.3, uammd_err(u.0)), 6, BLACK.stroke_width(2))),
+            )
+            .map_err(|e| err(&e))?
+            .label("UAMMD FCM (H200, its reported errors)")
+            .legend(|(x, y)| Cross::new((x + 10, y), 5, BLACK));
+        chart
+            .configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.9))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(|e| err(&e))?;
+        root.present().map_err(|e| err(&e))?;
+    }
+    std::fs::rename(&tmp, path).map_err(|e| err(&e))
+}
