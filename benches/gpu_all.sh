@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # Every GPU measurement in one call on the GPU machine (device tool), from the repository
 # root, with the kit and a release binary in .gpu/ (see ../shared/gpu/README.md):
-#   bash benches/gpu_all.sh [names...]     names: overhead reduce sort scan fft torch (default all)
+#   bash benches/gpu_all.sh [names...]     names: overhead reduce sort scan spread fft fcm torch (default all)
 # Prints each table; copies the full log to $OUT/bench.log when OUT is set.
 set -uo pipefail
 source .gpu/gpu-env.sh
 export PYTHONUNBUFFERED=1
 bin=.gpu/mesoflow
 want=("$@")
-[ ${#want[@]} -eq 0 ] && want=(overhead reduce sort scan spread fft torch)
+[ ${#want[@]} -eq 0 ] && want=(overhead reduce sort scan spread fft fcm torch)
 log=${OUT:-/tmp}/bench.log
 : > "$log"
 has() { [[ " ${want[*]} " == *" $1 "* ]]; }
@@ -21,6 +21,8 @@ has sort && $bin bench sort --help >/dev/null 2>&1 && run $bin bench sort --n 10
 has scan && $bin bench scan --help >/dev/null 2>&1 && run $bin bench scan --n 100000000 --reps 20
 has spread && run $bin bench spread --cells 128 --reps 20
 has fft && $bin bench fft --help >/dev/null 2>&1 && run $bin bench fft --comps 3 --reps 20
+has fcm && run $bin bench fcm --noise --reps 20 --plot ${OUT:-/tmp}/fcm_gaussian.svg
+has fcm && run $bin bench fcm --kernels es,peskin3,peskin4,peskin6 --reps 10 --plot ${OUT:-/tmp}/fcm_kernels.svg
 if has torch; then
   for s in benches/torch_*.py; do [ -f "$s" ] && run python3 "$s"; done
 fi

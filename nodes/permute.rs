@@ -54,22 +54,43 @@ impl NodeKind for GatherKind {
     }
 
     fn params(&self) -> Vec<ParamSpec> {
-        Vec::new()
+        vec![enabled_param()]
     }
 
-    fn build(&self, _: &Params) -> Result<Box<dyn Node>, String> {
-        Ok(Box::new(Gather))
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        Ok(Box::new(Gather {
+            enabled: p.flag("enabled"),
+        }))
     }
 }
 
-struct Gather;
+/// Lets a graph switch a permutation off by a param (FCM sorts particles only where the
+/// grid outgrows the cache): the node then forwards `values` and does no work.
+fn enabled_param() -> ParamSpec {
+    ParamSpec::flag(
+        "enabled",
+        true,
+        "false: out = values unchanged (the index is not read and the node does no work)",
+    )
+}
+
+struct Gather {
+    enabled: bool,
+}
 
 impl Node for Gather {
+    fn forwards(&self, _: &[Option<ValueType>]) -> Option<usize> {
+        (!self.enabled).then_some(0)
+    }
+
     fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
         let values = inputs[0].expect("required");
         let Some(ValueType::Indices { n }) = inputs[1] else {
             unreachable!("port type checked")
         };
+        if !self.enabled {
+            return Ok(Signature::outputs(vec![values]));
+        }
         Ok(Signature::outputs(vec![with_rows(values, n)]))
     }
 
@@ -79,6 +100,10 @@ impl Node for Gather {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let values = inputs[0].as_ref().expect("required");
+        if !self.enabled {
+            outputs[0].data.copy_from_slice(&values.data);
+            return;
+        }
         let index = &inputs[1].as_ref().expect("required").data;
         let (rows, k) = rows_of(values.ty);
         let k = k as usize;
@@ -154,27 +179,36 @@ impl NodeKind for ScatterKind {
     }
 
     fn params(&self) -> Vec<ParamSpec> {
-        vec![ParamSpec::integer(
-            "rows",
-            Some(0.0),
-            0.0,
-            u32::MAX as f64,
-            "rows of the output (0: as many as `values`); indices past it are skipped",
-        )]
+        vec![
+            ParamSpec::integer(
+                "rows",
+                Some(0.0),
+                0.0,
+                u32::MAX as f64,
+                "rows of the output (0: as many as `values`); indices past it are skipped",
+            ),
+            enabled_param(),
+        ]
     }
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
         Ok(Box::new(Scatter {
             rows: p.number("rows") as u32,
+            enabled: p.flag("enabled"),
         }))
     }
 }
 
 struct Scatter {
     rows: u32,
+    enabled: bool,
 }
 
 impl Node for Scatter {
+    fn forwards(&self, _: &[Option<ValueType>]) -> Option<usize> {
+        (!self.enabled).then_some(0)
+    }
+
     fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
         let values = inputs[0].expect("required");
         let Some(ValueType::Indices { n }) = inputs[1] else {
@@ -188,6 +222,14 @@ impl Node for Scatter {
             ));
         }
         let out_rows = if self.rows == 0 { rows } else { self.rows };
+        if !self.enabled && out_rows != rows {
+            return Err(PortError::new(
+                "values",
+                format!(
+                    "has {rows} rows but `rows` asks for {out_rows}: a disabled scatter forwards its values unchanged"
+                ),
+            ));
+        }
         Ok(Signature::outputs(vec![with_rows(values, out_rows)]))
     }
 
@@ -197,6 +239,10 @@ impl Node for Scatter {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let values = inputs[0].as_ref().expect("required");
+        if !self.enabled {
+            outputs[0].data.copy_from_slice(&values.data);
+            return;
+        }
         let index = &inputs[1].as_ref().expect("required").data;
         let (_, k) = rows_of(values.ty);
         let (out_rows, _) = rows_of(outputs[0].ty);

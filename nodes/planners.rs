@@ -17,6 +17,19 @@ fn number(args: &[ParamValue], i: usize, what: &str) -> Result<f64, String> {
     }
 }
 
+fn flag(args: &[ParamValue], i: usize, what: &str) -> Result<bool, String> {
+    match args.get(i) {
+        Some(ParamValue::Bool(b)) => Ok(*b),
+        Some(ParamValue::Number(x)) => Ok(*x != 0.0),
+        Some(other) => Err(format!(
+            "argument {} ({what}) must be a boolean, got {}",
+            i + 1,
+            other.type_name()
+        )),
+        None => Err(format!("argument {} ({what}) is missing", i + 1)),
+    }
+}
+
 fn numbers<'a>(args: &'a [ParamValue], i: usize, what: &str) -> Result<&'a [f64], String> {
     match args.get(i) {
         Some(ParamValue::Numbers(x)) => Ok(x),
@@ -72,7 +85,7 @@ pub static FUNCTIONS: &[HostFunction] = &[
             if !(4..=5).contains(&a.len()) {
                 return Err(format!("takes 4 or 5 arguments, got {}", a.len()));
             }
-            let rotation = a.len() == 5 && number(a, 4, "rotation")? != 0.0;
+            let rotation = a.len() == 5 && flag(a, 4, "rotation")?;
             let g = plan::grid_for(
                 numbers(a, 0, "box")?,
                 number(a, 1, "radius")?,
@@ -169,6 +182,42 @@ pub static FUNCTIONS: &[HostFunction] = &[
             Ok(ParamValue::Number(plan::torque_width(number(
                 a, 0, "radius",
             )?)))
+        },
+    },
+    HostFunction {
+        name: "fcm_sort_cells",
+        doc: "fcm_sort_cells(grid): cells per axis of the Morton order particles are sorted in before spreading (4 grid cells each, at most 1024 per axis)",
+        call: |a| {
+            arity(a, 1)?;
+            Ok(ParamValue::Numbers(
+                numbers(a, 0, "grid")?
+                    .iter()
+                    .map(|&g| plan::sort_cells(g))
+                    .collect(),
+            ))
+        },
+    },
+    HostFunction {
+        name: "fcm_sort_particles",
+        doc: "fcm_sort_particles(grid): whether sorting particles pays, that is whether the 3 components of the grid outgrow the cache",
+        call: |a| {
+            arity(a, 1)?;
+            let cells: f64 = numbers(a, 0, "grid")?.iter().product();
+            Ok(ParamValue::Bool(
+                cells * 3.0 * 4.0 > crate::nodes::spread::LARGE_GRID_BYTES as f64,
+            ))
+        },
+    },
+    HostFunction {
+        name: "fcm_sort_bits",
+        doc: "fcm_sort_bits(grid): key bits of that Morton order (3 per level of the largest axis)",
+        call: |a| {
+            arity(a, 1)?;
+            let most = numbers(a, 0, "grid")?
+                .iter()
+                .map(|&g| plan::sort_cells(g))
+                .fold(1.0, f64::max);
+            Ok(ParamValue::Number(3.0 * most.log2().ceil().max(1.0)))
         },
     },
     HostFunction {

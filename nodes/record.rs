@@ -97,7 +97,7 @@ impl Node for Record {
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
         let Some(x) = &inputs[0] else { return };
         let done = cx.step + 1;
-        if done % self.every as u64 != 0 {
+        if !done.is_multiple_of(self.every as u64) {
             return;
         }
         let frame = (done / self.every as u64 - 1) as usize;

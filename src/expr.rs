@@ -196,6 +196,7 @@ pub fn evaluate(text: &str, scope: &Scope) -> Result<ParamValue, String> {
             .map(finite)
             .collect::<Result<Vec<_>, _>>()
             .map(ParamValue::Numbers),
+        V::Bool(b) => Ok(ParamValue::Bool(b)),
         V::Text(_) => Err(format!(
             "expression `{}` gives a string; write the string itself instead",
             text.trim()
@@ -287,12 +288,15 @@ enum V {
     Num(f64),
     Arr(Vec<f64>),
     Text(String),
+    /// A boolean param or host-function result; 1 or 0 in arithmetic.
+    Bool(bool),
 }
 
 impl V {
     fn number(self, src: &str) -> Result<f64, String> {
         match self {
             V::Num(x) => Ok(x),
+            V::Bool(b) => Ok(if b { 1.0 } else { 0.0 }),
             V::Arr(_) => Err(format!(
                 "expression `{}` gives an array where a number is needed",
                 src.trim()
@@ -309,6 +313,7 @@ impl V {
             V::Num(x) => ParamValue::Number(x),
             V::Arr(a) => ParamValue::Numbers(a),
             V::Text(t) => ParamValue::Text(t),
+            V::Bool(b) => ParamValue::Bool(b),
         }
     }
 }
@@ -467,7 +472,7 @@ impl Parser<'_> {
                     return Ok(match v {
                         ParamValue::Number(x) => V::Num(*x),
                         ParamValue::Numbers(a) => V::Arr(a.clone()),
-                        ParamValue::Bool(b) => V::Num(if *b { 1.0 } else { 0.0 }),
+                        ParamValue::Bool(b) => V::Bool(*b),
                         ParamValue::Text(t) => V::Text(t.clone()),
                     });
                 }
@@ -494,6 +499,7 @@ impl Parser<'_> {
             for a in args {
                 match a {
                     V::Num(x) => out.push(x),
+                    V::Bool(b) => out.push(if b { 1.0 } else { 0.0 }),
                     V::Arr(v) => out.extend(v),
                     V::Text(_) => {
                         return Err(format!("`{name}` takes numbers in expression `{src}`"));
@@ -558,7 +564,7 @@ impl Parser<'_> {
                         ParamValue::Number(x) => V::Num(x),
                         ParamValue::Numbers(a) => V::Arr(a),
                         ParamValue::Text(t) => V::Text(t),
-                        ParamValue::Bool(b) => V::Num(if b { 1.0 } else { 0.0 }),
+                        ParamValue::Bool(b) => V::Bool(b),
                     })
                 }
                 None => Err(format!("unknown function `{name}` in expression `{src}`")),

@@ -131,6 +131,15 @@ impl ParamSpec {
         }
     }
 
+    pub fn flag(name: &'static str, default: bool, doc: &'static str) -> Self {
+        ParamSpec {
+            name,
+            kind: ParamKind::Bool,
+            default: Some(ParamValue::Bool(default)),
+            doc,
+        }
+    }
+
     /// Checks a value against the spec; the message says what was expected.
     pub fn check(&self, v: &ParamValue) -> Result<(), String> {
         match (&self.kind, v) {

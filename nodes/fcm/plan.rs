@@ -266,6 +266,13 @@ pub fn torque_width(radius: f64) -> f64 {
     radius / (6.0 * std::f64::consts::PI.sqrt()).cbrt()
 }
 
+/// Cells per axis of the Morton order FCM sorts particles in (see graphs/fcm.json): four
+/// grid cells each, so that particles served together touch overlapping supports; at most
+/// 1024 per axis (30-bit keys).
+pub fn sort_cells(grid_cells: f64) -> f64 {
+    (grid_cells / 4.0).ceil().clamp(1.0, 1024.0)
+}
+
 /// Hasimoto's self-mobility of a sphere in a cubic periodic box, times 6 pi eta a
 /// (thesis Eq. 21.18): 1 - b x + (4 pi / 3) x^3 - c x^6 with x = a / L.
 pub fn hasimoto(radius: f64, length: f64) -> f64 {

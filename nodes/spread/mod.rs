@@ -29,10 +29,21 @@ pub struct GridWindow {
     pub window: Window,
     /// Threads per workgroup of the kernels (64, 128 or 256): a tuning knob.
     pub workgroup: u32,
+    /// Serve particles in input order (for input sorted in space: concurrent workgroups
+    /// then share cache lines of a grid too large for the cache) instead of in
+    /// interleaved runs.
+    pub contiguous: bool,
+    /// Decide `contiguous` from the grid's size.
+    pub auto_order: bool,
     /// Gaussian window: the fewest cells its standard deviation may span (0: no check).
     /// Checked when the node is planned, not built, so an unused node never fails.
     pub min_width_cells: f64,
 }
+
+/// Grids whose components take more than this (about the GPU's last-level cache) are
+/// served in input order, so that particles sorted in space touch the grid with locality;
+/// smaller ones stay in cache whatever the order. FCM sorts particles above it too.
+pub const LARGE_GRID_BYTES: u64 = 32 << 20;
 
 impl GridWindow {
     pub fn dims(&self) -> usize {
@@ -41,6 +52,17 @@ impl GridWindow {
 
     pub fn h(&self, a: usize) -> f64 {
         self.lengths[a] / self.cells[a] as f64
+    }
+
+    /// Interleaved runs of particles (see shaders/spread/stencil.wgsl) for `count`
+    /// particles and `comps` components, or 1 (input order).
+    pub fn chunks(&self, count: u32, comps: u32) -> u32 {
+        let big = self.cell_count() as u64 * comps as u64 * 4 > LARGE_GRID_BYTES;
+        if self.contiguous || (self.auto_order && big) {
+            1
+        } else {
+            chunks(count)
+        }
     }
 
     /// The accuracy guard `min_width_cells` for a Gaussian window on this grid.
@@ -171,6 +193,12 @@ fn grid_params() -> Vec<ParamSpec> {
             0.5,
             "Gaussian and ES: truncation tolerance that sets the support",
         ),
+        ParamSpec::choice(
+            "order",
+            "auto",
+            &["auto", "interleaved", "contiguous"],
+            "order particles are served in: interleaved runs (concurrent workgroups far apart: no contention), contiguous (for input sorted in space: cache locality on grids larger than the cache), auto: contiguous when the grid's components take more than 32 MiB",
+        ),
         ParamSpec::number(
             "min_width_cells",
             Some(0.0),
@@ -242,6 +270,8 @@ fn grid_window(p: &Params) -> Result<GridWindow, String> {
         // The choice list admits only 64, 128 and 256.
         workgroup: p.text("workgroup").parse().unwrap_or(256),
         min_width_cells: p.number("min_width_cells"),
+        contiguous: p.text("order") == "contiguous",
+        auto_order: p.text("order") == "auto",
     })
 }
 
@@ -306,12 +336,12 @@ fn chunks(count: u32) -> u32 {
 /// Dispatch shape for `count` particles: see shaders/spread/stencil.wgsl. Particles are
 /// served in `chunks(count)` interleaved runs, by 64-thread workgroups holding 64 / SEG particles
 /// (SEG = support^2 rounded up to a power of two, at most 64).
-fn per_particle(cx: &CompileCtx, count: u32, support: u32, wg: u32) -> [u32; 3] {
+fn per_particle(cx: &CompileCtx, count: u32, chunks: u32, support: u32, wg: u32) -> [u32; 3] {
     let seg = (support as u64 * support as u64)
         .next_power_of_two()
         .min(64);
     let per_workgroup = wg as u64 / seg;
-    let c = chunks(count) as u64;
+    let c = chunks as u64;
     let slots = c * (count as u64).div_ceil(c);
     cx.grid_1d(slots.div_ceil(per_workgroup), 1)
 }
@@ -493,9 +523,9 @@ impl GpuKernels for Spread {
             } else {
                 (
                     spec.constant("COMPS", chunk as f64)
-                        .constant("CHUNKS", chunks(n) as f64)
+                        .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
                         .constant("WG", self.gw.workgroup as f64),
-                    per_particle(cx, n, ns, self.gw.workgroup),
+                    per_particle(cx, n, self.gw.chunks(n, comps), ns, self.gw.workgroup),
                 )
             };
             let kernel = cx.kernel(&spec)?;
@@ -689,7 +719,7 @@ impl GpuKernels for Interpolate {
                 .constant("DIMS", self.gw.dims() as f64)
                 .constant("COMPS", chunk as f64)
                 .constant("TOTAL", comps as f64)
-                .constant("CHUNKS", chunks(n) as f64)
+                .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
                 .constant("WG", self.gw.workgroup as f64)
                 .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some()))),
             )?;
@@ -700,7 +730,13 @@ impl GpuKernels for Interpolate {
                     ..geometry(&self.gw, n)
                 }),
             );
-            let groups = per_particle(cx, n, self.gw.window.support(), self.gw.workgroup);
+            let groups = per_particle(
+                cx,
+                n,
+                self.gw.chunks(n, comps),
+                self.gw.window.support(),
+                self.gw.workgroup,
+            );
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[

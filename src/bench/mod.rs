@@ -218,7 +218,7 @@ pub enum BenchCommand {
         n: u32,
         #[arg(long, default_value_t = 20)]
         reps: u64,
-        /// The sort's `variant` (auto, tile4096, tile3072, tile2048, subgroup, portable), or
+        /// The sort's `variant` (auto, tile4096, tile2048, subgroup, portable), or
         /// `all`: each in turn on the same keys, one row each.
         #[arg(long, default_value = "auto")]
         variant: String,
