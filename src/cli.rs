@@ -88,7 +88,8 @@ pub enum Command {
     },
     /// Show the GPU adapter mesoflow would use and what it can do.
     Info,
-    /// List every node kind with its ports, params and a one-line doc.
+    /// List every node kind with its ports, params and a one-line doc, then the host
+    /// functions param expressions may call.
     Nodes {
         /// Show only this kind.
         kind: Option<String>,
@@ -672,6 +673,12 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
             println!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);
         }
         println!();
+    }
+    if only.is_none() {
+        println!("Host functions for param expressions (planning in f64 on the host):");
+        for f in crate::nodes::planners::FUNCTIONS {
+            println!("  {}", f.doc);
+        }
     }
     if shown == 0 {
         let hint = only

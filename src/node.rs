@@ -212,11 +212,16 @@ impl ParamSpec {
     }
 }
 
+/// A range bound as people read it: beyond 1e300 in magnitude (f64::MAX, used as "no
+/// bound") it prints as inf; beyond 1e15 (2^53 - 1, the largest exact seed) or below 1e-6
+/// (f64::MIN_POSITIVE, "positive") in exponent form.
 fn fmt_bound(x: f64) -> String {
-    if x == f64::INFINITY {
+    if x >= 1e300 {
         "inf".into()
-    } else if x == f64::NEG_INFINITY {
+    } else if x <= -1e300 {
         "-inf".into()
+    } else if x.abs() >= 1e15 || (x != 0.0 && x.abs() < 1e-6) {
+        format!("{x:e}")
     } else {
         x.to_string()
     }

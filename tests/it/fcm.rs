@@ -753,6 +753,53 @@ fn velocities_do_not_depend_on_where_the_grid_is() {
     }
 }
 
+/// The README's main job (graphs/examples/colloids.json) measures the self-diffusion
+/// coefficient from its own initial positions (kept in state: random nodes draw afresh
+/// every step) and reports kT times Hasimoto's self-mobility as theory.
+#[test]
+fn colloids_demo_measures_the_self_diffusion() {
+    let Some(gpu) = gpu() else { return };
+    let (n, side, steps) = (1000usize, 24.0, 200u64);
+    let g = graph::load(
+        &root().join("graphs/examples/colloids.json"),
+        registry(),
+        &LoadOptions {
+            overrides: [
+                ("n", ParamValue::Number(n as f64)),
+                ("side", ParamValue::Number(side)),
+                ("tolerance", ParamValue::Number(1e-2)),
+            ]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect(),
+            steps,
+            seed: 3,
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let out = crate::util::run_graph(&gpu, &g, &BTreeMap::new(), None, steps, true);
+    let theory = out["theory"].data.to_f64()[0];
+    let want = hasimoto(1.0, side) / (6.0 * PI);
+    assert!((theory - want).abs() <= 1e-6 * want, "{theory} vs {want}");
+    // Relative standard errors per axis: independent particles plus the Oseen correlation
+    // of pairs (graphs/examples/colloids.json's doc); steps are independent samples for
+    // the per-step estimate. 5 standard deviations.
+    let var = 2.0 / n as f64 + 13.2 / (side * side);
+    for (name, bound) in [
+        ("diffusion", 5.0 * (var / steps as f64).sqrt()),
+        ("diffusion_msd", 5.0 * var.sqrt()),
+    ] {
+        let d = out[name].data.to_f64();
+        eprintln!("colloids: {name} = {d:?}, theory {theory:e}, bound {bound:e} per axis");
+        for (a, &da) in d.iter().enumerate() {
+            assert!(
+                (da / theory - 1.0).abs() <= bound,
+                "{name} axis {a}: {da:e} vs {theory:e}"
+            );
+        }
+    }
+}
+
 /// Serving particles in Morton order (what fcm.json does on grids larger than the cache)
 /// changes only the order of the grid's float additions: velocities and noise come back in
 /// the input order and agree with the unsorted run to f32 rounding.
