@@ -801,8 +801,9 @@ fn colloids_demo_measures_the_self_diffusion() {
 }
 
 /// Serving particles in Morton order (what fcm.json does on grids larger than the cache)
-/// changes only the order of the grid's float additions: velocities and noise come back in
-/// the input order and agree with the unsorted run to f32 rounding.
+/// changes only the order of the grid's float additions: every output (forces and torques
+/// in, noise drawn) comes back in the input order and agrees with the unsorted run to f32
+/// rounding.
 #[test]
 fn sorting_particles_changes_nothing_but_rounding() {
     let Some(gpu) = gpu() else { return };
@@ -812,23 +813,43 @@ fn sorting_particles_changes_nothing_but_rounding() {
     let f: Vec<[f64; 3]> = (0..n)
         .map(|_| [0, 1, 2].map(|_| rng.uniform(-1.0, 1.0)))
         .collect();
+    let t: Vec<[f64; 3]> = (0..n)
+        .map(|_| [0, 1, 2].map(|_| rng.uniform(-1.0, 1.0)))
+        .collect();
+    let outputs = [
+        "velocities",
+        "angular_velocities",
+        "noise",
+        "fluctuating_velocities",
+    ];
     let run = |sort: &str| {
         let g = load_with(
             "fcm.json",
-            &[("box", "[12, 12, 12]"), ("sort_particles", sort)],
+            &[
+                ("box", "[12, 12, 12]"),
+                ("rotation", "true"),
+                ("temperature", "1"),
+                ("sort_particles", sort),
+            ],
             9,
         );
-        let plan = fcm_plan(&gpu, &g, n as u32, false, &["velocities", "noise"]);
-        let sorted = plan
+        let plan = fcm_plan(&gpu, &g, n as u32, true, &outputs);
+        let read_through: Vec<&str> = plan
             .forwarded
             .iter()
-            .all(|&i| g.nodes[i].id != "velocities");
-        assert_eq!(sorted, sort == "true", "sort_particles = {sort}");
+            .map(|&i| g.nodes[i].id.as_str())
+            .collect();
+        let sorted = !outputs.iter().any(|o| read_through.contains(o));
+        assert_eq!(
+            sorted,
+            sort == "true",
+            "sort_particles = {sort}: {read_through:?}"
+        );
         let mut fcm = compile(&gpu, &g, &plan);
-        eval(&mut fcm, &x, &f, None)
+        eval(&mut fcm, &x, &f, Some(&t))
     };
     let (plain, sorted) = (run("false"), run("true"));
-    for out in ["velocities", "noise"] {
+    for out in outputs {
         let (a, b) = (&plain[out], &sorted[out]);
         let biggest = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
         let worst = a
