@@ -587,6 +587,25 @@ mod tests {
     }
 
     #[test]
+    fn booleans_stay_booleans_and_count_as_0_or_1() {
+        let mut s = scope();
+        s.insert("rotation".into(), ParamValue::Bool(true));
+        assert_eq!(evaluate("rotation", &s).unwrap(), ParamValue::Bool(true));
+        assert_eq!(
+            evaluate("1 + rotation", &s).unwrap(),
+            ParamValue::Number(2.0)
+        );
+        assert_eq!(
+            evaluate("fcm_sort_particles([512, 512, 512])", &s).unwrap(),
+            ParamValue::Bool(true)
+        );
+        assert_eq!(
+            evaluate("fcm_sort_particles([48, 48, 48])", &s).unwrap(),
+            ParamValue::Bool(false)
+        );
+    }
+
+    #[test]
     fn arithmetic_is_f64_not_integer() {
         let s = scope();
         assert_eq!(eval("2/3", &s).unwrap(), 2.0 / 3.0);
