@@ -1,33 +1,13 @@
 //! Gather, scatter, histograms and cell hashing against their references.
 
-use std::collections::BTreeMap;
-
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{Rng, gpu, load, reference, run_graph, single_node_graph, tmpdir, write_graph};
+use crate::util::{Rng, gpu, run_node_and_reference, single_node_graph, tmpdir, write_graph};
 
 /// Runs a node and returns (GPU output, f64 reference) for output `out`.
 fn run_node(kind: &str, params: &str, inputs: &[(&str, HostArray)]) -> (Vec<f64>, Vec<f64>) {
-    let gpu = gpu().expect("checked by the caller");
-    let types: Vec<(&str, ValueType)> = inputs.iter().map(|(n, a)| (*n, a.ty)).collect();
-    let dir = tmpdir(&format!("cells-{kind}"));
-    let g = load(&write_graph(
-        &dir,
-        "g.json",
-        &single_node_graph(kind, params, &types),
-    ));
-    let data: BTreeMap<String, HostArray> = inputs
-        .iter()
-        .map(|(n, a)| (n.to_string(), a.clone()))
-        .collect();
-    let out = run_graph(&gpu, &g, &data, None, 1, true);
-    let args: Vec<Option<&HostArray>> = g.nodes[0]
-        .input_ports
-        .iter()
-        .map(|p| data.get(p.name))
-        .collect();
-    let refs = reference(kind, params, &args);
-    (out["out"].data.to_f64(), refs[0].data.clone())
+    let (out, mut refs) = run_node_and_reference(kind, params, inputs);
+    (out["out"].data.to_f64(), refs.remove(0).data)
 }
 
 fn idx(v: Vec<u32>) -> HostArray {

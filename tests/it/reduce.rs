@@ -1,45 +1,14 @@
 //! Reductions against f64 references: every kind, edge sizes, segments, and the accuracy
 //! of blocked and compensated sums on 10^6 elements of mixed magnitude.
 
-use std::collections::BTreeMap;
-
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{
-    Rng, gpu, load, reference, rel_max_err, run_graph, single_node_graph, tmpdir, write_graph,
-};
-
-fn run_node(
-    kind: &str,
-    params: &str,
-    inputs: &[(&str, HostArray)],
-) -> (BTreeMap<String, HostArray>, Vec<mesoflow::value::RefArray>) {
-    let gpu = gpu().expect("checked by the caller");
-    let types: Vec<(&str, ValueType)> = inputs.iter().map(|(n, a)| (*n, a.ty)).collect();
-    let dir = tmpdir(&format!("reduce-{kind}"));
-    let g = load(&write_graph(
-        &dir,
-        "g.json",
-        &single_node_graph(kind, params, &types),
-    ));
-    let data: BTreeMap<String, HostArray> = inputs
-        .iter()
-        .map(|(n, a)| (n.to_string(), a.clone()))
-        .collect();
-    let out = run_graph(&gpu, &g, &data, None, 1, true);
-    let args: Vec<Option<&HostArray>> = g.nodes[0]
-        .input_ports
-        .iter()
-        .map(|p| data.get(p.name))
-        .collect();
-    let refs = reference(kind, params, &args);
-    (out, refs)
-}
+use crate::util::{Rng, gpu, rel_max_err, run_node_and_reference};
 
 /// Compares a node with its reference on the given inputs (relative to the largest
 /// reference magnitude).
 fn check(kind: &str, params: &str, inputs: &[(&str, HostArray)], tol: f64) {
-    let (out, refs) = run_node(kind, params, inputs);
+    let (out, refs) = run_node_and_reference(kind, params, inputs);
     let (err, at) = rel_max_err(&out["out"], &refs[0]);
     let sizes: Vec<String> = inputs.iter().map(|(_, a)| a.ty.to_string()).collect();
     assert!(
@@ -105,7 +74,7 @@ fn empty_reductions_give_their_identities() {
         ("max", f64::NEG_INFINITY),
         ("min", f64::INFINITY),
     ] {
-        let (out, refs) = run_node(kind, "{}", &[("x", empty.clone())]);
+        let (out, refs) = run_node_and_reference(kind, "{}", &[("x", empty.clone())]);
         assert_eq!(out["out"].data.to_f64()[0], want, "{kind} of nothing");
         assert_eq!(refs[0].data[0], want);
     }
@@ -169,7 +138,7 @@ fn segment_reductions_match_their_references() {
     for op in ["sum", "mean", "max", "min"] {
         for comp in [false, true] {
             let params = format!(r#"{{"op": "{op}", "compensated": {comp}}}"#);
-            let (out, refs) = run_node(
+            let (out, refs) = run_node_and_reference(
                 "segment_reduce",
                 &params,
                 &[("values", values.clone()), ("starts", starts.clone())],
@@ -209,12 +178,13 @@ fn sums_of_a_million_mixed_magnitudes() {
     let abs_sum: f64 = values.iter().map(|&x| (x as f64).abs()).sum();
     let naive_f32 = values.iter().fold(0f32, |a, &x| a + x) as f64;
     let x = HostArray::f32(p(n, 1), values);
-    let blocked = run_node("sum", "{}", &[("x", x.clone())]).0["out"]
+    let blocked = run_node_and_reference("sum", "{}", &[("x", x.clone())]).0["out"]
         .data
         .to_f64()[0];
-    let compensated = run_node("sum", r#"{"compensated": true}"#, &[("x", x)]).0["out"]
-        .data
-        .to_f64()[0];
+    let compensated =
+        run_node_and_reference("sum", r#"{"compensated": true}"#, &[("x", x)]).0["out"]
+            .data
+            .to_f64()[0];
     let rel = |v: f64| (v - exact).abs() / abs_sum;
     eprintln!(
         "sum of 1e6 mixed magnitudes, error relative to sum|x| = {abs_sum:.4e} (sum = {exact:.6e}): \
@@ -247,12 +217,13 @@ fn compensation_recovers_what_f32_rounding_loses() {
     v[0] = 1e8;
     let exact = 1e8 + (n - 1) as f64;
     let x = HostArray::f32(p(n, 1), v.clone());
-    let blocked = run_node("sum", "{}", &[("x", x.clone())]).0["out"]
+    let blocked = run_node_and_reference("sum", "{}", &[("x", x.clone())]).0["out"]
         .data
         .to_f64()[0];
-    let compensated = run_node("sum", r#"{"compensated": true}"#, &[("x", x)]).0["out"]
-        .data
-        .to_f64()[0];
+    let compensated =
+        run_node_and_reference("sum", r#"{"compensated": true}"#, &[("x", x)]).0["out"]
+            .data
+            .to_f64()[0];
     eprintln!(
         "1e8 + (1e6 - 1) ones: blocked {blocked} (error {}), compensated {compensated} (error {})",
         blocked - exact,
@@ -267,7 +238,7 @@ fn compensation_recovers_what_f32_rounding_loses() {
     // The same per column.
     let rows: Vec<f32> = v.iter().flat_map(|&x| [x, x]).collect();
     let cols = HostArray::f32(p(n, 2), rows);
-    let c = run_node("column_reduce", r#"{"compensated": true}"#, &[("x", cols)]).0["out"]
+    let c = run_node_and_reference("column_reduce", r#"{"compensated": true}"#, &[("x", cols)]).0["out"]
         .data
         .to_f64();
     assert!(
@@ -284,7 +255,7 @@ fn compensation_recovers_what_f32_rounding_loses() {
     let seg = HostArray::f32(p(m, 2), rows);
     let starts = HostArray::u32(ValueType::Indices { n: 1 }, vec![0]);
     let exact = 1e8 + (m - 1) as f64;
-    let plain = run_node(
+    let plain = run_node_and_reference(
         "segment_reduce",
         "{}",
         &[("values", seg.clone()), ("starts", starts.clone())],
@@ -292,7 +263,7 @@ fn compensation_recovers_what_f32_rounding_loses() {
     .0["out"]
         .data
         .to_f64();
-    let s = run_node(
+    let s = run_node_and_reference(
         "segment_reduce",
         r#"{"compensated": true}"#,
         &[("values", seg), ("starts", starts)],

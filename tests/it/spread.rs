@@ -7,7 +7,8 @@ use std::collections::BTreeMap;
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::{
-    Rng, gpu, load, reference, rel_max_err, run_graph, single_node_graph, tmpdir, write_graph,
+    Rng, gpu, reference, rel_max_err, run_node_and_reference, single_node_graph, tmpdir,
+    write_graph,
 };
 
 fn run_node(
@@ -15,26 +16,8 @@ fn run_node(
     params: &str,
     inputs: &[(&str, HostArray)],
 ) -> (HostArray, mesoflow::value::RefArray) {
-    let gpu = gpu().expect("checked by the caller");
-    let types: Vec<(&str, ValueType)> = inputs.iter().map(|(n, a)| (*n, a.ty)).collect();
-    let dir = tmpdir(&format!("spread-{kind}"));
-    let g = load(&write_graph(
-        &dir,
-        "g.json",
-        &single_node_graph(kind, params, &types),
-    ));
-    let data: BTreeMap<String, HostArray> = inputs
-        .iter()
-        .map(|(n, a)| (n.to_string(), a.clone()))
-        .collect();
-    let out = run_graph(&gpu, &g, &data, None, 1, true);
-    let args: Vec<Option<&HostArray>> = g.nodes[0]
-        .input_ports
-        .iter()
-        .map(|p| data.get(p.name))
-        .collect();
-    let mut refs = reference(kind, params, &args);
-    (out["out"].clone(), refs.remove(0))
+    let (mut out, mut refs) = run_node_and_reference(kind, params, inputs);
+    (out.remove("out").expect("output `out`"), refs.remove(0))
 }
 
 fn positions(rng: &mut Rng, n: u32, lengths: &[f64]) -> HostArray {

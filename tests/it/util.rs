@@ -175,6 +175,29 @@ pub fn run_node(
     out
 }
 
+/// [`run_node`] on the shared GPU, with the node's f64 reference for the same inputs (in
+/// output-port order).
+pub fn run_node_and_reference(
+    kind: &str,
+    params: &str,
+    inputs: &[(&str, HostArray)],
+) -> (BTreeMap<String, HostArray>, Vec<RefArray>) {
+    let gpu = gpu().expect("checked by the caller");
+    let data: BTreeMap<String, HostArray> = inputs
+        .iter()
+        .map(|(n, a)| (n.to_string(), a.clone()))
+        .collect();
+    let (dir, g) = load_single_node(kind, params, &data);
+    let out = run_graph(&gpu, &g, &data, None, 1, true);
+    let _ = std::fs::remove_dir_all(&dir);
+    let args: Vec<Option<&HostArray>> = g.nodes[0]
+        .input_ports
+        .iter()
+        .map(|p| data.get(p.name))
+        .collect();
+    (out, reference(kind, params, &args))
+}
+
 /// The error of compiling a one-`kind`-node graph for `gpu` (which must fail).
 pub fn compile_error(
     gpu: &GpuContext,
