@@ -156,7 +156,7 @@ pub static FUNCTIONS: &[HostFunction] = &[
             arity(a, 2)?;
             let r = number(a, 0, "radius")?;
             Ok(ParamValue::Number(if text(a, 1, "kernel")? == "gaussian" {
-                r / std::f64::consts::PI.sqrt()
+                plan::gaussian_width(r)
             } else {
                 0.0
             }))

@@ -193,7 +193,7 @@ pub fn grid_for(
             if kernel == "gaussian" {
                 // A slightly finer grid keeps the Gaussian's radius (it is not tied to
                 // the cell) and, with the same support, its accuracy.
-                let sigma = radius / std::f64::consts::PI.sqrt();
+                let sigma = gaussian_width(radius);
                 let support = |cells: u32| gaussian_support(tolerance, sigma * cells as f64 / l);
                 let fast = fast_fft_size(friendly);
                 if fast as f64 <= FAST_SIZE_STRETCH * friendly as f64
@@ -216,20 +216,9 @@ pub const FAST_SIZE_STRETCH: f64 = 1.04;
 /// one when it is at most [`FAST_SIZE_STRETCH`] times the friendly size and the window's
 /// support stays the same.
 pub fn fast_fft_size(n: u32) -> u32 {
-    let mut best = u32::MAX;
-    let mut p = 1u32;
-    while p < u32::MAX / 3 {
-        for m in [p, 3 * p] {
-            if m >= n {
-                best = best.min(m);
-            }
-        }
-        if p >= n {
-            break;
-        }
-        p *= 2;
-    }
-    best
+    let n = n.max(1);
+    n.next_power_of_two()
+        .min(3 * n.div_ceil(3).next_power_of_two())
 }
 
 /// Complementary error function, relative error below 1.2e-7 (Numerical Recipes'
@@ -296,6 +285,12 @@ pub fn effective_radius(
         .sum::<f64>()
         / lengths.len() as f64;
     Ok(h.exp() * radius_per_cell(kernel, tolerance)?)
+}
+
+/// The standard deviation of FCM's force Gaussian, a / sqrt(pi): the mobility of an
+/// isolated sphere is then 1 / (6 pi eta a).
+pub fn gaussian_width(radius: f64) -> f64 {
+    radius / std::f64::consts::PI.sqrt()
 }
 
 /// The standard deviation of FCM's torque Gaussian, a / (6 sqrt(pi))^(1/3): the
@@ -430,7 +425,7 @@ mod tests {
                 vec![n],
                 "L = {l}, tolerance {tol}"
             );
-            let sigma_cells = |cells: u32| cells as f64 / (std::f64::consts::PI.sqrt() * l);
+            let sigma_cells = |cells: u32| gaussian_width(1.0) * cells as f64 / l;
             assert_eq!(
                 gaussian_support(tol, sigma_cells(n)),
                 gaussian_support(tol, sigma_cells(uammd)),
