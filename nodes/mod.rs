@@ -3,6 +3,7 @@
 pub mod cells;
 pub mod fcm;
 pub mod fft;
+pub mod lanczos;
 pub mod permute;
 pub mod planners;
 pub mod pointwise;
@@ -21,6 +22,7 @@ pub fn register_all(r: &mut Registry) {
     fft::register(r);
     pointwise::register(r);
     cells::register(r);
+    lanczos::register(r);
     permute::register(r);
     random::register(r);
     record::register(r);

@@ -392,6 +392,14 @@ fn run(
         plan::human_bytes(p.memory.total()),
         plan::human_bytes(program.table_bytes),
     );
+    for (node, counts) in program.loop_iterations() {
+        if let (Some(lo), Some(hi)) = (counts.iter().min(), counts.iter().max()) {
+            let mean = counts.iter().map(|&k| k as f64).sum::<f64>() / counts.len() as f64;
+            eprintln!(
+                "mesoflow: loop `{node}`: {mean:.1} iterations per step (min {lo}, max {hi})"
+            );
+        }
+    }
     if profile != Profile::Off {
         print_profile(&stats);
     }

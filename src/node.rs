@@ -24,6 +24,11 @@ pub struct PortSpec {
     /// Outputs only: the value persists across time steps and the node updates it in
     /// place (it starts at zero). Trajectory recorders and running averages use this.
     pub persistent: bool,
+    /// The port belongs to an iteration the node drives (see [`GpuIterative`]). An output
+    /// so marked takes a new value every iteration: the nodes that depend on it form the
+    /// node's loop body. An input so marked closes the loop: the body's result, read
+    /// after every iteration. Edges into such an input are not cycles.
+    pub iterate: bool,
 }
 
 impl PortSpec {
@@ -34,6 +39,7 @@ impl PortSpec {
             doc,
             optional: false,
             persistent: false,
+            iterate: false,
         }
     }
 
@@ -44,6 +50,11 @@ impl PortSpec {
 
     pub const fn persistent(mut self) -> Self {
         self.persistent = true;
+        self
+    }
+
+    pub const fn iterate(mut self) -> Self {
+        self.iterate = true;
         self
     }
 }
@@ -438,6 +449,48 @@ pub enum Lowering<'a> {
     Kernels(&'a dyn GpuKernels),
     /// A spectral operation the planner folds into a transform or runs alone.
     Spectral(SpectralBody),
+    /// The node drives an iteration of its loop body, deciding on the host when to stop.
+    Iterative(&'a dyn GpuIterative),
+}
+
+/// The GPU side of an iterative node, recorded once per program.
+pub struct IterativeKernels {
+    /// Before the first iteration (the first value of the node's `iterate` output).
+    pub start: Vec<Dispatch>,
+    /// After every run of the loop body (the next value of the `iterate` output).
+    pub iterate: Vec<Dispatch>,
+    /// After the last iteration, once the host has written its answer to `answer`.
+    pub finish: Vec<Dispatch>,
+    /// What the host reads to decide (`status_bytes` bytes from offset 0).
+    pub status: wgpu::Buffer,
+    pub status_bytes: u64,
+    /// Where the host writes [`Decision::Finish`]'s bytes (from `answer_offset`).
+    pub answer: wgpu::Buffer,
+    pub answer_offset: u64,
+}
+
+/// The host's verdict after reading an iterative node's status.
+pub enum Decision {
+    /// Run the loop body and `iterate` once more.
+    Continue,
+    /// Write these bytes to `answer`, run `finish` and leave the loop.
+    Finish(Vec<u8>),
+}
+
+/// A node that runs its loop body repeatedly (Lanczos: one operator product per
+/// iteration) and decides on the host, from a small status buffer, when to stop. The
+/// executor runs the node's `start`, then body + `iterate` until `decide` says finish:
+/// one host round trip per decision.
+pub trait GpuIterative {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<IterativeKernels, CompileError>;
+
+    /// After `iterations` runs of the body, from the status bytes: go on, finish, or stop
+    /// with an error that says why (no convergence, an operator that is not positive).
+    fn decide(&self, iterations: usize, status: &[u8]) -> Result<Decision, String>;
 }
 
 /// A node that records its own dispatches.

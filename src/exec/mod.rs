@@ -17,7 +17,7 @@ use crate::gpu::{
     NodeIo, Slot, WG_1D,
 };
 use crate::graph::Graph;
-use crate::node::{Lowering, SpectralBody};
+use crate::node::{Decision, IterativeKernels, Lowering, SpectralBody};
 use crate::plan::{Launch, Phase, Plan, Storage, ValueId};
 use crate::value::{HostArray, ValueType};
 
@@ -94,6 +94,25 @@ struct Compiled {
     label: String,
     kinds: String,
     dispatches: Vec<Dispatch>,
+    /// An iterative node with its body (its `dispatches` are then empty).
+    looped: Option<std::sync::Arc<CompiledLoop>>,
+}
+
+struct CompiledLoop {
+    node: usize,
+    kernels: IterativeKernels,
+    body: Vec<Compiled>,
+}
+
+impl Compiled {
+    fn plain(label: String, kinds: String, dispatches: Vec<Dispatch>) -> Self {
+        Compiled {
+            label,
+            kinds,
+            dispatches,
+            looped: None,
+        }
+    }
 }
 
 /// A compiled plan, ready to run repeatedly.
@@ -114,6 +133,8 @@ pub struct Program<'a> {
     /// Bytes nodes allocated for uniforms and tables.
     pub table_bytes: u64,
     steps_done: u64,
+    /// Iterations of each loop per step over the last run.
+    iterations: Vec<(String, Vec<u32>)>,
 }
 
 fn storage_buffer(gpu: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
@@ -191,6 +212,7 @@ impl<'a> Program<'a> {
             kernels_built: 0,
             table_bytes: 0,
             steps_done: 0,
+            iterations: Vec::new(),
         };
         let mut prologue = Vec::new();
         for l in &plan.prologue {
@@ -212,6 +234,7 @@ impl<'a> Program<'a> {
                     label: c0.label.clone(),
                     kinds: c0.kinds.clone(),
                     dispatches: c0.dispatches.clone(),
+                    looped: c0.looped.clone(),
                 }
             };
             even.push(c0);
@@ -286,27 +309,27 @@ impl<'a> Program<'a> {
                     source,
                 };
                 match (inst.node.lowering(), spectral) {
-                    (Lowering::Kernels(k), None) => Ok(Compiled {
-                        label: inst.id.clone(),
-                        kinds: inst.kind.to_string(),
-                        dispatches: k.compile(cx, &io).map_err(err)?,
-                    }),
+                    (Lowering::Kernels(k), None) => Ok(Compiled::plain(
+                        inst.id.clone(),
+                        inst.kind.to_string(),
+                        k.compile(cx, &io).map_err(err)?,
+                    )),
                     (Lowering::Kernels(k), Some(f)) => {
                         let s = &g.nodes[f.node];
                         let Lowering::Spectral(body) = s.node.lowering() else {
                             panic!("folded node `{}` is not spectral", s.id)
                         };
-                        Ok(Compiled {
-                            label: format!("{} + {}", inst.id, s.id),
-                            kinds: format!("{}+{}", inst.kind, s.kind),
-                            dispatches: k.compile_spectral(cx, &io, &body).map_err(err)?,
-                        })
+                        Ok(Compiled::plain(
+                            format!("{} + {}", inst.id, s.id),
+                            format!("{}+{}", inst.kind, s.kind),
+                            k.compile_spectral(cx, &io, &body).map_err(err)?,
+                        ))
                     }
-                    (Lowering::Spectral(body), None) => Ok(Compiled {
-                        label: inst.id.clone(),
-                        kinds: inst.kind.to_string(),
-                        dispatches: vec![spectral_dispatch(cx, &body, &io).map_err(err)?],
-                    }),
+                    (Lowering::Spectral(body), None) => Ok(Compiled::plain(
+                        inst.id.clone(),
+                        inst.kind.to_string(),
+                        vec![spectral_dispatch(cx, &body, &io).map_err(err)?],
+                    )),
                     _ => panic!(
                         "node `{}` scheduled as a single launch cannot run as one",
                         inst.id
@@ -344,11 +367,7 @@ impl<'a> Program<'a> {
                 bufs.extend(k.inputs.iter().map(|&v| self.buffer(v, parity)));
                 bufs.extend(k.outputs.iter().map(|&v| self.buffer(v, parity)));
                 let d = cx.dispatch(&kernel, &bufs, cx.grid_1d(k.len, WG_1D));
-                Ok(Compiled {
-                    label,
-                    kinds: kinds.join("+"),
-                    dispatches: vec![d],
-                })
+                Ok(Compiled::plain(label, kinds.join("+"), vec![d]))
             }
             Launch::Copy { src, dst } => {
                 let words = self.plan.values[*src].ty.words();
@@ -370,10 +389,46 @@ impl<'a> Program<'a> {
                     cx.grid_1d(words, WG_1D),
                 );
                 let label = format!("copy -> {}", self.plan.values[*dst].name);
+                Ok(Compiled::plain(label, "copy".into(), vec![d]))
+            }
+            Launch::Loop {
+                node,
+                inputs,
+                outputs,
+                scratch,
+                body,
+                ..
+            } => {
+                let inst = &g.nodes[*node];
+                let Lowering::Iterative(it) = inst.node.lowering() else {
+                    panic!("node `{}` scheduled as a loop does not iterate", inst.id)
+                };
+                let slot = |v: ValueId| Slot {
+                    buffer: self.buffer(v, parity),
+                    ty: self.plan.values[v].ty,
+                };
+                let io = NodeIo {
+                    inputs: inputs.iter().map(|v| v.map(slot)).collect(),
+                    outputs: outputs.iter().map(|&v| slot(v)).collect(),
+                    scratch: scratch.iter().map(|&v| self.buffer(v, parity)).collect(),
+                };
+                let kernels = it.compile(cx, &io).map_err(|source| ExecError::Compile {
+                    node: inst.id.clone(),
+                    source,
+                })?;
+                let body = body
+                    .iter()
+                    .map(|l| self.compile_launch(cx, l, parity))
+                    .collect::<Result<Vec<_>, _>>()?;
                 Ok(Compiled {
-                    label,
-                    kinds: "copy".into(),
-                    dispatches: vec![d],
+                    label: inst.id.clone(),
+                    kinds: format!("{} (loop of {})", inst.kind, body.len()),
+                    dispatches: Vec::new(),
+                    looped: Some(std::sync::Arc::new(CompiledLoop {
+                        node: *node,
+                        kernels,
+                        body,
+                    })),
                 })
             }
         }
@@ -431,7 +486,122 @@ impl<'a> Program<'a> {
         let idx = self.gpu.queue.submit([enc.finish()]);
         self.gpu.wait(idx)?;
         self.steps_done = 0;
+        self.iterations.clear();
         Ok(())
+    }
+
+    fn has_loops(&self) -> bool {
+        self.step[0].iter().any(|c| c.looped.is_some())
+    }
+
+    /// Submits dispatches in one compute pass.
+    fn submit(&self, dispatches: &[&Dispatch]) -> wgpu::SubmissionIndex {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            for d in dispatches {
+                Self::record(&mut pass, std::slice::from_ref(*d));
+            }
+        }
+        self.gpu.queue.submit([enc.finish()])
+    }
+
+    /// Runs an iterative node: `pending` (work recorded before it) goes out with the
+    /// first iteration; each iteration ends with a host round trip that reads the node's
+    /// status and asks it whether to go on. Leaves the node's finishing dispatches in
+    /// `pending` and returns the number of iterations.
+    fn run_loop<'p>(
+        &'p self,
+        lp: &'p CompiledLoop,
+        pending: &mut Vec<&'p Dispatch>,
+        step: u64,
+    ) -> Result<u32, ExecError> {
+        let inst = &self.graph.nodes[lp.node];
+        let Lowering::Iterative(it) = inst.node.lowering() else {
+            unreachable!("compiled as a loop")
+        };
+        pending.extend(&lp.kernels.start);
+        let mut iterations = 0usize;
+        loop {
+            for c in &lp.body {
+                pending.extend(&c.dispatches);
+            }
+            pending.extend(&lp.kernels.iterate);
+            iterations += 1;
+            self.submit(pending);
+            pending.clear();
+            let status = self
+                .gpu
+                .read_buffer(&lp.kernels.status, lp.kernels.status_bytes)?;
+            match it.decide(iterations, &status) {
+                Ok(Decision::Continue) => {}
+                Ok(Decision::Finish(answer)) => {
+                    self.gpu.queue.write_buffer(
+                        &lp.kernels.answer,
+                        lp.kernels.answer_offset,
+                        &answer,
+                    );
+                    pending.extend(&lp.kernels.finish);
+                    return Ok(iterations as u32);
+                }
+                Err(e) => {
+                    return Err(ExecError::Run(format!(
+                        "node `{}` ({}), step {}: {e}",
+                        inst.id,
+                        inst.kind,
+                        step + 1
+                    )));
+                }
+            }
+        }
+    }
+
+    /// Submits one step of a program with loops; returns the last submission and the
+    /// iterations of each loop.
+    fn submit_step_with_loops(
+        &self,
+        step: u64,
+    ) -> Result<(wgpu::SubmissionIndex, Vec<u32>), ExecError> {
+        let parity = (step % 2) as usize;
+        let mut pending: Vec<&Dispatch> = Vec::new();
+        let mut counts = Vec::new();
+        for c in &self.step[parity] {
+            match &c.looped {
+                None => pending.extend(&c.dispatches),
+                Some(lp) => counts.push(self.run_loop(lp, &mut pending, step)?),
+            }
+        }
+        pending.push(&self.clock_tick);
+        Ok((self.submit(&pending), counts))
+    }
+
+    /// Runs a loop alone and waits for it: its wall time (host round trips included) and
+    /// its iterations.
+    fn time_loop(&self, lp: &CompiledLoop, step: u64) -> Result<(Duration, u32), ExecError> {
+        let t = Instant::now();
+        let mut pending = Vec::new();
+        let k = self.run_loop(lp, &mut pending, step)?;
+        let idx = self.submit(&pending);
+        self.gpu.wait(idx)?;
+        Ok((t.elapsed(), k))
+    }
+
+    /// Iterations each loop took at every step of the last run, by node id.
+    pub fn loop_iterations(&self) -> &[(String, Vec<u32>)] {
+        &self.iterations
+    }
+
+    fn note_iterations(&mut self, counts: Vec<u32>) {
+        if self.iterations.is_empty() {
+            self.iterations = self.step[0]
+                .iter()
+                .filter(|c| c.looped.is_some())
+                .map(|c| (c.label.clone(), Vec::new()))
+                .collect();
+        }
+        for (row, k) in self.iterations.iter_mut().zip(counts) {
+            row.1.push(k);
+        }
     }
 
     /// Runs the prologue and `steps` time steps.
@@ -477,6 +647,18 @@ impl<'a> Program<'a> {
         };
         let mut in_flight: Option<(wgpu::SubmissionIndex, u64)> = None;
         let mut done = 0;
+        if self.has_loops() {
+            // Loops decide on the host, so steps go out one at a time.
+            while done < opts.steps {
+                let (idx, counts) = self.submit_step_with_loops(self.steps_done + done)?;
+                self.note_iterations(counts);
+                self.gpu.wait(idx)?;
+                done += 1;
+                if let Some(b) = &bar {
+                    b.inc(1);
+                }
+            }
+        }
         while done < opts.steps {
             let n = steps_per_submit.min(opts.steps - done);
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
@@ -540,11 +722,16 @@ impl<'a> Program<'a> {
             .collect();
         let use_gpu = self.gpu.caps.timestamps;
         // Timed units: launches, or every dispatch of every launch.
+        // A loop is one unit, timed on the host (its decisions are host round trips).
         let units: Vec<(usize, Option<usize>)> = if per_dispatch {
             self.step[0]
                 .iter()
                 .enumerate()
-                .flat_map(|(i, c)| (0..c.dispatches.len()).map(move |d| (i, Some(d))))
+                .flat_map(|(i, c)| {
+                    let whole = c.looped.is_some();
+                    let parts = if whole { 1 } else { c.dispatches.len() };
+                    (0..parts).map(move |d| (i, (!whole).then_some(d)))
+                })
                 .collect()
         } else {
             (0..launches).map(|i| (i, None)).collect()
@@ -569,8 +756,22 @@ impl<'a> Program<'a> {
             let parity = ((self.steps_done + s) % 2) as usize;
             if let Some(qs) = &queries {
                 let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+                let mut host_timed: Vec<(usize, Duration)> = Vec::new();
+                let mut counts = Vec::new();
                 for (u, &(i, d)) in units.iter().enumerate() {
                     let c = &self.step[parity][i];
+                    if let Some(lp) = &c.looped {
+                        let before = std::mem::replace(
+                            &mut enc,
+                            self.gpu.device.create_command_encoder(&Default::default()),
+                        );
+                        let idx = self.gpu.queue.submit([before.finish()]);
+                        self.gpu.wait(idx)?;
+                        let (dt, k) = self.time_loop(lp, self.steps_done + s)?;
+                        host_timed.push((u, dt));
+                        counts.push(k);
+                        continue;
+                    }
                     let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                         label: Some(&c.label),
                         timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
@@ -598,9 +799,13 @@ impl<'a> Program<'a> {
                     let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
                     let mut per_launch = vec![Duration::ZERO; launches];
                     for (u, &(i, d)) in units.iter().enumerate() {
-                        let dt = Duration::from_nanos(
-                            (ticks[2 * u + 1].saturating_sub(ticks[2 * u]) as f64 * period) as u64,
-                        );
+                        let dt = match host_timed.iter().find(|(h, _)| *h == u) {
+                            Some((_, dt)) => *dt,
+                            None => Duration::from_nanos(
+                                (ticks[2 * u + 1].saturating_sub(ticks[2 * u]) as f64 * period)
+                                    as u64,
+                            ),
+                        };
                         per_launch[i] += dt;
                         if let Some(d) = d {
                             rows[i].dispatch_samples[d].1.push(dt);
@@ -612,8 +817,18 @@ impl<'a> Program<'a> {
                         row.calls += 1;
                     }
                 }
+                self.note_iterations(counts);
             } else {
+                let mut counts = Vec::new();
                 for (i, c) in self.step[parity].iter().enumerate() {
+                    if let Some(lp) = &c.looped {
+                        let (dt, k) = self.time_loop(lp, self.steps_done + s)?;
+                        counts.push(k);
+                        rows[i].total += dt;
+                        rows[i].samples.push(dt);
+                        rows[i].calls += 1;
+                        continue;
+                    }
                     let t = Instant::now();
                     let mut enc = self.gpu.device.create_command_encoder(&Default::default());
                     {
@@ -634,6 +849,7 @@ impl<'a> Program<'a> {
                 }
                 let idx = self.gpu.queue.submit([enc.finish()]);
                 self.gpu.wait(idx)?;
+                self.note_iterations(counts);
             }
         }
         self.steps_done += steps;

@@ -1,6 +1,6 @@
 //! Loading: file -> schema types -> flattened, validated [`Graph`].
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use indexmap::IndexMap;
@@ -771,7 +771,7 @@ impl Loader<'_> {
         if !self.problems.is_empty() {
             return Err(Problems(self.problems));
         }
-        Ok(Graph {
+        let graph = Graph {
             file: path.to_path_buf(),
             doc: root.doc,
             params: root.params,
@@ -780,7 +780,135 @@ impl Loader<'_> {
             states,
             nodes,
             outputs,
-        })
+        };
+        self.check_loops(&graph);
+        if !self.problems.is_empty() {
+            return Err(Problems(self.problems));
+        }
+        Ok(graph)
+    }
+
+    /// An iterative node's loop body (the nodes that depend on its `iterate` outputs) may
+    /// be read only by itself, through its `iterate` input, and by the body: anything else
+    /// would see a value that changes every iteration. Loops do not nest.
+    fn check_loops(&mut self, g: &Graph) {
+        for (l, inst) in g.nodes.iter().enumerate() {
+            if !inst.output_ports.iter().any(|p| p.iterate) {
+                continue;
+            }
+            let body = g.loop_body(l);
+            let inside = |s: &Source| matches!(s, Source::Node { node, .. } if *node == l || body.contains(node));
+            for (port, s) in inst.input_ports.iter().zip(&inst.inputs) {
+                if port.iterate && matches!(s, Source::Node { node, .. } if *node == l) {
+                    self.problems.push(Problem::port(
+                        &inst.file,
+                        &inst.id,
+                        port.name,
+                        format!(
+                            "reads `{}` directly: the loop body is empty (put the operator's nodes between them)",
+                            g.source_name(*s)
+                        ),
+                    ));
+                } else if port.iterate && !matches!(s, Source::Absent) && !inside(s) {
+                    self.problems.push(Problem::port(
+                        &inst.file,
+                        &inst.id,
+                        port.name,
+                        format!(
+                            "`{}` does not depend on `{}`: the loop input must be the body's result for the current iteration",
+                            g.source_name(*s),
+                            inst.id
+                        ),
+                    ));
+                }
+            }
+            // Every body node must lead to the loop's result.
+            let mut feeds: BTreeSet<usize> = BTreeSet::new();
+            let mut stack: Vec<Source> = inst
+                .input_ports
+                .iter()
+                .zip(&inst.inputs)
+                .filter(|(p, _)| p.iterate)
+                .map(|(_, s)| *s)
+                .collect();
+            while let Some(s) = stack.pop() {
+                if let Source::Node { node, .. } = s
+                    && body.contains(&node)
+                    && feeds.insert(node)
+                {
+                    stack.extend(g.nodes[node].inputs.iter().copied());
+                }
+            }
+            for &b in body.difference(&feeds) {
+                let dead = &g.nodes[b];
+                self.problems.push(Problem::node(
+                    &dead.file,
+                    &dead.id,
+                    format!(
+                        "depends on `{}`'s basis (it is inside its loop) but does not lead to the loop's result: compute it outside the loop",
+                        inst.id
+                    ),
+                ));
+            }
+            for (n, reader) in g.nodes.iter().enumerate() {
+                if body.contains(&n) {
+                    if reader
+                        .output_ports
+                        .iter()
+                        .any(|p| p.iterate || p.persistent)
+                    {
+                        self.problems.push(Problem::node(
+                            &reader.file,
+                            &reader.id,
+                            format!(
+                                "is in the loop body of `{}` but iterates or keeps state itself; loops do not nest",
+                                inst.id
+                            ),
+                        ));
+                    }
+                    continue;
+                }
+                for (port, s) in reader.input_ports.iter().zip(&reader.inputs) {
+                    let from_body = matches!(s, Source::Node { node, .. } if body.contains(node));
+                    if from_body && !(n == l && port.iterate) {
+                        self.problems.push(Problem::port(
+                            &reader.file,
+                            &reader.id,
+                            port.name,
+                            format!(
+                                "reads `{}`, which is inside the loop of `{}` and changes every iteration; only the loop's result `{}` leaves it",
+                                g.source_name(*s),
+                                inst.id,
+                                inst.id
+                            ),
+                        ));
+                    }
+                }
+            }
+            let leaks = g
+                .states
+                .iter()
+                .map(|st| (st.next, format!("state `{}`", st.name)))
+                .chain(
+                    g.outputs
+                        .iter()
+                        .map(|o| (o.source, format!("output `{}`", o.name))),
+                );
+            for (s, what) in leaks {
+                if matches!(s, Source::Node { node, .. } if body.contains(&node))
+                    || matches!(s, Source::Node { node, port } if node == l && inst.output_ports[port].iterate)
+                {
+                    self.problems.push(Problem::node(
+                        &inst.file,
+                        &inst.id,
+                        format!(
+                            "{what} reads `{}`, which changes every iteration of this loop",
+                            g.source_name(s)
+                        ),
+                    ));
+                }
+            }
+        }
     }
 
     fn check_cycles(&mut self, nodes: &[NodeInst]) {
@@ -788,8 +916,12 @@ impl Loader<'_> {
         let mut g = DiGraph::<usize, ()>::with_capacity(nodes.len(), 0);
         let idx: Vec<_> = (0..nodes.len()).map(|i| g.add_node(i)).collect();
         for (i, n) in nodes.iter().enumerate() {
-            for s in &n.inputs {
-                if let Source::Node { node, .. } = s {
+            for (port, s) in n.input_ports.iter().zip(&n.inputs) {
+                // The input that closes an iterative node's loop is read after each
+                // iteration, not before the node: no cycle.
+                if let Source::Node { node, .. } = s
+                    && !port.iterate
+                {
                     g.add_edge(idx[*node], idx[i], ());
                 }
             }

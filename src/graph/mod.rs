@@ -9,7 +9,7 @@
 mod load;
 mod schema;
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::fmt;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -272,6 +272,33 @@ impl Graph {
             }
             Source::Absent => "(absent)".into(),
         }
+    }
+
+    /// The loop body of an iterative node: every node that depends, directly or through
+    /// others, on one of its `iterate` outputs (the node itself excluded), ascending.
+    pub fn loop_body(&self, node: usize) -> BTreeSet<usize> {
+        let mut body = BTreeSet::new();
+        let mut changed = true;
+        while changed {
+            changed = false;
+            for (n, inst) in self.nodes.iter().enumerate() {
+                if n == node || body.contains(&n) {
+                    continue;
+                }
+                let reads = inst.inputs.iter().any(|s| match s {
+                    Source::Node { node: m, port } => {
+                        (*m == node && self.nodes[node].output_ports[*port].iterate)
+                            || body.contains(m)
+                    }
+                    _ => false,
+                });
+                if reads {
+                    body.insert(n);
+                    changed = true;
+                }
+            }
+        }
+        body
     }
 
     /// The graph with every read of a forwarded node's output replaced by what it

@@ -111,6 +111,16 @@ pub enum Launch {
     Fused(FusedKernel),
     /// Engine copy (a state whose next value is not written in place).
     Copy { src: ValueId, dst: ValueId },
+    /// An iterative node (see `GpuIterative`) with its loop body: the executor runs the
+    /// node's start, then `body` and the node's iteration until the host says stop.
+    Loop {
+        node: usize,
+        inputs: Vec<Option<ValueId>>,
+        outputs: Vec<ValueId>,
+        scratch: Vec<ValueId>,
+        notes: Vec<String>,
+        body: Vec<Launch>,
+    },
 }
 
 /// A state as planned.
@@ -387,8 +397,50 @@ impl<'g> Planner<'g> {
 
         // Absent nodes drop out of the schedule.
         let present = |n: &usize| matches!(self.node_types[*n], Some(Some(_)));
-        let prologue_order = self.topo(prologue_nodes.iter().copied().filter(present).collect());
-        let step_order = self.topo(step_nodes.iter().copied().filter(present).collect());
+        let iterative = |n: usize| g.nodes[n].input_ports.iter().any(|p| p.iterate);
+        for &n in prologue_nodes.iter().filter(|&&n| iterative(n)) {
+            let inst = &g.nodes[n];
+            self.problems.push(Problem::node(
+                &inst.file,
+                &inst.id,
+                "an iterative node cannot compute a state's initial value (it runs in the steps only)",
+            ));
+        }
+        if !self.problems.is_empty() {
+            return Err(Problems(self.problems));
+        }
+        let prologue_order = self.topo(
+            prologue_nodes.iter().copied().filter(present).collect(),
+            &BTreeMap::new(),
+        );
+        // Loops: an iterative node's body is scheduled inside it; the node runs after
+        // everything its body reads from outside.
+        let step_present: BTreeSet<usize> = step_nodes.iter().copied().filter(present).collect();
+        let mut loops: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        let mut extra_deps: BTreeMap<usize, BTreeSet<usize>> = BTreeMap::new();
+        let mut in_body = BTreeSet::new();
+        for &l in step_present.iter().filter(|&&n| iterative(n)) {
+            let body: BTreeSet<usize> = g
+                .loop_body(l)
+                .into_iter()
+                .filter(|b| step_present.contains(b))
+                .collect();
+            let outside: BTreeSet<usize> = body
+                .iter()
+                .flat_map(|&b| g.nodes[b].inputs.iter().copied())
+                .filter_map(|s| match s {
+                    Source::Node { node, .. } if node != l && !body.contains(&node) => Some(node),
+                    _ => None,
+                })
+                .collect();
+            extra_deps.insert(l, outside);
+            in_body.extend(body.iter().copied());
+            loops.insert(l, self.topo(body.into_iter().collect(), &BTreeMap::new()));
+        }
+        let step_order = self.topo(
+            step_present.difference(&in_body).copied().collect(),
+            &extra_deps,
+        );
         let pruned: Vec<usize> = (0..g.nodes.len())
             .filter(|n| !(step_nodes.contains(n) || prologue_nodes.contains(n)) || !present(n))
             .collect();
@@ -398,6 +450,7 @@ impl<'g> Planner<'g> {
             &needed_states,
             prologue_order,
             step_order,
+            &loops,
             pruned,
         )
     }
@@ -458,16 +511,47 @@ impl<'g> Planner<'g> {
         }
         let g = self.g;
         let inst = &g.nodes[n];
-        for s in &inst.inputs {
-            if let Source::Node { node, .. } = s {
+        for (port, s) in inst.input_ports.iter().zip(&inst.inputs) {
+            if let Source::Node { node, .. } = s
+                && !port.iterate
+            {
                 self.infer_node(*node);
             }
         }
+        if inst.input_ports.iter().any(|p| p.iterate) {
+            // An iterative node's loop body reads the node's own outputs: type the node
+            // without its loop input first, then the body, then the node again in full.
+            let reported = self.problems.len();
+            self.infer_signature(n, true);
+            self.problems.truncate(reported);
+            if matches!(self.node_types[n], Some(Some(_))) {
+                for (port, s) in inst.input_ports.iter().zip(&inst.inputs) {
+                    if let Source::Node { node, .. } = s
+                        && port.iterate
+                    {
+                        self.infer_node(*node);
+                    }
+                }
+            }
+        }
+        self.infer_signature(n, false);
+    }
+
+    /// Infers a node's output types from its inputs' (already inferred); with
+    /// `without_loop_input`, the input closing an iterative node's loop counts as absent.
+    fn infer_signature(&mut self, n: usize, without_loop_input: bool) {
+        let g = self.g;
+        let inst = &g.nodes[n];
         let mut types = Vec::new();
         let mut absent = false;
         let mut ok = true;
         for (port, src) in inst.input_ports.iter().zip(&inst.inputs) {
-            let t = self.source_type(*src);
+            let t = if without_loop_input && port.iterate {
+                types.push(None);
+                continue;
+            } else {
+                self.source_type(*src)
+            };
             match t {
                 None if !port.optional => absent = true,
                 Some(t) if !port.ty.accepts(&t) => {
@@ -528,17 +612,26 @@ impl<'g> Planner<'g> {
 
     /// Topological order of a node set; among ready nodes the one declared first runs
     /// first, so plans read in file order where the data allow.
-    fn topo(&self, nodes: Vec<usize>) -> Vec<usize> {
+    /// `extra[n]`: nodes `n` must follow besides its inputs' producers. Loop inputs
+    /// (read after each iteration) impose no order.
+    fn topo(&self, nodes: Vec<usize>, extra: &BTreeMap<usize, BTreeSet<usize>>) -> Vec<usize> {
         let set: BTreeSet<usize> = nodes.iter().copied().collect();
         let mut indeg: BTreeMap<usize, usize> = set.iter().map(|&n| (n, 0)).collect();
         let mut users: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
         for &n in &set {
             let mut deps = BTreeSet::new();
-            for s in &self.g.nodes[n].inputs {
+            let inst = &self.g.nodes[n];
+            for (port, s) in inst.input_ports.iter().zip(&inst.inputs) {
                 if let Source::Node { node, .. } = s
                     && set.contains(node)
+                    && !port.iterate
                 {
                     deps.insert(*node);
+                }
+            }
+            for d in extra.get(&n).into_iter().flatten() {
+                if set.contains(d) {
+                    deps.insert(*d);
                 }
             }
             for d in deps {
@@ -572,6 +665,7 @@ impl<'g> Planner<'g> {
         needed_states: &BTreeSet<usize>,
         prologue_order: Vec<usize>,
         step_order: Vec<usize>,
+        loops: &BTreeMap<usize, Vec<usize>>,
         pruned: Vec<usize>,
     ) -> Result<Plan, Problems> {
         let g = self.g;
@@ -629,35 +723,103 @@ impl<'g> Planner<'g> {
                 next_claimed.entry(next).or_insert(k);
             }
         }
+        // What loop bodies read from outside them, and the results loops read back: both
+        // must be stored, whatever fusion would otherwise keep in registers.
+        let mut loop_reads: BTreeSet<Source> = BTreeSet::new();
+        for (&l, body) in loops {
+            for &n in body.iter().chain(std::iter::once(&l)) {
+                loop_reads.extend(g.nodes[n].inputs.iter().copied());
+            }
+        }
+        let input_types = |n: usize| -> Vec<Option<ValueType>> {
+            g.nodes[n]
+                .inputs
+                .iter()
+                .map(|s| self.source_type(*s))
+                .collect()
+        };
         let mut phases = Vec::new();
         for (phase, order) in [
             (Phase::Prologue, &prologue_order),
             (Phase::Step, &step_order),
         ] {
+            let escapes = |src: Source| {
+                phase == Phase::Step
+                    && (output_sources.contains(&src)
+                        || next_claimed.contains_key(&src)
+                        || loop_reads.contains(&src))
+                    || phase == Phase::Prologue
+                        && needed_states.iter().any(|&s| g.states[s].init == src)
+            };
             let ctx = fuse::FuseCtx {
                 g,
                 types: &self.node_types,
                 order,
                 fuse: self.opts.fuse,
-                escapes: &|src: Source| {
-                    phase == Phase::Step
-                        && (output_sources.contains(&src) || next_claimed.contains_key(&src))
-                        || phase == Phase::Prologue
-                            && needed_states.iter().any(|&s| g.states[s].init == src)
-                },
+                escapes: &escapes,
             };
             let units = fuse::group(&ctx);
-            let input_types = |n: usize| -> Vec<Option<ValueType>> {
-                g.nodes[n]
-                    .inputs
-                    .iter()
-                    .map(|s| self.source_type(*s))
-                    .collect()
-            };
             let units = spectral::fold(&ctx, units, self.caps, &input_types);
             let mut launches = Vec::new();
             for unit in units {
-                launches.push(b.lower(g, &self, phase, unit, &next_claimed, &output_sources));
+                let launch = b.lower(
+                    g,
+                    &self,
+                    phase,
+                    unit.clone(),
+                    &next_claimed,
+                    &output_sources,
+                );
+                let (fuse::Unit::Single(l), Some(body)) = (&unit, loops.get(&unit_node(&unit)))
+                else {
+                    launches.push(launch);
+                    continue;
+                };
+                // The node's outputs exist now; its body reads them, and the node then
+                // reads the body's result.
+                let body_ctx = fuse::FuseCtx {
+                    g,
+                    types: &self.node_types,
+                    order: body,
+                    fuse: self.opts.fuse,
+                    escapes: &escapes,
+                };
+                let units = fuse::group(&body_ctx);
+                let units = spectral::fold(&body_ctx, units, self.caps, &input_types);
+                let body_launches: Vec<Launch> = units
+                    .into_iter()
+                    .map(|u| b.lower(g, &self, phase, u, &next_claimed, &output_sources))
+                    .collect();
+                let Launch::Node {
+                    node,
+                    outputs,
+                    scratch,
+                    mut notes,
+                    ..
+                } = launch
+                else {
+                    unreachable!("an iterative node lowers as a single launch")
+                };
+                let inputs = g.nodes[*l]
+                    .inputs
+                    .iter()
+                    .map(|s| b.try_get(*s, phase))
+                    .collect();
+                notes.push(format!(
+                    "loop body: {} launch{} ({} node{})",
+                    body_launches.len(),
+                    if body_launches.len() == 1 { "" } else { "es" },
+                    body.len(),
+                    if body.len() == 1 { "" } else { "s" }
+                ));
+                launches.push(Launch::Loop {
+                    node,
+                    inputs,
+                    outputs,
+                    scratch,
+                    notes,
+                    body: body_launches,
+                });
             }
             phases.push(launches);
         }
@@ -744,6 +906,13 @@ impl<'g> Planner<'g> {
         };
         memory::assign(&mut plan);
         Ok(plan)
+    }
+}
+
+fn unit_node(u: &fuse::Unit) -> usize {
+    match u {
+        fuse::Unit::Single(n) => *n,
+        _ => usize::MAX,
     }
 }
 
@@ -912,6 +1081,16 @@ impl Launch {
             Launch::Node { inputs, .. } => inputs.iter().flatten().copied().collect(),
             Launch::Fused(k) => k.inputs.clone(),
             Launch::Copy { src, .. } => vec![*src],
+            Launch::Loop { inputs, body, .. } => {
+                // What the loop reads from before it: values its body or the node itself
+                // do not produce.
+                let made: BTreeSet<ValueId> = self.writes().into_iter().collect();
+                let mut r: Vec<ValueId> = inputs.iter().flatten().copied().collect();
+                r.extend(body.iter().flat_map(|l| l.reads()));
+                let mut seen = BTreeSet::new();
+                r.retain(|v| !made.contains(v) && seen.insert(*v));
+                r
+            }
         }
     }
 
@@ -931,6 +1110,17 @@ impl Launch {
                 .collect(),
             Launch::Fused(k) => k.outputs.clone(),
             Launch::Copy { dst, .. } => vec![*dst],
+            Launch::Loop {
+                outputs,
+                scratch,
+                body,
+                ..
+            } => outputs
+                .iter()
+                .chain(scratch)
+                .copied()
+                .chain(body.iter().flat_map(|l| l.writes()))
+                .collect(),
         }
     }
 
@@ -942,6 +1132,9 @@ impl Launch {
                 .collect(),
             Launch::Fused(k) => k.nodes.clone(),
             Launch::Copy { .. } => vec![],
+            Launch::Loop { node, body, .. } => std::iter::once(*node)
+                .chain(body.iter().flat_map(|l| l.nodes()))
+                .collect(),
         }
     }
 }

@@ -42,8 +42,50 @@ fn value(plan: &Plan, v: ValueId) -> String {
 }
 
 fn launch_lines(out: &mut String, g: &Graph, plan: &Plan, launches: &[Launch]) {
+    launch_lines_indented(out, g, plan, launches, "");
+}
+
+fn launch_lines_indented(
+    out: &mut String,
+    g: &Graph,
+    plan: &Plan,
+    launches: &[Launch],
+    indent: &str,
+) {
     for (i, l) in launches.iter().enumerate() {
+        let mut text = String::new();
+        launch_text(&mut text, g, plan, i, l);
+        for line in text.lines() {
+            writeln!(out, "{indent}{line}").unwrap();
+        }
+    }
+}
+
+fn launch_text(out: &mut String, g: &Graph, plan: &Plan, i: usize, l: &Launch) {
+    {
         match l {
+            Launch::Loop {
+                node,
+                inputs,
+                outputs,
+                scratch,
+                notes,
+                body,
+            } => {
+                let n = &g.nodes[*node];
+                writeln!(out, "  {:>3}. {} ({}), a loop:", i + 1, n.id, n.kind).unwrap();
+                for note in notes {
+                    writeln!(out, "         note   {note}").unwrap();
+                }
+                for v in inputs.iter().flatten() {
+                    writeln!(out, "         reads  {}", value(plan, *v)).unwrap();
+                }
+                for v in outputs.iter().chain(scratch) {
+                    writeln!(out, "         writes {}", value(plan, *v)).unwrap();
+                }
+                writeln!(out, "         each iteration:").unwrap();
+                launch_lines_indented(out, g, plan, body, "         ");
+            }
             Launch::Node {
                 node,
                 inputs,

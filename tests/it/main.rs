@@ -8,6 +8,7 @@ mod cli;
 mod fcm;
 mod fft;
 mod graph_files;
+mod lanczos;
 mod nodes;
 mod plan;
 mod random;
