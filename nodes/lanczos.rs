@@ -70,7 +70,7 @@ impl NodeKind for LanczosKind {
                 Some(100.0),
                 1.0,
                 1000.0,
-                "iteration cap: not converging within it is an error (it also sizes the basis storage: (cap + 2) vectors)",
+                "iteration cap: not converging within it is an error (it also sizes the basis storage: cap + 3 vectors)",
             ),
             ParamSpec::choice(
                 "function",
@@ -114,11 +114,13 @@ impl Layout {
     fn alpha(&self) -> u32 {
         4
     }
+    // alpha and beta hold max_iter + 1 entries: the executor may run one speculative
+    // iteration past the cap before the host stops the loop.
     fn beta(&self) -> u32 {
-        4 + self.max_iter
+        4 + self.max_iter + 1
     }
     fn answer(&self) -> u32 {
-        4 + 2 * self.max_iter
+        4 + 2 * (self.max_iter + 1)
     }
     fn partial_a(&self) -> u32 {
         self.answer() + 1 + self.max_iter
@@ -163,7 +165,7 @@ impl Node for Lanczos {
         Ok(Signature {
             outputs: vec![z, z],
             scratch: vec![
-                (self.max_iterations as u64 + 2) * z.bytes(),
+                (self.max_iterations as u64 + 3) * z.bytes(),
                 4 * layout.words() as u64,
             ],
         })
@@ -184,7 +186,7 @@ impl Node for Lanczos {
             },
             self.tolerance,
             self.max_iterations,
-            self.max_iterations + 2,
+            self.max_iterations + 3,
         )]
     }
 

@@ -11,7 +11,7 @@ const WG: u32 = 256u;
 
 struct Shape {
     n: u32,          // vector length (N x k words)
-    max_iter: u32,   // rows of `basis_rows` are max_iter + 1 basis vectors and w
+    max_iter: u32,   // rows of `basis_rows`: max_iter + 2 basis vectors, then w
     parts: u32,      // workgroups of the reductions
     alpha: u32,      // word offsets into `small`
     beta: u32,
@@ -24,7 +24,8 @@ struct Shape {
 @group(0) @binding(1) var<storage, read> product: array<f32>;
 @group(0) @binding(2) var<storage, read_write> result: array<f32>;
 @group(0) @binding(3) var<storage, read_write> basis: array<f32>;
-// Rows 0..=max_iter: the basis vectors v_i; row max_iter + 1: w, the orthogonalised product.
+// Rows 0..=max_iter + 1: the basis vectors v_i (one past the cap: the executor may run
+// one speculative iteration); row max_iter + 2: w, the orthogonalised product.
 @group(0) @binding(4) var<storage, read_write> basis_rows: array<f32>;
 // Word 0: iteration counter (u32); 1: |z| (f32); then alpha, beta, answer, partial sums.
 @group(0) @binding(5) var<storage, read_write> small: array<u32>;
@@ -127,7 +128,7 @@ fn update(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) l
         prev = row(i - 1u);
     }
     let cur = row(i);
-    let w_row = row(shape.max_iter + 1u);
+    let w_row = row(shape.max_iter + 2u);
     var acc = 0.0;
     for (var j = wid.x * WG + lid; j < shape.n; j += shape.parts * WG) {
         let w = product[j] - a * basis_rows[cur + j] - b * basis_rows[prev + j];
@@ -150,8 +151,8 @@ fn next_vector(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
         small[shape.beta + i] = bitcast<u32>(b);
     }
     let inv = select(0.0, 1.0 / b, b > 0.0);
-    let next = row(min(i + 1u, shape.max_iter));
-    let w_row = row(shape.max_iter + 1u);
+    let next = row(min(i + 1u, shape.max_iter + 1u));
+    let w_row = row(shape.max_iter + 2u);
     for (var j = wid.x * WG + lid; j < shape.n; j += shape.parts * WG) {
         let v = basis_rows[w_row + j] * inv;
         basis_rows[next + j] = v;

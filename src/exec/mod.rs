@@ -102,6 +102,8 @@ struct CompiledLoop {
     node: usize,
     kernels: IterativeKernels,
     body: Vec<Compiled>,
+    /// Two readback buffers for the status: iteration k copies into `staging[k % 2]`.
+    staging: [wgpu::Buffer; 2],
 }
 
 impl Compiled {
@@ -420,6 +422,14 @@ impl<'a> Program<'a> {
                     .iter()
                     .map(|l| self.compile_launch(cx, l, parity))
                     .collect::<Result<Vec<_>, _>>()?;
+                let staging = [0, 1].map(|i| {
+                    self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some(&format!("{} status {i}", inst.id)),
+                        size: kernels.status_bytes.max(4).next_multiple_of(4),
+                        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                        mapped_at_creation: false,
+                    })
+                });
                 Ok(Compiled {
                     label: inst.id.clone(),
                     kinds: format!("{} (loop of {})", inst.kind, body.len()),
@@ -428,6 +438,7 @@ impl<'a> Program<'a> {
                         node: *node,
                         kernels,
                         body,
+                        staging,
                     })),
                 })
             }
@@ -520,21 +531,52 @@ impl<'a> Program<'a> {
         let Lowering::Iterative(it) = inst.node.lowering() else {
             unreachable!("compiled as a loop")
         };
-        pending.extend(&lp.kernels.start);
-        let mut iterations = 0usize;
-        loop {
+        // Iteration k goes out with a copy of the status after it. While the host reads
+        // and judges iteration k, iteration k + 1 already runs (speculatively: when k
+        // finishes, its work is discarded; it only wrote basis rows past the answer), so
+        // the GPU does not idle through the round trip.
+        let bytes = lp.kernels.status_bytes.max(4).next_multiple_of(4);
+        let submit_iteration = |pending: &mut Vec<&'p Dispatch>, k: usize| {
             for c in &lp.body {
                 pending.extend(&c.dispatches);
             }
             pending.extend(&lp.kernels.iterate);
-            iterations += 1;
-            self.submit(pending);
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                for d in pending.iter() {
+                    Self::record(&mut pass, std::slice::from_ref(*d));
+                }
+            }
+            enc.copy_buffer_to_buffer(&lp.kernels.status, 0, &lp.staging[k % 2], 0, bytes);
             pending.clear();
-            let status = self
-                .gpu
-                .read_buffer(&lp.kernels.status, lp.kernels.status_bytes)?;
+            self.gpu.queue.submit([enc.finish()])
+        };
+        pending.extend(&lp.kernels.start);
+        let mut iterations = 1usize;
+        let mut current = submit_iteration(pending, iterations);
+        loop {
+            let next = submit_iteration(pending, iterations + 1);
+            let staging = &lp.staging[iterations % 2];
+            let (tx, rx) = std::sync::mpsc::channel();
+            staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send(r);
+            });
+            self.gpu.wait(current)?;
+            rx.recv()
+                .map_err(|_| GpuError::Device("buffer map callback never ran".into()))?
+                .map_err(|e| GpuError::Device(format!("mapping a status buffer failed: {e}")))?;
+            let status =
+                staging.slice(..).get_mapped_range().map_err(|e| {
+                    GpuError::Device(format!("reading a status buffer failed: {e}"))
+                })?[..lp.kernels.status_bytes as usize]
+                    .to_vec();
+            staging.unmap();
             match it.decide(iterations, &status) {
-                Ok(Decision::Continue) => {}
+                Ok(Decision::Continue) => {
+                    iterations += 1;
+                    current = next;
+                }
                 Ok(Decision::Finish(answer)) => {
                     self.gpu.queue.write_buffer(
                         &lp.kernels.answer,
