@@ -4,6 +4,7 @@
 
 use crate::expr::{HostFunction, ParamValue};
 use crate::nodes::fcm::plan;
+use crate::nodes::pse;
 
 fn number(args: &[ParamValue], i: usize, what: &str) -> Result<f64, String> {
     match args.get(i) {
@@ -14,6 +15,15 @@ fn number(args: &[ParamValue], i: usize, what: &str) -> Result<f64, String> {
             other.type_name()
         )),
         None => Err(format!("argument {} ({what}) is missing", i + 1)),
+    }
+}
+
+fn positive(args: &[ParamValue], i: usize, what: &str) -> Result<f64, String> {
+    let x = number(args, i, what)?;
+    if x > 0.0 && x.is_finite() {
+        Ok(x)
+    } else {
+        Err(format!("argument {} ({what}) must be positive, got {x}", i + 1))
     }
 }
 
@@ -233,6 +243,84 @@ pub static FUNCTIONS: &[HostFunction] = &[
                 number(a, 3, "tolerance")?,
                 text(a, 4, "kernel")?,
             )?))
+        },
+    },
+    HostFunction {
+        name: "pse_split",
+        doc: "pse_split(radius, tolerance, box): the default Ewald splitting parameter xi of PSE, 0.5 / radius, raised where the near-field cutoff would pass half the box",
+        call: |a| {
+            arity(a, 3)?;
+            Ok(ParamValue::Number(pse::default_split(
+                number(a, 0, "radius")?,
+                number(a, 1, "tolerance")?,
+                numbers(a, 2, "box")?,
+            )))
+        },
+    },
+    HostFunction {
+        name: "pse_cutoff",
+        doc: "pse_cutoff(split, tolerance): the PSE near-field cutoff sqrt(-ln tolerance) / split",
+        call: |a| {
+            arity(a, 2)?;
+            Ok(ParamValue::Number(pse::cutoff(
+                positive(a, 0, "split")?,
+                number(a, 1, "tolerance")?,
+            )))
+        },
+    },
+    HostFunction {
+        name: "pse_grid",
+        doc: "pse_grid(box, split, tolerance): FFT-friendly far-field cells per axis, spacing pi / (2 split sqrt(-ln tolerance))",
+        call: |a| {
+            arity(a, 3)?;
+            let g = pse::grid(
+                numbers(a, 0, "box")?,
+                positive(a, 1, "split")?,
+                number(a, 2, "tolerance")?,
+            );
+            if g.iter().any(|&n| n > 4096) {
+                return Err(format!(
+                    "the far-field grid would be {g:?} cells (more than 4096 per axis): lower the split"
+                ));
+            }
+            Ok(ParamValue::Numbers(g.into_iter().map(f64::from).collect()))
+        },
+    },
+    HostFunction {
+        name: "pse_support",
+        doc: "pse_support(tolerance, grid): support in cells of the far-field Gaussian (Lindbo-Tornberg, odd)",
+        call: |a| {
+            arity(a, 2)?;
+            let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
+            Ok(ParamValue::Number(
+                pse::support(number(a, 0, "tolerance")?, &cells) as f64,
+            ))
+        },
+    },
+    HostFunction {
+        name: "pse_width",
+        doc: "pse_width(box, grid, tolerance): standard deviation of the far-field Gaussian (half the support over the deviations it is cut at)",
+        call: |a| {
+            arity(a, 3)?;
+            let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
+            Ok(ParamValue::Number(pse::width(
+                numbers(a, 0, "box")?,
+                &cells,
+                number(a, 2, "tolerance")?,
+            )))
+        },
+    },
+    HostFunction {
+        name: "pse_cells",
+        doc: "pse_cells(box, cutoff): cells per axis of the near field's cell list (at least the cutoff wide)",
+        call: |a| {
+            arity(a, 2)?;
+            Ok(ParamValue::Numbers(
+                pse::neighbour_cells(numbers(a, 0, "box")?, positive(a, 1, "cutoff")?)
+                    .into_iter()
+                    .map(f64::from)
+                    .collect(),
+            ))
         },
     },
     HostFunction {

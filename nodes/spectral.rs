@@ -98,20 +98,40 @@ fn body(text: &str, params: Vec<f32>) -> SpectralBody {
     }
 }
 
-/// Index of the `stokes` values: box (3), viscosity, noise, seed, stream, with_forces.
+/// Index of the `stokes` values: box (3), viscosity, noise, seed, stream, with_forces,
+/// and the Positively Split Ewald screening: radius, split (0: none), width.
 mod stokes {
     pub const VISCOSITY: usize = 3;
     pub const NOISE: usize = 4;
     pub const SEED: usize = 5;
     pub const STREAM: usize = 6;
     pub const FORCES: usize = 7;
+    pub const RADIUS: usize = 8;
+    pub const SPLIT: usize = 9;
+    pub const WIDTH: usize = 10;
+}
+
+/// The PSE far-field factor on the Stokes operator at |k|^2 = k2 (UAMMD thesis eq. 20.17,
+/// digest section 4.2): sinc^2(k a) (1 + k^2 / (4 xi^2)) exp((sigma^2 - 1 / (4 xi^2)) k^2).
+/// The last exponential holds Hasimoto's exp(-k^2 / (4 xi^2)) and undoes the two
+/// convolutions with the spreading Gaussian of standard deviation sigma; 1 without a split.
+pub fn pse_screening(k2: f64, radius: f64, split: f64, width: f64) -> f64 {
+    if split == 0.0 {
+        return 1.0;
+    }
+    let ka = k2.sqrt() * radius;
+    let sinc = if ka < 1e-8 { 1.0 } else { ka.sin() / ka };
+    let q = k2 / (4.0 * split * split);
+    sinc * sinc * (1.0 + q) * ((width * width * k2) - q).exp()
 }
 
 /// The Stokes solution operator with Fourier-space fluctuations: values are the box,
-/// viscosity, noise scale, seed, stream and whether the deterministic part is applied.
-/// f32 params: 1/L (3), 1/(4 pi^2 eta), noise / (2 pi sqrt(eta V)), seed bits (2),
-/// stream bits; with q = k / (2 pi) the mobility is p3 / q^2 and the noise amplitude
-/// p4 N / |q| (N cells, V the box volume).
+/// viscosity, noise scale, seed, stream, whether the deterministic part is applied, and
+/// the PSE screening. f32 params: 1/L (3), 1/(4 pi^2 eta), noise / (2 pi sqrt(eta V)),
+/// seed bits (2), stream bits; with q = k / (2 pi) the mobility is p3 / q^2 and the
+/// noise amplitude p4 N / |q| (N cells, V the box volume). With a split, also 2 pi a,
+/// pi^2 / xi^2 and 4 pi^2 sigma^2 - pi^2 / xi^2, and the mobility is times
+/// [`pse_screening`], the noise times its square root.
 fn stokes_body(v: &[f64]) -> SpectralBody {
     let eta = v[stokes::VISCOSITY];
     let noise = v[stokes::NOISE];
@@ -123,6 +143,13 @@ fn stokes_body(v: &[f64]) -> SpectralBody {
     params.push(f32::from_bits(seed as u32));
     params.push(f32::from_bits((seed >> 32) as u32));
     params.push(f32::from_bits(v[stokes::STREAM] as u32));
+    let split = v[stokes::SPLIT];
+    if split != 0.0 {
+        let (a, sigma) = (v[stokes::RADIUS], v[stokes::WIDTH]);
+        params.push((2.0 * PI * a) as f32);
+        params.push((PI * PI / (split * split)) as f32);
+        params.push((4.0 * PI * PI * sigma * sigma - PI * PI / (split * split)) as f32);
+    }
     // The projection leaves out unpaired Nyquist wave numbers (n/2 of an even n): a mode
     // there and its conjugate partner, both stored with +n/2, then get the same
     // operator, so the result stays the half spectrum of a real field.
@@ -141,10 +168,20 @@ fn stokes_body(v: &[f64]) -> SpectralBody {
     let pinv = select(0.0, 1.0 / p2, p2 > 0.0);
 ",
     );
+    if split != 0.0 {
+        text.push_str(
+            "    let ka = spectral_params[8] * sqrt(q2);
+    let sinc = sin(ka) / ka;
+    let screen = sinc * sinc * (1.0 + spectral_params[9] * q2) * exp(spectral_params[10] * q2);
+",
+        );
+    } else {
+        text.push_str("    let screen = 1.0;\n");
+    }
     if v[stokes::FORCES] != 0.0 {
         text.push_str(
             "    let d = (p.x * v[0] + p.y * v[1] + p.z * v[2]) * pinv;
-    let b = spectral_params[3] * inv;
+    let b = spectral_params[3] * inv * screen;
     u[0] = b * (v[0] - p.x * d);
     u[1] = b * (v[1] - p.y * d);
     u[2] = b * (v[2] - p.z * d);
@@ -156,7 +193,7 @@ fn stokes_body(v: &[f64]) -> SpectralBody {
         text.push_str(
             "    let z = fourier_normal(k, n, step, bitcast<u32>(spectral_params[5]), bitcast<u32>(spectral_params[6]), bitcast<u32>(spectral_params[7]));
     let dz = (p.x * z[0] + p.y * z[1] + p.z * z[2]) * pinv;
-    let c = spectral_params[4] * f32(n.x * n.y * n.z) * sqrt(inv);
+    let c = spectral_params[4] * f32(n.x * n.y * n.z) * sqrt(inv * screen);
     u[0] += c * (z[0] - p.x * dz);
     u[1] += c * (z[1] - p.y * dz);
     u[2] += c * (z[2] - p.z * dz);
@@ -181,6 +218,7 @@ fn stokes_apply(at: &Mode, p: &[f64], v: &mut [[f64; 2]]) {
     let (eta, noise, forces) = (p[0], p[1], p[4] != 0.0);
     let k = at.k;
     let k2 = k[0] * k[0] + k[1] * k[1] + k[2] * k[2];
+    let screen = pse_screening(k2, p[5], p[6], p[7]);
     let mut u = [[0.0; 2]; 3];
     if k2 > 0.0 {
         // Unpaired Nyquist wave numbers are left out of the projection (see stokes_body).
@@ -199,7 +237,7 @@ fn stokes_apply(at: &Mode, p: &[f64], v: &mut [[f64; 2]]) {
             }
         };
         if forces {
-            project(v, 1.0 / (eta * k2), &mut u);
+            project(v, screen / (eta * k2), &mut u);
         }
         if noise != 0.0 {
             let cells = at.dims.iter().map(|&d| d as f64).product::<f64>();
@@ -207,7 +245,7 @@ fn stokes_apply(at: &Mode, p: &[f64], v: &mut [[f64; 2]]) {
             let z = fourier_normal(at.wave, at.dims, at.step, p[2] as u64, p[3] as u32);
             project(
                 &z,
-                noise * cells / (volume.sqrt() * (eta * k2).sqrt()),
+                noise * cells * (screen / (volume * eta * k2)).sqrt(),
                 &mut u,
             );
         }
@@ -302,6 +340,27 @@ fn stokes_params(noise_default: f64) -> Vec<ParamSpec> {
         ),
         crate::nodes::random::seed_param(),
         crate::nodes::random::stream_param(),
+        ParamSpec::number(
+            "split",
+            Some(0.0),
+            0.0,
+            f64::MAX,
+            "Positively Split Ewald: the splitting parameter xi of the far field (0: plain Stokes); then the operator is times sinc^2(k a) (1 + k^2/(4 xi^2)) exp((width^2 - 1/(4 xi^2)) k^2)",
+        ),
+        ParamSpec::number(
+            "radius",
+            Some(1.0),
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            "with a split: the hydrodynamic radius a of the RPY sinc^2(k a)",
+        ),
+        ParamSpec::number(
+            "width",
+            Some(0.0),
+            0.0,
+            f64::MAX,
+            "with a split: standard deviation sigma of the spreading Gaussian, whose two convolutions the operator undoes",
+        ),
     ]
 }
 
@@ -316,6 +375,9 @@ fn stokes_values(p: &Params, forces: bool) -> Vec<f64> {
         p.number("seed"),
         p.number("stream"),
         if forces { 1.0 } else { 0.0 },
+        p.number("radius"),
+        p.number("split"),
+        p.number("width"),
     ]
 }
 
@@ -418,7 +480,7 @@ static KINDS: &[SpectralKind] = &[
     },
     SpectralKind {
         name: "stokes",
-        doc: "periodic Stokes flow of a force density: u = (I - k k^T / k^2) f / (eta k^2), k = 0 mode zero (unpaired Nyquist components left out of the projection); plus noise * M^(1/2) W drawn in Fourier space (FCM's fluctuating stress) when noise > 0",
+        doc: "periodic Stokes flow of a force density: u = (I - k k^T / k^2) f / (eta k^2), k = 0 mode zero (unpaired Nyquist components left out of the projection); plus noise * M^(1/2) W drawn in Fourier space (FCM's fluctuating stress) when noise > 0; with split > 0 the Positively Split Ewald far field of RPY (times sinc^2(ka) H(k, xi), undoing the spreading Gaussian)",
         params: || stokes_params(0.0),
         comps: Some(3),
         values: |p| stokes_values(p, true),

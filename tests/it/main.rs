@@ -10,6 +10,7 @@ mod fft;
 mod graph_files;
 mod lanczos;
 mod nodes;
+mod pairs;
 mod plan;
 mod random;
 mod reduce;

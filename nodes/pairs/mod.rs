@@ -1,0 +1,754 @@
+//! Pairwise sums: `neighbour_sum` (pairs within a cutoff found through a cell list) and
+//! `all_pairs` (every pair, tiled in workgroup memory, for open boundaries and small N).
+//! Both apply one pair kernel from [`PairKernel`] and sum per particle:
+//!
+//! out_i = self(v_i) + sum over j != i with |r_ij| <= cutoff of pair(r_ij, v_j),
+//! r_ij = x_i - x_j (the minimum image on periodic axes).
+//!
+//! A pair kernel is one WGSL file in `shaders/pairs/` defining `pair_term(r, r2, vj)` and
+//! `self_term(vi)` (3-vectors; `pair_params` and `pair_table` are its f32 words and
+//! table), plus its arm in [`PairKernel`] here with the f64 twin: swapping the kernel is
+//! changing the `kernel` param. Mobility kernels act on values (forces): a sum is then a
+//! matrix-vector product M v, and can be a Lanczos loop body.
+//!
+//! The cell list is made of primitives (see `graphs/lib/cell_list.json`): cell_hash in
+//! linear order, sort, gather of the rows, histogram and scan of the keys. The sum runs in
+//! the sorted order it is given.
+
+pub mod rpy;
+
+use std::f64::consts::PI;
+
+use crate::expr::ParamValue;
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::node::{
+    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
+    RefCtx, Registry, Signature,
+};
+use crate::value::{PortType, RefArray, ValueType};
+use rpy::NearTable;
+
+/// The pair kernels, by name in the `kernel` param.
+pub const KERNELS: &[&str] = &["rpy", "rpy_near", "lj"];
+
+/// One pair kernel with its parameters, as built from node params.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PairKernel {
+    /// Free-space Rotne-Prager-Yamakawa mobility (overlap form below 2a): out = M v.
+    Rpy { radius: f64, viscosity: f64 },
+    /// The near field of RPY under the Positively Split Ewald split with parameter xi,
+    /// tabulated in f64 on the host (see `rpy.rs`), linear interpolation on the GPU.
+    RpyNear {
+        radius: f64,
+        viscosity: f64,
+        split: f64,
+        table: NearTable,
+    },
+    /// Lennard-Jones force 24 eps (2 (s/r)^12 - (s/r)^6) r / r^2 (values unused); with
+    /// cutoff 2^(1/6) sigma it is the WCA force.
+    Lj { epsilon: f64, sigma: f64 },
+}
+
+impl PairKernel {
+    fn from_params(p: &Params, cutoff: f64) -> Result<PairKernel, String> {
+        let radius = p.number("radius");
+        let viscosity = p.number("viscosity");
+        Ok(match p.text("kernel") {
+            "rpy" => PairKernel::Rpy { radius, viscosity },
+            "rpy_near" => {
+                let split = p.number("split");
+                if split <= 0.0 {
+                    return Err("kernel rpy_near needs `split` (the Ewald parameter xi) > 0".into());
+                }
+                if !cutoff.is_finite() {
+                    return Err("kernel rpy_near needs a finite `cutoff` (its table ends there)".into());
+                }
+                let points = p.number("table_points") as usize;
+                PairKernel::RpyNear {
+                    radius,
+                    viscosity,
+                    split,
+                    table: NearTable::new(radius, viscosity, split, cutoff, points),
+                }
+            }
+            "lj" => PairKernel::Lj {
+                epsilon: p.number("epsilon"),
+                sigma: p.number("sigma"),
+            },
+            other => unreachable!("choice checked: {other}"),
+        })
+    }
+
+    pub fn name(&self) -> &'static str {
+        match self {
+            PairKernel::Rpy { .. } => "rpy",
+            PairKernel::RpyNear { .. } => "rpy_near",
+            PairKernel::Lj { .. } => "lj",
+        }
+    }
+
+    fn shader(&self) -> String {
+        format!("pairs/{}.wgsl", self.name())
+    }
+
+    /// Whether the kernel reads the values (a product M v) or only positions (forces).
+    pub fn uses_values(&self) -> bool {
+        !matches!(self, PairKernel::Lj { .. })
+    }
+
+    /// The `pair_params` words, computed in f64 and rounded once.
+    fn words(&self) -> Vec<f32> {
+        match self {
+            PairKernel::Rpy { radius, viscosity } => vec![
+                *radius as f32,
+                (1.0 / (6.0 * PI * viscosity * radius)) as f32,
+                (1.0 / (8.0 * PI * viscosity)) as f32,
+            ],
+            PairKernel::RpyNear { table, .. } => {
+                let last = (table.f.len() - 1) as f64;
+                vec![(last / table.cutoff) as f32, last as f32]
+            }
+            PairKernel::Lj { epsilon, sigma } => {
+                vec![(24.0 * epsilon) as f32, (sigma * sigma) as f32]
+            }
+        }
+    }
+
+    /// The `pair_table` words: (f, g) interleaved for the tabulated near field.
+    fn table(&self) -> Vec<f32> {
+        match self {
+            PairKernel::RpyNear { table, .. } => table
+                .f
+                .iter()
+                .zip(&table.g)
+                .flat_map(|(f, g)| [*f as f32, *g as f32])
+                .collect(),
+            _ => vec![0.0],
+        }
+    }
+
+    /// The f64 twin of `pair_term`: the contribution of j (value vj) to i at r = x_i - x_j.
+    pub fn pair(&self, r: [f64; 3], vj: [f64; 3]) -> [f64; 3] {
+        let r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+        let d = r2.sqrt();
+        let tensor = |f: f64, g: f64| {
+            // f v + g (r^ . v) r^, with r^ r^ taken as 0 for coincident particles (g
+            // vanishes there for the mobilities).
+            let rv = if r2 > 0.0 {
+                (r[0] * vj[0] + r[1] * vj[1] + r[2] * vj[2]) / r2
+            } else {
+                0.0
+            };
+            [0, 1, 2].map(|c| f * vj[c] + g * rv * r[c])
+        };
+        match self {
+            PairKernel::Rpy { radius, viscosity } => {
+                let (f, g) = rpy::rpy(d, *radius, *viscosity);
+                tensor(f, g)
+            }
+            PairKernel::RpyNear { table, .. } => {
+                let (f, g) = table.at(d);
+                tensor(f, g)
+            }
+            PairKernel::Lj { epsilon, sigma } => {
+                let s6 = (sigma * sigma / r2).powi(3);
+                let c = 24.0 * epsilon * (2.0 * s6 * s6 - s6) / r2;
+                r.map(|x| c * x)
+            }
+        }
+    }
+
+    /// The f64 twin of `self_term`.
+    pub fn self_term(&self, vi: [f64; 3]) -> [f64; 3] {
+        match self {
+            PairKernel::Rpy { radius, viscosity } => {
+                vi.map(|v| v / (6.0 * PI * viscosity * radius))
+            }
+            PairKernel::RpyNear { table, .. } => vi.map(|v| table.f[0] * v),
+            PairKernel::Lj { .. } => [0.0; 3],
+        }
+    }
+
+    fn describe(&self) -> String {
+        match self {
+            PairKernel::Rpy { radius, viscosity } => {
+                format!("RPY mobility, radius {radius}, viscosity {viscosity}")
+            }
+            PairKernel::RpyNear {
+                radius,
+                viscosity,
+                split,
+                table,
+            } => format!(
+                "PSE near-field RPY, radius {radius}, viscosity {viscosity}, split {split}: table of {} points to r = {:.6} (self term {:.6e})",
+                table.f.len(),
+                table.cutoff,
+                table.f[0]
+            ),
+            PairKernel::Lj { epsilon, sigma } => {
+                format!("Lennard-Jones force, epsilon {epsilon}, sigma {sigma}")
+            }
+        }
+    }
+}
+
+fn kernel_params() -> Vec<ParamSpec> {
+    vec![
+        ParamSpec::choice(
+            "kernel",
+            "rpy",
+            KERNELS,
+            "the pair kernel: rpy (free-space RPY mobility times values), rpy_near (PSE near field of RPY), lj (Lennard-Jones force; WCA with cutoff 2^(1/6) sigma)",
+        ),
+        ParamSpec::number(
+            "radius",
+            Some(1.0),
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            "rpy, rpy_near: hydrodynamic radius a",
+        ),
+        ParamSpec::number(
+            "viscosity",
+            Some(1.0),
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            "rpy, rpy_near: viscosity eta",
+        ),
+        ParamSpec::number(
+            "split",
+            Some(0.0),
+            0.0,
+            f64::MAX,
+            "rpy_near: Ewald splitting parameter xi (> 0)",
+        ),
+        ParamSpec::integer(
+            "table_points",
+            Some(8192.0),
+            16.0,
+            (1u64 << 22) as f64,
+            "rpy_near: points of the f64-computed table from 0 to the cutoff",
+        ),
+        ParamSpec::number("epsilon", Some(1.0), 0.0, f64::MAX, "lj: energy scale"),
+        ParamSpec::number(
+            "sigma",
+            Some(1.0),
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            "lj: length scale",
+        ),
+    ]
+}
+
+fn value_inputs() -> Vec<PortSpec> {
+    vec![
+        PortSpec::new(
+            "positions",
+            PortType::Particles(Some(3)),
+            "positions (N x 3)",
+        ),
+        PortSpec::new(
+            "values",
+            PortType::Particles(Some(3)),
+            "the vector each particle carries (forces for a mobility product); unused by force kernels",
+        )
+        .optional(),
+    ]
+}
+
+fn out_port() -> Vec<PortSpec> {
+    vec![PortSpec::new(
+        "out",
+        PortType::Particles(Some(3)),
+        "per particle: self(v_i) + sum over neighbours j of pair(x_i - x_j, v_j)",
+    )]
+}
+
+/// Checks positions and values, returning N.
+fn check_rows(kernel: &PairKernel, inputs: &[Option<ValueType>]) -> Result<u32, PortError> {
+    let Some(ValueType::Particles { n, .. }) = inputs[0] else {
+        unreachable!("port type checked")
+    };
+    match inputs[1] {
+        Some(ValueType::Particles { n: m, .. }) if m != n => Err(PortError::new(
+            "values",
+            format!("has {m} rows but positions has {n}"),
+        )),
+        None if kernel.uses_values() => Err(PortError::new(
+            "values",
+            format!("kernel {} multiplies values: connect them", kernel.name()),
+        )),
+        _ => Ok(n),
+    }
+}
+
+fn row(data: &[f64], i: usize) -> [f64; 3] {
+    [data[3 * i], data[3 * i + 1], data[3 * i + 2]]
+}
+
+/// The f64 O(N^2) reference shared by both nodes: every pair, minimum image on the
+/// periodic axes of `lengths` (empty: open boundaries).
+fn reference_sum(
+    kernel: &PairKernel,
+    lengths: &[f64],
+    periodic: &[bool],
+    cutoff: f64,
+    inputs: &[Option<RefArray>],
+    out: &mut [f64],
+) {
+    let pos = &inputs[0].as_ref().expect("required").data;
+    let zero = vec![0.0; pos.len()];
+    let vals = inputs[1].as_ref().map(|v| &v.data).unwrap_or(&zero);
+    let n = pos.len() / 3;
+    // The cutoff is compared as the GPU does, squared in f32.
+    let cut2 = (cutoff as f32 * cutoff as f32) as f64;
+    for i in 0..n {
+        let xi = row(pos, i);
+        let mut acc = kernel.self_term(row(vals, i));
+        for j in 0..n {
+            if j == i {
+                continue;
+            }
+            let xj = row(pos, j);
+            let mut r = [0.0; 3];
+            for a in 0..3 {
+                r[a] = xi[a] - xj[a];
+                if a < lengths.len() && periodic[a] {
+                    r[a] -= lengths[a] * (r[a] / lengths[a]).round();
+                }
+            }
+            let r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+            if r2 <= cut2 {
+                let t = kernel.pair(r, row(vals, j));
+                for a in 0..3 {
+                    acc[a] += t[a];
+                }
+            }
+        }
+        out[3 * i..3 * i + 3].copy_from_slice(&acc);
+    }
+}
+
+fn pair_buffers(
+    cx: &CompileCtx<'_>,
+    kernel: &PairKernel,
+) -> (wgpu::Buffer, wgpu::Buffer) {
+    let words = kernel.words();
+    let table = kernel.table();
+    (
+        cx.table("pair params", bytemuck::cast_slice(&words)),
+        cx.table("pair table", bytemuck::cast_slice(&table)),
+    )
+}
+
+fn box_spec(doc: &'static str, required: bool) -> ParamSpec {
+    ParamSpec {
+        name: "box",
+        kind: ParamKind::Numbers {
+            len: Some(3),
+            min: f64::MIN_POSITIVE,
+            max: f64::MAX,
+        },
+        default: if required {
+            None
+        } else {
+            Some(ParamValue::Numbers(vec![1.0, 1.0, 1.0]))
+        },
+        doc,
+    }
+}
+
+pub struct NeighbourSumKind;
+
+impl NodeKind for NeighbourSumKind {
+    fn name(&self) -> &'static str {
+        "neighbour_sum"
+    }
+
+    fn doc(&self) -> &'static str {
+        "per particle, self term plus the pair kernel summed over neighbours within the cutoff, found through a cell list (27 cells; periodic minimum image)"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        let mut v = value_inputs();
+        v[0].doc = "positions, sorted by cell (the cell list's order)";
+        v.extend([
+            PortSpec::new(
+                "cells",
+                PortType::Indices,
+                "linear cell index of each (sorted) particle: cell_hash keys after the sort",
+            ),
+            PortSpec::new(
+                "cell_start",
+                PortType::Indices,
+                "first particle of each cell (exclusive scan of the counts)",
+            ),
+            PortSpec::new(
+                "cell_count",
+                PortType::Indices,
+                "particles in each cell (histogram of the keys)",
+            ),
+        ]);
+        v
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        out_port()
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        let mut v = vec![
+            box_spec("box lengths (Lx, Ly, Lz), centred at the origin", true),
+            ParamSpec {
+                name: "cells",
+                kind: ParamKind::Numbers {
+                    len: Some(3),
+                    min: 1.0,
+                    max: 1024.0,
+                },
+                default: None,
+                doc: "cells per axis of the cell list (cell size >= cutoff)",
+            },
+            ParamSpec {
+                name: "periodic",
+                kind: ParamKind::Numbers {
+                    len: Some(3),
+                    min: 0.0,
+                    max: 1.0,
+                },
+                default: Some(ParamValue::Numbers(vec![1.0, 1.0, 1.0])),
+                doc: "1 for a periodic axis (minimum image), 0 for an open one",
+            },
+            ParamSpec::number(
+                "cutoff",
+                None,
+                0.0,
+                f64::MAX,
+                "pairs with |r| <= cutoff are summed",
+            ),
+        ];
+        v.extend(kernel_params());
+        v
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        let lengths = p.numbers("box").to_vec();
+        let cells: Vec<u32> = p.numbers("cells").iter().map(|&c| c as u32).collect();
+        if p.numbers("cells").iter().any(|c| c.fract() != 0.0) {
+            return Err(format!("`cells` must be whole numbers, got {:?}", p.numbers("cells")));
+        }
+        let periodic: Vec<bool> = p.numbers("periodic").iter().map(|&x| x == 1.0).collect();
+        let cutoff = p.number("cutoff");
+        let mut problems = Vec::new();
+        for a in 0..3 {
+            let size = lengths[a] / cells[a] as f64;
+            if size < cutoff {
+                problems.push(format!(
+                    "cells along axis {a} are {size} wide, less than the cutoff {cutoff}: use at most {} cells",
+                    (lengths[a] / cutoff).floor().max(1.0)
+                ));
+            }
+            if periodic[a] && 2.0 * cutoff > lengths[a] {
+                problems.push(format!(
+                    "the cutoff {cutoff} exceeds half the periodic box along axis {a} ({}): the minimum image would miss pairs",
+                    lengths[a]
+                ));
+            }
+        }
+        if !problems.is_empty() {
+            return Err(problems.join("; "));
+        }
+        Ok(Box::new(NeighbourSum {
+            kernel: PairKernel::from_params(p, cutoff)?,
+            lengths,
+            cells,
+            periodic,
+            cutoff,
+        }))
+    }
+}
+
+pub struct NeighbourSum {
+    pub kernel: PairKernel,
+    lengths: Vec<f64>,
+    cells: Vec<u32>,
+    periodic: Vec<bool>,
+    cutoff: f64,
+}
+
+impl NeighbourSum {
+    fn cell_count(&self) -> u32 {
+        self.cells.iter().product()
+    }
+}
+
+impl Node for NeighbourSum {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let n = check_rows(&self.kernel, inputs)?;
+        let Some(ValueType::Indices { n: keys }) = inputs[2] else {
+            unreachable!("port type checked")
+        };
+        if keys != n {
+            return Err(PortError::new(
+                "cells",
+                format!("has {keys} entries but positions has {n} rows"),
+            ));
+        }
+        for (port, i) in [("cell_start", 3), ("cell_count", 4)] {
+            let Some(ValueType::Indices { n: c }) = inputs[i] else {
+                unreachable!("port type checked")
+            };
+            if c != self.cell_count() {
+                return Err(PortError::new(
+                    port,
+                    format!(
+                        "has {c} entries but the cell list has {:?} = {} cells",
+                        self.cells,
+                        self.cell_count()
+                    ),
+                ));
+            }
+        }
+        Ok(Signature::outputs(vec![ValueType::Particles { n, k: 3 }]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
+        let size: Vec<String> = (0..3)
+            .map(|a| format!("{:.4}", self.lengths[a] / self.cells[a] as f64))
+            .collect();
+        vec![
+            self.kernel.describe(),
+            format!(
+                "cutoff {}, {:?} cells of size ({})",
+                self.cutoff,
+                self.cells,
+                size.join(", ")
+            ),
+        ]
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        reference_sum(
+            &self.kernel,
+            &self.lengths,
+            &self.periodic,
+            self.cutoff,
+            inputs,
+            &mut outputs[0].data,
+        );
+    }
+}
+
+/// Layout of the `Geometry` uniform of shaders/pairs/neighbour_sum.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct NeighbourGeometry {
+    lengths: [f32; 4],
+    cells: [u32; 4],
+    periodic: [u32; 4],
+    n: u32,
+    cutoff2: f32,
+    pad: [u32; 2],
+}
+
+impl GpuKernels for NeighbourSum {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let pos = io.inputs[0].expect("required");
+        let ValueType::Particles { n, .. } = pos.ty else {
+            unreachable!()
+        };
+        let values = io.inputs[1].map(|v| v.buffer);
+        let source = format!(
+            "{}{}",
+            cx.shader(&self.kernel.shader())?,
+            cx.shader("pairs/neighbour_sum.wgsl")?
+        );
+        let mut b = vec![Binding::StorageRead; 5];
+        b.extend([
+            Binding::StorageReadWrite,
+            Binding::Uniform,
+            Binding::StorageRead,
+            Binding::StorageRead,
+        ]);
+        let kernel = cx.kernel(
+            &KernelSpec::new(
+                format!("neighbour_sum ({})", self.kernel.name()),
+                source,
+                &b,
+            )
+            .constant("HAS_VALUES", f64::from(u8::from(values.is_some()))),
+        )?;
+        let mut g = NeighbourGeometry {
+            lengths: [1.0; 4],
+            cells: [1; 4],
+            periodic: [0; 4],
+            n,
+            cutoff2: (self.cutoff as f32) * (self.cutoff as f32),
+            pad: [0; 2],
+        };
+        for a in 0..3 {
+            g.lengths[a] = self.lengths[a] as f32;
+            g.cells[a] = self.cells[a];
+            g.periodic[a] = u32::from(self.periodic[a]);
+        }
+        let geo = cx.uniform("neighbour geometry", bytemuck::bytes_of(&g));
+        let (params, table) = pair_buffers(cx, &self.kernel);
+        let buffers = [
+            pos.buffer,
+            values.unwrap_or(pos.buffer),
+            io.inputs[2].expect("required").buffer,
+            io.inputs[3].expect("required").buffer,
+            io.inputs[4].expect("required").buffer,
+            io.outputs[0].buffer,
+            &geo,
+            &params,
+            &table,
+        ];
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &buffers,
+            cx.grid_1d(n as u64, WG_1D),
+        )])
+    }
+}
+
+pub struct AllPairsKind;
+
+/// Particles per tile of shaders/pairs/all_pairs.wgsl (its workgroup size).
+const TILE: u32 = 128;
+
+impl NodeKind for AllPairsKind {
+    fn name(&self) -> &'static str {
+        "all_pairs"
+    }
+
+    fn doc(&self) -> &'static str {
+        "per particle, self term plus the pair kernel summed over every other particle within the cutoff (open boundaries; tiled in workgroup memory, O(N^2))"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        value_inputs()
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        out_port()
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        let mut v = vec![ParamSpec::number(
+            "cutoff",
+            Some(f64::MAX),
+            0.0,
+            f64::MAX,
+            "pairs with |r| <= cutoff are summed (default: all)",
+        )];
+        v.extend(kernel_params());
+        v
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        let cutoff = p.number("cutoff");
+        if p.text("kernel") == "rpy_near" {
+            return Err("kernel rpy_near is the near field of a periodic split: use it in neighbour_sum, and rpy for open boundaries".into());
+        }
+        Ok(Box::new(AllPairs {
+            kernel: PairKernel::from_params(p, cutoff)?,
+            cutoff,
+        }))
+    }
+}
+
+pub struct AllPairs {
+    kernel: PairKernel,
+    cutoff: f64,
+}
+
+impl Node for AllPairs {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let n = check_rows(&self.kernel, inputs)?;
+        Ok(Signature::outputs(vec![ValueType::Particles { n, k: 3 }]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn notes(&self, inputs: &[Option<ValueType>]) -> Vec<String> {
+        let n = match inputs[0] {
+            Some(ValueType::Particles { n, .. }) => n as u64,
+            _ => 0,
+        };
+        vec![
+            self.kernel.describe(),
+            format!("{} pairs in tiles of {TILE}", n * n.saturating_sub(1)),
+        ]
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        reference_sum(&self.kernel, &[], &[], self.cutoff, inputs, &mut outputs[0].data);
+    }
+}
+
+impl GpuKernels for AllPairs {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let pos = io.inputs[0].expect("required");
+        let ValueType::Particles { n, .. } = pos.ty else {
+            unreachable!()
+        };
+        let values = io.inputs[1].map(|v| v.buffer);
+        let source = format!(
+            "{}{}",
+            cx.shader(&self.kernel.shader())?,
+            cx.shader("pairs/all_pairs.wgsl")?
+        );
+        let kernel = cx.kernel(
+            &KernelSpec::new(
+                format!("all_pairs ({})", self.kernel.name()),
+                source,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                ],
+            )
+            .constant("HAS_VALUES", f64::from(u8::from(values.is_some()))),
+        )?;
+        let cut = self.cutoff.min(f32::MAX.sqrt() as f64 * 0.5) as f32;
+        let shape = cx.uniform(
+            "all_pairs shape",
+            bytemuck::cast_slice(&[n, (cut * cut).to_bits()]),
+        );
+        let (params, table) = pair_buffers(cx, &self.kernel);
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &[
+                pos.buffer,
+                values.unwrap_or(pos.buffer),
+                io.outputs[0].buffer,
+                &shape,
+                &params,
+                &table,
+            ],
+            cx.grid_1d(n as u64, TILE),
+        )])
+    }
+}
+
+pub fn register(r: &mut Registry) {
+    r.add(NeighbourSumKind);
+    r.add(AllPairsKind);
+}

@@ -1,0 +1,244 @@
+//! The Rotne-Prager-Yamakawa tensor in f64 and the near field of its Positively Split
+//! Ewald sum (UAMMD thesis section 20.2; digest section 4), tabulated on the host.
+//!
+//! A mobility tensor of a pair at separation r is written `f(r) I + g(r) r^ r^`.
+//!
+//! The PSE split (Hasimoto's splitting function H(k, xi) = (1 + k^2 / (4 xi^2))
+//! exp(-k^2 / (4 xi^2))): the far field is the Fourier sum of sinc^2(ka) H(k, xi)
+//! (I - k^ k^) / (eta k^2); the near field is what remains of free-space RPY,
+//! `M_near(r) = M_RPY(r) - M_far,free(r)`, with M_far,free the radial inverse Fourier
+//! transform of the far kernel (angular average of e^(ik.r) (I - k^ k^) is
+//! (j0 - j1/x) I + j2 r^ r^, x = kr):
+//!
+//! M_far,free(r) = 1 / (2 pi^2 eta) int_0^inf dk sinc^2(ka) H(k, xi) [(j0 - j1/x) I + j2 r^ r^].
+//!
+//! The integral is Gaussian-damped and is done by composite Gauss-Legendre quadrature in
+//! f64; the near field decays as exp(-xi^2 r^2), which sets the cutoff.
+
+use std::f64::consts::PI;
+
+/// Free-space RPY tensor (f, g) at distance r for spheres of radius a in a fluid of
+/// viscosity eta; the overlap form for r < 2a (regular at r = 0: f = 1 / (6 pi eta a)).
+pub fn rpy(r: f64, a: f64, eta: f64) -> (f64, f64) {
+    if r >= 2.0 * a {
+        let c = 1.0 / (8.0 * PI * eta * r);
+        let s = a * a / (r * r);
+        (c * (1.0 + 2.0 * s / 3.0), c * (1.0 - 2.0 * s))
+    } else {
+        let c = 1.0 / (6.0 * PI * eta * a);
+        (c * (1.0 - 9.0 * r / (32.0 * a)), c * (3.0 * r / (32.0 * a)))
+    }
+}
+
+/// (j0(x) - j1(x)/x, j2(x)): the isotropic and r^ r^ parts of the angular average of
+/// e^(ik.r) (I - k^ k^); series below x = 0.1, where the closed forms cancel.
+fn angular(x: f64) -> (f64, f64) {
+    if x < 0.1 {
+        let x2 = x * x;
+        // j0 - j1/x = 2/3 - 2 x^2/15 + x^4/140 - x^6/5670 ...; j2 = x^2/15 - x^4/210 + x^6/7560.
+        (
+            2.0 / 3.0 - x2 * (2.0 / 15.0 - x2 * (1.0 / 140.0 - x2 / 5670.0)),
+            x2 * (1.0 / 15.0 - x2 * (1.0 / 210.0 - x2 / 7560.0)),
+        )
+    } else {
+        let (s, c) = x.sin_cos();
+        let j0 = s / x;
+        let j1 = s / (x * x) - c / x;
+        let j2 = (3.0 / (x * x) - 1.0) * s / x - 3.0 * c / (x * x);
+        (j0 - j1 / x, j2)
+    }
+}
+
+/// Gauss-Legendre nodes and weights of 8 points on [-1, 1].
+const GL8: [(f64, f64); 4] = [
+    (0.183_434_642_495_649_8, 0.362_683_783_378_362_0),
+    (0.525_532_409_916_329_0, 0.313_706_645_877_887_3),
+    (0.796_666_477_413_626_7, 0.222_381_034_453_374_5),
+    (0.960_289_856_497_536_2, 0.101_228_536_290_376_3),
+];
+
+/// The far-field kernel of PSE along k: quadrature nodes k_q with weights w_q times
+/// sinc^2(k a) H(k, xi) / (2 pi^2 eta), fine enough for distances up to `r_max`.
+struct FarQuadrature {
+    nodes: Vec<(f64, f64)>,
+}
+
+impl FarQuadrature {
+    fn new(a: f64, eta: f64, xi: f64, r_max: f64) -> Self {
+        // exp(-k^2 / (4 xi^2)) < 1e-19 past k_max.
+        let k_max = 2.0 * xi * 44.0f64.sqrt();
+        // Panels of at most a quarter of the fastest oscillation (period 2 pi / (r + 2a)).
+        let width = (PI / (4.0 * (r_max + 2.0 * a))).min(k_max / 64.0);
+        let panels = (k_max / width).ceil() as usize;
+        let width = k_max / panels as f64;
+        let mut nodes = Vec::with_capacity(8 * panels);
+        for p in 0..panels {
+            let mid = (p as f64 + 0.5) * width;
+            for &(x, w) in &GL8 {
+                for k in [mid - 0.5 * width * x, mid + 0.5 * width * x] {
+                    let ka = k * a;
+                    let sinc = if ka < 1e-8 { 1.0 } else { ka.sin() / ka };
+                    let q = k * k / (4.0 * xi * xi);
+                    let weight = 0.5 * width * w * sinc * sinc * (1.0 + q) * (-q).exp()
+                        / (2.0 * PI * PI * eta);
+                    nodes.push((k, weight));
+                }
+            }
+        }
+        FarQuadrature { nodes }
+    }
+
+    /// (f, g) of M_far,free at distance r.
+    fn at(&self, r: f64) -> (f64, f64) {
+        let (mut f, mut g) = (0.0, 0.0);
+        for &(k, w) in &self.nodes {
+            let (i, rr) = angular(k * r);
+            f += w * i;
+            g += w * rr;
+        }
+        (f, g)
+    }
+}
+
+/// The PSE near field of RPY, f(r) and g(r) on `points` equally spaced distances from 0
+/// to `cutoff` (inclusive), for radius a, viscosity eta and splitting parameter xi.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NearTable {
+    pub cutoff: f64,
+    pub f: Vec<f64>,
+    pub g: Vec<f64>,
+}
+
+impl NearTable {
+    pub fn new(a: f64, eta: f64, xi: f64, cutoff: f64, points: usize) -> Self {
+        let far = FarQuadrature::new(a, eta, xi, cutoff);
+        let dr = cutoff / (points - 1) as f64;
+        let (mut f, mut g) = (Vec::with_capacity(points), Vec::with_capacity(points));
+        for i in 0..points {
+            let r = i as f64 * dr;
+            let (rf, rg) = rpy(r, a, eta);
+            let (ff, fg) = far.at(r);
+            f.push(rf - ff);
+            g.push(rg - fg);
+        }
+        NearTable { cutoff, f, g }
+    }
+
+    /// Linear interpolation, as the GPU does it (0 past the cutoff).
+    pub fn at(&self, r: f64) -> (f64, f64) {
+        if r > self.cutoff {
+            return (0.0, 0.0);
+        }
+        let s = r / self.cutoff * (self.f.len() - 1) as f64;
+        let i = (s.floor() as usize).min(self.f.len() - 2);
+        let t = s - i as f64;
+        (
+            self.f[i] + t * (self.f[i + 1] - self.f[i]),
+            self.g[i] + t * (self.g[i + 1] - self.g[i]),
+        )
+    }
+}
+
+/// The self term of the PSE near field in closed form (Fiore et al. 2017; digest
+/// section 4.3), times 6 pi eta a: (1 / (4 sqrt(pi) xi a)) (1 - exp(-4 a^2 xi^2)) +
+/// erfc(2 a xi).
+pub fn near_self(a: f64, xi: f64) -> f64 {
+    (1.0 - (-4.0 * a * a * xi * xi).exp()) / (4.0 * PI.sqrt() * xi * a) + erfc(2.0 * a * xi)
+}
+
+/// erfc in f64 to about 1e-15 relative: the Taylor series of erf below 2, the continued
+/// fraction of erfc above (where 1 - erf would cancel).
+pub fn erfc(x: f64) -> f64 {
+    if x < 0.0 {
+        return 2.0 - erfc(-x);
+    }
+    if x < 2.0 {
+        // erf by its Taylor series: 2/sqrt(pi) sum (-1)^n x^(2n+1) / (n! (2n+1)).
+        let mut term = x;
+        let mut sum = x;
+        let x2 = x * x;
+        let mut n = 0.0;
+        while term.abs() > 1e-17 * sum.abs() {
+            n += 1.0;
+            term *= -x2 / n;
+            sum += term / (2.0 * n + 1.0);
+        }
+        1.0 - 2.0 / PI.sqrt() * sum
+    } else {
+        // Continued fraction (Lentz): erfc(x) = exp(-x^2)/sqrt(pi) * 1/(x + 1/2/(x + 1/(x + 3/2/(x + ...)))).
+        let tiny = 1e-300;
+        let mut f = x;
+        let mut c = x;
+        let mut d = 0.0;
+        for i in 1..200 {
+            let an = i as f64 / 2.0;
+            d = x + an * d;
+            d = if d.abs() < tiny { tiny } else { d };
+            c = x + an / c;
+            c = if c.abs() < tiny { tiny } else { c };
+            d = 1.0 / d;
+            let delta = c * d;
+            f *= delta;
+            if (delta - 1.0).abs() < 1e-16 {
+                break;
+            }
+        }
+        (-x * x).exp() / PI.sqrt() / f
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn erfc_matches_known_values() {
+        // Abramowitz and Stegun table values.
+        for (x, want) in [
+            (0.0, 1.0),
+            (0.5, 0.479_500_122_186_953_5),
+            (1.0, 0.157_299_207_050_285_1),
+            (2.0, 0.004_677_734_981_047_266),
+            (3.0, 2.209_049_699_858_544e-5),
+            (-1.0, 1.842_700_792_949_715),
+        ] {
+            assert!(
+                ((erfc(x) - want) / want).abs() < 1e-13,
+                "erfc({x}) = {}",
+                erfc(x)
+            );
+        }
+    }
+
+    #[test]
+    fn rpy_is_continuous_at_contact() {
+        let (a, b) = (rpy(2.0 - 1e-12, 1.0, 1.0), rpy(2.0, 1.0, 1.0));
+        assert!((a.0 - b.0).abs() < 1e-12 && (a.1 - b.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn near_self_term_matches_the_closed_form() {
+        for xi in [0.3, 0.5, 1.0, 2.0] {
+            let t = NearTable::new(1.0, 1.0, xi, 1.0, 3);
+            let want = near_self(1.0, xi) / (6.0 * PI);
+            assert!(
+                ((t.f[0] - want) / want).abs() < 1e-10,
+                "xi {xi}: {} against {want}",
+                t.f[0]
+            );
+            assert!(t.g[0].abs() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn near_field_decays_like_a_gaussian() {
+        // exp(-xi^2 r^2) sets the cutoff: at r_c = sqrt(-ln eps) / xi the near field is
+        // a small multiple of eps times RPY there.
+        let (xi, eps) = (0.5, 1e-3);
+        let rc = (-f64::ln(eps)).sqrt() / xi;
+        let t = NearTable::new(1.0, 1.0, xi, rc, 3);
+        let (f, _) = rpy(rc, 1.0, 1.0);
+        let near = t.f[2].abs();
+        assert!(near < 10.0 * eps * f, "near {near} against RPY {f}");
+    }
+}

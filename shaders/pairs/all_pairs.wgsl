@@ -1,0 +1,64 @@
+// template: composed after a pair kernel (pair_term, self_term; shaders/pairs/*.wgsl).
+//
+// Every pair, open boundaries: each workgroup holds TILE particles i (one per thread)
+// and walks the others in tiles of TILE loaded into workgroup memory.
+#import common/index.wgsl
+
+override HAS_VALUES: bool = true;
+const TILE: u32 = 128u;  // nodes/pairs/mod.rs TILE
+
+struct Shape {
+    n: u32,
+    cutoff2: f32,
+}
+
+@group(0) @binding(0) var<storage, read> pos: array<f32>;
+@group(0) @binding(1) var<storage, read> vals: array<f32>;
+@group(0) @binding(2) var<storage, read_write> out: array<f32>;
+@group(0) @binding(3) var<uniform> shape: Shape;
+@group(0) @binding(4) var<storage, read> pair_params: array<f32>;
+@group(0) @binding(5) var<storage, read> pair_table: array<f32>;
+
+var<workgroup> tile_pos: array<vec3<f32>, TILE>;
+var<workgroup> tile_val: array<vec3<f32>, TILE>;
+
+fn value3(a: u32) -> vec3<f32> {
+    if (HAS_VALUES) {
+        return vec3<f32>(vals[3u * a], vals[3u * a + 1u], vals[3u * a + 2u]);
+    }
+    return vec3<f32>(0.0);
+}
+
+@compute @workgroup_size(TILE)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wid, nwg, lid, TILE);
+    let n = shape.n;
+    let inside = i < n;
+    let ii = min(i, max(n, 1u) - 1u);
+    let xi = vec3<f32>(pos[3u * ii], pos[3u * ii + 1u], pos[3u * ii + 2u]);
+    var acc = self_term(value3(ii));
+    let tiles = (n + TILE - 1u) / TILE;
+    for (var t = 0u; t < tiles; t++) {
+        let j = t * TILE + lid;
+        if (j < n) {
+            tile_pos[lid] = vec3<f32>(pos[3u * j], pos[3u * j + 1u], pos[3u * j + 2u]);
+            tile_val[lid] = value3(j);
+        }
+        workgroupBarrier();
+        let count = min(TILE, n - t * TILE);
+        for (var k = 0u; k < count; k++) {
+            let r = xi - tile_pos[k];
+            let r2 = dot(r, r);
+            if (t * TILE + k != i && r2 <= shape.cutoff2) {
+                acc += pair_term(r, r2, tile_val[k]);
+            }
+        }
+        workgroupBarrier();
+    }
+    if (inside) {
+        out[3u * i] = acc.x;
+        out[3u * i + 1u] = acc.y;
+        out[3u * i + 2u] = acc.z;
+    }
+}

@@ -1,0 +1,95 @@
+// template: composed after a pair kernel (pair_term, self_term; shaders/pairs/*.wgsl).
+//
+// One thread per particle (in the cell list's sorted order): the self term, then every
+// particle of the neighbouring cells (3 per axis, or the distinct ones on axes of fewer
+// than 3 cells, or those inside on open axes) within the cutoff, minimum image on
+// periodic axes.
+#import common/index.wgsl
+
+override HAS_VALUES: bool = true;
+
+struct Geometry {
+    lengths: vec4<f32>,
+    cells: vec4<u32>,
+    periodic: vec4<u32>,
+    n: u32,
+    cutoff2: f32,
+}
+
+@group(0) @binding(0) var<storage, read> pos: array<f32>;
+@group(0) @binding(1) var<storage, read> vals: array<f32>;
+@group(0) @binding(2) var<storage, read> keys: array<u32>;
+@group(0) @binding(3) var<storage, read> cell_start: array<u32>;
+@group(0) @binding(4) var<storage, read> cell_count: array<u32>;
+@group(0) @binding(5) var<storage, read_write> out: array<f32>;
+@group(0) @binding(6) var<uniform> geo: Geometry;
+@group(0) @binding(7) var<storage, read> pair_params: array<f32>;
+@group(0) @binding(8) var<storage, read> pair_table: array<f32>;
+
+fn load3(a: u32) -> vec3<f32> {
+    return vec3<f32>(pos[3u * a], pos[3u * a + 1u], pos[3u * a + 2u]);
+}
+
+fn value3(a: u32) -> vec3<f32> {
+    if (HAS_VALUES) {
+        return vec3<f32>(vals[3u * a], vals[3u * a + 1u], vals[3u * a + 2u]);
+    }
+    return vec3<f32>(0.0);
+}
+
+// The range of cell offsets to visit along one axis, as (first, last).
+fn offsets(c: i32, n: i32, periodic: bool) -> vec2<i32> {
+    if (periodic) {
+        if (n >= 3) {
+            return vec2<i32>(-1, 1);
+        }
+        return vec2<i32>(0, n - 1);
+    }
+    return vec2<i32>(max(-1, -c), min(1, n - 1 - c));
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wid, nwg, lid, 256u);
+    if (i >= geo.n) {
+        return;
+    }
+    let xi = load3(i);
+    var acc = self_term(value3(i));
+    let n = vec3<i32>(geo.cells.xyz);
+    let key = keys[i];
+    let c = vec3<i32>(i32(key % geo.cells.x), i32((key / geo.cells.x) % geo.cells.y),
+                      i32(key / (geo.cells.x * geo.cells.y)));
+    let per = geo.periodic.xyz == vec3<u32>(1u);
+    let ox = offsets(c.x, n.x, per.x);
+    let oy = offsets(c.y, n.y, per.y);
+    let oz = offsets(c.z, n.z, per.z);
+    let l = geo.lengths.xyz;
+    for (var dz = oz.x; dz <= oz.y; dz++) {
+        let cz = (c.z + dz + n.z) % n.z;
+        for (var dy = oy.x; dy <= oy.y; dy++) {
+            let cy = (c.y + dy + n.y) % n.y;
+            for (var dx = ox.x; dx <= ox.y; dx++) {
+                let cx = (c.x + dx + n.x) % n.x;
+                let cell = u32(cx + n.x * (cy + n.y * cz));
+                let first = cell_start[cell];
+                let last = first + cell_count[cell];
+                for (var j = first; j < last; j++) {
+                    if (j == i) {
+                        continue;
+                    }
+                    var r = xi - load3(j);
+                    r = select(r, r - l * round(r / l), per);
+                    let r2 = dot(r, r);
+                    if (r2 <= geo.cutoff2) {
+                        acc += pair_term(r, r2, value3(j));
+                    }
+                }
+            }
+        }
+    }
+    out[3u * i] = acc.x;
+    out[3u * i + 1u] = acc.y;
+    out[3u * i + 2u] = acc.z;
+}
