@@ -23,7 +23,10 @@ fn positive(args: &[ParamValue], i: usize, what: &str) -> Result<f64, String> {
     if x > 0.0 && x.is_finite() {
         Ok(x)
     } else {
-        Err(format!("argument {} ({what}) must be positive, got {x}", i + 1))
+        Err(format!(
+            "argument {} ({what}) must be positive, got {x}",
+            i + 1
+        ))
     }
 }
 
@@ -247,24 +250,25 @@ pub static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "pse_split",
-        doc: "pse_split(radius, tolerance, box): the default Ewald splitting parameter xi of PSE, 0.5 / radius, raised where the near-field cutoff would pass half the box",
+        doc: "pse_split(radius, tolerance, box): the default Ewald splitting parameter xi of PSE, 0.5 / radius, raised where the near-field cutoff would pass half the smallest box side",
         call: |a| {
             arity(a, 3)?;
             Ok(ParamValue::Number(pse::default_split(
-                number(a, 0, "radius")?,
-                number(a, 1, "tolerance")?,
+                positive(a, 0, "radius")?,
+                positive(a, 1, "tolerance")?,
                 numbers(a, 2, "box")?,
-            )))
+            )?))
         },
     },
     HostFunction {
         name: "pse_cutoff",
-        doc: "pse_cutoff(split, tolerance): the PSE near-field cutoff sqrt(-ln tolerance) / split",
+        doc: "pse_cutoff(radius, split, tolerance): the PSE near-field cutoff, where the near field falls below tolerance / 2 of the self-mobility (computed in f64)",
         call: |a| {
-            arity(a, 2)?;
+            arity(a, 3)?;
             Ok(ParamValue::Number(pse::cutoff(
-                positive(a, 0, "split")?,
-                number(a, 1, "tolerance")?,
+                positive(a, 0, "radius")?,
+                positive(a, 1, "split")?,
+                positive(a, 2, "tolerance")?,
             )))
         },
     },

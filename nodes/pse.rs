@@ -11,15 +11,39 @@ use crate::nodes::fft::next_friendly;
 /// Default splitting parameter: 0.5 / a (UAMMD's usual choice for dilute suspensions,
 /// where the near field is cheap), raised where the near-field cutoff would exceed half
 /// the smallest box side (the minimum image then misses pairs).
-pub fn default_split(radius: f64, tolerance: f64, lengths: &[f64]) -> f64 {
-    let smallest = lengths.iter().copied().fold(f64::INFINITY, f64::min);
-    let needed = 2.0 * (-tolerance.ln()).sqrt() / smallest;
-    (0.5 / radius).max(needed * (1.0 + 1e-9))
+pub fn default_split(radius: f64, tolerance: f64, lengths: &[f64]) -> Result<f64, String> {
+    let half = 0.5 * lengths.iter().copied().fold(f64::INFINITY, f64::min);
+    let xi = 0.5 / radius;
+    if cutoff(radius, xi, tolerance) <= half {
+        return Ok(xi);
+    }
+    // The cutoff falls as xi grows: bisect for the smallest xi that fits.
+    let (mut lo, mut hi) = (xi, xi);
+    while cutoff(radius, hi, tolerance) > half {
+        hi *= 2.0;
+        if hi > 64.0 / radius {
+            return Err(format!(
+                "the box (smallest side {}) is too small for PSE at radius {radius}: the near field reaches further than half of it at any split",
+                2.0 * half
+            ));
+        }
+    }
+    while hi - lo > 1e-6 * hi {
+        let mid = 0.5 * (lo + hi);
+        if cutoff(radius, mid, tolerance) > half {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Ok(hi)
 }
 
-/// Near-field cutoff: the real-space error decays as exp(-xi^2 r^2) (thesis eq. 20.19).
-pub fn cutoff(split: f64, tolerance: f64) -> f64 {
-    (-tolerance.ln()).sqrt() / split
+/// Near-field cutoff: where the near field falls below tol / 2 of the self-mobility
+/// (`near_cutoff`; about sqrt(-ln tol) / xi, thesis eq. 20.19, at small xi a, and up to
+/// 2a further at large xi a, where the shells of the RPY spheres widen the screening).
+pub fn cutoff(radius: f64, split: f64, tolerance: f64) -> f64 {
+    crate::nodes::pairs::rpy::near_cutoff(radius, split, 0.5 * tolerance)
 }
 
 /// Far-field cells per axis: wave numbers up to k_cut = 2 xi sqrt(-ln tol) (where
@@ -60,15 +84,18 @@ pub fn support(tolerance: f64, cells: &[u32]) -> u32 {
     p.min(smallest).max(3)
 }
 
-/// Standard deviation of the far-field Gaussian: the support's half width over m, on the
-/// finest cell of the grid (sigma^2 = lambda / (4 xi^2), eq. 20.17).
+/// Standard deviation of the far-field Gaussian: the support's half width w = P h / 2
+/// over m = 0.976 sqrt(pi P) for the support P actually used (so the rounding of P up
+/// to an odd count cuts the Gaussian further out, not narrower), on the finest cell of
+/// the grid (sigma^2 = lambda / (4 xi^2), eq. 20.17): sigma = 0.765 h for P = 7.
 pub fn width(lengths: &[f64], cells: &[u32], tolerance: f64) -> f64 {
     let h = lengths
         .iter()
         .zip(cells)
         .map(|(l, &n)| l / n as f64)
         .fold(f64::INFINITY, f64::min);
-    0.5 * support(tolerance, cells) as f64 * h / deviations(tolerance)
+    let p = support(tolerance, cells) as f64;
+    0.5 * p * h / (0.976 * (std::f64::consts::PI * p).sqrt())
 }
 
 /// Cells per axis of the near field's cell list: as many as keep cells at least the
@@ -89,16 +116,18 @@ mod tests {
         // UAMMD's benchmark: a = 1, tol 1e-3, L = 128, xi = 0.5: k_cut = 2.63, h = 1.19.
         let g = grid(&[128.0; 3], 0.5, 1e-3);
         assert_eq!(g, vec![108; 3]);
-        let rc = cutoff(0.5, 1e-3);
-        assert!((rc - 5.2565).abs() < 1e-3);
-        assert_eq!(neighbour_cells(&[128.0; 3], rc), vec![24; 3]);
+        let rc = cutoff(1.0, 0.5, 1e-3);
+        assert!(rc > 5.2565 && rc < 6.5, "{rc}");
+        assert_eq!(neighbour_cells(&[128.0; 3], 5.3), vec![24; 3]);
         assert_eq!(support(1e-3, &g), 7);
     }
 
     #[test]
     fn split_grows_for_small_boxes() {
-        assert_eq!(default_split(1.0, 1e-3, &[128.0; 3]), 0.5);
-        let s = default_split(1.0, 1e-3, &[8.0, 8.0, 8.0]);
-        assert!(2.0 * cutoff(s, 1e-3) <= 8.0);
+        assert_eq!(default_split(1.0, 1e-3, &[128.0; 3]), Ok(0.5));
+        let s = default_split(1.0, 1e-3, &[8.0, 8.0, 8.0]).unwrap();
+        assert!(2.0 * cutoff(1.0, s, 1e-3) <= 8.0 && s > 0.5);
+        let s = default_split(1.0, 1e-3, &[2.0, 8.0, 8.0]).unwrap();
+        assert!(cutoff(1.0, s, 1e-3) <= 1.0);
     }
 }

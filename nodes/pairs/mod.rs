@@ -61,7 +61,9 @@ impl PairKernel {
                     return Err("kernel rpy_near needs `split` (the Ewald parameter xi) > 0".into());
                 }
                 if !cutoff.is_finite() {
-                    return Err("kernel rpy_near needs a finite `cutoff` (its table ends there)".into());
+                    return Err(
+                        "kernel rpy_near needs a finite `cutoff` (its table ends there)".into(),
+                    );
                 }
                 let points = p.number("table_points") as usize;
                 PairKernel::RpyNear {
@@ -223,7 +225,7 @@ fn kernel_params() -> Vec<ParamSpec> {
         ),
         ParamSpec::integer(
             "table_points",
-            Some(8192.0),
+            Some(4096.0),
             16.0,
             (1u64 << 22) as f64,
             "rpy_near: points of the f64-computed table from 0 to the cutoff",
@@ -328,10 +330,7 @@ fn reference_sum(
     }
 }
 
-fn pair_buffers(
-    cx: &CompileCtx<'_>,
-    kernel: &PairKernel,
-) -> (wgpu::Buffer, wgpu::Buffer) {
+fn pair_buffers(cx: &CompileCtx<'_>, kernel: &PairKernel) -> (wgpu::Buffer, wgpu::Buffer) {
     let words = kernel.words();
     let table = kernel.table();
     (
@@ -434,7 +433,10 @@ impl NodeKind for NeighbourSumKind {
         let lengths = p.numbers("box").to_vec();
         let cells: Vec<u32> = p.numbers("cells").iter().map(|&c| c as u32).collect();
         if p.numbers("cells").iter().any(|c| c.fract() != 0.0) {
-            return Err(format!("`cells` must be whole numbers, got {:?}", p.numbers("cells")));
+            return Err(format!(
+                "`cells` must be whole numbers, got {:?}",
+                p.numbers("cells")
+            ));
         }
         let periodic: Vec<bool> = p.numbers("periodic").iter().map(|&x| x == 1.0).collect();
         let cutoff = p.number("cutoff");
@@ -692,7 +694,14 @@ impl Node for AllPairs {
     }
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
-        reference_sum(&self.kernel, &[], &[], self.cutoff, inputs, &mut outputs[0].data);
+        reference_sum(
+            &self.kernel,
+            &[],
+            &[],
+            self.cutoff,
+            inputs,
+            &mut outputs[0].data,
+        );
     }
 }
 

@@ -139,6 +139,40 @@ impl NearTable {
     }
 }
 
+/// The distance past which the PSE near field stays below `fraction` of the Stokes
+/// self-mobility 1 / (6 pi eta a) (both f and g), for radius a and splitting parameter
+/// xi: the truncation error of a pair left out. The near field decays as
+/// exp(-xi^2 (r - 2a)^2) (the two shells of radius a smear the Gaussian screening), so
+/// the cutoff is about 2a + sqrt(-ln fraction) / xi at large xi a and
+/// sqrt(-ln fraction) / xi at small; found by stepping out in f64 from the contact
+/// distance, past the last point above the fraction.
+pub fn near_cutoff(a: f64, xi: f64, fraction: f64) -> f64 {
+    let reach = 2.0 * a + (-(fraction / 100.0).ln()).sqrt() / xi;
+    let far = FarQuadrature::new(a, 1.0, xi, reach);
+    let limit = fraction / (6.0 * PI * a);
+    let above = |r: f64| {
+        let (rf, rg) = rpy(r, a, 1.0);
+        let (ff, fg) = far.at(r);
+        (rf - ff).abs() > limit || (rg - fg).abs() > limit
+    };
+    // Inwards from the reach to the first point above, then bisection to 1e-6 of it.
+    let steps = 400;
+    let dr = reach / steps as f64;
+    let Some(i) = (0..=steps).rev().find(|&i| above(i as f64 * dr)) else {
+        return dr;
+    };
+    let (mut lo, mut hi) = (i as f64 * dr, (i + 1) as f64 * dr);
+    while hi - lo > 1e-6 * reach {
+        let mid = 0.5 * (lo + hi);
+        if above(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
 /// The self term of the PSE near field in closed form (Fiore et al. 2017; digest
 /// section 4.3), times 6 pi eta a: (1 / (4 sqrt(pi) xi a)) (1 - exp(-4 a^2 xi^2)) +
 /// erfc(2 a xi).
@@ -231,14 +265,25 @@ mod tests {
     }
 
     #[test]
-    fn near_field_decays_like_a_gaussian() {
-        // exp(-xi^2 r^2) sets the cutoff: at r_c = sqrt(-ln eps) / xi the near field is
-        // a small multiple of eps times RPY there.
-        let (xi, eps) = (0.5, 1e-3);
-        let rc = (-f64::ln(eps)).sqrt() / xi;
-        let t = NearTable::new(1.0, 1.0, xi, rc, 3);
-        let (f, _) = rpy(rc, 1.0, 1.0);
-        let near = t.f[2].abs();
-        assert!(near < 10.0 * eps * f, "near {near} against RPY {f}");
+    fn near_cutoff_bounds_the_left_out_pairs() {
+        // Past the cutoff, the near field stays below the fraction of the self-mobility;
+        // just inside it, it does not. Large xi a: well past sqrt(-ln eps) / xi.
+        let self_mobility = 1.0 / (6.0 * PI);
+        for (xi, eps) in [(0.5, 1e-3), (1.2, 1e-3), (0.8, 1e-4)] {
+            let rc = near_cutoff(1.0, xi, eps);
+            let t = NearTable::new(1.0, 1.0, xi, 2.0 * rc, 401);
+            for (i, (f, g)) in t.f.iter().zip(&t.g).enumerate() {
+                let r = i as f64 * 2.0 * rc / 400.0;
+                if r >= rc {
+                    assert!(
+                        f.abs().max(g.abs()) <= eps * self_mobility,
+                        "xi {xi}: r {r}"
+                    );
+                }
+            }
+            let inside = NearTable::new(1.0, 1.0, xi, 0.98 * rc, 2);
+            assert!(inside.f[1].abs().max(inside.g[1].abs()) > 0.5 * eps * self_mobility);
+            assert!(rc > (-f64::ln(eps)).sqrt() / xi, "xi {xi}: {rc}");
+        }
     }
 }

@@ -19,7 +19,7 @@ use crate::util::{Rng, gpu, registry, root};
 
 /// One kernel cache for the module: the cases share their pipelines (lavapipe compiles
 /// slowly), whatever the seed or the particle positions.
-fn cache() -> std::sync::MutexGuard<'static, KernelCache> {
+pub(crate) fn cache() -> std::sync::MutexGuard<'static, KernelCache> {
     static CACHE: OnceLock<Mutex<KernelCache>> = OnceLock::new();
     CACHE
         .get_or_init(Default::default)
@@ -28,7 +28,7 @@ fn cache() -> std::sync::MutexGuard<'static, KernelCache> {
 }
 
 /// `graphs/<name>` loaded with these `--set` values (JSON literals) and seed.
-fn load_with(name: &str, sets: &[(&str, &str)], seed: u64) -> Graph {
+pub(crate) fn load_with(name: &str, sets: &[(&str, &str)], seed: u64) -> Graph {
     let overrides = sets
         .iter()
         .map(|(k, v)| {
@@ -45,7 +45,7 @@ fn load_with(name: &str, sets: &[(&str, &str)], seed: u64) -> Graph {
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
-fn particles(rows: &[[f64; 3]]) -> HostArray {
+pub(crate) fn particles(rows: &[[f64; 3]]) -> HostArray {
     HostArray::f32(
         ValueType::Particles {
             n: rows.len() as u32,
@@ -55,7 +55,7 @@ fn particles(rows: &[[f64; 3]]) -> HostArray {
     )
 }
 
-fn rows(a: &HostArray) -> Vec<[f64; 3]> {
+pub(crate) fn rows(a: &HostArray) -> Vec<[f64; 3]> {
     a.data
         .to_f64()
         .chunks(3)
@@ -81,12 +81,12 @@ fn fcm_plan(gpu: &GpuContext, g: &Graph, n: u32, torques: bool, outputs: &[&str]
     mesoflow::plan::plan(g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"))
 }
 
-fn compile<'a>(gpu: &'a GpuContext, g: &'a Graph, plan: &'a Plan) -> Program<'a> {
+pub(crate) fn compile<'a>(gpu: &'a GpuContext, g: &'a Graph, plan: &'a Plan) -> Program<'a> {
     Program::compile(gpu, g, plan, &mut cache()).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Outputs of a compiled fcm.json for these inputs, one evaluation.
-fn eval(
+pub(crate) fn eval(
     program: &mut Program,
     positions: &[[f64; 3]],
     forces: &[[f64; 3]],
@@ -120,7 +120,7 @@ fn eval(
 /// Hasimoto's periodic self-mobility of a sphere, times 6 pi eta a (cubic box of side L):
 /// 1 - 2.837297 x + (4 pi / 3) x^3 - 27.4 x^6, x = a / L (thesis Eq. 21.18), written here
 /// from the paper's coefficients.
-fn hasimoto(a: f64, l: f64) -> f64 {
+pub(crate) fn hasimoto(a: f64, l: f64) -> f64 {
     let x = a / l;
     1.0 - 2.837_297_479 * x + 4.0 * PI / 3.0 * x.powi(3) - 27.3594 * x.powi(6)
 }
@@ -317,7 +317,7 @@ fn grand_mobility(program: &mut Program, x: &[[f64; 3]]) -> Vec<Vec<f64>> {
 }
 
 /// Cholesky in f64: `None` when the matrix is not positive definite.
-fn cholesky_min_pivot(m: &[Vec<f64>]) -> Option<f64> {
+pub(crate) fn cholesky_min_pivot(m: &[Vec<f64>]) -> Option<f64> {
     let n = m.len();
     let mut l = vec![vec![0.0; n]; n];
     let mut min_pivot = f64::INFINITY;

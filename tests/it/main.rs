@@ -12,6 +12,7 @@ mod lanczos;
 mod nodes;
 mod pairs;
 mod plan;
+mod pse;
 mod random;
 mod reduce;
 mod run;

@@ -252,15 +252,12 @@ fn neighbour_sums_cross_faces_stop_at_the_cutoff_and_skip_loners() {
     let lengths = [8.0, 8.0, 8.0];
     let pos = vec![
         // A pair across the x faces (0.2 apart through the face).
-        -3.9, 0.0, 0.0, 3.9, 0.0, 0.0,
-        // A pair across a corner.
+        -3.9, 0.0, 0.0, 3.9, 0.0, 0.0, // A pair across a corner.
         -3.95, -3.95, -3.95, 3.95, 3.95, 3.95,
         // A pair exactly at the cutoff (2), and one just past it.
         0.0, 2.0, 1.0, 2.0, 2.0, 1.0, //
-        0.0, -2.0, 1.0, 2.0000005, -2.0, 1.0,
-        // Alone.
-        0.0, 0.0, -2.5,
-        // Coincident particles.
+        0.0, -2.0, 1.0, 2.0000005, -2.0, 1.0, // Alone.
+        0.0, 0.0, -2.5, // Coincident particles.
         -1.5, -1.0, 3.0, -1.5, -1.0, 3.0,
     ];
     let vals: Vec<f64> = (0..pos.len()).map(|i| 1.0 + (i % 5) as f64).collect();

@@ -1,0 +1,504 @@
+//! graphs/pse.json and graphs/rpy_open.json against physics: the periodic RPY mobility
+//! by an f64 Ewald sum written here (Hasimoto's split at its own xi: a real-space lattice
+//! sum of the near field, from a Simpson quadrature of its radial integral, plus a direct
+//! Fourier sum of the far field), itself checked against Hasimoto's self-mobility;
+//! independence of the split; overlapping pairs; symmetry and positive definiteness;
+//! fluctuation-dissipation; open-boundary RPY against the closed form.
+
+use std::collections::BTreeMap;
+use std::f64::consts::PI;
+
+use mesoflow::exec::{Profile, RunOptions};
+use mesoflow::graph::{self, Graph, LoadOptions};
+use mesoflow::plan::{Plan, PlanOptions};
+use mesoflow::value::{HostArray, ValueType};
+
+use crate::fcm::{cholesky_min_pivot, compile, eval, hasimoto, load_with, particles, rows};
+use crate::util::{Rng, gpu, registry, root};
+
+type M3 = [[f64; 3]; 3];
+
+/// Free-space RPY (eta = 1) as f I + g r^ r^, written here from the closed forms.
+fn rpy_fg(r: f64, a: f64) -> (f64, f64) {
+    if r >= 2.0 * a {
+        let c = 1.0 / (8.0 * PI * r);
+        (
+            c * (1.0 + 2.0 * a * a / (3.0 * r * r)),
+            c * (1.0 - 2.0 * a * a / (r * r)),
+        )
+    } else {
+        let c = 1.0 / (6.0 * PI * a);
+        (c * (1.0 - 9.0 * r / (32.0 * a)), c * 3.0 * r / (32.0 * a))
+    }
+}
+
+/// Hasimoto's splitting function.
+fn split_h(k: f64, xi: f64) -> f64 {
+    let q = k * k / (4.0 * xi * xi);
+    (1.0 + q) * (-q).exp()
+}
+
+fn sinc(x: f64) -> f64 {
+    if x.abs() < 1e-8 { 1.0 } else { x.sin() / x }
+}
+
+/// The near field (f, g) at r: RPY minus the free-space far part, the latter
+/// 1/(2 pi^2) int dk sinc^2(ka) H(k) [(j0 - j1/x) I + j2 r^ r^] by Simpson's rule.
+fn near(r: f64, a: f64, xi: f64) -> (f64, f64) {
+    let k_max = 2.0 * xi * 40f64.sqrt();
+    let steps = 4000;
+    let dk = k_max / steps as f64;
+    let (mut fi, mut gi) = (0.0, 0.0);
+    for s in 0..=steps {
+        let k = s as f64 * dk;
+        let w = if s == 0 || s == steps {
+            1.0
+        } else if s % 2 == 1 {
+            4.0
+        } else {
+            2.0
+        };
+        let x = k * r;
+        let (iso, rr) = if x < 1e-3 {
+            (2.0 / 3.0 - 2.0 * x * x / 15.0, x * x / 15.0)
+        } else {
+            let (sn, cs) = x.sin_cos();
+            let j0 = sn / x;
+            let j1 = sn / (x * x) - cs / x;
+            let j2 = (3.0 / (x * x) - 1.0) * sn / x - 3.0 * cs / (x * x);
+            (j0 - j1 / x, j2)
+        };
+        let s2 = sinc(k * a).powi(2) * split_h(k, xi) * w * dk / 3.0 / (2.0 * PI * PI);
+        fi += s2 * iso;
+        gi += s2 * rr;
+    }
+    let (f, g) = rpy_fg(r, a);
+    (f - fi, g - gi)
+}
+
+fn tensor(f: f64, g: f64, r: [f64; 3]) -> M3 {
+    let d2: f64 = r.iter().map(|x| x * x).sum();
+    let mut m = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            m[i][j] =
+                if i == j { f } else { 0.0 } + if d2 > 0.0 { g * r[i] * r[j] / d2 } else { 0.0 };
+        }
+    }
+    m
+}
+
+/// The periodic RPY pair mobility (eta = 1) at separation r in a cubic box of side l, by
+/// Ewald summation with splitting parameter xi: near field over the lattice images
+/// within 7 / xi, far field over the wave vectors up to where H < 1e-16.
+fn ewald_rpy(r: [f64; 3], l: f64, a: f64, xi: f64) -> M3 {
+    let mut m = [[0.0; 3]; 3];
+    let reach = 7.0 / xi;
+    let images = (reach / l).ceil() as i64 + 1;
+    for nx in -images..=images {
+        for ny in -images..=images {
+            for nz in -images..=images {
+                let d = [
+                    r[0] + nx as f64 * l,
+                    r[1] + ny as f64 * l,
+                    r[2] + nz as f64 * l,
+                ];
+                let dist = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if dist > reach {
+                    continue;
+                }
+                let (f, g) = near(dist, a, xi);
+                let t = tensor(f, g, d);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        m[i][j] += t[i][j];
+                    }
+                }
+            }
+        }
+    }
+    let k_max = 2.0 * xi * 40f64.sqrt();
+    let dk = 2.0 * PI / l;
+    let kn = (k_max / dk).ceil() as i64;
+    let volume = l * l * l;
+    for kx in -kn..=kn {
+        for ky in -kn..=kn {
+            for kz in -kn..=kn {
+                if kx == 0 && ky == 0 && kz == 0 {
+                    continue;
+                }
+                let k = [kx as f64 * dk, ky as f64 * dk, kz as f64 * dk];
+                let k2: f64 = k.iter().map(|x| x * x).sum();
+                if k2 > k_max * k_max {
+                    continue;
+                }
+                let kk = k2.sqrt();
+                let phase = (k[0] * r[0] + k[1] * r[1] + k[2] * r[2]).cos();
+                let c = phase * sinc(kk * a).powi(2) * split_h(kk, xi) / (k2 * volume);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        let p = if i == j { 1.0 } else { 0.0 } - k[i] * k[j] / k2;
+                        m[i][j] += c * p;
+                    }
+                }
+            }
+        }
+    }
+    m
+}
+
+#[test]
+fn ewald_reference_gives_hasimoto_at_any_split() {
+    // The reference itself: its self-mobility is Hasimoto's (whose expansion in a / L
+    // stops at x^6, with a coefficient given to 6 digits: 1e-5 is its own accuracy
+    // here), and any two splits agree to the quadrature's accuracy.
+    let want = hasimoto(1.0, 16.0) / (6.0 * PI);
+    let r = [1.3, -0.4, 2.2];
+    let (a, b) = (ewald_rpy(r, 16.0, 1.0, 0.5), ewald_rpy(r, 16.0, 1.0, 1.0));
+    for xi in [0.5, 1.0] {
+        let m = ewald_rpy([0.0; 3], 16.0, 1.0, xi);
+        for (i, row) in m.iter().enumerate() {
+            assert!(
+                (row[i] / want - 1.0).abs() < 1e-5,
+                "xi {xi}: {} against {want}",
+                row[i]
+            );
+        }
+    }
+    for i in 0..3 {
+        for j in 0..3 {
+            assert!((a[i][j] - b[i][j]).abs() < 1e-9 * want, "pair {i}{j}");
+        }
+    }
+}
+
+/// The plan of pse.json for `n` particles and these outputs.
+fn pse_plan(gpu: &mesoflow::gpu::GpuContext, g: &Graph, n: u32, outputs: &[&str]) -> Plan {
+    let p3 = ValueType::Particles { n, k: 3 };
+    let opts = PlanOptions {
+        outputs: Some(outputs.iter().map(|s| s.to_string()).collect()),
+        inputs: [("positions".to_string(), p3), ("forces".to_string(), p3)]
+            .into_iter()
+            .collect(),
+        fuse: true,
+    };
+    mesoflow::plan::plan(g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn random_positions(rng: &mut Rng, n: usize, l: f64) -> Vec<[f64; 3]> {
+    (0..n)
+        .map(|_| [0, 1, 2].map(|_| rng.uniform(-0.5, 0.5) * l))
+        .collect()
+}
+
+#[test]
+fn self_mobility_is_hasimoto_whatever_the_split() {
+    let Some(gpu) = gpu() else { return };
+    let (l, tol) = (16.0, 1e-3);
+    let want = hasimoto(1.0, l) / (6.0 * PI);
+    let mut rng = Rng::new(5);
+    let spots = random_positions(&mut rng, 4, l);
+    for xi in ["0.4", "0.6", "1.0", "1.6"] {
+        let g = load_with(
+            "pse.json",
+            &[
+                ("box", "[16, 16, 16]"),
+                ("split", xi),
+                ("tolerance", "1e-3"),
+            ],
+            0,
+        );
+        let plan = pse_plan(&gpu, &g, 1, &["velocities"]);
+        let mut program = compile(&gpu, &g, &plan);
+        let mut worst: f64 = 0.0;
+        for x in &spots {
+            for a in 0..3 {
+                let mut f = [[0.0; 3]];
+                f[0][a] = 1.0;
+                let v = eval(&mut program, &[*x], &f, None)["velocities"][0];
+                worst = worst.max((v[a] / want - 1.0).abs());
+                // No coupling between axes for a single sphere.
+                for b in 0..3 {
+                    if b != a {
+                        assert!(v[b].abs() < tol * want, "xi {xi}: cross term {}", v[b]);
+                    }
+                }
+            }
+        }
+        eprintln!("split {xi}: worst self-mobility error {worst:.2e}");
+        assert!(worst < tol, "split {xi}: self-mobility error {worst:e}");
+    }
+}
+
+#[test]
+fn pair_mobility_matches_the_ewald_sum_overlapping_or_not() {
+    let Some(gpu) = gpu() else { return };
+    let (l, tol) = (16.0, 1e-3);
+    let m_self = hasimoto(1.0, l) / (6.0 * PI);
+    let mut rng = Rng::new(9);
+    // Overlapping (0.5 a, 1.3 a), at contact, and apart; random directions.
+    let separations = [0.5, 1.3, 2.0, 3.1, 5.5, 7.9];
+    let pairs: Vec<([f64; 3], [f64; 3])> = separations
+        .iter()
+        .map(|&d| {
+            let u = [0, 1, 2].map(|_| rng.uniform(-1.0, 1.0));
+            let nu = u.iter().map(|x| x * x).sum::<f64>().sqrt();
+            let x0 = [0, 1, 2].map(|_| rng.uniform(-0.5, 0.5) * l);
+            (x0, [0, 1, 2].map(|c| x0[c] + d * u[c] / nu))
+        })
+        .collect();
+    let references: Vec<M3> = pairs
+        .iter()
+        .map(|(x0, x1)| ewald_rpy([0, 1, 2].map(|c| x1[c] - x0[c]), l, 1.0, 0.8))
+        .collect();
+    for xi in ["0.45", "1.2"] {
+        let g = load_with(
+            "pse.json",
+            &[
+                ("box", "[16, 16, 16]"),
+                ("split", xi),
+                ("tolerance", "1e-3"),
+            ],
+            0,
+        );
+        let plan = pse_plan(&gpu, &g, 2, &["velocities"]);
+        let mut program = compile(&gpu, &g, &plan);
+        let mut worst: f64 = 0.0;
+        for ((x0, x1), want) in pairs.iter().zip(&references) {
+            for b in 0..3 {
+                let mut f = [[0.0; 3]; 2];
+                f[0][b] = 1.0;
+                let v = &eval(&mut program, &[*x0, *x1], &f, None)["velocities"];
+                for a in 0..3 {
+                    // Particle 1 moves by M(x1 - x0) F.
+                    worst = worst.max((v[1][a] - want[a][b]).abs() / m_self);
+                }
+            }
+        }
+        eprintln!("split {xi}: worst pair-mobility error / self {worst:.2e}");
+        assert!(worst < tol, "split {xi}: pair error {worst:e}");
+    }
+}
+
+#[test]
+fn mobility_matrix_is_symmetric_and_positive_definite() {
+    let Some(gpu) = gpu() else { return };
+    let mut rng = Rng::new(21);
+    let mut x = random_positions(&mut rng, 4, 12.0);
+    // An overlapping pair and a coincident one.
+    x[1] = [x[0][0] + 0.7, x[0][1], x[0][2] - 0.4];
+    x[3] = x[2];
+    let g = load_with(
+        "pse.json",
+        &[("box", "[12, 12, 12]"), ("tolerance", "1e-3")],
+        0,
+    );
+    let plan = pse_plan(&gpu, &g, 4, &["velocities"]);
+    let mut program = compile(&gpu, &g, &plan);
+    let n = x.len();
+    let mut m = vec![vec![0.0; 3 * n]; 3 * n];
+    for j in 0..n {
+        for b in 0..3 {
+            let mut f = vec![[0.0; 3]; n];
+            f[j][b] = 1.0;
+            let v = &eval(&mut program, &x, &f, None)["velocities"];
+            for i in 0..n {
+                for a in 0..3 {
+                    m[3 * i + a][3 * j + b] = v[i][a];
+                }
+            }
+        }
+    }
+    let scale = m[0][0];
+    let mut asym: f64 = 0.0;
+    for (i, row) in m.iter().enumerate() {
+        for (j, v) in row.iter().enumerate() {
+            asym = asym.max((v - m[j][i]).abs() / scale);
+        }
+    }
+    assert!(asym < 1e-4, "asymmetry {asym:e}");
+    // Coincident spheres have a singular mobility (they move as one): symmetrise and
+    // check positive semi-definiteness with the pair merged, then the rest strictly.
+    let keep: Vec<usize> = (0..3 * n).filter(|&i| i < 9).collect();
+    let sub: Vec<Vec<f64>> = keep
+        .iter()
+        .map(|&i| keep.iter().map(|&j| 0.5 * (m[i][j] + m[j][i])).collect())
+        .collect();
+    let pivot = cholesky_min_pivot(&sub).expect("positive definite");
+    assert!(pivot > 1e-3 * scale, "smallest pivot {pivot}");
+}
+
+/// Covariance of the noise over many steps against the mobility: for two overlapping
+/// particles the near field's Lanczos square root and the far field's Fourier noise
+/// together give M.
+#[test]
+fn noise_covariance_is_the_mobility() {
+    let Some(gpu) = gpu() else { return };
+    let x = vec![[0.3, -1.1, 2.0], [1.4, -0.6, 2.5]];
+    let sets = r#"{"box": [10, 10, 10], "tolerance": 0.001}"#;
+    let g = load_with("pse.json", &[("box", "[10, 10, 10]")], 0);
+    let plan = pse_plan(&gpu, &g, 2, &["velocities"]);
+    let mut program = compile(&gpu, &g, &plan);
+    let mut m = [[[0.0; 3]; 2]; 2];
+    for j in 0..2 {
+        for a in 0..3 {
+            let mut f = vec![[0.0; 3]; 2];
+            f[j][a] = 1.0;
+            let v = &eval(&mut program, &x, &f, None)["velocities"];
+            for i in 0..2 {
+                m[i][j][a] = v[i][a];
+            }
+        }
+    }
+    drop(program);
+    let pse = root().join("graphs/pse.json");
+    let json = format!(
+        r#"{{"mesoflow": 1,
+          "inputs": {{"positions": {{"type": "particles", "rows": 2, "cols": 3}}}},
+          "state": {{"sq": {{"init": "zero.out", "next": "sq_next.out"}},
+                    "pair": {{"init": "zero_row.out", "next": "pair_next.out"}}}},
+          "nodes": [
+            {{"id": "zero", "kind": "constant", "params": {{"value": 0}}, "inputs": {{"like": "inputs.positions"}}}},
+            {{"id": "zero_row", "kind": "constant", "params": {{"value": 0, "rows": 1, "cols": 3}}}},
+            {{"id": "pse", "graph": "{}", "params": {sets}, "inputs": {{"positions": "inputs.positions", "forces": "zero.out"}}}},
+            {{"id": "sq", "kind": "multiply", "inputs": {{"a": "pse.noise", "b": "pse.noise"}}}},
+            {{"id": "sq_next", "kind": "add", "inputs": {{"a": "state.sq", "b": "sq.out"}}}},
+            {{"id": "sum", "kind": "column_reduce", "params": {{"op": "sum"}}, "inputs": {{"x": "pse.noise"}}}},
+            {{"id": "sum_sq", "kind": "multiply", "inputs": {{"a": "sum.out", "b": "sum.out"}}}},
+            {{"id": "pair_next", "kind": "add", "inputs": {{"a": "state.pair", "b": "sum_sq.out"}}}}
+          ],
+          "outputs": {{"sq": "state.sq", "pair": "state.pair"}}}}"#,
+        pse.display()
+    );
+    let dir = crate::util::tmpdir("pse-fdt");
+    let path = crate::util::write_graph(&dir, "noise_stats.json", &json);
+    let steps = 4000u64;
+    let g = graph::load(
+        &path,
+        registry(),
+        &LoadOptions {
+            steps,
+            seed: 17,
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: [("positions".to_string(), ValueType::Particles { n: 2, k: 3 })]
+            .into_iter()
+            .collect(),
+        fuse: true,
+    };
+    let plan = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
+    let mut program = compile(&gpu, &g, &plan);
+    program
+        .upload(
+            &[("positions".to_string(), particles(&x))]
+                .into_iter()
+                .collect(),
+        )
+        .unwrap();
+    program
+        .run(&RunOptions {
+            steps,
+            profile: Profile::Off,
+            progress: false,
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    let out: BTreeMap<String, HostArray> = program.read_outputs().unwrap().into_iter().collect();
+    let _ = std::fs::remove_dir_all(&dir);
+    let sq = rows(&out["sq"]);
+    let pair = rows(&out["pair"])[0];
+    let s = steps as f64;
+    // A variance from s normal samples has relative standard deviation sqrt(2 / s)
+    // (2.2 % here); 5 of them is the bound.
+    let bound = 5.0 * (2.0 / s).sqrt();
+    for a in 0..3 {
+        for i in 0..2 {
+            let ratio = sq[i][a] / s / m[i][i][a];
+            eprintln!("particle {i} axis {a}: variance / M = {ratio}");
+            assert!(
+                (ratio - 1.0).abs() <= bound,
+                "particle {i} axis {a}: {ratio}"
+            );
+        }
+        let want = m[0][0][a] + m[1][1][a] + m[0][1][a] + m[1][0][a];
+        let ratio = pair[a] / s / want;
+        eprintln!("axis {a}: variance of the sum / M = {ratio}");
+        assert!((ratio - 1.0).abs() <= bound, "axis {a}: {ratio}");
+    }
+}
+
+#[test]
+fn open_boundary_rpy_matches_the_closed_form() {
+    let Some(gpu) = gpu() else { return };
+    let mut rng = Rng::new(2);
+    let mut x = random_positions(&mut rng, 40, 10.0);
+    x[1] = [x[0][0] + 0.9, x[0][1], x[0][2]];
+    let f: Vec<[f64; 3]> = (0..x.len())
+        .map(|_| [0, 1, 2].map(|_| rng.uniform(-1.0, 1.0)))
+        .collect();
+    let g = load_with(
+        "rpy_open.json",
+        &[("radius", "0.8"), ("viscosity", "2.0")],
+        0,
+    );
+    let plan = pse_plan(&gpu, &g, x.len() as u32, &["velocities"]);
+    let mut program = compile(&gpu, &g, &plan);
+    let v = &eval(&mut program, &x, &f, None)["velocities"];
+    let x32 = rows(&particles(&x));
+    let f32_ = rows(&particles(&f));
+    let mut worst: f64 = 0.0;
+    let mut scale: f64 = 0.0;
+    for i in 0..x.len() {
+        let mut want = [0.0; 3];
+        for j in 0..x.len() {
+            let r = [0, 1, 2].map(|c| x32[i][c] - x32[j][c]);
+            let d = r.iter().map(|q| q * q).sum::<f64>().sqrt();
+            let (ff, gg) = rpy_fg(d, 0.8);
+            let t = tensor(ff / 2.0, gg / 2.0, r);
+            for a in 0..3 {
+                want[a] += (0..3).map(|b| t[a][b] * f32_[j][b]).sum::<f64>();
+            }
+        }
+        for a in 0..3 {
+            worst = worst.max((v[i][a] - want[a]).abs());
+            scale = scale.max(want[a].abs());
+        }
+    }
+    assert!(worst < 1e-5 * scale, "rpy_open error {:e}", worst / scale);
+}
+
+#[test]
+fn bad_settings_get_clear_errors() {
+    let load_err = |sets: &[(&str, &str)]| -> String {
+        let overrides = sets
+            .iter()
+            .map(|(k, v)| {
+                let json: serde_json::Value = serde_json::from_str(v).unwrap();
+                (
+                    k.to_string(),
+                    mesoflow::expr::ParamValue::from_json(&json).unwrap(),
+                )
+            })
+            .collect();
+        match graph::load(
+            &root().join("graphs/pse.json"),
+            registry(),
+            &LoadOptions {
+                overrides,
+                ..Default::default()
+            },
+        ) {
+            Ok(_) => panic!("{sets:?} loaded"),
+            Err(e) => e.to_string(),
+        }
+    };
+    // A split so small that the near field reaches past half the box.
+    let e = load_err(&[("box", "[8, 8, 8]"), ("split", "0.3")]);
+    assert!(e.contains("exceeds half the periodic box"), "{e}");
+    // A split so large that the far grid explodes.
+    let e = load_err(&[("box", "[64, 64, 64]"), ("split", "200")]);
+    assert!(e.contains("lower the split"), "{e}");
+}
