@@ -77,7 +77,7 @@ fn deviations(tolerance: f64) -> f64 {
 pub fn support(tolerance: f64, cells: &[u32]) -> u32 {
     let m = deviations(tolerance);
     let mut p = ((m / 0.976).powi(2) / std::f64::consts::PI).ceil() as u32;
-    if p % 2 == 0 {
+    if p.is_multiple_of(2) {
         p += 1;
     }
     let smallest = cells.iter().copied().min().unwrap_or(p);
@@ -107,6 +107,62 @@ pub fn neighbour_cells(lengths: &[f64], cutoff: f64) -> Vec<u32> {
         .collect()
 }
 
+/// The periodic RPY mobility tensor (row-major 3x3) at separation r in a cubic box of
+/// side l, in f64 by Ewald summation at splitting parameter `xi`: the near field over
+/// the lattice images (a fine table of `rpy::NearTable`) plus the direct Fourier sum of
+/// the far field. `mesoflow bench pse` measures errors against it (at a split other than
+/// the one benchmarked); the tests have an independent copy.
+pub fn periodic_rpy(r: [f64; 3], l: f64, a: f64, eta: f64, xi: f64) -> [[f64; 3]; 3] {
+    use std::f64::consts::PI;
+    let reach = crate::nodes::pairs::rpy::near_cutoff(a, xi, 1e-12);
+    let table = crate::nodes::pairs::rpy::NearTable::new(a, eta, xi, reach, 20001);
+    let mut m = [[0.0; 3]; 3];
+    let add = |f: f64, g: f64, d: [f64; 3], m: &mut [[f64; 3]; 3]| {
+        let d2: f64 = d.iter().map(|x| x * x).sum();
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += if i == j { f } else { 0.0 } + if d2 > 0.0 { g * d[i] * d[j] / d2 } else { 0.0 };
+            }
+        }
+    };
+    let images = (reach / l).ceil() as i64 + 1;
+    for nx in -images..=images {
+        for ny in -images..=images {
+            for nz in -images..=images {
+                let d = [r[0] + nx as f64 * l, r[1] + ny as f64 * l, r[2] + nz as f64 * l];
+                let dist = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if dist <= reach {
+                    let (f, g) = table.at(dist);
+                    add(f, g, d, &mut m);
+                }
+            }
+        }
+    }
+    let k_max = 2.0 * xi * 40f64.sqrt();
+    let dk = 2.0 * PI / l;
+    let kn = (k_max / dk).ceil() as i64;
+    for kx in -kn..=kn {
+        for ky in -kn..=kn {
+            for kz in -kn..=kn {
+                let k = [kx as f64 * dk, ky as f64 * dk, kz as f64 * dk];
+                let k2: f64 = k.iter().map(|x| x * x).sum();
+                if k2 == 0.0 || k2 > k_max * k_max {
+                    continue;
+                }
+                let phase = (k[0] * r[0] + k[1] * r[1] + k[2] * r[2]).cos();
+                let c = phase * crate::nodes::spectral::pse_screening(k2, a, xi, 0.0)
+                    / (eta * k2 * l * l * l);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        m[i][j] += c * (if i == j { 1.0 } else { 0.0 } - k[i] * k[j] / k2);
+                    }
+                }
+            }
+        }
+    }
+    m
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -120,6 +176,13 @@ mod tests {
         assert!(rc > 5.2565 && rc < 6.5, "{rc}");
         assert_eq!(neighbour_cells(&[128.0; 3], 5.3), vec![24; 3]);
         assert_eq!(support(1e-3, &g), 7);
+    }
+
+    #[test]
+    fn periodic_rpy_self_is_hasimoto() {
+        let m = periodic_rpy([0.0; 3], 20.0, 1.0, 1.0, 0.7);
+        let want = crate::nodes::fcm::plan::hasimoto(1.0, 20.0) / (6.0 * std::f64::consts::PI);
+        assert!((m[0][0] / want - 1.0).abs() < 1e-5, "{} against {want}", m[0][0]);
     }
 
     #[test]

@@ -67,10 +67,10 @@ struct Row {
 }
 
 /// A small deterministic generator (xorshift) for positions and forces.
-struct Rng(u64);
+pub(super) struct Rng(pub(super) u64);
 
 impl Rng {
-    fn uniform(&mut self) -> f64 {
+    pub(super) fn uniform(&mut self) -> f64 {
         self.0 ^= self.0 << 13;
         self.0 ^= self.0 >> 7;
         self.0 ^= self.0 << 17;
@@ -78,7 +78,7 @@ impl Rng {
     }
 }
 
-fn load(path: &Path, sets: &[(&str, ParamValue)], registry: &Registry) -> Result<Graph, CliError> {
+pub(super) fn load(path: &Path, sets: &[(&str, ParamValue)], registry: &Registry) -> Result<Graph, CliError> {
     let overrides = sets
         .iter()
         .map(|(k, v)| (k.to_string(), v.clone()))
@@ -95,7 +95,7 @@ fn load(path: &Path, sets: &[(&str, ParamValue)], registry: &Registry) -> Result
     .map_err(|p| CliError::Input(p.to_string()))
 }
 
-fn param(g: &Graph, name: &str) -> Option<ParamValue> {
+pub(super) fn param(g: &Graph, name: &str) -> Option<ParamValue> {
     g.params
         .iter()
         .find(|p| p.name == name)
@@ -113,7 +113,7 @@ fn particles(rows: &[[f64; 3]]) -> HostArray {
 }
 
 /// Velocities of `x` under forces `f`, one evaluation of a compiled graph.
-fn velocities(
+pub(super) fn velocities(
     program: &mut Program,
     x: &[[f64; 3]],
     f: &[[f64; 3]],
@@ -226,7 +226,7 @@ fn accuracy(
     Ok((self_max, self_mean, pair))
 }
 
-fn plan_for(gpu: &GpuContext, g: &Graph, n: u32) -> Result<plan::Plan, CliError> {
+pub(super) fn plan_for(gpu: &GpuContext, g: &Graph, n: u32) -> Result<plan::Plan, CliError> {
     let p3 = ValueType::Particles { n, k: 3 };
     let opts = PlanOptions {
         outputs: Some(vec!["velocities".into()]),
@@ -239,7 +239,7 @@ fn plan_for(gpu: &GpuContext, g: &Graph, n: u32) -> Result<plan::Plan, CliError>
 }
 
 /// GPU time of one evaluation of `output` for N random particles in a cube of side L.
-fn timed(
+pub(super) fn timed(
     gpu: &GpuContext,
     g: &Graph,
     l: f64,

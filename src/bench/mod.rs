@@ -8,6 +8,7 @@
 mod fcm;
 mod fft;
 mod primitives;
+mod pse;
 mod reduce;
 mod spread;
 
@@ -282,6 +283,46 @@ pub enum BenchCommand {
         #[arg(long)]
         plot: Option<PathBuf>,
     },
+    /// PSE speed against error per split (time of one M F, with --noise also M F +
+    /// M^(1/2) W; self- and pair-mobility errors against f64 references).
+    Pse {
+        /// The PSE graph file.
+        #[arg(long, default_value = "graphs/pse.json")]
+        graph: PathBuf,
+        /// Ewald splitting parameters xi to measure.
+        #[arg(long, value_delimiter = ',', default_values_t = [0.3, 0.4, 0.5, 0.6, 0.8, 1.0])]
+        splits: Vec<f64>,
+        #[arg(long, default_value_t = 1e-3)]
+        tolerance: f64,
+        /// Box sides and particle counts as L:N (default: UAMMD's, 64:10000,128:100000).
+        #[arg(long, value_delimiter = ',')]
+        sizes: Vec<String>,
+        /// Also time M F + sqrt(2 kT) M^(1/2) W (kT = 1).
+        #[arg(long)]
+        noise: bool,
+        #[arg(long, default_value_t = 20)]
+        reps: u64,
+        /// Side of the cubic box (in radii) the errors are measured in.
+        #[arg(long, default_value_t = 24.0)]
+        error_box: f64,
+    },
+}
+
+/// `--sizes` values L:N.
+fn parse_sizes(sizes: &[String]) -> Result<Vec<(f64, u32)>, CliError> {
+    sizes
+        .iter()
+        .map(|s| {
+            let parsed = s
+                .split_once(':')
+                .and_then(|(l, n)| Some((l.parse::<f64>().ok()?, n.parse::<u32>().ok()?)));
+            parsed.filter(|(l, n)| *l > 0.0 && *n > 0).ok_or_else(|| {
+                CliError::Input(format!(
+                    "--sizes `{s}`: expected L:N with L > 0 and N > 0 (e.g. 129:100000)"
+                ))
+            })
+        })
+        .collect()
 }
 
 pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
@@ -325,19 +366,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             } else {
                 kernels
             };
-            let sizes = sizes
-                .iter()
-                .map(|s| {
-                    let parsed = s
-                        .split_once(':')
-                        .and_then(|(l, n)| Some((l.parse::<f64>().ok()?, n.parse::<u32>().ok()?)));
-                    parsed.filter(|(l, n)| *l > 0.0 && *n > 0).ok_or_else(|| {
-                        CliError::Input(format!(
-                            "--sizes `{s}`: expected L:N with L > 0 and N > 0 (e.g. 129:100000)"
-                        ))
-                    })
-                })
-                .collect::<Result<Vec<_>, _>>()?;
+            let sizes = parse_sizes(&sizes)?;
             fcm::run(&fcm::FcmBench {
                 graph,
                 kernels,
@@ -350,6 +379,23 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
                 plot,
             })
         }
+        BenchCommand::Pse {
+            graph,
+            splits,
+            tolerance,
+            sizes,
+            noise,
+            reps,
+            error_box,
+        } => pse::run(&pse::PseBench {
+            graph,
+            splits,
+            tolerance,
+            sizes: parse_sizes(&sizes)?,
+            noise,
+            reps,
+            error_box,
+        }),
     }
 }
 

@@ -218,9 +218,9 @@ fn self_mobility_is_hasimoto_whatever_the_split() {
                 let v = eval(&mut program, &[*x], &f, None)["velocities"][0];
                 worst = worst.max((v[a] / want - 1.0).abs());
                 // No coupling between axes for a single sphere.
-                for b in 0..3 {
+                for (b, vb) in v.iter().enumerate() {
                     if b != a {
-                        assert!(v[b].abs() < tol * want, "xi {xi}: cross term {}", v[b]);
+                        assert!(vb.abs() < tol * want, "xi {xi}: cross term {vb}");
                     }
                 }
             }
