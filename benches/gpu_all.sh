@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # Every GPU measurement in one call on the GPU machine (device tool), from the repository
 # root, with the kit and a release binary in .gpu/ (see ../shared/gpu/README.md):
-#   bash benches/gpu_all.sh [names...]     names: overhead reduce sort scan spread fft fcm torch (default all)
+#   bash benches/gpu_all.sh [names...]     names: overhead reduce sort scan spread fft fcm pse torch (default all)
 # Prints each table; copies the full log to $OUT/bench.log when OUT is set.
 set -uo pipefail
 source .gpu/gpu-env.sh
 export PYTHONUNBUFFERED=1
 bin=.gpu/mesoflow
 want=("$@")
-[ ${#want[@]} -eq 0 ] && want=(overhead reduce sort scan spread fft fcm torch)
+[ ${#want[@]} -eq 0 ] && want=(overhead reduce sort scan spread fft fcm pse torch)
 log=${OUT:-/tmp}/bench.log
 : > "$log"
 has() { [[ " ${want[*]} " == *" $1 "* ]]; }
@@ -23,6 +23,8 @@ has spread && run $bin bench spread --cells 128 --reps 20
 has fft && $bin bench fft --help >/dev/null 2>&1 && run $bin bench fft --comps 3 --reps 20
 has fcm && run $bin bench fcm --noise --reps 20 --plot ${OUT:-/tmp}/fcm_gaussian.svg
 has fcm && run $bin bench fcm --kernels es,peskin3,peskin4,peskin6 --reps 10 --plot ${OUT:-/tmp}/fcm_kernels.svg
+has pse && run $bin bench pse --noise --reps 20
+has pse-profile && MESOFLOW_BENCH_DISPATCHES=1 run $bin bench pse --splits 0.4 --sizes 128:100000 --noise --reps 10
 if has torch; then
   for s in benches/torch_*.py; do [ -f "$s" ] && run python3 "$s"; done
 fi

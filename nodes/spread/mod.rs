@@ -216,7 +216,7 @@ fn grid_params() -> Vec<ParamSpec> {
             name: "sorted_input",
             kind: ParamKind::Bool,
             default: Some(ParamValue::Bool(false)),
-            doc: "spreading: particles come sorted by cell (Morton order best): accumulate runs of them in workgroup memory first (fewer grid atomics)",
+            doc: "particles come sorted in space (Morton order of cells best): work box by box, runs of 64 particles at a time over the block of cells their supports cover, spreading in registers with one grid atomic per box cell, interpolating from a copy of the box in workgroup memory (runs whose box exceeds 16 cells per axis go direct)",
         },
         ParamSpec::choice(
             "variant",
@@ -478,9 +478,9 @@ impl GpuKernels for Spread {
         } else {
             "spread/add_cas.wgsl"
         };
-        let tiled = self.params.get("sorted_input") == Some(&ParamValue::Bool(true));
-        let kernel_file = if tiled {
-            "spread/spread_tiled.wgsl"
+        let boxed = self.params.get("sorted_input") == Some(&ParamValue::Bool(true));
+        let kernel_file = if boxed {
+            "spread/spread_box.wgsl"
         } else {
             "spread/spread.wgsl"
         };
@@ -492,10 +492,8 @@ impl GpuKernels for Spread {
         );
         let ns = self.gw.window.support();
         let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
-        // The tiled kernel spreads one component per dispatch; the other four at a time.
-        let step = if tiled { 1 } else { CHUNK_COMPS };
-        for first in (0..comps).step_by(step as usize) {
-            let chunk = step.min(comps - first);
+        for first in (0..comps).step_by(CHUNK_COMPS as usize) {
+            let chunk = CHUNK_COMPS.min(comps - first);
             let bindings = [
                 Binding::StorageRead,
                 Binding::StorageRead,
@@ -506,24 +504,23 @@ impl GpuKernels for Spread {
                 format!(
                     "spread ({}{})",
                     self.gw.window.shader(),
-                    if tiled { ", tiled" } else { "" }
+                    if boxed { ", boxes" } else { "" }
                 ),
                 source.clone(),
                 &bindings,
             )
             .constant("NS", ns as f64)
             .constant("DIMS", self.gw.dims() as f64)
-            .constant("TOTAL", comps as f64);
-            let (spec, groups) = if tiled {
-                let per_workgroup = tiled_particles(self.gw.dims() as u32, ns);
+            .constant("TOTAL", comps as f64)
+            .constant("COMPS", chunk as f64);
+            let (spec, groups) = if boxed {
                 (
-                    spec.constant("P", per_workgroup as f64),
-                    cx.grid_1d((n as u64).div_ceil(per_workgroup as u64), 1),
+                    spec,
+                    cx.grid_1d((n as u64).div_ceil(BOX_PARTICLES as u64), 1),
                 )
             } else {
                 (
-                    spec.constant("COMPS", chunk as f64)
-                        .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
+                    spec.constant("CHUNKS", self.gw.chunks(n, comps) as f64)
                         .constant("WG", self.gw.workgroup as f64),
                     per_particle(cx, n, self.gw.chunks(n, comps), ns, self.gw.workgroup),
                 )
@@ -546,11 +543,8 @@ impl GpuKernels for Spread {
     }
 }
 
-/// Particles per workgroup of the tiled kernel (shaders/spread/spread_tiled.wgsl): 32,
-/// or fewer so that their weight tables fit 1536 entries.
-fn tiled_particles(dims: u32, support: u32) -> u32 {
-    (1536 / (dims * support)).min(32)
-}
+/// Particles per workgroup of the box kernels (shaders/spread/box.wgsl, `P`).
+const BOX_PARTICLES: u32 = 64;
 
 pub struct InterpolateKind;
 
@@ -688,7 +682,10 @@ impl GpuKernels for Interpolate {
         // Subgroup shuffles reduce each particle's threads when the adapter has them
         // (variant "portable" forces the workgroup-memory tree).
         let portable = self.params.get("variant") == Some(&ParamValue::Text("portable".into()));
-        let file = if cx.caps().subgroups.is_some() && !portable {
+        let boxed = self.params.get("sorted_input") == Some(&ParamValue::Bool(true));
+        let file = if boxed {
+            "spread/interpolate_box.wgsl"
+        } else if cx.caps().subgroups.is_some() && !portable {
             "spread/interpolate_subgroup.wgsl"
         } else {
             "spread/interpolate.wgsl"
@@ -703,26 +700,33 @@ impl GpuKernels for Interpolate {
         let mut dispatches = Vec::new();
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
-            let kernel = cx.kernel(
-                &KernelSpec::new(
-                    format!("interpolate ({})", self.gw.window.shader()),
-                    source.clone(),
-                    &[
-                        Binding::StorageRead,
-                        Binding::StorageRead,
-                        Binding::StorageRead,
-                        Binding::StorageReadWrite,
-                        Binding::Uniform,
-                    ],
-                )
-                .constant("NS", self.gw.window.support() as f64)
-                .constant("DIMS", self.gw.dims() as f64)
-                .constant("COMPS", chunk as f64)
-                .constant("TOTAL", comps as f64)
-                .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
-                .constant("WG", self.gw.workgroup as f64)
-                .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some()))),
-            )?;
+            let spec = KernelSpec::new(
+                format!(
+                    "interpolate ({}{})",
+                    self.gw.window.shader(),
+                    if boxed { ", boxes" } else { "" }
+                ),
+                source.clone(),
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                ],
+            )
+            .constant("NS", self.gw.window.support() as f64)
+            .constant("DIMS", self.gw.dims() as f64)
+            .constant("COMPS", chunk as f64)
+            .constant("TOTAL", comps as f64)
+            .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some())));
+            let spec = if boxed {
+                spec
+            } else {
+                spec.constant("CHUNKS", self.gw.chunks(n, comps) as f64)
+                    .constant("WG", self.gw.workgroup as f64)
+            };
+            let kernel = cx.kernel(&spec)?;
             let geo = cx.uniform(
                 "interpolate geometry",
                 bytemuck::bytes_of(&GeometryUniform {
@@ -730,13 +734,17 @@ impl GpuKernels for Interpolate {
                     ..geometry(&self.gw, n)
                 }),
             );
-            let groups = per_particle(
-                cx,
-                n,
-                self.gw.chunks(n, comps),
-                self.gw.window.support(),
-                self.gw.workgroup,
-            );
+            let groups = if boxed {
+                cx.grid_1d((n as u64).div_ceil(BOX_PARTICLES as u64), 1)
+            } else {
+                per_particle(
+                    cx,
+                    n,
+                    self.gw.chunks(n, comps),
+                    self.gw.window.support(),
+                    self.gw.workgroup,
+                )
+            };
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[

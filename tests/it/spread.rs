@@ -513,14 +513,25 @@ fn sorted_input_spreading_matches_the_reference() {
         return;
     }
     let mut rng = Rng::new(58);
-    for (lengths, cells) in [
-        (vec![20.0, 14.0, 9.0], vec![32u32, 20, 12]),
-        (vec![30.0, 10.0], vec![48u32, 16]),
+    // Sparse (boxes of 64 sorted particles often exceed 16 cells: the direct path) and
+    // dense (boxes fit) placements, 3-D and 2-D.
+    for (lengths, cells, n) in [
+        (vec![20.0, 14.0, 9.0], vec![32u32, 20, 12], 1500),
+        (vec![8.0, 9.0, 7.0], vec![16u32, 18, 14], 3000),
+        (vec![30.0, 10.0], vec![48u32, 16], 1500),
     ] {
-        let random = positions(&mut rng, 1500, &lengths);
+        let random = positions(&mut rng, n, &lengths);
         let sorted = morton_sorted(&random, &lengths, &cells);
-        for comps in [1u32, 3] {
-            let vals = rng.array(ValueType::Particles { n: 1500, k: comps }, -1.0, 1.0);
+        for comps in [1u32, 3, 5] {
+            let vals = rng.array(ValueType::Particles { n, k: comps }, -1.0, 1.0);
+            let field = rng.array(
+                ValueType::RealGrid {
+                    dims: [cells[0], cells[1], cells.get(2).copied().unwrap_or(1)],
+                    comps,
+                },
+                -1.0,
+                1.0,
+            );
             for (w, extra) in WINDOWS {
                 let extra = if extra.is_empty() {
                     r#""sorted_input": true"#.to_string()
@@ -539,7 +550,17 @@ fn sorted_input_spreading_matches_the_reference() {
                         let (err, at) = rel_max_err(&g, &r);
                         assert!(
                             err < 1e-5,
-                            "tiled spread {w} {variant} {comps} comps {lengths:?}: error {err:e} at {at}"
+                            "box spread {w} {variant} {comps} comps {lengths:?}: error {err:e} at {at}"
+                        );
+                        let (g, r) = run_node(
+                            "interpolate",
+                            &p,
+                            &[("grid", field.clone()), ("positions", pos.clone())],
+                        );
+                        let (err, at) = rel_max_err(&g, &r);
+                        assert!(
+                            err < 1e-5,
+                            "box interpolate {w} {variant} {comps} comps {lengths:?}: error {err:e} at {at}"
                         );
                     }
                 }
@@ -549,7 +570,7 @@ fn sorted_input_spreading_matches_the_reference() {
 }
 
 #[test]
-fn tiled_boxes_wrap_across_the_periodic_faces() {
+fn boxes_wrap_across_the_periodic_faces() {
     if gpu().is_none() {
         return;
     }
@@ -583,6 +604,15 @@ fn tiled_boxes_wrap_across_the_periodic_faces() {
             &[("positions", pos.clone()), ("values", vals.clone())],
         );
         assert!(rel_max_err(&g, &r).0 < 1e-5, "{w}");
+        let field = HostArray::f32(
+            ValueType::RealGrid {
+                dims: [32, 32, 32],
+                comps: 1,
+            },
+            (0..32 * 32 * 32).map(|i| ((i * 37) % 101) as f32 - 50.0).collect(),
+        );
+        let (g, r) = run_node("interpolate", &p, &[("grid", field), ("positions", pos.clone())]);
+        assert!(rel_max_err(&g, &r).0 < 1e-5, "interpolate {w}");
     }
 }
 
