@@ -7,6 +7,7 @@
 //! weights. Both nodes build their stencil from the same [`GridWindow`], so
 //! <S F, v>_dV = <F, J v> by construction. Grid cells are centred at -L/2 + (j + 1/2) h.
 
+pub mod boxgen;
 pub mod window;
 
 use crate::expr::ParamValue;
@@ -478,19 +479,15 @@ impl GpuKernels for Spread {
         } else {
             "spread/add_cas.wgsl"
         };
-        let boxed = self.params.get("sorted_input") == Some(&ParamValue::Bool(true));
-        let kernel_file = if boxed {
-            "spread/spread_box.wgsl"
-        } else {
-            "spread/spread.wgsl"
-        };
-        let source = format!(
-            "{}{}{}",
-            cx.shader(self.gw.window.shader())?,
-            cx.shader(add)?,
-            cx.shader(kernel_file)?
-        );
         let ns = self.gw.window.support();
+        let boxed = self.params.get("sorted_input") == Some(&ParamValue::Bool(true))
+            && ns <= boxgen::BMAX;
+        let prefix = format!(
+            "{}{}",
+            cx.shader(self.gw.window.shader())?,
+            cx.shader(add)?
+        );
+        let plain = format!("{prefix}{}", cx.shader("spread/spread.wgsl")?);
         let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
@@ -506,13 +503,17 @@ impl GpuKernels for Spread {
                     self.gw.window.shader(),
                     if boxed { ", boxes" } else { "" }
                 ),
-                source.clone(),
+                if boxed {
+                    let generated = boxgen::spread_source(ns, self.gw.dims() as u32, chunk, comps);
+                    format!(
+                        "{prefix}{}",
+                        crate::gpu::shaders::resolve(&generated).map_err(CompileError::Library)?
+                    )
+                } else {
+                    plain.clone()
+                },
                 &bindings,
-            )
-            .constant("NS", ns as f64)
-            .constant("DIMS", self.gw.dims() as f64)
-            .constant("TOTAL", comps as f64)
-            .constant("COMPS", chunk as f64);
+            );
             let (spec, groups) = if boxed {
                 (
                     spec,
@@ -520,7 +521,11 @@ impl GpuKernels for Spread {
                 )
             } else {
                 (
-                    spec.constant("CHUNKS", self.gw.chunks(n, comps) as f64)
+                    spec.constant("NS", ns as f64)
+                        .constant("DIMS", self.gw.dims() as f64)
+                        .constant("TOTAL", comps as f64)
+                        .constant("COMPS", chunk as f64)
+                        .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
                         .constant("WG", self.gw.workgroup as f64),
                     per_particle(cx, n, self.gw.chunks(n, comps), ns, self.gw.workgroup),
                 )
@@ -682,10 +687,10 @@ impl GpuKernels for Interpolate {
         // Subgroup shuffles reduce each particle's threads when the adapter has them
         // (variant "portable" forces the workgroup-memory tree).
         let portable = self.params.get("variant") == Some(&ParamValue::Text("portable".into()));
-        let boxed = self.params.get("sorted_input") == Some(&ParamValue::Bool(true));
-        let file = if boxed {
-            "spread/interpolate_box.wgsl"
-        } else if cx.caps().subgroups.is_some() && !portable {
+        let ns = self.gw.window.support();
+        let boxed = self.params.get("sorted_input") == Some(&ParamValue::Bool(true))
+            && ns <= boxgen::BMAX;
+        let file = if cx.caps().subgroups.is_some() && !portable {
             "spread/interpolate_subgroup.wgsl"
         } else {
             "spread/interpolate.wgsl"
@@ -706,7 +711,22 @@ impl GpuKernels for Interpolate {
                     self.gw.window.shader(),
                     if boxed { ", boxes" } else { "" }
                 ),
-                source.clone(),
+                if boxed {
+                    let generated = boxgen::interpolate_source(
+                        ns,
+                        self.gw.dims() as u32,
+                        chunk,
+                        comps,
+                        weights.is_some(),
+                    );
+                    format!(
+                        "{}{}",
+                        cx.shader(self.gw.window.shader())?,
+                        crate::gpu::shaders::resolve(&generated).map_err(CompileError::Library)?
+                    )
+                } else {
+                    source.clone()
+                },
                 &[
                     Binding::StorageRead,
                     Binding::StorageRead,
@@ -714,16 +734,16 @@ impl GpuKernels for Interpolate {
                     Binding::StorageReadWrite,
                     Binding::Uniform,
                 ],
-            )
-            .constant("NS", self.gw.window.support() as f64)
-            .constant("DIMS", self.gw.dims() as f64)
-            .constant("COMPS", chunk as f64)
-            .constant("TOTAL", comps as f64)
-            .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some())));
+            );
             let spec = if boxed {
                 spec
             } else {
-                spec.constant("CHUNKS", self.gw.chunks(n, comps) as f64)
+                spec.constant("NS", ns as f64)
+                    .constant("DIMS", self.gw.dims() as f64)
+                    .constant("COMPS", chunk as f64)
+                    .constant("TOTAL", comps as f64)
+                    .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some())))
+                    .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
                     .constant("WG", self.gw.workgroup as f64)
             };
             let kernel = cx.kernel(&spec)?;

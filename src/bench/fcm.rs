@@ -35,6 +35,8 @@ pub struct FcmBench {
     /// Random positions the self-mobility error is measured at.
     pub error_samples: usize,
     pub plot: Option<PathBuf>,
+    /// Other graph params for the timed runs.
+    pub sets: Vec<(String, ParamValue)>,
 }
 
 /// UAMMD's FCM benchmark (H200, Gaussian, a = 1): (tolerance, L, N, ms).
@@ -331,6 +333,7 @@ pub fn run(bench: &FcmBench) -> Result<(), CliError> {
                     ("tolerance", ParamValue::Number(tol)),
                     ("kernel", ParamValue::Text(kernel.clone())),
                 ];
+                sets.extend(bench.sets.iter().map(|(k, v)| (k.as_str(), v.clone())));
                 let g = load(&bench.graph, &sets, &registry)?;
                 let grid = match param(&g, "grid") {
                     Some(ParamValue::Numbers(v)) => v[0] as u32,

@@ -282,6 +282,9 @@ pub enum BenchCommand {
         /// Draw error against time into this SVG file.
         #[arg(long)]
         plot: Option<PathBuf>,
+        /// Other graph params for the timed runs (NAME=VALUE, as in `run`).
+        #[arg(long = "set")]
+        sets: Vec<String>,
     },
     /// PSE speed against error per split (time of one M F, with --noise also M F +
     /// M^(1/2) W; self- and pair-mobility errors against f64 references).
@@ -305,6 +308,9 @@ pub enum BenchCommand {
         /// Side of the cubic box (in radii) the errors are measured in.
         #[arg(long, default_value_t = 24.0)]
         error_box: f64,
+        /// Other graph params for the timed runs (NAME=VALUE, as in `run`).
+        #[arg(long = "set")]
+        sets: Vec<String>,
     },
 }
 
@@ -357,6 +363,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             error_box,
             error_samples,
             plot,
+            sets,
         } => {
             let kernels = if kernels.iter().any(|k| k == "all") {
                 crate::nodes::spread::window::NAMES
@@ -377,6 +384,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
                 error_box,
                 error_samples,
                 plot,
+                sets: crate::cli::parse_sets(&sets)?.into_iter().collect(),
             })
         }
         BenchCommand::Pse {
@@ -387,6 +395,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             noise,
             reps,
             error_box,
+            sets,
         } => pse::run(&pse::PseBench {
             graph,
             splits,
@@ -395,6 +404,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             noise,
             reps,
             error_box,
+            sets: crate::cli::parse_sets(&sets)?.into_iter().collect(),
         }),
     }
 }

@@ -26,6 +26,8 @@ pub struct PseBench {
     pub noise: bool,
     pub reps: u64,
     pub error_box: f64,
+    /// Other graph params for the timed runs.
+    pub sets: Vec<(String, ParamValue)>,
 }
 
 /// UAMMD's PSE benchmark (H200, a = 1, tolerance 1e-3): (L, N, split, ms, with noise ms).
@@ -136,6 +138,7 @@ pub fn run(bench: &PseBench) -> Result<(), CliError> {
                 ("tolerance", ParamValue::Number(bench.tolerance)),
                 ("split", ParamValue::Number(split)),
             ];
+            sets.extend(bench.sets.iter().map(|(k, v)| (k.as_str(), v.clone())));
             let g = match load(&bench.graph, &sets, &registry) {
                 Ok(g) => g,
                 Err(CliError::Input(e) | CliError::Runtime(e)) => {

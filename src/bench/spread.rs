@@ -109,27 +109,56 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32]) -> Result<(), CliError> 
         } else {
             r#""window": "peskin4""#
         };
-        // Sorted input also runs the tiled kernel (sorted_input), shown as wg "tile".
-        let mut runs: Vec<(String, String)> = workgroups
+        // Sorted input also runs the box kernels (sorted_input), shown as wg "box";
+        // random input runs them after sorting in the graph (Morton order of 4-cell
+        // blocks, as graphs/fcm.json does), shown as "sort+box", the sort, the gathers
+        // and the scatter back included in the times.
+        let mut runs: Vec<(String, String, bool)> = workgroups
             .iter()
-            .map(|wg| (wg.to_string(), format!(r#""workgroup": "{wg}""#)))
+            .map(|wg| (wg.to_string(), format!(r#""workgroup": "{wg}""#), false))
             .collect();
-        if sorted {
-            runs.push(("tile".into(), r#""sorted_input": true"#.into()));
-        }
-        for (wg, extra) in runs {
+        runs.push((
+            if sorted { "box" } else { "sort+box" }.into(),
+            r#""sorted_input": true"#.into(),
+            !sorted,
+        ));
+        for (wg, extra, sort_first) in runs {
             let params = format!(
                 r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, {extra}}}"#
             );
+            let blocks = n_cells.div_ceil(4);
+            let bits = 3 * (blocks as f64).log2().ceil().max(1.0) as u32;
+            let (sorting, spread_in, interp_in, u) = if sort_first {
+                (
+                    format!(
+                        r#"{{"id": "hash", "kind": "cell_hash", "params": {{"box": [{l}, {l}, {l}], "cells": [{blocks}, {blocks}, {blocks}], "order": "morton"}}, "inputs": {{"positions": "inputs.positions"}}}},
+                    {{"id": "order", "kind": "sort", "params": {{"bits": {bits}}}, "inputs": {{"keys": "hash.out"}}}},
+                    {{"id": "sorted_positions", "kind": "gather", "inputs": {{"values": "inputs.positions", "index": "order.perm"}}}},
+                    {{"id": "sorted_values", "kind": "gather", "inputs": {{"values": "inputs.values", "index": "order.perm"}}}},
+                    {{"id": "back", "kind": "scatter", "inputs": {{"values": "interpolate.out", "index": "order.perm"}}}},"#
+                    ),
+                    r#""positions": "sorted_positions.out", "values": "sorted_values.out""#,
+                    r#""positions": "sorted_positions.out""#,
+                    "back.out",
+                )
+            } else {
+                (
+                    String::new(),
+                    r#""positions": "inputs.positions", "values": "inputs.values""#,
+                    r#""positions": "inputs.positions""#,
+                    "interpolate.out",
+                )
+            };
             let graph = format!(
                 r#"{{"mesoflow": 1,
                   "inputs": {{"positions": {{"type": "particles", "cols": 3}}, "values": {{"type": "particles", "cols": {comps}}},
                              "field": {{"type": "real_grid", "dims": [{n_cells}, {n_cells}, {n_cells}], "comps": {comps}}}}},
                   "nodes": [
-                    {{"id": "spread", "kind": "spread", "params": {params}, "inputs": {{"positions": "inputs.positions", "values": "inputs.values"}}}},
-                    {{"id": "interpolate", "kind": "interpolate", "params": {params}, "inputs": {{"grid": "inputs.field", "positions": "inputs.positions"}}}}
+                    {sorting}
+                    {{"id": "spread", "kind": "spread", "params": {params}, "inputs": {{{spread_in}}}}},
+                    {{"id": "interpolate", "kind": "interpolate", "params": {params}, "inputs": {{"grid": "inputs.field", {interp_in}}}}}
                   ],
-                  "outputs": {{"grid": "spread.out", "u": "interpolate.out"}}}}"#
+                  "outputs": {{"grid": "spread.out", "u": "{u}"}}}}"#
             );
             let run = time_graph(&gpu, &graph, &inputs, reps, true)?;
             let t = |label: &str| {
@@ -139,7 +168,11 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32]) -> Result<(), CliError> 
                     .map(|t| t.median.as_secs_f64())
                     .unwrap_or(f64::NAN)
             };
-            let (ts, ti) = (t("spread"), t("interpolate"));
+            let (mut ts, mut ti) = (t("spread"), t("interpolate"));
+            if sort_first {
+                ts += t("hash") + t("order") + t("sorted_positions") + t("sorted_values");
+                ti += t("back");
+            }
             // Mass check: the grid integrates to the sum of the values (a wrong kernel fails).
             let total: f64 = run.outputs["grid"].data.to_f64().iter().sum();
             let mass = if (total - want).abs() > 1e-3 * want.abs().max(1.0) + 1e-2 {

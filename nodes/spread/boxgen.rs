@@ -1,0 +1,286 @@
+//! WGSL of the box kernels (spreading and interpolation of particles sorted in space,
+//! see shaders/spread/box.wgsl), generated for one support, dimension and component
+//! count with every per-thread loop over z cells, support cells and components written
+//! out: the accumulators are then named scalars in registers. Written as loops, naga
+//! emits arrays indexed by a loop counter, which the driver kept in local memory (the
+//! first version measured 7.5 ns per particle at support 8 on an H200, against 1.4 ns for
+//! the per-particle kernel); see BENCHMARKS.md.
+
+use std::fmt::Write;
+
+/// Box cells per axis (shaders/spread/box.wgsl `BMAX`).
+pub const BMAX: u32 = 16;
+
+const HEADER: &str = "#import common/index.wgsl
+#import spread/geometry.wgsl
+#import spread/box.wgsl
+";
+
+const COMP: [&str; 4] = ["x", "y", "z", "w"];
+
+/// The spreading kernel: composed after a window file and an add file (grid_add).
+pub fn spread_source(ns: u32, dims: u32, comps: u32, total: u32) -> String {
+    let zmax = if dims == 3 { BMAX } else { 1 };
+    let mut w = String::from(HEADER);
+    let _ = write!(
+        w,
+        "const NS: u32 = {ns}u;
+const DIMS: u32 = {dims}u;
+const COMPS: u32 = {comps}u;
+const TOTAL: u32 = {total}u;
+
+@group(0) @binding(0) var<storage, read> pos: array<f32>;
+@group(0) @binding(1) var<storage, read> vals: array<f32>;
+@group(0) @binding(3) var<uniform> geo: Geometry;
+
+var<workgroup> value: array<vec4<f32>, 64>;
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {{
+    let p0 = (wid.y * nwg.x + wid.x) * P;
+    let count = min(P, select(0u, geo.count - p0, p0 < geo.count));
+    if (lid < P) {{
+        var v = vec4<f32>(0.0);
+        if (lid < count) {{
+"
+    );
+    for c in 0..comps {
+        let _ = writeln!(
+            w,
+            "            v.{} = vals[(p0 + lid) * TOTAL + geo.comp_offset + {c}u];",
+            COMP[c as usize]
+        );
+    }
+    w.push_str(
+        "        }
+        value[lid] = v;
+    }
+    let b = box_setup(p0, count, lid);
+    let cells = geo.n.w;
+    if (!b.fits) {
+        let nz = select(1u, NS, DIMS == 3u);
+        for (var q = lid; q < count * NS * NS; q = q + BOX_WG) {
+            let s = q / (NS * NS);
+            let ix = q % NS;
+            let iy = (q / NS) % NS;
+            let wxy = direct_weight(s, 0u, ix) * direct_weight(s, 1u, iy);
+            let v = value[s];
+            for (var iz = 0u; iz < nz; iz = iz + 1u) {
+                let w = wxy * direct_weight(s, 2u, iz);
+                let cell = direct_cell(s, ix, iy, iz);
+",
+    );
+    for c in 0..comps {
+        let _ = writeln!(
+            w,
+            "                grid_add((geo.comp_offset + {c}u) * cells + cell, w * v.{});",
+            COMP[c as usize]
+        );
+    }
+    w.push_str(
+        "            }
+        }
+        return;
+    }
+    let x = lid % b.n.x;
+    let y = min(lid / b.n.x, BMAX - 1u);
+",
+    );
+    for z in 0..zmax {
+        for c in 0..comps {
+            let _ = writeln!(w, "    var a{z}_{c} = 0.0;");
+        }
+    }
+    w.push_str(
+        "    for (var s = 0u; s < count; s = s + 1u) {
+        let a = box_w[(s * 3u) * BMAX + x] * box_w[(s * 3u + 1u) * BMAX + y];
+        if (a != 0.0) {
+            let v = a * value[s];
+            let wz = (s * 3u + 2u) * BMAX;
+",
+    );
+    for z in 0..zmax {
+        let _ = writeln!(w, "            let w{z} = box_w[wz + {z}u];");
+        for c in 0..comps {
+            let _ = writeln!(
+                w,
+                "            a{z}_{c} = fma(w{z}, v.{}, a{z}_{c});",
+                COMP[c as usize]
+            );
+        }
+    }
+    w.push_str(
+        "        }
+    }
+    if (lid < b.n.x * b.n.y) {
+",
+    );
+    for z in 0..zmax {
+        let _ = writeln!(
+            w,
+            "        if ({z}u < b.n.z) {{\n            let cell = box_cell(b, x, y, {z}u);"
+        );
+        for c in 0..comps {
+            let _ = writeln!(
+                w,
+                "            if (a{z}_{c} != 0.0) {{ grid_add((geo.comp_offset + {c}u) * cells + cell, a{z}_{c}); }}"
+            );
+        }
+        w.push_str("        }\n");
+    }
+    w.push_str("    }\n}\n");
+    w
+}
+
+/// The interpolation kernel: composed after a window file.
+pub fn interpolate_source(ns: u32, dims: u32, comps: u32, total: u32, weights: bool) -> String {
+    let mut w = String::from(HEADER);
+    let _ = write!(
+        w,
+        "const NS: u32 = {ns}u;
+const DIMS: u32 = {dims}u;
+const COMPS: u32 = {comps}u;
+const TOTAL: u32 = {total}u;
+const HAS_WEIGHTS: bool = {weights};
+const BOX_VALUES: u32 = 6144u;
+
+@group(0) @binding(0) var<storage, read> pos: array<f32>;
+@group(0) @binding(1) var<storage, read> grid: array<f32>;
+@group(0) @binding(2) var<storage, read> quadrature: array<f32>;
+@group(0) @binding(3) var<storage, read_write> out: array<f32>;
+@group(0) @binding(4) var<uniform> geo: Geometry;
+
+var<workgroup> box_g: array<f32, 6144>;
+var<workgroup> partial: array<vec4<f32>, 256>;
+var<workgroup> box_load: i32;
+
+fn dv(cell: u32) -> f32 {{
+    if (HAS_WEIGHTS) {{
+        return quadrature[cell];
+    }}
+    return geo.dv;
+}}
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {{
+    let p0 = (wid.y * nwg.x + wid.x) * P;
+    let count = min(P, select(0u, geo.count - p0, p0 < geo.count));
+    let b = box_setup(p0, count, lid);
+    let cells = geo.n.w;
+    let box_cells = b.n.x * b.n.y * b.n.z;
+    if (lid == 0u) {{
+        box_load = select(0, 1, b.fits && box_cells * COMPS <= BOX_VALUES);
+    }}
+    let use_box = workgroupUniformLoad(&box_load) == 1;
+    if (use_box) {{
+        for (var e = lid; e < box_cells; e = e + BOX_WG) {{
+            let cell = box_cell(b, e % b.n.x, (e / b.n.x) % b.n.y, e / (b.n.x * b.n.y));
+            let q = dv(cell);
+"
+    );
+    for c in 0..comps {
+        let _ = writeln!(
+            w,
+            "            box_g[{c}u * box_cells + e] = grid[(geo.comp_offset + {c}u) * cells + cell] * q;"
+        );
+    }
+    w.push_str(
+        "        }
+    }
+    workgroupBarrier();
+    let tpp = select(1u, NS, DIMS == 3u);
+    let per_round = BOX_WG / tpp;
+    for (var base = 0u; base < count; base = base + per_round) {
+        let s = base + lid / tpp;
+        let iz = lid % tpp;
+        var acc = vec4<f32>(0.0);
+        if (s < count && lid < per_round * tpp) {
+            if (use_box) {
+                let ox = u32(box_rel[s * 3u] - atomicLoad(&box_lo[0]));
+                let oy = u32(box_rel[s * 3u + 1u] - atomicLoad(&box_lo[1]));
+                var oz = 0u;
+                if (DIMS == 3u) {
+                    oz = u32(box_rel[s * 3u + 2u] - atomicLoad(&box_lo[2])) + iz;
+                }
+                let wx = (s * 3u) * BMAX + ox;
+                let wy = (s * 3u + 1u) * BMAX + oy;
+                let wz = box_w[(s * 3u + 2u) * BMAX + oz];
+                let rows = (oz * b.n.y + oy) * b.n.x + ox;
+",
+    );
+    for ix in 0..ns {
+        let _ = writeln!(w, "                let x{ix} = box_w[wx + {ix}u];");
+    }
+    for c in 0..comps {
+        let _ = writeln!(w, "                var s{c} = 0.0;");
+    }
+    for iy in 0..ns {
+        let _ = writeln!(
+            w,
+            "                {{\n                    let row = rows + {iy}u * b.n.x;"
+        );
+        for c in 0..comps {
+            let _ = write!(
+                w,
+                "                    let r{c} = x0 * box_g[{c}u * box_cells + row]"
+            );
+            for ix in 1..ns {
+                let _ = write!(w, " + x{ix} * box_g[{c}u * box_cells + row + {ix}u]");
+            }
+            w.push_str(";\n");
+            let _ = writeln!(
+                w,
+                "                    s{c} = fma(box_w[wy + {iy}u], r{c}, s{c});"
+            );
+        }
+        w.push_str("                }\n");
+    }
+    for c in 0..comps {
+        let _ = writeln!(w, "                acc.{} = s{c} * wz;", COMP[c as usize]);
+    }
+    w.push_str(
+        "            } else {
+                let wz = direct_weight(s, 2u, iz);
+                for (var iy = 0u; iy < NS; iy = iy + 1u) {
+                    let wy = direct_weight(s, 1u, iy) * wz;
+                    for (var ix = 0u; ix < NS; ix = ix + 1u) {
+                        let cell = direct_cell(s, ix, iy, iz);
+                        let w = direct_weight(s, 0u, ix) * wy * dv(cell);
+",
+    );
+    for c in 0..comps {
+        let _ = writeln!(
+            w,
+            "                        acc.{0} = fma(w, grid[(geo.comp_offset + {c}u) * cells + cell], acc.{0});",
+            COMP[c as usize]
+        );
+    }
+    w.push_str(
+        "                    }
+                }
+            }
+        }
+        partial[lid] = acc;
+        workgroupBarrier();
+        if (lid < per_round && base + lid < count) {
+            var sum = vec4<f32>(0.0);
+            for (var t = 0u; t < tpp; t = t + 1u) {
+                sum = sum + partial[lid * tpp + t];
+            }
+            let o = (p0 + base + lid) * TOTAL + geo.comp_offset;
+",
+    );
+    for c in 0..comps {
+        let _ = writeln!(w, "            out[o + {c}u] = sum.{};", COMP[c as usize]);
+    }
+    w.push_str(
+        "        }
+        workgroupBarrier();
+    }
+}
+",
+    );
+    w
+}
