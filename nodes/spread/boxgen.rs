@@ -38,8 +38,8 @@ var<workgroup> value: array<vec4<f32>, 64>;
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {{
-    let p0 = (wid.y * nwg.x + wid.x) * P;
-    let count = min(P, select(0u, geo.count - p0, p0 < geo.count));
+    let p0 = (wid.y * nwg.x + wid.x) * geo.run;
+    let count = min(geo.run, select(0u, geo.count - p0, p0 < geo.count));
     if (lid < P) {{
         var v = vec4<f32>(0.0);
         if (lid < count) {{
@@ -114,12 +114,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         "        }
     }
     if (lid < b.n.x * b.n.y) {
+        let xy = box_wrap[x] + box_wrap[BMAX + y];
 ",
     );
     for z in 0..zmax {
         let _ = writeln!(
             w,
-            "        if ({z}u < b.n.z) {{\n            let cell = box_cell(b, x, y, {z}u);"
+            "        if ({z}u < b.n.z) {{\n            let cell = xy + box_wrap[2u * BMAX + {z}u];"
         );
         for c in 0..comps {
             let _ = writeln!(
@@ -165,8 +166,8 @@ fn dv(cell: u32) -> f32 {{
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {{
-    let p0 = (wid.y * nwg.x + wid.x) * P;
-    let count = min(P, select(0u, geo.count - p0, p0 < geo.count));
+    let p0 = (wid.y * nwg.x + wid.x) * geo.run;
+    let count = min(geo.run, select(0u, geo.count - p0, p0 < geo.count));
     let b = box_setup(p0, count, lid);
     let cells = geo.n.w;
     let box_cells = b.n.x * b.n.y * b.n.z;
@@ -175,19 +176,27 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }}
     let use_box = workgroupUniformLoad(&box_load) == 1;
     if (use_box) {{
-        for (var e = lid; e < box_cells; e = e + BOX_WG) {{
-            let cell = box_cell(b, e % b.n.x, (e / b.n.x) % b.n.y, e / (b.n.x * b.n.y));
-            let q = dv(cell);
+        // 16 threads per row of the box (x fastest, as in the grid), 16 rows at a time.
+        let x = lid % BMAX;
+        let rows = b.n.y * b.n.z;
+        for (var r = lid / BMAX; r < rows; r = r + BOX_WG / BMAX) {{
+            let y = r % b.n.y;
+            let z = r / b.n.y;
+            if (x < b.n.x) {{
+                let cell = box_cell(x, y, z);
+                let q = dv(cell);
+                let e = r * b.n.x + x;
 "
     );
     for c in 0..comps {
         let _ = writeln!(
             w,
-            "            box_g[{c}u * box_cells + e] = grid[(geo.comp_offset + {c}u) * cells + cell] * q;"
+            "                box_g[{c}u * box_cells + e] = grid[(geo.comp_offset + {c}u) * cells + cell] * q;"
         );
     }
     w.push_str(
-        "        }
+        "            }
+        }
     }
     workgroupBarrier();
     let tpp = select(1u, NS, DIMS == 3u);

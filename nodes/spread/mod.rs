@@ -302,7 +302,7 @@ struct GeometryUniform {
     count: u32,
     dv: f32,
     comp_offset: u32,
-    pad: u32,
+    run: u32,
 }
 
 fn geometry(gw: &GridWindow, count: u32) -> GeometryUniform {
@@ -315,7 +315,7 @@ fn geometry(gw: &GridWindow, count: u32) -> GeometryUniform {
         count,
         dv: gw.cell_volume() as f32,
         comp_offset: 0,
-        pad: 0,
+        run: box_run(count, gw.cell_count() as u64),
     };
     for a in 0..gw.dims() {
         u.n[a] = gw.cells[a];
@@ -517,7 +517,7 @@ impl GpuKernels for Spread {
             let (spec, groups) = if boxed {
                 (
                     spec,
-                    cx.grid_1d((n as u64).div_ceil(BOX_PARTICLES as u64), 1),
+                    cx.grid_1d((n as u64).div_ceil(box_run(n, self.gw.cell_count() as u64) as u64), 1),
                 )
             } else {
                 (
@@ -548,8 +548,14 @@ impl GpuKernels for Spread {
     }
 }
 
-/// Particles per workgroup of the box kernels (shaders/spread/box.wgsl, `P`).
-const BOX_PARTICLES: u32 = 64;
+/// Particles per workgroup of the box kernels (shaders/spread/box.wgsl): about as many
+/// as a 4^3 block of cells holds (fcm.json sorts by such blocks), a power of two from 4
+/// to 64, so that a run's box stays within 16 cells per axis: 64 at one particle per
+/// cell, 8 at 0.1.
+fn box_run(count: u32, cells: u64) -> u32 {
+    let per_block = (64.0 * count as f64 / cells.max(1) as f64).ceil() as u32;
+    per_block.next_power_of_two().clamp(4, 64)
+}
 
 pub struct InterpolateKind;
 
@@ -755,7 +761,7 @@ impl GpuKernels for Interpolate {
                 }),
             );
             let groups = if boxed {
-                cx.grid_1d((n as u64).div_ceil(BOX_PARTICLES as u64), 1)
+                cx.grid_1d((n as u64).div_ceil(box_run(n, self.gw.cell_count() as u64) as u64), 1)
             } else {
                 per_particle(
                     cx,

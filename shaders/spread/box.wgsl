@@ -10,7 +10,7 @@
 // missing z axis of a 2D grid, 1 at k = 0). Spreading and interpolation over the box
 // are then dense sums over box cells with no index arithmetic per particle.
 
-const P: u32 = 64u;        // particles per workgroup, at most (nodes/spread/mod.rs BOX_PARTICLES)
+const P: u32 = 64u;        // particles per workgroup, at most (geo.run of them: nodes/spread/mod.rs box_run)
 const BMAX: u32 = 16u;     // box cells per axis, at most
 const BOX_WG: u32 = 256u;  // threads per workgroup
 
@@ -22,6 +22,7 @@ var<workgroup> box_hi: array<atomic<i32>, 3>;
 var<workgroup> box_shape: array<i32, 6>;     // n (3), origin (3)
 var<workgroup> box_fits: i32;
 var<workgroup> box_w: array<f32, 3072>;      // P * 3 * BMAX zero-padded weights
+var<workgroup> box_wrap: array<u32, 48>;     // a*BMAX + k: wrapped cell of box cell k times the axis stride
 
 struct Box {
     fits: bool,
@@ -85,7 +86,15 @@ fn box_setup(p0: u32, count: u32, lid: u32) -> Box {
     b.n = vec3<u32>(u32(box_shape[0]), u32(box_shape[1]), u32(box_shape[2]));
     b.origin = vec3<i32>(box_shape[3], box_shape[4], box_shape[5]);
     if (b.fits) {
-        for (var e = lid; e < P * 3u * BMAX; e = e + BOX_WG) {
+        if (lid < 3u * BMAX) {
+            let a = lid / BMAX;
+            let k = i32(lid % BMAX);
+            var stride = 1u;
+            if (a >= 1u) { stride = geo.n.x; }
+            if (a == 2u) { stride = geo.n.x * geo.n.y; }
+            box_wrap[lid] = wrap_cell(b.origin[a] + k, geo.n[a]) * stride;
+        }
+        for (var e = lid; e < count * 3u * BMAX; e = e + BOX_WG) {
             let s = e / (3u * BMAX);
             let a = (e / BMAX) % 3u;
             let k = i32(e % BMAX);
@@ -108,12 +117,9 @@ fn box_setup(p0: u32, count: u32, lid: u32) -> Box {
     return b;
 }
 
-// The grid cell of box cell (x, y, z).
-fn box_cell(b: Box, x: u32, y: u32, z: u32) -> u32 {
-    let cx = wrap_cell(b.origin.x + i32(x), geo.n.x);
-    let cy = wrap_cell(b.origin.y + i32(y), geo.n.y);
-    let cz = wrap_cell(b.origin.z + i32(z), geo.n.z);
-    return cx + geo.n.x * (cy + geo.n.y * cz);
+// The grid cell of box cell (x, y, z) (after box_setup, for a box that fits).
+fn box_cell(x: u32, y: u32, z: u32) -> u32 {
+    return box_wrap[x] + box_wrap[BMAX + y] + box_wrap[2u * BMAX + z];
 }
 
 // Weight of particle s on axis a at support index k (computed from the tables, for the

@@ -9,7 +9,7 @@ struct Geometry {
     count: u32,            // particles
     dv: f32,               // uniform quadrature weight h_x h_y (h_z)
     comp_offset: u32,      // first component of this dispatch (components go 4 at a time)
-    pad: u32,
+    run: u32,              // box kernels: particles per workgroup (at most 64)
 }
 
 fn wrap_cell(i: i32, n: u32) -> u32 {
