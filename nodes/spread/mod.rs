@@ -217,7 +217,7 @@ fn grid_params() -> Vec<ParamSpec> {
             name: "sorted_input",
             kind: ParamKind::Bool,
             default: Some(ParamValue::Bool(false)),
-            doc: "particles come sorted in space (Morton order of cells best): work box by box, runs of 64 particles at a time over the block of cells their supports cover, spreading in registers with one grid atomic per box cell, interpolating from a copy of the box in workgroup memory (runs whose box exceeds 16 cells per axis go direct)",
+            doc: "spreading: particles come sorted in space (Morton order of cells best); where they are dense (at least 0.5 per cell) spread box by box: runs of up to 64 particles summed in registers over the block of cells their supports cover, one grid atomic per box cell (runs whose box exceeds 16 cells per axis go direct). Interpolation ignores it",
         },
         ParamSpec::choice(
             "variant",
@@ -411,6 +411,16 @@ struct Spread {
     params: Params,
 }
 
+impl Spread {
+    /// Whether spreading `n` particles goes box by box (shaders/spread/box.wgsl): sorted
+    /// input, dense enough, and a support that fits the box.
+    fn uses_boxes(&self, n: u32) -> bool {
+        self.params.get("sorted_input") == Some(&ParamValue::Bool(true))
+            && self.gw.window.support() <= boxgen::BMAX
+            && n as f64 >= BOX_MIN_DENSITY * self.gw.cell_count() as f64
+    }
+}
+
 impl Node for Spread {
     fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
         let n = check_positions(&self.gw, inputs[0])?;
@@ -480,8 +490,7 @@ impl GpuKernels for Spread {
             "spread/add_cas.wgsl"
         };
         let ns = self.gw.window.support();
-        let boxed = self.params.get("sorted_input") == Some(&ParamValue::Bool(true))
-            && ns <= boxgen::BMAX;
+        let boxed = self.uses_boxes(n);
         let prefix = format!(
             "{}{}",
             cx.shader(self.gw.window.shader())?,
@@ -547,6 +556,12 @@ impl GpuKernels for Spread {
         Ok(dispatches)
     }
 }
+
+/// Particles per cell below which spreading sorted input box by box stops paying (the
+/// box of a run then holds few particles: one grid atomic per box cell is no saving; on
+/// an H200 at 0.1 per cell the box kernel took 1.75 ns per particle against 1.54 for the
+/// per-particle kernel, at 1 per cell 1.0 against 1.8).
+const BOX_MIN_DENSITY: f64 = 0.5;
 
 /// Particles per workgroup of the box kernels (shaders/spread/box.wgsl): about as many
 /// as a 4^3 block of cells holds (fcm.json sorts by such blocks), a power of two from 4
@@ -693,9 +708,6 @@ impl GpuKernels for Interpolate {
         // Subgroup shuffles reduce each particle's threads when the adapter has them
         // (variant "portable" forces the workgroup-memory tree).
         let portable = self.params.get("variant") == Some(&ParamValue::Text("portable".into()));
-        let ns = self.gw.window.support();
-        let boxed = self.params.get("sorted_input") == Some(&ParamValue::Bool(true))
-            && ns <= boxgen::BMAX;
         let file = if cx.caps().subgroups.is_some() && !portable {
             "spread/interpolate_subgroup.wgsl"
         } else {
@@ -712,27 +724,8 @@ impl GpuKernels for Interpolate {
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
             let spec = KernelSpec::new(
-                format!(
-                    "interpolate ({}{})",
-                    self.gw.window.shader(),
-                    if boxed { ", boxes" } else { "" }
-                ),
-                if boxed {
-                    let generated = boxgen::interpolate_source(
-                        ns,
-                        self.gw.dims() as u32,
-                        chunk,
-                        comps,
-                        weights.is_some(),
-                    );
-                    format!(
-                        "{}{}",
-                        cx.shader(self.gw.window.shader())?,
-                        crate::gpu::shaders::resolve(&generated).map_err(CompileError::Library)?
-                    )
-                } else {
-                    source.clone()
-                },
+                format!("interpolate ({})", self.gw.window.shader()),
+                source.clone(),
                 &[
                     Binding::StorageRead,
                     Binding::StorageRead,
@@ -741,17 +734,14 @@ impl GpuKernels for Interpolate {
                     Binding::Uniform,
                 ],
             );
-            let spec = if boxed {
-                spec
-            } else {
-                spec.constant("NS", ns as f64)
-                    .constant("DIMS", self.gw.dims() as f64)
-                    .constant("COMPS", chunk as f64)
-                    .constant("TOTAL", comps as f64)
-                    .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some())))
-                    .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
-                    .constant("WG", self.gw.workgroup as f64)
-            };
+            let spec = spec
+                .constant("NS", self.gw.window.support() as f64)
+                .constant("DIMS", self.gw.dims() as f64)
+                .constant("COMPS", chunk as f64)
+                .constant("TOTAL", comps as f64)
+                .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some())))
+                .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
+                .constant("WG", self.gw.workgroup as f64);
             let kernel = cx.kernel(&spec)?;
             let geo = cx.uniform(
                 "interpolate geometry",
@@ -760,17 +750,13 @@ impl GpuKernels for Interpolate {
                     ..geometry(&self.gw, n)
                 }),
             );
-            let groups = if boxed {
-                cx.grid_1d((n as u64).div_ceil(box_run(n, self.gw.cell_count() as u64) as u64), 1)
-            } else {
-                per_particle(
-                    cx,
-                    n,
-                    self.gw.chunks(n, comps),
-                    self.gw.window.support(),
-                    self.gw.workgroup,
-                )
-            };
+            let groups = per_particle(
+                cx,
+                n,
+                self.gw.chunks(n, comps),
+                self.gw.window.support(),
+                self.gw.workgroup,
+            );
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[

@@ -1,5 +1,5 @@
-// template: imported by spread/spread_box.wgsl and spread/interpolate_box.wgsl, which
-// define NS, DIMS, pos, geo and (through a window file) window_phi.
+// template: imported by the box spreading kernel that nodes/spread/boxgen.rs generates,
+// which defines NS, DIMS, pos, geo and (through a window file) window_phi.
 //
 // The box of a run of particles sorted in space: a workgroup takes up to P consecutive
 // particles, and the box is the smallest block of cells (at most BMAX per axis) that
@@ -7,8 +7,8 @@
 // relative to particle 0's (so runs that straddle a periodic face stay compact). The
 // window weights are tabulated box-relative and zero-padded: box_w[(s*3 + a)*BMAX + k]
 // is particle s's weight at box cell k along axis a (0 outside its support; on the
-// missing z axis of a 2D grid, 1 at k = 0). Spreading and interpolation over the box
-// are then dense sums over box cells with no index arithmetic per particle.
+// missing z axis of a 2D grid, 1 at k = 0). Spreading over the box is then a dense sum
+// over box cells with no index arithmetic per particle.
 
 const P: u32 = 64u;        // particles per workgroup, at most (geo.run of them: nodes/spread/mod.rs box_run)
 const BMAX: u32 = 16u;     // box cells per axis, at most
@@ -115,11 +115,6 @@ fn box_setup(p0: u32, count: u32, lid: u32) -> Box {
     }
     workgroupBarrier();
     return b;
-}
-
-// The grid cell of box cell (x, y, z) (after box_setup, for a box that fits).
-fn box_cell(x: u32, y: u32, z: u32) -> u32 {
-    return box_wrap[x] + box_wrap[BMAX + y] + box_wrap[2u * BMAX + z];
 }
 
 // Weight of particle s on axis a at support index k (computed from the tables, for the

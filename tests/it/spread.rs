@@ -560,7 +560,7 @@ fn sorted_input_spreading_matches_the_reference() {
                         let (err, at) = rel_max_err(&g, &r);
                         assert!(
                             err < 1e-5,
-                            "box interpolate {w} {variant} {comps} comps {lengths:?}: error {err:e} at {at}"
+                            "interpolate of sorted input {w} {variant} {comps} comps {lengths:?}: error {err:e} at {at}"
                         );
                     }
                 }
@@ -574,19 +574,22 @@ fn boxes_wrap_across_the_periodic_faces() {
     if gpu().is_none() {
         return;
     }
-    // Particles on both sides of every face, in one workgroup: the box must use the
-    // minimal image of their cells, or it would span the whole grid.
+    // Particles on both sides of every face, in every workgroup, dense enough (about 1
+    // per cell) to spread box by box: the box must use the minimal image of their cells,
+    // or it would span the whole grid.
     let lengths = [8.0, 8.0, 8.0];
-    let cells = [32u32, 32, 32];
+    let cells = [8u32, 8, 8];
+    let n = 600;
     let mut v = Vec::new();
-    for i in 0..30 {
+    for i in 0..n {
         let s = if i % 2 == 0 { 3.95 } else { -3.95 };
-        v.extend([s, -s + 0.01 * i as f32, s - 0.02 * i as f32]);
+        let d = 0.001 * (i % 97) as f32;
+        v.extend([s - d, -s + d, s - 0.5 * d]);
     }
-    let pos = HostArray::f32(ValueType::Particles { n: 30, k: 3 }, v);
+    let pos = HostArray::f32(ValueType::Particles { n, k: 3 }, v);
     let vals = HostArray::f32(
-        ValueType::Particles { n: 30, k: 1 },
-        (0..30).map(|i| 1.0 + i as f32).collect(),
+        ValueType::Particles { n, k: 1 },
+        (0..n).map(|i| 1.0 + (i % 13) as f32).collect(),
     );
     for (w, extra) in [
         ("peskin6", ""),
@@ -606,10 +609,10 @@ fn boxes_wrap_across_the_periodic_faces() {
         assert!(rel_max_err(&g, &r).0 < 1e-5, "{w}");
         let field = HostArray::f32(
             ValueType::RealGrid {
-                dims: [32, 32, 32],
+                dims: [8, 8, 8],
                 comps: 1,
             },
-            (0..32 * 32 * 32).map(|i| ((i * 37) % 101) as f32 - 50.0).collect(),
+            (0..8 * 8 * 8).map(|i| ((i * 37) % 101) as f32 - 50.0).collect(),
         );
         let (g, r) = run_node("interpolate", &p, &[("grid", field), ("positions", pos.clone())]);
         assert!(rel_max_err(&g, &r).0 < 1e-5, "interpolate {w}");
