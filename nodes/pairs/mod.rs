@@ -386,6 +386,18 @@ impl NodeKind for NeighbourSumKind {
                 PortType::Indices,
                 "particles in each cell (histogram of the keys)",
             ),
+            PortSpec::new(
+                "list",
+                PortType::Indices,
+                "neighbour list from neighbour_list (same positions and cutoff): read instead of the cells for particles it holds whole",
+            )
+            .optional(),
+            PortSpec::new(
+                "list_count",
+                PortType::Indices,
+                "neighbours of each particle, from neighbour_list",
+            )
+            .optional(),
         ]);
         v
     }
@@ -440,25 +452,7 @@ impl NodeKind for NeighbourSumKind {
         }
         let periodic: Vec<bool> = p.numbers("periodic").iter().map(|&x| x == 1.0).collect();
         let cutoff = p.number("cutoff");
-        let mut problems = Vec::new();
-        for a in 0..3 {
-            let size = lengths[a] / cells[a] as f64;
-            if size < cutoff {
-                problems.push(format!(
-                    "cells along axis {a} are {size} wide, less than the cutoff {cutoff}: use at most {} cells",
-                    (lengths[a] / cutoff).floor().max(1.0)
-                ));
-            }
-            if periodic[a] && 2.0 * cutoff > lengths[a] {
-                problems.push(format!(
-                    "the cutoff {cutoff} exceeds half the periodic box along axis {a} ({}): the minimum image would miss pairs",
-                    lengths[a]
-                ));
-            }
-        }
-        if !problems.is_empty() {
-            return Err(problems.join("; "));
-        }
+        check_geometry(&lengths, &cells, &periodic, cutoff)?;
         Ok(Box::new(NeighbourSum {
             kernel: PairKernel::from_params(p, cutoff)?,
             lengths,
@@ -466,6 +460,42 @@ impl NodeKind for NeighbourSumKind {
             periodic,
             cutoff,
         }))
+    }
+}
+
+/// The cell list must find every pair within the cutoff among 3 cells per axis, and the
+/// minimum image must be unique.
+fn check_geometry(
+    lengths: &[f64],
+    cells: &[u32],
+    periodic: &[bool],
+    cutoff: f64,
+) -> Result<(), String> {
+    if cells.iter().any(|&c| c == 0) {
+        return Err(format!(
+            "`cells` must be at least 1 per axis, got {cells:?}"
+        ));
+    }
+    let mut problems = Vec::new();
+    for a in 0..3 {
+        let size = lengths[a] / cells[a] as f64;
+        if size < cutoff {
+            problems.push(format!(
+                "cells along axis {a} are {size} wide, less than the cutoff {cutoff}: use at most {} cells",
+                (lengths[a] / cutoff).floor().max(1.0)
+            ));
+        }
+        if periodic[a] && 2.0 * cutoff > lengths[a] {
+            problems.push(format!(
+                "the cutoff {cutoff} exceeds half the periodic box along axis {a} ({}): the minimum image would miss pairs",
+                lengths[a]
+            ));
+        }
+    }
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(problems.join("; "))
     }
 }
 
@@ -509,6 +539,36 @@ impl Node for NeighbourSum {
                     ),
                 ));
             }
+        }
+        match (inputs[5], inputs[6]) {
+            (None, None) => {}
+            (Some(ValueType::Indices { n: l }), Some(ValueType::Indices { n: c })) => {
+                if c != n {
+                    return Err(PortError::new(
+                        "list_count",
+                        format!("has {c} entries but positions has {n} rows"),
+                    ));
+                }
+                if n > 0 && l % n != 0 {
+                    return Err(PortError::new(
+                        "list",
+                        format!("has {l} entries, not a whole number per particle ({n})"),
+                    ));
+                }
+            }
+            (Some(_), None) => {
+                return Err(PortError::new(
+                    "list_count",
+                    "a neighbour list needs its counts: connect list_count too",
+                ));
+            }
+            (None, Some(_)) => {
+                return Err(PortError::new(
+                    "list",
+                    "list_count without the list: connect list too",
+                ));
+            }
+            _ => unreachable!("port types checked"),
         }
         Ok(Signature::outputs(vec![ValueType::Particles { n, k: 3 }]))
     }
@@ -579,13 +639,24 @@ impl GpuKernels for NeighbourSum {
             Binding::StorageRead,
             Binding::StorageRead,
         ]);
+        b.extend([Binding::StorageRead, Binding::StorageRead]);
+        let list = io.inputs[5];
+        let width = match list {
+            Some(l) if n > 0 => (l.ty.words() / n as u64) as u32,
+            _ => 0,
+        };
         let kernel = cx.kernel(
             &KernelSpec::new(
-                format!("neighbour_sum ({})", self.kernel.name()),
+                format!(
+                    "neighbour_sum ({}{})",
+                    self.kernel.name(),
+                    if list.is_some() { ", list" } else { "" }
+                ),
                 source,
                 &b,
             )
-            .constant("HAS_VALUES", f64::from(u8::from(values.is_some()))),
+            .constant("HAS_VALUES", f64::from(u8::from(values.is_some())))
+            .constant("LIST_WIDTH", width as f64),
         )?;
         let mut g = NeighbourGeometry {
             lengths: [1.0; 4],
@@ -612,12 +683,263 @@ impl GpuKernels for NeighbourSum {
             &geo,
             &params,
             &table,
+            list.map(|l| l.buffer).unwrap_or(pos.buffer),
+            io.inputs[6].map(|l| l.buffer).unwrap_or(pos.buffer),
         ];
         Ok(vec![cx.dispatch(
             &kernel,
             &buffers,
             cx.grid_1d(n as u64, WG_1D),
         )])
+    }
+}
+
+pub struct NeighbourListKind;
+
+impl NodeKind for NeighbourListKind {
+    fn name(&self) -> &'static str {
+        "neighbour_list"
+    }
+
+    fn doc(&self) -> &'static str {
+        "the neighbours within the cutoff of each particle, found through a cell list, as a list neighbour_sum reads instead of the cells (worth it when one list serves many sums: a Lanczos loop)"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        let mut v = NeighbourSumKind.inputs();
+        v.retain(|p| !matches!(p.name, "values" | "list" | "list_count"));
+        v
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new(
+                "list",
+                PortType::Indices,
+                "max_neighbours entries per particle, neighbour k of particle i at k * N + i",
+            ),
+            PortSpec::new(
+                "count",
+                PortType::Indices,
+                "neighbours of each particle (past max_neighbours the list holds the first ones, and neighbour_sum walks the cells for that particle)",
+            ),
+        ]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        let mut v: Vec<ParamSpec> = NeighbourSumKind
+            .params()
+            .into_iter()
+            .filter(|p| matches!(p.name, "box" | "cells" | "periodic" | "cutoff"))
+            .collect();
+        v.push(ParamSpec::integer(
+            "max_neighbours",
+            None,
+            1.0,
+            4096.0,
+            "list entries per particle (a particle with more is summed from the cells: correct, slower)",
+        ));
+        v
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        if p.numbers("cells").iter().any(|c| c.fract() != 0.0) {
+            return Err(format!(
+                "`cells` must be whole numbers, got {:?}",
+                p.numbers("cells")
+            ));
+        }
+        let list = NeighbourList {
+            lengths: p.numbers("box").to_vec(),
+            cells: p.numbers("cells").iter().map(|&c| c as u32).collect(),
+            periodic: p.numbers("periodic").iter().map(|&x| x == 1.0).collect(),
+            cutoff: p.number("cutoff"),
+            width: p.number("max_neighbours") as u32,
+        };
+        check_geometry(&list.lengths, &list.cells, &list.periodic, list.cutoff)?;
+        Ok(Box::new(list))
+    }
+}
+
+pub struct NeighbourList {
+    lengths: Vec<f64>,
+    cells: Vec<u32>,
+    periodic: Vec<bool>,
+    cutoff: f64,
+    width: u32,
+}
+
+impl Node for NeighbourList {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let Some(ValueType::Particles { n, .. }) = inputs[0] else {
+            unreachable!("port type checked")
+        };
+        let cells: u32 = self.cells.iter().product();
+        for (port, i, want) in [
+            ("cells", 1, n),
+            ("cell_start", 2, cells),
+            ("cell_count", 3, cells),
+        ] {
+            let Some(ValueType::Indices { n: m }) = inputs[i] else {
+                unreachable!("port type checked")
+            };
+            if m != want {
+                return Err(PortError::new(
+                    port,
+                    format!("has {m} entries, expected {want}"),
+                ));
+            }
+        }
+        let entries = n as u64 * self.width as u64;
+        if entries > u32::MAX as u64 {
+            return Err(PortError::new(
+                "positions",
+                format!(
+                    "{n} particles x {} neighbours do not fit one list",
+                    self.width
+                ),
+            ));
+        }
+        Ok(Signature::outputs(vec![
+            ValueType::Indices { n: entries as u32 },
+            ValueType::Indices { n },
+        ]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn notes(&self, inputs: &[Option<ValueType>]) -> Vec<String> {
+        let n = match inputs[0] {
+            Some(ValueType::Particles { n, .. }) => n as u64,
+            _ => 0,
+        };
+        vec![format!(
+            "up to {} neighbours per particle within {} ({} MiB)",
+            self.width,
+            self.cutoff,
+            (4 * n * self.width as u64) >> 20
+        )]
+    }
+
+    /// The reference list holds every neighbour in the order the GPU finds them (cells
+    /// by z, y, x offset, then the cell's particles), so it compares entry by entry.
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let pos = &inputs[0].as_ref().expect("required").data;
+        let keys = &inputs[1].as_ref().expect("required").data;
+        let start = &inputs[2].as_ref().expect("required").data;
+        let count = &inputs[3].as_ref().expect("required").data;
+        let n = pos.len() / 3;
+        let [nx, ny, nz] = [0, 1, 2].map(|a| self.cells[a] as i64);
+        let cut2 = (self.cutoff as f32 * self.cutoff as f32) as f64;
+        let width = self.width as usize;
+        outputs[0].data.fill(u32::MAX as f64);
+        for i in 0..n {
+            let key = keys[i] as i64;
+            let c = [key % nx, (key / nx) % ny, key / (nx * ny)];
+            let n3 = [nx, ny, nz];
+            let range = |a: usize| -> (i64, i64) {
+                if self.periodic[a] {
+                    if n3[a] >= 3 { (-1, 1) } else { (0, n3[a] - 1) }
+                } else {
+                    ((-1i64).max(-c[a]), 1i64.min(n3[a] - 1 - c[a]))
+                }
+            };
+            let mut found = 0usize;
+            let (zr, yr, xr) = (range(2), range(1), range(0));
+            for dz in zr.0..=zr.1 {
+                for dy in yr.0..=yr.1 {
+                    for dx in xr.0..=xr.1 {
+                        let cc = [
+                            (c[0] + dx).rem_euclid(nx),
+                            (c[1] + dy).rem_euclid(ny),
+                            (c[2] + dz).rem_euclid(nz),
+                        ];
+                        let cell = (cc[0] + nx * (cc[1] + ny * cc[2])) as usize;
+                        let first = start[cell] as usize;
+                        for j in first..first + count[cell] as usize {
+                            if j == i {
+                                continue;
+                            }
+                            let mut r2 = 0.0;
+                            for a in 0..3 {
+                                let mut d = pos[3 * i + a] - pos[3 * j + a];
+                                if self.periodic[a] {
+                                    d -= self.lengths[a] * (d / self.lengths[a]).round();
+                                }
+                                r2 += d * d;
+                            }
+                            if r2 <= cut2 {
+                                if found < width {
+                                    outputs[0].data[found * n + i] = j as f64;
+                                }
+                                found += 1;
+                            }
+                        }
+                    }
+                }
+            }
+            outputs[1].data[i] = found as f64;
+        }
+    }
+}
+
+impl GpuKernels for NeighbourList {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let pos = io.inputs[0].expect("required");
+        let ValueType::Particles { n, .. } = pos.ty else {
+            unreachable!()
+        };
+        let mut b = vec![Binding::StorageRead; 4];
+        b.extend([
+            Binding::StorageReadWrite,
+            Binding::StorageReadWrite,
+            Binding::Uniform,
+        ]);
+        let kernel = cx.kernel(
+            &KernelSpec::new(
+                "neighbour_list",
+                cx.shader("pairs/neighbour_list.wgsl")?,
+                &b,
+            )
+            .constant("LIST_WIDTH", self.width as f64),
+        )?;
+        let mut g = NeighbourGeometry {
+            lengths: [1.0; 4],
+            cells: [1; 4],
+            periodic: [0; 4],
+            n,
+            cutoff2: (self.cutoff as f32) * (self.cutoff as f32),
+            pad: [0; 2],
+        };
+        for a in 0..3 {
+            g.lengths[a] = self.lengths[a] as f32;
+            g.cells[a] = self.cells[a];
+            g.periodic[a] = u32::from(self.periodic[a]);
+        }
+        let geo = cx.uniform("neighbour geometry", bytemuck::bytes_of(&g));
+        let list = io.outputs[0].buffer;
+        Ok(vec![
+            cx.fill(list, io.outputs[0].ty.words(), u32::MAX)?,
+            cx.dispatch(
+                &kernel,
+                &[
+                    pos.buffer,
+                    io.inputs[1].expect("required").buffer,
+                    io.inputs[2].expect("required").buffer,
+                    io.inputs[3].expect("required").buffer,
+                    list,
+                    io.outputs[1].buffer,
+                    &geo,
+                ],
+                cx.grid_1d(n as u64, WG_1D),
+            ),
+        ])
     }
 }
 
@@ -759,5 +1081,6 @@ impl GpuKernels for AllPairs {
 
 pub fn register(r: &mut Registry) {
     r.add(NeighbourSumKind);
+    r.add(NeighbourListKind);
     r.add(AllPairsKind);
 }

@@ -217,7 +217,7 @@ fn grid_params() -> Vec<ParamSpec> {
             name: "sorted_input",
             kind: ParamKind::Bool,
             default: Some(ParamValue::Bool(false)),
-            doc: "spreading: particles come sorted in space (Morton order of cells best); where they are dense (at least 0.5 per cell) spread box by box: runs of up to 64 particles summed in registers over the block of cells their supports cover, one grid atomic per box cell (runs whose box exceeds 16 cells per axis go direct). Interpolation ignores it",
+            doc: "spreading: particles come sorted in space (Morton order of cells best); where they are dense (at least 0.5 per cell) and the support is 6 to 16 cells, spread box by box: runs of up to 64 particles summed in registers over the block of cells their supports cover, one grid atomic per box cell (runs whose box exceeds 16 cells per axis go direct). Interpolation ignores it",
         },
         ParamSpec::choice(
             "variant",
@@ -413,10 +413,10 @@ struct Spread {
 
 impl Spread {
     /// Whether spreading `n` particles goes box by box (shaders/spread/box.wgsl): sorted
-    /// input, dense enough, and a support that fits the box.
+    /// input, dense enough, and a support wide enough to pay and narrow enough to fit.
     fn uses_boxes(&self, n: u32) -> bool {
         self.params.get("sorted_input") == Some(&ParamValue::Bool(true))
-            && self.gw.window.support() <= boxgen::BMAX
+            && (BOX_MIN_SUPPORT..=boxgen::BMAX).contains(&self.gw.window.support())
             && n as f64 >= BOX_MIN_DENSITY * self.gw.cell_count() as f64
     }
 }
@@ -491,11 +491,7 @@ impl GpuKernels for Spread {
         };
         let ns = self.gw.window.support();
         let boxed = self.uses_boxes(n);
-        let prefix = format!(
-            "{}{}",
-            cx.shader(self.gw.window.shader())?,
-            cx.shader(add)?
-        );
+        let prefix = format!("{}{}", cx.shader(self.gw.window.shader())?, cx.shader(add)?);
         let plain = format!("{prefix}{}", cx.shader("spread/spread.wgsl")?);
         let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
@@ -526,7 +522,10 @@ impl GpuKernels for Spread {
             let (spec, groups) = if boxed {
                 (
                     spec,
-                    cx.grid_1d((n as u64).div_ceil(box_run(n, self.gw.cell_count() as u64) as u64), 1),
+                    cx.grid_1d(
+                        (n as u64).div_ceil(box_run(n, self.gw.cell_count() as u64) as u64),
+                        1,
+                    ),
                 )
             } else {
                 (
@@ -562,6 +561,11 @@ impl GpuKernels for Spread {
 /// an H200 at 0.1 per cell the box kernel took 1.75 ns per particle against 1.54 for the
 /// per-particle kernel, at 1 per cell 1.0 against 1.8).
 const BOX_MIN_DENSITY: f64 = 0.5;
+
+/// Smallest support spread box by box: the box's z sums run over all 16 box cells, so
+/// small supports waste most of them (support 4 at 1 per cell: 0.69 ns per particle
+/// against 0.32 for the per-particle kernel on an H200).
+const BOX_MIN_SUPPORT: u32 = 6;
 
 /// Particles per workgroup of the box kernels (shaders/spread/box.wgsl): about as many
 /// as a 4^3 block of cells holds (fcm.json sorts by such blocks), a power of two from 4

@@ -3,10 +3,12 @@
 // One thread per particle (in the cell list's sorted order): the self term, then every
 // particle of the neighbouring cells (3 per axis, or the distinct ones on axes of fewer
 // than 3 cells, or those inside on open axes) within the cutoff, minimum image on
-// periodic axes.
+// periodic axes. With a neighbour list (LIST_WIDTH > 0, from neighbour_list.wgsl) a
+// particle whose neighbours all fit it reads them from there instead.
 #import common/index.wgsl
 
 override HAS_VALUES: bool = true;
+override LIST_WIDTH: u32 = 0u;   // neighbour list entries per particle (0: no list)
 
 struct Geometry {
     lengths: vec4<f32>,
@@ -25,6 +27,8 @@ struct Geometry {
 @group(0) @binding(6) var<uniform> geo: Geometry;
 @group(0) @binding(7) var<storage, read> pair_params: array<f32>;
 @group(0) @binding(8) var<storage, read> pair_table: array<f32>;
+@group(0) @binding(9) var<storage, read> list: array<u32>;
+@group(0) @binding(10) var<storage, read> list_count: array<u32>;
 
 fn load3(a: u32) -> vec3<f32> {
     return vec3<f32>(pos[3u * a], pos[3u * a + 1u], pos[3u * a + 2u]);
@@ -57,15 +61,30 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     let xi = load3(i);
     var acc = self_term(value3(i));
+    let per = geo.periodic.xyz == vec3<u32>(1u);
+    let l = geo.lengths.xyz;
+    if (LIST_WIDTH > 0u) {
+        let m = list_count[i];
+        if (m <= LIST_WIDTH) {
+            for (var k = 0u; k < m; k++) {
+                let j = list[k * geo.n + i];
+                var r = xi - load3(j);
+                r = select(r, r - l * round(r / l), per);
+                acc += pair_term(r, dot(r, r), value3(j));
+            }
+            out[3u * i] = acc.x;
+            out[3u * i + 1u] = acc.y;
+            out[3u * i + 2u] = acc.z;
+            return;
+        }
+    }
     let n = vec3<i32>(geo.cells.xyz);
     let key = keys[i];
     let c = vec3<i32>(i32(key % geo.cells.x), i32((key / geo.cells.x) % geo.cells.y),
                       i32(key / (geo.cells.x * geo.cells.y)));
-    let per = geo.periodic.xyz == vec3<u32>(1u);
     let ox = offsets(c.x, n.x, per.x);
     let oy = offsets(c.y, n.y, per.y);
     let oz = offsets(c.z, n.z, per.z);
-    let l = geo.lengths.xyz;
     for (var dz = oz.x; dz <= oz.y; dz++) {
         let cz = (c.z + dz + n.z) % n.z;
         for (var dy = oy.x; dy <= oy.y; dy++) {

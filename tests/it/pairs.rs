@@ -87,13 +87,15 @@ fn brute_force(
     out
 }
 
-/// A graph: cell list, values gathered into its order, neighbour_sum, scattered back.
+/// A graph: cell list, values gathered into its order, neighbour_sum (through a
+/// neighbour list of `list` entries per particle when given), scattered back.
 fn neighbour_graph(
     lengths: [f64; 3],
     cells: [u32; 3],
     periodic: [u32; 3],
     kernel_params: &str,
     with_values: bool,
+    list: Option<u32>,
 ) -> String {
     let lib = util::root().join("graphs/lib/cell_list.json");
     let values = if with_values {
@@ -111,6 +113,20 @@ fn neighbour_graph(
     } else {
         ""
     };
+    let cutoff = kernel_params
+        .split(',')
+        .find_map(|kv| kv.trim().strip_prefix(r#""cutoff": "#))
+        .unwrap_or("0");
+    let (list_node, list_in) = match list {
+        Some(width) => (
+            format!(
+                r#"{{"id": "nl", "kind": "neighbour_list", "params": {{"box": {lengths:?}, "cells": {cells:?}, "periodic": {periodic:?}, "cutoff": {cutoff}, "max_neighbours": {width}}},
+     "inputs": {{"positions": "cl.positions", "cells": "cl.cells", "cell_start": "cl.cell_start", "cell_count": "cl.cell_count"}}}},"#
+            ),
+            r#", "list": "nl.list", "list_count": "nl.count""#,
+        ),
+        None => (String::new(), ""),
+    };
     format!(
         r#"{{"mesoflow": 1,
   "sizes": {{"n": {{"default": 1}}}},
@@ -118,8 +134,9 @@ fn neighbour_graph(
   "nodes": [
     {{"id": "cl", "graph": "{}", "params": {{"box": {lengths:?}, "cells": {cells:?}, "periodic": {periodic:?}}}, "inputs": {{"positions": "inputs.positions"}}}},
     {values}
+    {list_node}
     {{"id": "sum", "kind": "neighbour_sum", "params": {{"box": {lengths:?}, "cells": {cells:?}, "periodic": {periodic:?}, {kernel_params}}},
-     "inputs": {{"positions": "cl.positions", {values_in} "cells": "cl.cells", "cell_start": "cl.cell_start", "cell_count": "cl.cell_count"}}}},
+     "inputs": {{"positions": "cl.positions", {values_in} "cells": "cl.cells", "cell_start": "cl.cell_start", "cell_count": "cl.cell_count"{list_in}}}}},
     {{"id": "back", "kind": "scatter", "inputs": {{"values": "sum.out", "index": "cl.order"}}}}
   ],
   "outputs": {{"out": "back.out"}}}}"#,
@@ -149,9 +166,44 @@ fn check_neighbours(
     pair: &Pair,
     cutoff: f64,
 ) -> Vec<f64> {
+    check_neighbours_listed(
+        what,
+        pos,
+        vals,
+        lengths,
+        cells,
+        periodic,
+        kernel_params,
+        pair,
+        cutoff,
+        None,
+    )
+}
+
+/// [`check_neighbours`] through a neighbour list of `list` entries per particle.
+#[allow(clippy::too_many_arguments)]
+fn check_neighbours_listed(
+    what: &str,
+    pos: &[f64],
+    vals: Option<&[f64]>,
+    lengths: [f64; 3],
+    cells: [u32; 3],
+    periodic: [u32; 3],
+    kernel_params: &str,
+    pair: &Pair,
+    cutoff: f64,
+    list: Option<u32>,
+) -> Vec<f64> {
     let gpu = gpu().expect("checked by the caller");
     let dir = util::tmpdir("pairs");
-    let json = neighbour_graph(lengths, cells, periodic, kernel_params, vals.is_some());
+    let json = neighbour_graph(
+        lengths,
+        cells,
+        periodic,
+        kernel_params,
+        vals.is_some(),
+        list,
+    );
     let g = util::load(&util::write_graph(&dir, "g.json", &json));
     // Positions pass through f32 on the GPU: the reference takes the same f32 values.
     let pos32 = particles(pos.to_vec());
@@ -281,6 +333,79 @@ fn neighbour_sums_cross_faces_stop_at_the_cutoff_and_skip_loners() {
     let alone = |i: usize, c: usize| vals[3 * i + c] / (6.0 * PI);
     assert!((got[12] - alone(4, 0)).abs() > 1e-3);
     assert!((got[18] - alone(6, 0)).abs() < 1e-6);
+}
+
+#[test]
+fn neighbour_lists_give_the_same_sums_and_overflow_to_the_cells() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(13);
+    let lengths = [10.0, 12.0, 14.5];
+    let pos = random_positions(&mut rng, 400, lengths);
+    let vals: Vec<f64> = (0..pos.len()).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    // About 3 neighbours per particle within 1.5: a list of 64 holds them all, a list
+    // of 2 overflows for many particles (those walk the cells), 1 for most.
+    for width in [64, 2, 1] {
+        check_neighbours_listed(
+            &format!("list of {width}"),
+            &pos,
+            Some(&vals),
+            lengths,
+            [3, 4, 4],
+            [1, 1, 0],
+            r#""cutoff": 1.5, "kernel": "rpy", "radius": 0.8"#,
+            &Pair::Rpy(0.8),
+            1.5,
+            Some(width),
+        );
+    }
+}
+
+#[test]
+fn neighbour_list_matches_its_reference_entry_by_entry() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(17);
+    let lengths = [9.0, 9.0, 9.0];
+    let pos = particles(random_positions(&mut rng, 300, lengths));
+    // Sort by cell first (what the cell list does), then list from the node alone.
+    let gpu = gpu().unwrap();
+    let dir = util::tmpdir("pairs-list");
+    let lib = util::root().join("graphs/lib/cell_list.json");
+    let json = format!(
+        r#"{{"mesoflow": 1, "inputs": {{"positions": {{"type": "particles", "rows": 300, "cols": 3}}}},
+          "nodes": [{{"id": "cl", "graph": "{}", "params": {{"box": [9, 9, 9], "cells": [3, 3, 3]}}, "inputs": {{"positions": "inputs.positions"}}}}],
+          "outputs": {{"positions": "cl.positions", "cells": "cl.cells", "cell_start": "cl.cell_start", "cell_count": "cl.cell_count"}}}}"#,
+        lib.display()
+    );
+    let g = util::load(&util::write_graph(&dir, "g.json", &json));
+    let cl = util::run_graph(
+        &gpu,
+        &g,
+        &BTreeMap::from([("positions".into(), pos)]),
+        None,
+        1,
+        true,
+    );
+    drop(gpu);
+    let _ = std::fs::remove_dir_all(&dir);
+    let inputs: Vec<(&str, HostArray)> = ["positions", "cells", "cell_start", "cell_count"]
+        .iter()
+        .map(|&k| (k, cl[k].clone()))
+        .collect();
+    let (out, refs) = util::run_node_and_reference(
+        "neighbour_list",
+        r#"{"box": [9, 9, 9], "cells": [3, 3, 3], "cutoff": 2.5, "max_neighbours": 8}"#,
+        &inputs,
+    );
+    assert_eq!(out["count"].data.to_f64(), refs[1].data, "counts");
+    assert_eq!(out["list"].data.to_f64(), refs[0].data, "lists");
+    assert!(
+        refs[1].data.iter().any(|&c| c > 8.0),
+        "some particle overflows the list"
+    );
 }
 
 #[test]

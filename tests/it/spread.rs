@@ -612,9 +612,15 @@ fn boxes_wrap_across_the_periodic_faces() {
                 dims: [8, 8, 8],
                 comps: 1,
             },
-            (0..8 * 8 * 8).map(|i| ((i * 37) % 101) as f32 - 50.0).collect(),
+            (0..8 * 8 * 8)
+                .map(|i| ((i * 37) % 101) as f32 - 50.0)
+                .collect(),
         );
-        let (g, r) = run_node("interpolate", &p, &[("grid", field), ("positions", pos.clone())]);
+        let (g, r) = run_node(
+            "interpolate",
+            &p,
+            &[("grid", field), ("positions", pos.clone())],
+        );
         assert!(rel_max_err(&g, &r).0 < 1e-5, "interpolate {w}");
     }
 }
