@@ -303,14 +303,18 @@ pub static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "pse_width",
-        doc: "pse_width(box, grid, tolerance): standard deviation of the far-field Gaussian (half the support over the deviations it is cut at)",
+        doc: "pse_width(box, grid, support): standard deviation of the far-field Gaussian for that support (half the support over 0.976 sqrt(pi support), Lindbo-Tornberg)",
         call: |a| {
             arity(a, 3)?;
             let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
+            let support = number(a, 2, "support")?;
+            if !(1.0..=64.0).contains(&support) || support.fract() != 0.0 {
+                return Err(format!("support {support} must be a whole number of cells from 1 to 64"));
+            }
             Ok(ParamValue::Number(pse::width(
                 numbers(a, 0, "box")?,
                 &cells,
-                number(a, 2, "tolerance")?,
+                support as u32,
             )))
         },
     },

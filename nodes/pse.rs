@@ -84,17 +84,18 @@ pub fn support(tolerance: f64, cells: &[u32]) -> u32 {
     p.min(smallest).max(3)
 }
 
-/// Standard deviation of the far-field Gaussian: the support's half width w = P h / 2
-/// over m = 0.976 sqrt(pi P) for the support P actually used (so the rounding of P up
-/// to an odd count cuts the Gaussian further out, not narrower), on the finest cell of
-/// the grid (sigma^2 = lambda / (4 xi^2), eq. 20.17): sigma = 0.765 h for P = 7.
-pub fn width(lengths: &[f64], cells: &[u32], tolerance: f64) -> f64 {
+/// Standard deviation of the far-field Gaussian for a support of P cells: the half width
+/// w = P h / 2 over m = 0.976 sqrt(pi P) (Lindbo and Tornberg), on the finest cell of the
+/// grid (sigma^2 = lambda / (4 xi^2), eq. 20.17): sigma = 0.765 h for P = 7. Taking m
+/// from P rather than from the tolerance means that rounding P up to an odd count cuts
+/// the Gaussian further out instead of making it narrower.
+pub fn width(lengths: &[f64], cells: &[u32], support: u32) -> f64 {
     let h = lengths
         .iter()
         .zip(cells)
         .map(|(l, &n)| l / n as f64)
         .fold(f64::INFINITY, f64::min);
-    let p = support(tolerance, cells) as f64;
+    let p = support as f64;
     0.5 * p * h / (0.976 * (std::f64::consts::PI * p).sqrt())
 }
 

@@ -26,7 +26,7 @@ pub struct PseBench {
     pub noise: bool,
     pub reps: u64,
     pub error_box: f64,
-    /// Other graph params for the timed runs.
+    /// Other graph params, for the timed runs and the error runs alike.
     pub sets: Vec<(String, ParamValue)>,
 }
 
@@ -46,15 +46,13 @@ fn accuracy(
     split: f64,
 ) -> Result<(f64, f64), CliError> {
     let l = bench.error_box;
-    let g = load(
-        &bench.graph,
-        &[
-            ("box", ParamValue::Numbers(vec![l; 3])),
-            ("tolerance", ParamValue::Number(bench.tolerance)),
-            ("split", ParamValue::Number(split)),
-        ],
-        registry,
-    )?;
+    let mut sets = vec![
+        ("box", ParamValue::Numbers(vec![l; 3])),
+        ("tolerance", ParamValue::Number(bench.tolerance)),
+        ("split", ParamValue::Number(split)),
+    ];
+    sets.extend(bench.sets.iter().map(|(k, v)| (k.as_str(), v.clone())));
+    let g = load(&bench.graph, &sets, registry)?;
     let self_want = hasimoto(1.0, l) / (6.0 * PI);
     let mut cache = KernelCache::default();
     let mut rng = Rng(0x2545_F491_4F6C_DD1D);
