@@ -309,7 +309,9 @@ pub static FUNCTIONS: &[HostFunction] = &[
             let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
             let support = number(a, 2, "support")?;
             if !(1.0..=64.0).contains(&support) || support.fract() != 0.0 {
-                return Err(format!("support {support} must be a whole number of cells from 1 to 64"));
+                return Err(format!(
+                    "support {support} must be a whole number of cells from 1 to 64"
+                ));
             }
             Ok(ParamValue::Number(pse::width(
                 numbers(a, 0, "box")?,

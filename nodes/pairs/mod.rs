@@ -471,7 +471,7 @@ fn check_geometry(
     periodic: &[bool],
     cutoff: f64,
 ) -> Result<(), String> {
-    if cells.iter().any(|&c| c == 0) {
+    if cells.contains(&0) {
         return Err(format!(
             "`cells` must be at least 1 per axis, got {cells:?}"
         ));

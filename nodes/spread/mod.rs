@@ -213,12 +213,6 @@ fn grid_params() -> Vec<ParamSpec> {
             &["64", "128", "256"],
             "threads per workgroup (tuning: the workgroup serves workgroup / support^2 particles)",
         ),
-        ParamSpec {
-            name: "sorted_input",
-            kind: ParamKind::Bool,
-            default: Some(ParamValue::Bool(false)),
-            doc: "spreading: particles come sorted in space (Morton order of cells best); where they are dense (at least 0.5 per cell) and the support is 6 to 16 cells, spread box by box: runs of up to 64 particles summed in registers over the block of cells their supports cover, one grid atomic per box cell (runs whose box exceeds 16 cells per axis go direct). Interpolation ignores it",
-        },
         ParamSpec::choice(
             "variant",
             "auto",
@@ -395,7 +389,14 @@ impl NodeKind for SpreadKind {
     }
 
     fn params(&self) -> Vec<ParamSpec> {
-        grid_params()
+        let mut p = grid_params();
+        p.push(ParamSpec {
+            name: "sorted_input",
+            kind: ParamKind::Bool,
+            default: Some(ParamValue::Bool(false)),
+            doc: "spreading: particles come sorted in space (Morton order of cells best); where they are dense (at least 0.5 per cell) and the support is 6 to 16 cells, spread box by box: runs of up to 64 particles summed in registers over the block of cells their supports cover, one grid atomic per box cell (runs whose box exceeds 16 cells per axis go direct). Interpolation ignores it",
+        });
+        p
     }
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
