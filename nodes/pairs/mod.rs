@@ -604,7 +604,7 @@ impl Node for NeighbourSum {
     }
 }
 
-/// Layout of the `Geometry` uniform of shaders/pairs/neighbour_sum.wgsl.
+/// Layout of the `Geometry` uniform of shaders/pairs/cells.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct NeighbourGeometry {
@@ -614,6 +614,25 @@ struct NeighbourGeometry {
     n: u32,
     cutoff2: f32,
     pad: [u32; 2],
+}
+
+impl NeighbourGeometry {
+    fn new(lengths: &[f64], cells: &[u32], periodic: &[bool], n: u32, cutoff: f64) -> Self {
+        let mut g = NeighbourGeometry {
+            lengths: [1.0; 4],
+            cells: [1; 4],
+            periodic: [0; 4],
+            n,
+            cutoff2: (cutoff as f32) * (cutoff as f32),
+            pad: [0; 2],
+        };
+        for a in 0..3 {
+            g.lengths[a] = lengths[a] as f32;
+            g.cells[a] = cells[a];
+            g.periodic[a] = u32::from(periodic[a]);
+        }
+        g
+    }
 }
 
 impl GpuKernels for NeighbourSum {
@@ -658,19 +677,7 @@ impl GpuKernels for NeighbourSum {
             .constant("HAS_VALUES", f64::from(u8::from(values.is_some())))
             .constant("LIST_WIDTH", width as f64),
         )?;
-        let mut g = NeighbourGeometry {
-            lengths: [1.0; 4],
-            cells: [1; 4],
-            periodic: [0; 4],
-            n,
-            cutoff2: (self.cutoff as f32) * (self.cutoff as f32),
-            pad: [0; 2],
-        };
-        for a in 0..3 {
-            g.lengths[a] = self.lengths[a] as f32;
-            g.cells[a] = self.cells[a];
-            g.periodic[a] = u32::from(self.periodic[a]);
-        }
+        let g = NeighbourGeometry::new(&self.lengths, &self.cells, &self.periodic, n, self.cutoff);
         let geo = cx.uniform("neighbour geometry", bytemuck::bytes_of(&g));
         let (params, table) = pair_buffers(cx, &self.kernel);
         let buffers = [
@@ -909,19 +916,7 @@ impl GpuKernels for NeighbourList {
             )
             .constant("LIST_WIDTH", self.width as f64),
         )?;
-        let mut g = NeighbourGeometry {
-            lengths: [1.0; 4],
-            cells: [1; 4],
-            periodic: [0; 4],
-            n,
-            cutoff2: (self.cutoff as f32) * (self.cutoff as f32),
-            pad: [0; 2],
-        };
-        for a in 0..3 {
-            g.lengths[a] = self.lengths[a] as f32;
-            g.cells[a] = self.cells[a];
-            g.periodic[a] = u32::from(self.periodic[a]);
-        }
+        let g = NeighbourGeometry::new(&self.lengths, &self.cells, &self.periodic, n, self.cutoff);
         let geo = cx.uniform("neighbour geometry", bytemuck::bytes_of(&g));
         let list = io.outputs[0].buffer;
         Ok(vec![

@@ -2,16 +2,9 @@
 // neighbour_sum.wgsl, recording each neighbour within the cutoff, neighbour k of
 // particle i at list[k * N + i] (the first LIST_WIDTH of them; count holds them all).
 #import common/index.wgsl
+#import pairs/cells.wgsl
 
 override LIST_WIDTH: u32 = 32u;
-
-struct Geometry {
-    lengths: vec4<f32>,
-    cells: vec4<u32>,
-    periodic: vec4<u32>,
-    n: u32,
-    cutoff2: f32,
-}
 
 @group(0) @binding(0) var<storage, read> pos: array<f32>;
 @group(0) @binding(1) var<storage, read> keys: array<u32>;
@@ -20,21 +13,6 @@ struct Geometry {
 @group(0) @binding(4) var<storage, read_write> list: array<u32>;
 @group(0) @binding(5) var<storage, read_write> count: array<u32>;
 @group(0) @binding(6) var<uniform> geo: Geometry;
-
-fn load3(a: u32) -> vec3<f32> {
-    return vec3<f32>(pos[3u * a], pos[3u * a + 1u], pos[3u * a + 2u]);
-}
-
-// The range of cell offsets to visit along one axis, as (first, last).
-fn offsets(c: i32, n: i32, periodic: bool) -> vec2<i32> {
-    if (periodic) {
-        if (n >= 3) {
-            return vec2<i32>(-1, 1);
-        }
-        return vec2<i32>(0, n - 1);
-    }
-    return vec2<i32>(max(-1, -c), min(1, n - 1 - c));
-}
 
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -45,11 +23,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     let xi = load3(i);
     let per = geo.periodic.xyz == vec3<u32>(1u);
-    let l = geo.lengths.xyz;
     let n = vec3<i32>(geo.cells.xyz);
     let key = keys[i];
-    let c = vec3<i32>(i32(key % geo.cells.x), i32((key / geo.cells.x) % geo.cells.y),
-                      i32(key / (geo.cells.x * geo.cells.y)));
+    let c = cell_coords(key);
     let ox = offsets(c.x, n.x, per.x);
     let oy = offsets(c.y, n.y, per.y);
     let oz = offsets(c.z, n.z, per.z);
@@ -67,8 +43,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                     if (j == i) {
                         continue;
                     }
-                    var r = xi - load3(j);
-                    r = select(r, r - l * round(r / l), per);
+                    let r = displacement(xi, j);
                     if (dot(r, r) <= geo.cutoff2) {
                         if (found < LIST_WIDTH) {
                             list[found * geo.n + i] = j;

@@ -6,17 +6,10 @@
 // periodic axes. With a neighbour list (LIST_WIDTH > 0, from neighbour_list.wgsl) a
 // particle whose neighbours all fit it reads them from there instead.
 #import common/index.wgsl
+#import pairs/cells.wgsl
 
 override HAS_VALUES: bool = true;
 override LIST_WIDTH: u32 = 0u;   // neighbour list entries per particle (0: no list)
-
-struct Geometry {
-    lengths: vec4<f32>,
-    cells: vec4<u32>,
-    periodic: vec4<u32>,
-    n: u32,
-    cutoff2: f32,
-}
 
 @group(0) @binding(0) var<storage, read> pos: array<f32>;
 @group(0) @binding(1) var<storage, read> vals: array<f32>;
@@ -30,26 +23,11 @@ struct Geometry {
 @group(0) @binding(9) var<storage, read> list: array<u32>;
 @group(0) @binding(10) var<storage, read> list_count: array<u32>;
 
-fn load3(a: u32) -> vec3<f32> {
-    return vec3<f32>(pos[3u * a], pos[3u * a + 1u], pos[3u * a + 2u]);
-}
-
 fn value3(a: u32) -> vec3<f32> {
     if (HAS_VALUES) {
         return vec3<f32>(vals[3u * a], vals[3u * a + 1u], vals[3u * a + 2u]);
     }
     return vec3<f32>(0.0);
-}
-
-// The range of cell offsets to visit along one axis, as (first, last).
-fn offsets(c: i32, n: i32, periodic: bool) -> vec2<i32> {
-    if (periodic) {
-        if (n >= 3) {
-            return vec2<i32>(-1, 1);
-        }
-        return vec2<i32>(0, n - 1);
-    }
-    return vec2<i32>(max(-1, -c), min(1, n - 1 - c));
 }
 
 @compute @workgroup_size(256)
@@ -62,14 +40,12 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let xi = load3(i);
     var acc = self_term(value3(i));
     let per = geo.periodic.xyz == vec3<u32>(1u);
-    let l = geo.lengths.xyz;
     if (LIST_WIDTH > 0u) {
         let m = list_count[i];
         if (m <= LIST_WIDTH) {
             for (var k = 0u; k < m; k++) {
                 let j = list[k * geo.n + i];
-                var r = xi - load3(j);
-                r = select(r, r - l * round(r / l), per);
+                let r = displacement(xi, j);
                 acc += pair_term(r, dot(r, r), value3(j));
             }
             out[3u * i] = acc.x;
@@ -80,8 +56,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     let n = vec3<i32>(geo.cells.xyz);
     let key = keys[i];
-    let c = vec3<i32>(i32(key % geo.cells.x), i32((key / geo.cells.x) % geo.cells.y),
-                      i32(key / (geo.cells.x * geo.cells.y)));
+    let c = cell_coords(key);
     let ox = offsets(c.x, n.x, per.x);
     let oy = offsets(c.y, n.y, per.y);
     let oz = offsets(c.z, n.z, per.z);
@@ -98,8 +73,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                     if (j == i) {
                         continue;
                     }
-                    var r = xi - load3(j);
-                    r = select(r, r - l * round(r / l), per);
+                    let r = displacement(xi, j);
                     let r2 = dot(r, r);
                     if (r2 <= geo.cutoff2) {
                         acc += pair_term(r, r2, value3(j));

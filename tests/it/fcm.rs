@@ -486,10 +486,16 @@ fn fluctuating_velocities_add_the_same_noise() {
     assert_eq!(differs, 20, "seed 6 repeated seed 5's noise");
 }
 
-/// A graph accumulating noise statistics over the steps: per particle and axis the sum of
-/// squares, and the sum over particles squared (the covariance between particles).
-fn noise_statistics_graph(dir: &std::path::Path, n: usize, sets: &str) -> std::path::PathBuf {
-    let fcm = root().join("graphs/fcm.json");
+/// A graph accumulating noise statistics over the steps of `graphs/<name>` (a mobility
+/// graph with a `noise` output): per particle and axis the sum of squares, and the sum
+/// over particles squared (the covariance between particles).
+fn noise_statistics_graph(
+    dir: &std::path::Path,
+    name: &str,
+    n: usize,
+    sets: &str,
+) -> std::path::PathBuf {
+    let mobility = root().join("graphs").join(name);
     let json = format!(
         r#"{{"mesoflow": 1,
           "inputs": {{"positions": {{"type": "particles", "rows": {n}, "cols": 3}}}},
@@ -498,17 +504,74 @@ fn noise_statistics_graph(dir: &std::path::Path, n: usize, sets: &str) -> std::p
           "nodes": [
             {{"id": "zero", "kind": "constant", "params": {{"value": 0}}, "inputs": {{"like": "inputs.positions"}}}},
             {{"id": "zero_row", "kind": "constant", "params": {{"value": 0, "rows": 1, "cols": 3}}}},
-            {{"id": "fcm", "graph": "{}", "params": {sets}, "inputs": {{"positions": "inputs.positions", "forces": "zero.out"}}}},
-            {{"id": "sq", "kind": "multiply", "inputs": {{"a": "fcm.noise", "b": "fcm.noise"}}}},
+            {{"id": "m", "graph": "{}", "params": {sets}, "inputs": {{"positions": "inputs.positions", "forces": "zero.out"}}}},
+            {{"id": "sq", "kind": "multiply", "inputs": {{"a": "m.noise", "b": "m.noise"}}}},
             {{"id": "sq_next", "kind": "add", "inputs": {{"a": "state.sq", "b": "sq.out"}}}},
-            {{"id": "sum", "kind": "column_reduce", "params": {{"op": "sum"}}, "inputs": {{"x": "fcm.noise"}}}},
+            {{"id": "sum", "kind": "column_reduce", "params": {{"op": "sum"}}, "inputs": {{"x": "m.noise"}}}},
             {{"id": "sum_sq", "kind": "multiply", "inputs": {{"a": "sum.out", "b": "sum.out"}}}},
             {{"id": "pair_next", "kind": "add", "inputs": {{"a": "state.pair", "b": "sum_sq.out"}}}}
           ],
           "outputs": {{"sq": "state.sq", "pair": "state.pair"}}}}"#,
-        fcm.display()
+        mobility.display()
     );
     crate::util::write_graph(dir, "noise_stats.json", &json)
+}
+
+/// Over `steps` fresh draws of the noise of `graphs/<name>` (params `sets`, a JSON
+/// object) at positions `x`: per particle and axis the sum of squares, and per axis the
+/// sum of squares of the noise summed over the particles.
+pub(crate) fn noise_statistics(
+    gpu: &GpuContext,
+    name: &str,
+    sets: &str,
+    x: &[[f64; 3]],
+    steps: u64,
+    seed: u64,
+) -> (Vec<[f64; 3]>, [f64; 3]) {
+    let dir = crate::util::tmpdir(&format!("noise-{}", name.replace('.', "-")));
+    let path = noise_statistics_graph(&dir, name, x.len(), sets);
+    let g = graph::load(
+        &path,
+        registry(),
+        &LoadOptions {
+            steps,
+            seed,
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: [(
+            "positions".to_string(),
+            ValueType::Particles {
+                n: x.len() as u32,
+                k: 3,
+            },
+        )]
+        .into_iter()
+        .collect(),
+        fuse: true,
+    };
+    let plan = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
+    let mut program = compile(gpu, &g, &plan);
+    program
+        .upload(
+            &[("positions".to_string(), particles(x))]
+                .into_iter()
+                .collect(),
+        )
+        .unwrap();
+    program
+        .run(&RunOptions {
+            steps,
+            profile: Profile::Off,
+            progress: false,
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    let out: BTreeMap<String, HostArray> = program.read_outputs().unwrap().into_iter().collect();
+    let _ = std::fs::remove_dir_all(&dir);
+    (rows(&out["sq"]), rows(&out["pair"])[0])
 }
 
 /// Fluctuation-dissipation: over many steps (fresh draws each) the noise M^(1/2) W has
@@ -516,7 +579,6 @@ fn noise_statistics_graph(dir: &std::path::Path, n: usize, sets: &str) -> std::p
 #[test]
 fn noise_covariance_is_the_mobility() {
     let Some(gpu) = gpu() else { return };
-    let l = 8.0;
     let sets = r#"{"box": [8, 8, 8], "tolerance": 0.01}"#;
     let x = vec![[0.3, -1.1, 2.0], [1.6, -0.6, 2.4]];
     // M from the deterministic path of the same graph.
@@ -539,45 +601,8 @@ fn noise_covariance_is_the_mobility() {
         }
     }
     drop(fcm);
-    let dir = crate::util::tmpdir("fcm-fdt");
-    let path = noise_statistics_graph(&dir, 2, sets);
     let steps = 12_000u64;
-    let g = graph::load(
-        &path,
-        registry(),
-        &LoadOptions {
-            steps,
-            seed: 11,
-            ..Default::default()
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    let opts = PlanOptions {
-        outputs: None,
-        inputs: [("positions".to_string(), ValueType::Particles { n: 2, k: 3 })]
-            .into_iter()
-            .collect(),
-        fuse: true,
-    };
-    let plan = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
-    let mut program = compile(&gpu, &g, &plan);
-    program
-        .upload(
-            &[("positions".to_string(), particles(&x))]
-                .into_iter()
-                .collect(),
-        )
-        .unwrap();
-    program
-        .run(&RunOptions {
-            steps,
-            profile: Profile::Off,
-            progress: false,
-        })
-        .unwrap_or_else(|e| panic!("{e}"));
-    let out: BTreeMap<String, HostArray> = program.read_outputs().unwrap().into_iter().collect();
-    let sq = rows(&out["sq"]);
-    let pair = rows(&out["pair"])[0];
+    let (sq, pair) = noise_statistics(&gpu, "fcm.json", sets, &x, steps, 11);
     let s = steps as f64;
     // A variance estimated from s normal samples has relative standard deviation sqrt(2/s)
     // (1.3 % here); 5 of them is the bound.
@@ -601,7 +626,6 @@ fn noise_covariance_is_the_mobility() {
             "axis {a}: variance of the sum {var} vs {want}"
         );
     }
-    let _ = l;
 }
 
 /// Free Brownian particles in bd_fcm.json: the mean squared displacement per axis grows as

@@ -152,37 +152,10 @@ fn particles(data: Vec<f64>) -> HostArray {
     )
 }
 
-/// Runs the neighbour graph and returns the largest error relative to the largest
-/// reference value.
+/// Runs the neighbour graph (through a neighbour list of `list` entries per particle
+/// when given) and checks it against the O(N^2) sum; returns the GPU sums.
 #[allow(clippy::too_many_arguments)]
 fn check_neighbours(
-    what: &str,
-    pos: &[f64],
-    vals: Option<&[f64]>,
-    lengths: [f64; 3],
-    cells: [u32; 3],
-    periodic: [u32; 3],
-    kernel_params: &str,
-    pair: &Pair,
-    cutoff: f64,
-) -> Vec<f64> {
-    check_neighbours_listed(
-        what,
-        pos,
-        vals,
-        lengths,
-        cells,
-        periodic,
-        kernel_params,
-        pair,
-        cutoff,
-        None,
-    )
-}
-
-/// [`check_neighbours`] through a neighbour list of `list` entries per particle.
-#[allow(clippy::too_many_arguments)]
-fn check_neighbours_listed(
     what: &str,
     pos: &[f64],
     vals: Option<&[f64]>,
@@ -266,6 +239,7 @@ fn neighbour_sums_match_every_pair() {
         r#""cutoff": 3.0, "kernel": "rpy", "radius": 0.8"#,
         &Pair::Rpy(0.8),
         3.0,
+        None,
     );
     // Axes of 2 and 1 cells (the distinct neighbours only) and an open axis.
     check_neighbours(
@@ -278,6 +252,7 @@ fn neighbour_sums_match_every_pair() {
         r#""cutoff": 4.8, "kernel": "rpy", "radius": 0.8"#,
         &Pair::Rpy(0.8),
         4.8,
+        None,
     );
     // Forces from positions alone (WCA: cutoff 2^(1/6) sigma), spaced out so forces
     // stay moderate.
@@ -293,6 +268,7 @@ fn neighbour_sums_match_every_pair() {
         &format!(r#""cutoff": {wca}, "kernel": "lj", "sigma": 0.5, "epsilon": 2.0"#),
         &Pair::Lj(2.0, 0.5),
         wca,
+        None,
     );
 }
 
@@ -323,6 +299,7 @@ fn neighbour_sums_cross_faces_stop_at_the_cutoff_and_skip_loners() {
         r#""cutoff": 2.0, "kernel": "rpy", "radius": 1.0"#,
         &Pair::Rpy(1.0),
         2.0,
+        None,
     );
     // The loner gets its self term only: v / (6 pi).
     for c in 0..3 {
@@ -347,7 +324,7 @@ fn neighbour_lists_give_the_same_sums_and_overflow_to_the_cells() {
     // About 3 neighbours per particle within 1.5: a list of 64 holds them all, a list
     // of 2 overflows for many particles (those walk the cells), 1 for most.
     for width in [64, 2, 1] {
-        check_neighbours_listed(
+        check_neighbours(
             &format!("list of {width}"),
             &pos,
             Some(&vals),
@@ -429,6 +406,7 @@ fn near_field_table_sums_like_its_reference() {
         &format!(r#""cutoff": {cutoff}, "kernel": "rpy_near", "split": {xi}"#),
         &Pair::Near(table),
         cutoff,
+        None,
     );
 }
 

@@ -5,13 +5,11 @@
 //! independence of the split; overlapping pairs; symmetry and positive definiteness;
 //! fluctuation-dissipation; open-boundary RPY against the closed form.
 
-use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
-use mesoflow::exec::{Profile, RunOptions};
 use mesoflow::graph::{self, Graph, LoadOptions};
 use mesoflow::plan::{Plan, PlanOptions};
-use mesoflow::value::{HostArray, ValueType};
+use mesoflow::value::ValueType;
 
 use crate::fcm::{cholesky_min_pivot, compile, eval, hasimoto, load_with, particles, rows};
 use crate::util::{Rng, gpu, registry, root};
@@ -351,65 +349,8 @@ fn noise_covariance_is_the_mobility() {
         }
     }
     drop(program);
-    let pse = root().join("graphs/pse.json");
-    let json = format!(
-        r#"{{"mesoflow": 1,
-          "inputs": {{"positions": {{"type": "particles", "rows": 2, "cols": 3}}}},
-          "state": {{"sq": {{"init": "zero.out", "next": "sq_next.out"}},
-                    "pair": {{"init": "zero_row.out", "next": "pair_next.out"}}}},
-          "nodes": [
-            {{"id": "zero", "kind": "constant", "params": {{"value": 0}}, "inputs": {{"like": "inputs.positions"}}}},
-            {{"id": "zero_row", "kind": "constant", "params": {{"value": 0, "rows": 1, "cols": 3}}}},
-            {{"id": "pse", "graph": "{}", "params": {sets}, "inputs": {{"positions": "inputs.positions", "forces": "zero.out"}}}},
-            {{"id": "sq", "kind": "multiply", "inputs": {{"a": "pse.noise", "b": "pse.noise"}}}},
-            {{"id": "sq_next", "kind": "add", "inputs": {{"a": "state.sq", "b": "sq.out"}}}},
-            {{"id": "sum", "kind": "column_reduce", "params": {{"op": "sum"}}, "inputs": {{"x": "pse.noise"}}}},
-            {{"id": "sum_sq", "kind": "multiply", "inputs": {{"a": "sum.out", "b": "sum.out"}}}},
-            {{"id": "pair_next", "kind": "add", "inputs": {{"a": "state.pair", "b": "sum_sq.out"}}}}
-          ],
-          "outputs": {{"sq": "state.sq", "pair": "state.pair"}}}}"#,
-        pse.display()
-    );
-    let dir = crate::util::tmpdir("pse-fdt");
-    let path = crate::util::write_graph(&dir, "noise_stats.json", &json);
     let steps = 4000u64;
-    let g = graph::load(
-        &path,
-        registry(),
-        &LoadOptions {
-            steps,
-            seed: 17,
-            ..Default::default()
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    let opts = PlanOptions {
-        outputs: None,
-        inputs: [("positions".to_string(), ValueType::Particles { n: 2, k: 3 })]
-            .into_iter()
-            .collect(),
-        fuse: true,
-    };
-    let plan = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
-    let mut program = compile(&gpu, &g, &plan);
-    program
-        .upload(
-            &[("positions".to_string(), particles(&x))]
-                .into_iter()
-                .collect(),
-        )
-        .unwrap();
-    program
-        .run(&RunOptions {
-            steps,
-            profile: Profile::Off,
-            progress: false,
-        })
-        .unwrap_or_else(|e| panic!("{e}"));
-    let out: BTreeMap<String, HostArray> = program.read_outputs().unwrap().into_iter().collect();
-    let _ = std::fs::remove_dir_all(&dir);
-    let sq = rows(&out["sq"]);
-    let pair = rows(&out["pair"])[0];
+    let (sq, pair) = crate::fcm::noise_statistics(&gpu, "pse.json", sets, &x, steps, 17);
     let s = steps as f64;
     // A variance from s normal samples has relative standard deviation sqrt(2 / s)
     // (2.2 % here); 5 of them is the bound.

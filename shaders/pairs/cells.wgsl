@@ -1,0 +1,39 @@
+// template: shared by the cell-list traversals (neighbour_sum.wgsl, neighbour_list.wgsl), which
+// bind `pos` and `geo`: the geometry, positions, and the cell offsets to visit.
+
+struct Geometry {
+    lengths: vec4<f32>,
+    cells: vec4<u32>,
+    periodic: vec4<u32>,
+    n: u32,
+    cutoff2: f32,
+}
+
+fn load3(a: u32) -> vec3<f32> {
+    return vec3<f32>(pos[3u * a], pos[3u * a + 1u], pos[3u * a + 2u]);
+}
+
+// The range of cell offsets to visit along one axis, as (first, last): 3 cells, or the
+// distinct ones on periodic axes of fewer than 3 cells, or those inside on open axes.
+fn offsets(c: i32, n: i32, periodic: bool) -> vec2<i32> {
+    if (periodic) {
+        if (n >= 3) {
+            return vec2<i32>(-1, 1);
+        }
+        return vec2<i32>(0, n - 1);
+    }
+    return vec2<i32>(max(-1, -c), min(1, n - 1 - c));
+}
+
+// The cell coordinates of a linear cell index.
+fn cell_coords(key: u32) -> vec3<i32> {
+    return vec3<i32>(i32(key % geo.cells.x), i32((key / geo.cells.x) % geo.cells.y),
+                     i32(key / (geo.cells.x * geo.cells.y)));
+}
+
+// The displacement x_i - x_j, minimum image on the periodic axes.
+fn displacement(xi: vec3<f32>, j: u32) -> vec3<f32> {
+    let r = xi - load3(j);
+    let l = geo.lengths.xyz;
+    return select(r, r - l * round(r / l), geo.periodic.xyz == vec3<u32>(1u));
+}
