@@ -7,6 +7,7 @@
 
 mod fcm;
 mod fft;
+mod mpcd;
 mod primitives;
 mod pse;
 mod reduce;
@@ -286,6 +287,20 @@ pub enum BenchCommand {
         #[arg(long = "set")]
         sets: Vec<String>,
     },
+    /// MPCD particle-steps per second (3D SRD) at several particle counts.
+    Mpcd {
+        /// The MPCD graph file.
+        #[arg(long, default_value = "graphs/mpcd.json")]
+        graph: PathBuf,
+        /// Particle counts (rounded to whole cubic boxes of cells).
+        #[arg(long, value_delimiter = ',', default_values_t = [1_000_000u64, 10_000_000, 50_000_000])]
+        sizes: Vec<u64>,
+        /// Mean particles per cell.
+        #[arg(long, default_value_t = 10.0)]
+        density: f64,
+        #[arg(long, default_value_t = 20)]
+        reps: u64,
+    },
     /// PSE speed against error per split (time of one M F, with --noise also M F +
     /// M^(1/2) W; self- and pair-mobility errors against f64 references).
     Pse {
@@ -387,6 +402,17 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
                 sets: crate::cli::parse_sets(&sets)?.into_iter().collect(),
             })
         }
+        BenchCommand::Mpcd {
+            graph,
+            sizes,
+            density,
+            reps,
+        } => mpcd::run(&mpcd::MpcdBench {
+            graph,
+            sizes,
+            density,
+            reps,
+        }),
         BenchCommand::Pse {
             graph,
             splits,
