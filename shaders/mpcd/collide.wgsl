@@ -1,0 +1,98 @@
+// SRD collision, one thread per particle: v <- u + S R (v - u), u the cell mean from the
+// cell sums, R the rotation by the angle about this cell's random axis (3D: uniform on the
+// sphere; 2D: by +-angle), S the cell thermostat factor (1, plain rescaling of the
+// relative velocities to kT, or the Monte-Carlo cell scaling). Each cell's draws come from
+// one Philox block keyed by (seed, stream + j, step, cell), so every particle of a cell
+// recomputes the same rotation without a pass over the cells. Wall-cut cells (first and
+// last layer along the walled axis, with the grid shift) holding fewer than `density`
+// particles are filled up to it with virtual particles: u <- (n u + (M - n) q) / M with
+// q normal of variance kT / (m (M - n)) per component (the mean of M - n thermal
+// particles); those cells skip the thermostat.
+#import common/index.wgsl
+#import mpcd/common.wgsl
+
+@group(0) @binding(0) var<uniform> m: Mpcd;
+@group(0) @binding(1) var<storage, read> clock: array<u32>;
+@group(0) @binding(2) var<storage, read> vel: array<f32>;
+@group(0) @binding(3) var<storage, read> cell: array<u32>;
+@group(0) @binding(4) var<storage, read> sums: array<u32>;
+@group(0) @binding(5) var<storage, read_write> vel_out: array<f32>;
+
+fn cell_block(c: u32, step: u32, j: u32) -> vec4<u32> {
+    return philox4x32_10(vec4<u32>(c, step, m.seed_hi, 0u), vec2<u32>(m.seed_lo, m.stream + j));
+}
+
+fn unit(w: u32) -> f32 {
+    return f32(w >> 8u) * (1.0 / 16777216.0);
+}
+
+fn pair(i: u32) -> vec2<u32> {
+    return vec2<u32>(sums[i], sums[i + 1u]);
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let p = flat_index(wid, nwg, lid, 256u);
+    if (p >= m.n) {
+        return;
+    }
+    let step = clock[0];
+    let c = cell[p];
+    let base = c * CELL_WORDS;
+    let count = sums[base];
+    let n = f32(count);
+    var sv = vec3<f32>(0.0);
+    var v = vec3<f32>(0.0);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        sv[a] = fx_to_f32(pair(base + 1u + 2u * a));
+        v[a] = vel[p * DIMS + a];
+    }
+    var u = sv / (n * m.fix_v);
+    let rel = max(fx_to_f32(pair(base + 7u)) / m.fix_e - n * dot(u, u), 0.0);
+    var scale = 1.0;
+    let layer = cell_layer(m, c);
+    let cut = m.walls == 1u && m.shift == 1u && (layer == 0u || layer == m.cells[DIMS - 1u] - 1u);
+    if (m.ghosts == 1u && cut && n < m.density) {
+        let g = cell_block(c, step, 2u);
+        let r0 = sqrt(-2.0 * log(philox_open01(g.x)));
+        let r1 = sqrt(-2.0 * log(philox_open01(g.z)));
+        let t0 = 6.283185307179586 * philox_open01(g.y);
+        let t1 = 6.283185307179586 * philox_open01(g.w);
+        let q = vec3<f32>(r0 * cos(t0), r0 * sin(t0), r1 * cos(t1)) * sqrt(m.kt / (m.mass * (m.density - n)));
+        u = (n * u + (m.density - n) * q) / m.density;
+        if (DIMS == 2u) {
+            u.z = 0.0;
+        }
+    } else if (m.thermostat != 0u && count >= 2u && rel > 0.0) {
+        let dof = f32(DIMS * (count - 1u));
+        if (m.thermostat == 1u) {
+            scale = sqrt(dof * m.kt / (m.mass * rel));
+        } else {
+            let t = cell_block(c, step, 1u);
+            let psi = 1.0 + m.mc_c * unit(t.x);
+            let s = select(1.0 / psi, psi, unit(t.y) < 0.5);
+            let log_accept = dof * log(s) - 0.5 * m.mass / m.kt * rel * (s * s - 1.0);
+            if (log(philox_open01(t.z)) < log_accept) {
+                scale = s;
+            }
+        }
+    }
+    let r = cell_block(c, step, 0u);
+    let d = v - u;
+    var rd = vec3<f32>(0.0);
+    if (DIMS == 3u) {
+        let cz = 2.0 * unit(r.x) - 1.0;
+        let phi = 6.283185307179586 * unit(r.y);
+        let sz = sqrt(max(1.0 - cz * cz, 0.0));
+        let k = vec3<f32>(sz * cos(phi), sz * sin(phi), cz);
+        rd = d * m.cos_a + cross(k, d) * m.sin_a + k * (dot(k, d) * (1.0 - m.cos_a));
+    } else {
+        let sa = select(m.sin_a, -m.sin_a, (r.x & 0x80000000u) != 0u);
+        rd = vec3<f32>(d.x * m.cos_a - d.y * sa, d.x * sa + d.y * m.cos_a, 0.0);
+    }
+    let out = u + scale * rd;
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        vel_out[p * DIMS + a] = out[a];
+    }
+}
