@@ -5,8 +5,7 @@
 use super::{Geometry, fixed_scales, geometry_params, key_into, key_of, thermal_params};
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx,
-    Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
 };
 use crate::nodes::random;
 use crate::value::{PortType, RefArray, ValueType};
@@ -29,7 +28,11 @@ impl NodeKind for MpcdInitKind {
     fn outputs(&self) -> Vec<PortSpec> {
         vec![
             PortSpec::new("positions", PortType::Particles(None), "positions (N x d)"),
-            PortSpec::new("velocities", PortType::Particles(None), "velocities (N x d)"),
+            PortSpec::new(
+                "velocities",
+                PortType::Particles(None),
+                "velocities (N x d)",
+            ),
         ]
     }
 
@@ -52,11 +55,7 @@ impl NodeKind for MpcdInitKind {
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
         let geo = Geometry::from_params(p)?;
-        let volume_cells: f64 = geo
-            .lengths
-            .iter()
-            .map(|l| (l / geo.cell).round())
-            .product();
+        let volume_cells: f64 = geo.lengths.iter().map(|l| (l / geo.cell).round()).product();
         let n = (p.number("density") * volume_cells).round();
         if !(1.0..=u32::MAX as f64 / 3.0).contains(&n) {
             return Err(format!(
@@ -160,12 +159,7 @@ impl GpuKernels for MpcdInit {
         )?;
         let params = cx.uniform("mpcd init", bytemuck::bytes_of(&self.u));
         let total = io.scratch[0];
-        let buffers = [
-            &params,
-            io.outputs[0].buffer,
-            io.outputs[1].buffer,
-            total,
-        ];
+        let buffers = [&params, io.outputs[0].buffer, io.outputs[1].buffer, total];
         let groups = cx.grid_1d(self.u.n as u64, WG_1D);
         Ok(vec![
             cx.fill(total, 8, 0)?,

@@ -7,8 +7,7 @@ use super::{
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx,
-    Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
@@ -77,7 +76,13 @@ impl NodeKind for MpcdMeasureKind {
                 u32::MAX as f64,
                 "steps before the first sample",
             ),
-            ParamSpec::integer("every", Some(1.0), 1.0, u32::MAX as f64, "steps between samples"),
+            ParamSpec::integer(
+                "every",
+                Some(1.0),
+                1.0,
+                u32::MAX as f64,
+                "steps between samples",
+            ),
         ]);
         p
     }
@@ -232,7 +237,11 @@ impl NodeKind for MpcdAverageKind {
     }
 
     fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("sums", PortType::Indices, "mpcd_measure's sums")]
+        vec![PortSpec::new(
+            "sums",
+            PortType::Indices,
+            "mpcd_measure's sums",
+        )]
     }
 
     fn outputs(&self) -> Vec<PortSpec> {
@@ -242,7 +251,11 @@ impl NodeKind for MpcdAverageKind {
                 PortType::Particles(Some(1)),
                 "mean v_x per bin (bins x 1; NaN for a bin never sampled)",
             ),
-            PortSpec::new("temperature", PortType::Scalar, "mean kT (NaN before a sample)"),
+            PortSpec::new(
+                "temperature",
+                PortType::Scalar,
+                "mean kT (NaN before a sample)",
+            ),
             PortSpec::new(
                 "momentum",
                 PortType::Particles(None),

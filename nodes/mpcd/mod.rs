@@ -84,10 +84,7 @@ impl Geometry {
         let cell = p.number("cell");
         let walls = p.text("walls") == "plates";
         if !(2..=3).contains(&lengths.len()) {
-            return Err(format!(
-                "`box` needs 2 or 3 lengths, got {}",
-                lengths.len()
-            ));
+            return Err(format!("`box` needs 2 or 3 lengths, got {}", lengths.len()));
         }
         let mut cells = Vec::new();
         for (a, &l) in lengths.iter().enumerate() {
@@ -229,10 +226,7 @@ pub(crate) fn thermal_params() -> Vec<ParamSpec> {
 /// The fixed-point scales (fix_v, fix_e) for (kT, m), as f32 (the GPU's values).
 pub(crate) fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
     let vth = if kt > 0.0 { (kt / mass).sqrt() } else { 1.0 };
-    (
-        (16_777_216.0 / vth) as f32,
-        (65_536.0 / (vth * vth)) as f32,
-    )
+    ((16_777_216.0 / vth) as f32, (65_536.0 / (vth * vth)) as f32)
 }
 
 /// Seed and stream of a kind's params into the uniform.

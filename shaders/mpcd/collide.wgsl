@@ -85,7 +85,10 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         let cz = 2.0 * unit(r.x) - 1.0;
         let phi = 6.283185307179586 * unit(r.y);
         let sz = sqrt(max(1.0 - cz * cz, 0.0));
-        let k = vec3<f32>(sz * cos(phi), sz * sin(phi), cz);
+        // Normalised again: an axis a little longer than 1 (f32 sine and cosine) would make
+        // the rotation scale |v - u|, a steady heating over many steps.
+        let k0 = vec3<f32>(sz * cos(phi), sz * sin(phi), cz);
+        let k = k0 / sqrt(dot(k0, k0));
         rd = d * m.cos_a + cross(k, d) * m.sin_a + k * (dot(k, d) * (1.0 - m.cos_a));
     } else {
         let sa = select(m.sin_a, -m.sin_a, (r.x & 0x80000000u) != 0u);

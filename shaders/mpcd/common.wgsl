@@ -56,6 +56,13 @@ fn fx_round(x: f32) -> i32 {
     return i32(round(clamp(x, -2147483520.0, 2147483520.0)));
 }
 
+// The pair of round(x) for 0 <= x < 2^63 (x an f32: exact for x < 2^24, else rounded).
+fn fx_of_f32(x: f32) -> vec2<u32> {
+    let y = max(round(x), 0.0);
+    let hi = floor(y * (1.0 / 4294967296.0));
+    return vec2<u32>(u32(y - hi * 4294967296.0), u32(hi));
+}
+
 // (lo, hi) + (lo, hi) without atomics.
 fn fx_sum(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
     let lo = a.x + b.x;

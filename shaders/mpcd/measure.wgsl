@@ -70,8 +70,7 @@ fn cells(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
         }
     }
     if (on && lid == 0u) {
-        let q = u32(round(min(rel_sum[0] * m.fix_e, 4294967040.0)));
-        add64(7u, vec2<u32>(q, 0u));
+        add64(7u, fx_of_f32(rel_sum[0] * m.fix_e));
         add64(9u, vec2<u32>(dof_sum[0], 0u));
         if (i == 0u) {
             atomicAdd(&acc[0], 1u);
