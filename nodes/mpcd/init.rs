@@ -114,21 +114,16 @@ impl Node for MpcdInit {
         let d = self.geo.dims();
         let n = self.u.n as usize;
         let mut mean = [0.0; 3];
-        for p in 0..n {
-            for a in 0..d {
-                let e = (p * d + a) as u64;
-                let l = self.geo.lengths[a];
-                outputs[0].data[p * d + a] =
-                    (random::uniform(e, 0, self.seed, self.stream) - 0.5) * l;
-                let v = self.vth * random::normal(e, 0, self.seed, self.stream.wrapping_add(1));
-                outputs[1].data[p * d + a] = v;
-                mean[a] += v / n as f64;
-            }
+        for e in 0..n * d {
+            let l = self.geo.lengths[e % d];
+            let key = e as u64;
+            outputs[0].data[e] = (random::uniform(key, 0, self.seed, self.stream) - 0.5) * l;
+            let v = self.vth * random::normal(key, 0, self.seed, self.stream.wrapping_add(1));
+            outputs[1].data[e] = v;
+            mean[e % d] += v / n as f64;
         }
-        for p in 0..n {
-            for a in 0..d {
-                outputs[1].data[p * d + a] -= mean[a];
-            }
+        for (e, v) in outputs[1].data.iter_mut().enumerate() {
+            *v -= mean[e % d];
         }
     }
 }

@@ -62,12 +62,13 @@ fn cells(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     }
     rel_sum[lid] = rel;
     dof_sum[lid] = dof;
+    workgroupBarrier();
     for (var w = 128u; w > 0u; w = w >> 1u) {
-        workgroupBarrier();
         if (lid < w) {
             rel_sum[lid] = rel_sum[lid] + rel_sum[lid + w];
             dof_sum[lid] = dof_sum[lid] + dof_sum[lid + w];
         }
+        workgroupBarrier();
     }
     if (on && lid == 0u) {
         add64(7u, fx_of_f32(rel_sum[0] * m.fix_e));

@@ -321,9 +321,9 @@ fn cell_moments(cells: &[u32], v: &[Vec<f64>], ncells: usize) -> Vec<(f64, [f64;
     for (p, &c) in cells.iter().enumerate() {
         let e = &mut m[c as usize];
         e.0 += 1.0;
-        for a in 0..v[p].len() {
-            e.1[a] += v[p][a];
-            e.2 += v[p][a] * v[p][a];
+        for (a, &va) in v[p].iter().enumerate() {
+            e.1[a] += va;
+            e.2 += va * va;
         }
     }
     m
@@ -760,4 +760,165 @@ fn poiseuille_flow_between_plates_is_parabolic_with_the_srd_viscosity() {
             "M = {density}: slip {slip}"
         );
     }
+}
+
+#[test]
+fn initial_state_is_uniform_and_maxwell_boltzmann_with_zero_momentum() {
+    if gpu().is_none() {
+        return;
+    }
+    let params = r#"{"box": [12, 10, 8], "density": 5, "temperature": 2, "mass": 0.5, "seed": 3, "stream": 0}"#;
+    let (out, r) = crate::util::run_node_and_reference("mpcd_init", params, &[]);
+    let n = 12 * 10 * 8 * 5;
+    assert_eq!(out["positions"].ty, ValueType::Particles { n, k: 3 });
+    // Against the f64 reference (the same Philox draws): f32 uniform positions are exact
+    // up to the final rounding; normals differ by the f32 log/sqrt/cos (~1e-6 of 4 sigma).
+    for (port, r, tol) in [("positions", &r[0], 1e-6), ("velocities", &r[1], 2e-5)] {
+        let g = out[port].data.to_f64();
+        let worst = g
+            .iter()
+            .zip(&r.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < tol, "{port}: {worst}");
+    }
+    let x = rows(&out["positions"], 3);
+    let v = rows(&out["velocities"], 3);
+    let l = [12.0, 10.0, 8.0];
+    // Uniform: every axis inside the box with mean ~0 (sd L / sqrt(12 N) = 0.05 at most);
+    // kT / m = 4 per component (relative sd sqrt(2 / N) = 2.5%), mean exactly removed.
+    for a in 0..3 {
+        assert!(x.iter().all(|p| p[a] >= -l[a] / 2.0 && p[a] < l[a] / 2.0));
+        let mean: f64 = x.iter().map(|p| p[a]).sum::<f64>() / n as f64;
+        assert!(mean.abs() < 0.2, "axis {a}: mean position {mean}");
+        let vm: f64 = v.iter().map(|p| p[a]).sum::<f64>() / n as f64;
+        assert!(vm.abs() < 1e-6, "axis {a}: mean velocity {vm}");
+        let var: f64 = v.iter().map(|p| p[a] * p[a]).sum::<f64>() / n as f64;
+        assert!(
+            (var / 4.0 - 1.0).abs() < 0.1,
+            "axis {a}: <v^2> {var} vs kT/m = 4"
+        );
+    }
+}
+
+#[test]
+fn measure_and_average_match_their_f64_references() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("mpcd-measure");
+    let mut rng = Rng::new(11);
+    let l = vec![6.0, 5.0, 4.0];
+    let n = 1500;
+    let (x, v) = random_particles(&mut rng, n, &l);
+    let geometry = r#""box": [6, 5, 4], "walls": "plates", "temperature": 1.3, "mass": 2"#;
+    let json = format!(
+        r#"{{"mesoflow": 1,
+  "inputs": {{"x": {{"type": "particles", "rows": {n}, "cols": 3}}, "v": {{"type": "particles", "rows": {n}, "cols": 3}}}},
+  "nodes": [
+    {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}, "shift": false}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
+    {{"id": "measure", "kind": "mpcd_measure", "params": {{{geometry}, "bins": 7}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v", "sums": "bin.sums"}}}},
+    {{"id": "average", "kind": "mpcd_average", "params": {{{geometry}, "bins": 7}}, "inputs": {{"sums": "measure.sums"}}}}
+  ],
+  "outputs": {{"sums": "bin.sums", "acc": "measure.sums", "profile": "average.profile", "temperature": "average.temperature", "momentum": "average.momentum"}}}}"#
+    );
+    let g = crate::util::load(&write_graph(&dir, "measure.json", &json));
+    let inputs: BTreeMap<String, HostArray> = [
+        ("x".to_string(), particles(&x)),
+        ("v".to_string(), particles(&v)),
+    ]
+    .into();
+    // Three steps: the same inputs (and, unshifted, the same cells) sampled three times.
+    let out = run_loaded(
+        &g,
+        &inputs,
+        &["sums", "acc", "profile", "temperature", "momentum"],
+        3,
+    );
+    let p = format!("{{{geometry}, \"bins\": 7}}");
+    let mut acc =
+        mesoflow::value::RefArray::new(out["acc"].ty, vec![0.0; out["acc"].ty.words() as usize]);
+    {
+        let k = registry().get("mpcd_measure").unwrap();
+        let raw: BTreeMap<String, serde_json::Value> = serde_json::from_str(&p).unwrap();
+        let raw = raw
+            .into_iter()
+            .map(|(n, v)| (n, ParamValue::from_json(&v).unwrap()))
+            .collect();
+        let node = k
+            .build(&mesoflow::node::check_params(&k.params(), &raw).unwrap())
+            .unwrap();
+        let ins = [
+            Some(particles(&x).to_ref()),
+            Some(particles(&v).to_ref()),
+            Some(out["sums"].to_ref()),
+        ];
+        for step in 0..3 {
+            node.cpu_reference(
+                &ins,
+                std::slice::from_mut(&mut acc),
+                mesoflow::node::RefCtx { step },
+            );
+        }
+    }
+    let gacc = out["acc"].data.to_f64();
+    // Integer words: samples and counts agree exactly; momentum and profile sums up to the
+    // f32 product v * unit (above 2^24 units f32 rounds it: at most 1 unit per particle
+    // and sample); the temperature sum is rounded per workgroup of cells (relative 1e-6).
+    let pair = |w: &[f64], i: usize| value_of(w[i], w[i + 1]) as f64;
+    assert_eq!(gacc[0], 3.0);
+    for i in [1, 3, 5] {
+        let (g, r) = (pair(&gacc, i), pair(&acc.data, i));
+        assert!((g - r).abs() <= 3.0 * n as f64, "word {i}: {g} vs {r}");
+    }
+    assert!(
+        (pair(&gacc, 7) / pair(&acc.data, 7) - 1.0).abs() < 1e-5,
+        "temperature sum {} vs {}",
+        pair(&gacc, 7),
+        pair(&acc.data, 7)
+    );
+    assert_eq!(pair(&gacc, 9), pair(&acc.data, 9));
+    for b in 0..7 {
+        assert!(
+            (pair(&gacc, 11 + 4 * b) - pair(&acc.data, 11 + 4 * b)).abs()
+                <= pair(&acc.data, 13 + 4 * b),
+            "bin {b}"
+        );
+        assert_eq!(
+            pair(&gacc, 13 + 4 * b),
+            pair(&acc.data, 13 + 4 * b),
+            "bin {b} count"
+        );
+    }
+    let r = reference("mpcd_average", &p, &[Some(&out["acc"])]);
+    for (port, r) in ["profile", "temperature", "momentum"].iter().zip(&r) {
+        let (e, i) = crate::util::rel_max_err(&out[*port], r);
+        assert!(e < 1e-5, "{port}: {e} at {i}");
+    }
+    // And the averages against direct f64 sums of the inputs: momentum m sum v, profile.
+    let vv = rows(&particles(&v), 3);
+    let mom = out["momentum"].data.to_f64();
+    for a in 0..3 {
+        let direct: f64 = 2.0 * vv.iter().map(|p| p[a]).sum::<f64>();
+        assert!(
+            (mom[a] - direct).abs() < 1e-4 * n as f64 / 100.0,
+            "momentum {a}: {} vs {direct}",
+            mom[a]
+        );
+    }
+    let xs = rows(&particles(&x), 3);
+    let prof = out["profile"].data.to_f64();
+    for b in 0..7 {
+        let sel: Vec<f64> = (0..n)
+            .filter(|&p| (((xs[p][2] / 4.0 + 0.5) * 7.0).floor() as usize).min(6) == b)
+            .map(|p| vv[p][0])
+            .collect();
+        let direct = sel.iter().sum::<f64>() / sel.len() as f64;
+        assert!(
+            (prof[b] - direct).abs() < 1e-5,
+            "bin {b}: {} vs {direct}",
+            prof[b]
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
