@@ -2,8 +2,8 @@
 //! SRD rotation with the cell thermostat and virtual particles in wall-cut cells).
 
 use super::{
-    CELL_WORDS, Geometry, fixed_scales, fx_round, geometry_params, grid_shift, key_into, key_of,
-    thermal_params, value_of, words_of,
+    CELL_WORDS, Geometry, check_rule, fixed_scales, fx_round, geometry_params, grid_shift,
+    key_into, key_of, rule_param, thermal_params, value_of, words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -61,6 +61,7 @@ impl NodeKind for MpcdBinKind {
         let mut p = geometry_params();
         p.extend(thermal_params());
         p.push(shift_param());
+        p.push(rule_param());
         p.extend(key_params());
         p
     }
@@ -69,10 +70,13 @@ impl NodeKind for MpcdBinKind {
         let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
         let (seed, stream) = key_of(p);
         let geo = Geometry::from_params(p)?;
+        let biased = p.text("rule") == "biased";
+        check_rule(&geo, biased)?;
         let mut u = geo.uniform();
         u.fix_v = fix_v;
         u.fix_e = fix_e;
         u.shift = u32::from(p.flag("shift"));
+        u.rule = u32::from(biased);
         key_into(&mut u, p);
         Ok(Box::new(MpcdBin {
             geo,
@@ -130,7 +134,12 @@ impl Node for MpcdBin {
         let x = &inputs[0].as_ref().expect("required").data;
         let v = &inputs[1].as_ref().expect("required").data;
         let s = if self.u.shift == 1 {
-            grid_shift(self.geo.cell, cx.step, self.seed, self.stream)
+            grid_shift(
+                self.geo.cell * (1 + self.u.rule) as f64,
+                cx.step,
+                self.seed,
+                self.stream,
+            )
         } else {
             [0.0; 3]
         };
@@ -244,6 +253,14 @@ impl NodeKind for MpcdCollideKind {
         p.extend(thermal_params());
         p.extend([
             shift_param(),
+            rule_param(),
+            ParamSpec::number(
+                "acceptance",
+                Some(0.01),
+                0.0,
+                f64::MAX,
+                "MPCD-BC acceptance parameter A: a cell pair collides with probability tanh(A du n1 n2)",
+            ),
             ParamSpec::number(
                 "angle",
                 Some(130.0),
@@ -293,7 +310,11 @@ impl NodeKind for MpcdCollideKind {
             return Err("a thermostat needs temperature > 0".into());
         }
         let angle = p.number("angle").to_radians();
+        let biased = p.text("rule") == "biased";
+        check_rule(&geo, biased)?;
         let mut u = geo.uniform();
+        u.rule = u32::from(biased);
+        u.accept_a = p.number("acceptance") as f32;
         u.fix_v = fix_v;
         u.fix_e = fix_e;
         u.shift = u32::from(p.flag("shift"));
@@ -400,6 +421,89 @@ impl MpcdCollide {
             [self.seed as u32, self.stream.wrapping_add(j)],
         )
     }
+
+    fn mean(&self, c: u32, sums: &[f64]) -> ([f64; 3], f64) {
+        let s = &sums[(c * CELL_WORDS) as usize..((c + 1) * CELL_WORDS) as usize];
+        let mut u = [0.0; 3];
+        for a in 0..self.geo.dims() {
+            u[a] =
+                value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (s[0].max(1.0) * self.u.fix_v as f64);
+        }
+        (u, s[0])
+    }
+
+    /// MPCD-BC update of one particle (f64 twin of `biased` in shaders/mpcd/collide.wgsl).
+    fn biased(
+        &self,
+        c: u32,
+        step: u64,
+        u1: [f64; 3],
+        n1: f64,
+        v: [f64; 3],
+        sums: &[f64],
+    ) -> [f64; 3] {
+        let d = self.geo.dims();
+        let (nx, ny) = (self.geo.cells[0], self.geo.cells[1]);
+        let i = [
+            c % nx,
+            (c / nx) % ny,
+            if d == 3 { c / (nx * ny) } else { 0 },
+        ];
+        let sc = (i[0] >> 1) + (nx >> 1) * ((i[1] >> 1) + (ny >> 1) * (i[2] >> 1));
+        let t = unit(self.block(sc, step, 3)[0]);
+        let flip: [u32; 3] = if d == 3 {
+            let k = t * 13.0;
+            if k < 1.0 {
+                [1, 0, 0]
+            } else if k < 2.0 {
+                [0, 1, 0]
+            } else if k < 3.0 {
+                [0, 0, 1]
+            } else if k < 5.0 {
+                [1, 1, 0]
+            } else if k < 7.0 {
+                [1, 0, 1]
+            } else if k < 9.0 {
+                [0, 1, 1]
+            } else {
+                [1, 1, 1]
+            }
+        } else if t < 0.25 {
+            [1, 0, 0]
+        } else if t < 0.5 {
+            [0, 1, 0]
+        } else {
+            [1, 1, 0]
+        };
+        let j: Vec<u32> = (0..3).map(|a| i[a] ^ flip[a]).collect();
+        let cp = j[0] + nx * (j[1] + ny * j[2]);
+        let mut s = [0.0; 3];
+        for a in 0..3 {
+            s[a] = (1.0 - 2.0 * (i[a] & 1) as f64) * flip[a] as f64;
+        }
+        let norm = (s.iter().map(|x| x * x).sum::<f64>()).sqrt();
+        s.iter_mut().for_each(|x| *x /= norm);
+        let (u2, n2) = self.mean(cp, sums);
+        let du: f64 = (0..3).map(|a| s[a] * (u1[a] - u2[a])).sum();
+        let p = if du > 0.0 && n2 > 0.0 {
+            (self.u.accept_a as f64 * du * n1 * n2).tanh()
+        } else {
+            0.0
+        };
+        if unit(self.block(c.min(cp), step, 4)[0]) < p {
+            let mut up = [0.0; 3];
+            for a in 0..3 {
+                up[a] = (n1 * u1[a] + n2 * u2[a]) / (n1 + n2);
+            }
+            let proj: f64 = (0..3).map(|a| s[a] * (up[a] - v[a])).sum();
+            let mut out = v;
+            for a in 0..3 {
+                out[a] += 2.0 * s[a] * proj;
+            }
+            return out;
+        }
+        v
+    }
 }
 
 impl Node for MpcdCollide {
@@ -453,7 +557,10 @@ impl Node for MpcdCollide {
             let rel = (value_of(s[7], s[8]) as f64 / fix_e - count * uu).max(0.0);
             let mut scale = 1.0;
             let layer = self.geo.layer(c);
-            let cut = self.geo.walls && self.u.shift == 1 && (layer == 0 || layer == w_layers - 1);
+            let cut = self.u.rule == 0
+                && self.geo.walls
+                && self.u.shift == 1
+                && (layer == 0 || layer == w_layers - 1);
             if self.u.ghosts == 1 && cut && count < self.density {
                 let g = self.block(c, cx.step, 2);
                 let r0 = (-2.0 * open01(g[0]).ln()).sqrt();
@@ -483,6 +590,15 @@ impl Node for MpcdCollide {
             let mut dv = [0.0; 3];
             for a in 0..d {
                 dv[a] = v[p * d + a] - u[a];
+            }
+            if self.u.rule == 1 {
+                let mut vt = [0.0; 3];
+                for a in 0..d {
+                    vt[a] = u[a] + scale * dv[a];
+                }
+                let out = self.biased(c, cx.step, u, count, vt, sums);
+                outputs[0].data[p * d..(p + 1) * d].copy_from_slice(&out[..d]);
+                continue;
             }
             let r = srd_rotation(d, self.angle, self.block(c, cx.step, 0), dv);
             for a in 0..d {

@@ -65,7 +65,9 @@ pub(crate) struct Uniform {
     pub bins: u32,
     pub warmup: u32,
     pub every: u32,
-    pub pad: [u32; 3],
+    pub rule: u32,
+    pub accept_a: f32,
+    pub pad: u32,
 }
 
 /// Box, cells and walls, shared by the MPCD kinds.
@@ -242,14 +244,41 @@ pub(crate) fn key_of(p: &Params) -> (u64, u32) {
     (p.number("seed") as u64, p.number("stream") as u32)
 }
 
-/// This step's grid shift (f64 twin of `grid_shift`).
-pub fn grid_shift(cell: f64, step: u64, seed: u64, stream: u32) -> [f64; 3] {
+/// This step's grid shift (f64 twin of `grid_shift`): uniform in [-w/2, w/2) per axis for
+/// a width w = a (SRD) or 2a (MPCD-BC).
+pub fn grid_shift(width: f64, step: u64, seed: u64, stream: u32) -> [f64; 3] {
     let w = super::random::block(0, step, seed, stream);
     let mut s = [0.0; 3];
     for a in 0..3 {
-        s[a] = ((w[a] >> 8) as f64 / 16_777_216.0 - 0.5) * cell;
+        s[a] = ((w[a] >> 8) as f64 / 16_777_216.0 - 0.5) * width;
     }
     s
+}
+
+/// MPCD-BC needs supercells that tile a periodic box.
+pub(crate) fn check_rule(geo: &Geometry, biased: bool) -> Result<(), String> {
+    if !biased {
+        return Ok(());
+    }
+    if geo.walls {
+        return Err("rule `biased` supports periodic boxes only (walls none)".into());
+    }
+    if geo.cells.iter().any(|c| c % 2 != 0) {
+        return Err(format!(
+            "rule `biased` needs an even number of cells per axis (supercells of 2), got {:?}",
+            geo.cells
+        ));
+    }
+    Ok(())
+}
+
+pub(crate) fn rule_param() -> ParamSpec {
+    ParamSpec::choice(
+        "rule",
+        "srd",
+        &["srd", "biased"],
+        "srd: rotations within cells; biased: Ihle's biased collisions between cell pairs of 2 x 2 (x 2) supercells (MPCD-BC; grid shift in [-a, a); periodic boxes of even cell counts only)",
+    )
 }
 
 /// The fixed-point integer of x (clamped to the i32 range, as the GPU does).

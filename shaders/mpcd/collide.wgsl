@@ -30,6 +30,78 @@ fn pair(i: u32) -> vec2<u32> {
     return vec2<u32>(sums[i], sums[i + 1u]);
 }
 
+fn cell_mean(c: u32) -> vec4<f32> {
+    let base = c * CELL_WORDS;
+    let n = f32(sums[base]);
+    var sv = vec3<f32>(0.0);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        sv[a] = fx_to_f32(pair(base + 1u + 2u * a));
+    }
+    return vec4<f32>(sv / (max(n, 1.0) * m.fix_v), n);
+}
+
+// MPCD-BC (Ihle's biased collisions) for a particle of cell c with velocity v (after the
+// thermostat), its cell holding n1 particles of mean u1. The supercell (2 x 2 (x 2) cells)
+// draws one collision type per step (3D: x, y, z, xy, xz, yz, xyz with weights 1/13 per
+// direction: 1, 1, 1, 2, 2, 2, 4 thirteenths; 2D: x, y, diagonal with 1/4, 1/4, 1/2), which
+// pairs every cell with the one across the type's direction. The pair collides with
+// probability tanh(A du n1 n2) when du = s.(u1 - u2) > 0 (s the unit vector from this cell
+// to its partner: the cells approach), one uniform per pair (keyed by its lower cell); a
+// collision reverses the velocity components along s relative to the pair's mean velocity
+// u_P: v <- v + 2 s (s.(u_P - v)), conserving the pair's momentum and energy.
+fn biased(c: u32, step: u32, u1: vec3<f32>, count: u32, v: vec3<f32>) -> vec3<f32> {
+    let nx = m.cells.x;
+    let ny = m.cells.y;
+    var i = vec3<u32>(c % nx, (c / nx) % ny, 0u);
+    if (DIMS == 3u) {
+        i.z = c / (nx * ny);
+    }
+    let sc = (i.x >> 1u) + (nx >> 1u) * ((i.y >> 1u) + (ny >> 1u) * (i.z >> 1u));
+    let t = unit(cell_block(sc, step, 3u).x);
+    var flip = vec3<u32>(1u, 1u, 0u);
+    if (DIMS == 3u) {
+        let k = t * 13.0;
+        if (k < 1.0) {
+            flip = vec3<u32>(1u, 0u, 0u);
+        } else if (k < 2.0) {
+            flip = vec3<u32>(0u, 1u, 0u);
+        } else if (k < 3.0) {
+            flip = vec3<u32>(0u, 0u, 1u);
+        } else if (k < 5.0) {
+            flip = vec3<u32>(1u, 1u, 0u);
+        } else if (k < 7.0) {
+            flip = vec3<u32>(1u, 0u, 1u);
+        } else if (k < 9.0) {
+            flip = vec3<u32>(0u, 1u, 1u);
+        } else {
+            flip = vec3<u32>(1u, 1u, 1u);
+        }
+    } else if (t < 0.25) {
+        flip = vec3<u32>(1u, 0u, 0u);
+    } else if (t < 0.5) {
+        flip = vec3<u32>(0u, 1u, 0u);
+    }
+    let j = i ^ flip;
+    let cp = j.x + nx * (j.y + ny * j.z);
+    let o = vec3<f32>(i & vec3<u32>(1u));
+    let sgn = (vec3<f32>(1.0) - 2.0 * o) * vec3<f32>(flip);
+    let s = sgn / sqrt(dot(sgn, sgn));
+    let other = cell_mean(cp);
+    let n1 = f32(count);
+    let n2 = other.w;
+    let du = dot(s, u1 - other.xyz);
+    var p = 0.0;
+    if (du > 0.0 && n2 > 0.0) {
+        p = tanh(m.accept_a * du * n1 * n2);
+    }
+    let w = cell_block(min(c, cp), step, 4u);
+    if (unit(w.x) < p) {
+        let up = (n1 * u1 + n2 * other.xyz) / (n1 + n2);
+        return v + 2.0 * s * dot(s, up - v);
+    }
+    return v;
+}
+
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
@@ -52,7 +124,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let rel = max(fx_to_f32(pair(base + 7u)) / m.fix_e - n * dot(u, u), 0.0);
     var scale = 1.0;
     let layer = cell_layer(m, c);
-    let cut = m.walls == 1u && m.shift == 1u && (layer == 0u || layer == m.cells[DIMS - 1u] - 1u);
+    let cut = m.rule == 0u && m.walls == 1u && m.shift == 1u && (layer == 0u || layer == m.cells[DIMS - 1u] - 1u);
     if (m.ghosts == 1u && cut && n < m.density) {
         let g = cell_block(c, step, 2u);
         let r0 = sqrt(-2.0 * log(philox_open01(g.x)));
@@ -78,8 +150,15 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             }
         }
     }
-    let r = cell_block(c, step, 0u);
     let d = v - u;
+    if (m.rule == 1u) {
+        let out = biased(c, step, u, count, u + scale * d);
+        for (var a = 0u; a < DIMS; a = a + 1u) {
+            vel_out[p * DIMS + a] = out[a];
+        }
+        return;
+    }
+    let r = cell_block(c, step, 0u);
     var rd = vec3<f32>(0.0);
     if (DIMS == 3u) {
         let cz = 2.0 * unit(r.x) - 1.0;

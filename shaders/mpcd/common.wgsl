@@ -38,9 +38,9 @@ struct Mpcd {
     bins: u32,
     warmup: u32,
     every: u32,
+    rule: u32,             // 0 SRD, 1 biased collisions (MPCD-BC)
+    accept_a: f32,         // MPCD-BC acceptance parameter A
     pad0: u32,
-    pad1: u32,
-    pad2: u32,
 }
 
 // Words per cell of the cell sums: count, sum v (DIMS = up to 3 pairs), sum |v|^2 (a pair).
@@ -85,7 +85,8 @@ fn fx_to_f32(p: vec2<u32>) -> f32 {
     return f32(p.y) * 4294967296.0 + f32(p.x);
 }
 
-// The random grid shift of this step: uniform in [-a/2, a/2) per axis, one Philox block
+// The random grid shift of this step: uniform in [-a/2, a/2) per axis for SRD, in [-a, a)
+// for MPCD-BC (collisions within supercells of 2 x 2 (x 2) cells), one Philox block
 // (block 0 of (seed, stream) at this step); zero when the shift is off.
 fn grid_shift(m: Mpcd, step: u32) -> vec3<f32> {
     if (m.shift == 0u) {
@@ -93,7 +94,7 @@ fn grid_shift(m: Mpcd, step: u32) -> vec3<f32> {
     }
     let w = philox_block(0u, step, m.seed_lo, m.seed_hi, m.stream);
     let u = vec3<f32>(vec3<u32>(w.x, w.y, w.z) >> vec3<u32>(8u)) * (1.0 / 16777216.0);
-    return (u - vec3<f32>(0.5)) * m.cell;
+    return (u - vec3<f32>(0.5)) * (m.cell * f32(1u + m.rule));
 }
 
 // Cell of one coordinate along axis `a`: floor((x + L/2 + s) / a) wrapped on periodic axes;

@@ -922,3 +922,73 @@ fn measure_and_average_match_their_f64_references() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn biased_collisions_conserve_supercell_momentum_and_energy_and_match_the_f64_reference() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("mpcd-biased");
+    let mut rng = Rng::new(13);
+    for l in [vec![6.0, 4.0, 4.0], vec![8.0, 6.0]] {
+        let d = l.len();
+        let n = 2000;
+        let (x, v) = random_particles(&mut rng, n, &l);
+        let geometry = format!(r#""box": {l:?}, "cell": 1, "rule": "biased", "temperature": 1"#);
+        // A large A makes most approaching pairs collide (tanh(A du n1 n2) ~ 1).
+        let g = collide_graph(&dir, n, d, &geometry, r#""acceptance": 0.05"#);
+        let inputs: BTreeMap<String, HostArray> = [
+            ("x".to_string(), particles(&x)),
+            ("v".to_string(), particles(&v)),
+        ]
+        .into();
+        let out = run_loaded(&g, &inputs, &["cell", "sums", "v"], 1);
+        let cells = u32s(&out["cell"]);
+        let vin = rows(&particles(&v), d);
+        let vout = rows(&out["v"], d);
+        // Supercell of each cell: coordinates halved.
+        let dims: Vec<u32> = l.iter().map(|&x| x as u32).collect();
+        let supercell = |c: u32| {
+            let (ix, iy) = (c % dims[0], (c / dims[0]) % dims[1]);
+            let iz = if d == 3 { c / (dims[0] * dims[1]) } else { 0 };
+            ix / 2 + dims[0] / 2 * (iy / 2 + dims[1] / 2 * (iz / 2))
+        };
+        let super_cells: Vec<u32> = cells.iter().map(|&c| supercell(c)).collect();
+        let ns = dims.iter().map(|&c| c as usize / 2).product::<usize>();
+        let before = cell_moments(&super_cells, &vin, ns);
+        let after = cell_moments(&super_cells, &vout, ns);
+        for s in 0..ns {
+            // f32 rounding of the new velocities: 1e-6 per particle (see the SRD test).
+            for a in 0..d {
+                assert!(
+                    (after[s].1[a] - before[s].1[a]).abs() < 1e-6 * before[s].0,
+                    "supercell {s} momentum"
+                );
+            }
+            assert!(
+                (after[s].2 - before[s].2).abs() < 2e-6 * before[s].2.max(1.0),
+                "supercell {s} energy"
+            );
+        }
+        // Collisions happened and changed velocities of whole cells.
+        let changed = (0..n)
+            .filter(|&p| (0..d).any(|a| (vout[p][a] - vin[p][a]).abs() > 1e-3))
+            .count();
+        assert!(changed > n / 4, "{d}D: {changed} of {n} particles collided");
+        let params = format!("{{{geometry}, \"acceptance\": 0.05, \"seed\": 7, \"stream\": 3}}");
+        let r = reference(
+            "mpcd_collide",
+            &params,
+            &[Some(&particles(&v)), Some(&out["cell"]), Some(&out["sums"])],
+        );
+        let worst = out["v"]
+            .data
+            .to_f64()
+            .iter()
+            .zip(&r[0].data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-5, "{d}D: largest |gpu - f64| {worst}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
