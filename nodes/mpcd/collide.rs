@@ -252,7 +252,11 @@ impl NodeKind for MpcdCollideKind {
         let mut p = geometry_params();
         p.extend(thermal_params());
         p.extend([
-            shift_param(),
+            ParamSpec::flag(
+                "shift",
+                true,
+                "whether mpcd_bin shifts the grid (with walls, the first and last layers are then cut cells)",
+            ),
             rule_param(),
             ParamSpec::number(
                 "acceptance",
