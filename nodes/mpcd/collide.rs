@@ -325,6 +325,7 @@ impl NodeKind for MpcdCollideKind {
         u.kt = p.number("temperature") as f32;
         u.mass = p.number("mass") as f32;
         (u.cos_a, u.sin_a) = unit_pair(angle);
+        (u.half_cos, u.half_sin) = unit_pair(angle / 2.0);
         u.density = p.number("density") as f32;
         u.ghosts = u32::from(p.flag("ghosts"));
         u.thermostat = thermostat;
@@ -336,7 +337,6 @@ impl NodeKind for MpcdCollideKind {
             u,
             seed,
             stream,
-            angle,
             kt: p.number("temperature"),
             mass: p.number("mass"),
             density: p.number("density"),
@@ -349,7 +349,6 @@ struct MpcdCollide {
     u: super::Uniform,
     seed: u64,
     stream: u32,
-    angle: f64,
     kt: f64,
     mass: f64,
     density: f64,
@@ -391,11 +390,13 @@ fn open01(w: u32) -> f64 {
     ((w >> 8) as f64 + 1.0) / 16_777_216.0
 }
 
-/// R d for the SRD rotation by `angle` drawn from the cell's Philox words `w` (f64 twin of
+/// R d for the SRD rotation whose angle has cosine and sine (`ca`, `sa`) (the f32 pair
+/// the kernel uses, see `unit_pair`), drawn from the cell's Philox words `w` (f64 twin of
 /// the kernel's): 3D about the axis (sqrt(1 - c^2) cos phi, sqrt(1 - c^2) sin phi, c) with
-/// c = 2 u0 - 1, phi = 2 pi u1; 2D by -angle when the top bit of w0 is set, else +angle.
-pub fn srd_rotation(dims: usize, angle: f64, w: [u32; 4], d: [f64; 3]) -> [f64; 3] {
-    let (ca, sa) = (angle.cos(), angle.sin());
+/// c = 2 u0 - 1, phi = 2 pi u1 (right-handed, Rodrigues' formula; the kernel composes two
+/// reflections, the same rotation in exact arithmetic); 2D by -angle when the top bit of w0
+/// is set, else +angle.
+pub fn srd_rotation(dims: usize, ca: f64, sa: f64, w: [u32; 4], d: [f64; 3]) -> [f64; 3] {
     if dims == 3 {
         let cz = 2.0 * unit(w[0]) - 1.0;
         let phi = 2.0 * std::f64::consts::PI * unit(w[1]);
@@ -604,7 +605,14 @@ impl Node for MpcdCollide {
                 outputs[0].data[p * d..(p + 1) * d].copy_from_slice(&out[..d]);
                 continue;
             }
-            let r = srd_rotation(d, self.angle, self.block(c, cx.step, 0), dv);
+            let (ca, sa) = if d == 3 {
+                // The half angle: two reflections (see the kernel).
+                let (ch, sh) = (self.u.half_cos as f64, self.u.half_sin as f64);
+                (ch * ch - sh * sh, 2.0 * ch * sh)
+            } else {
+                (self.u.cos_a as f64, self.u.sin_a as f64)
+            };
+            let r = srd_rotation(d, ca, sa, self.block(c, cx.step, 0), dv);
             for a in 0..d {
                 outputs[0].data[p * d + a] = u[a] + scale * r[a];
             }

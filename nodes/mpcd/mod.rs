@@ -67,7 +67,9 @@ pub(crate) struct Uniform {
     pub every: u32,
     pub rule: u32,
     pub accept_a: f32,
-    pub pad: u32,
+    pub half_cos: f32,
+    pub half_sin: f32,
+    pub pad: [u32; 3],
 }
 
 /// Box, cells and walls, shared by the MPCD kinds.

@@ -164,11 +164,20 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         let cz = 2.0 * unit(r.x) - 1.0;
         let phi = 6.283185307179586 * unit(r.y);
         let sz = sqrt(max(1.0 - cz * cz, 0.0));
-        // Normalised again: an axis a little longer than 1 (f32 sine and cosine) would make
-        // the rotation scale |v - u|, a steady heating over many steps.
-        let k0 = vec3<f32>(sz * cos(phi), sz * sin(phi), cz);
-        let k = k0 / sqrt(dot(k0, k0));
-        rd = d * m.cos_a + cross(k, d) * m.sin_a + k * (dot(k, d) * (1.0 - m.cos_a));
+        let k = vec3<f32>(sz * cos(phi), sz * sin(phi), cz);
+        // The rotation about k by the angle as two reflections d -> d - 2 w (w.d) / (w.w),
+        // across e1 and then across e1 cos(angle/2) + e2 sin(angle/2) (e1 = k x x or k x y,
+        // e2 = k x e1): each keeps |d| whatever the lengths of k and w, so f32 rotations do
+        // not heat or cool the fluid (Rodrigues' formula with an f32 axis of length
+        // 1 + eps scales |d| by about 1 + eps in every collision).
+        var e1 = cross(k, vec3<f32>(1.0, 0.0, 0.0));
+        if (abs(k.x) > 0.5) {
+            e1 = cross(k, vec3<f32>(0.0, 1.0, 0.0));
+        }
+        let e2 = cross(k, e1);
+        let w2 = e1 * m.half_cos + e2 * m.half_sin;
+        let d1 = d - e1 * (2.0 * dot(e1, d) / dot(e1, e1));
+        rd = d1 - w2 * (2.0 * dot(w2, d1) / dot(w2, w2));
     } else {
         let sa = select(m.sin_a, -m.sin_a, (r.x & 0x80000000u) != 0u);
         rd = vec3<f32>(d.x * m.cos_a - d.y * sa, d.x * sa + d.y * m.cos_a, 0.0);

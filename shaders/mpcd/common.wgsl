@@ -40,7 +40,11 @@ struct Mpcd {
     every: u32,
     rule: u32,             // 0 SRD, 1 biased collisions (MPCD-BC)
     accept_a: f32,         // MPCD-BC acceptance parameter A
+    half_cos: f32,         // cos and sin of half the SRD angle (3D rotations)
+    half_sin: f32,
     pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // Words per cell of the cell sums: count, sum v (DIMS = up to 3 pairs), sum |v|^2 (a pair).
