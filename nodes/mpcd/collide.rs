@@ -225,7 +225,7 @@ impl NodeKind for MpcdCollideKind {
     }
 
     fn doc(&self) -> &'static str {
-        "SRD collision v <- u_c + S R(angle, random axis per cell) (v - u_c), with a cell thermostat S and virtual particles in wall-cut cells"
+        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC)"
     }
 
     fn inputs(&self) -> Vec<PortSpec> {

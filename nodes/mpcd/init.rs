@@ -18,11 +18,24 @@ impl NodeKind for MpcdInitKind {
     }
 
     fn doc(&self) -> &'static str {
-        "MPCD initial state: round(density x cells) particles uniform in the box, Maxwell-Boltzmann velocities with zero mean (Philox at step 0 of streams stream and stream + 1)"
+        "MPCD initial state: round(density x cells) particles uniform in the box, Maxwell-Boltzmann velocities with zero mean (Philox at step 0 of streams stream and stream + 1), or copies of given positions and velocities"
     }
 
     fn inputs(&self) -> Vec<PortSpec> {
-        Vec::new()
+        vec![
+            PortSpec::new(
+                "positions",
+                PortType::Particles(None),
+                "given initial positions (N x d; with `velocities`): copied instead of drawn",
+            )
+            .optional(),
+            PortSpec::new(
+                "velocities",
+                PortType::Particles(None),
+                "given initial velocities (N x d; with `positions`), copied as they are",
+            )
+            .optional(),
+        ]
     }
 
     fn outputs(&self) -> Vec<PortSpec> {
@@ -90,8 +103,39 @@ struct MpcdInit {
     vth: f64,
 }
 
+impl MpcdInit {
+    /// The type of the given state: both inputs or neither, matching the box.
+    fn given(&self, inputs: &[Option<ValueType>]) -> Result<Option<ValueType>, PortError> {
+        match (inputs[0], inputs[1]) {
+            (None, None) => Ok(None),
+            (Some(_), None) => Err(PortError::new(
+                "velocities",
+                "is needed with `positions` (give both or neither)",
+            )),
+            (None, Some(_)) => Err(PortError::new(
+                "positions",
+                "is needed with `velocities` (give both or neither)",
+            )),
+            (x, v) => {
+                let n = self.geo.particles("positions", x)?;
+                let nv = self.geo.particles("velocities", v)?;
+                if n != nv {
+                    return Err(PortError::new(
+                        "velocities",
+                        format!("has {nv} rows but positions has {n}"),
+                    ));
+                }
+                Ok(x)
+            }
+        }
+    }
+}
+
 impl Node for MpcdInit {
-    fn infer(&self, _: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        if let Some(given) = self.given(inputs)? {
+            return Ok(Signature::outputs(vec![given, given]));
+        }
         let t = ValueType::Particles {
             n: self.u.n,
             k: self.geo.dims() as u32,
@@ -106,11 +150,19 @@ impl Node for MpcdInit {
         Lowering::Kernels(self)
     }
 
-    fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
-        vec![format!("{} particles", self.u.n)]
+    fn notes(&self, inputs: &[Option<ValueType>]) -> Vec<String> {
+        match self.given(inputs) {
+            Ok(Some(t)) => vec![format!("given state {t}")],
+            _ => vec![format!("{} particles", self.u.n)],
+        }
     }
 
-    fn cpu_reference(&self, _: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        if let (Some(x), Some(v)) = (&inputs[0], &inputs[1]) {
+            outputs[0].data.copy_from_slice(&x.data);
+            outputs[1].data.copy_from_slice(&v.data);
+            return;
+        }
         let d = self.geo.dims();
         let n = self.u.n as usize;
         let mut mean = [0.0; 3];
@@ -134,6 +186,24 @@ impl GpuKernels for MpcdInit {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
+        if let (Some(x), Some(v)) = (io.inputs[0], io.inputs[1]) {
+            let copy = cx.kernel(&KernelSpec::new(
+                "copy",
+                cx.shader("engine/copy.wgsl")?,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                ],
+            ))?;
+            let words = x.ty.words();
+            let shape = cx.uniform("mpcd init copy", bytemuck::cast_slice(&[words as u32]));
+            let groups = cx.grid_1d(words, WG_1D);
+            return Ok(vec![
+                cx.dispatch(&copy, &[x.buffer, io.outputs[0].buffer, &shape], groups),
+                cx.dispatch(&copy, &[v.buffer, io.outputs[1].buffer, &shape], groups),
+            ]);
+        }
         let bindings = [
             Binding::Uniform,
             Binding::StorageReadWrite,
