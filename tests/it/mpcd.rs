@@ -1191,3 +1191,82 @@ fn kolmogorov_flow_gives_the_srd_viscosity() {
     );
     assert!((kt - 1.0).abs() < 0.01, "kT {kt}");
 }
+
+#[test]
+fn bad_mpcd_input_gets_messages_naming_file_node_and_port() {
+    let load = |sets: &[(&str, ParamValue)]| {
+        graph::load(
+            &root().join("graphs/mpcd.json"),
+            registry(),
+            &LoadOptions {
+                overrides: sets
+                    .iter()
+                    .map(|(k, v)| (k.to_string(), v.clone()))
+                    .collect(),
+                ..Default::default()
+            },
+        )
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default()
+    };
+    let e = load(&[("box", ParamValue::Numbers(vec![10.5, 10.0, 10.0]))]);
+    assert!(
+        e.contains("mpcd.json")
+            && e.contains("node `bin`")
+            && e.contains("not a whole number of cells"),
+        "{e}"
+    );
+    let e = load(&[
+        ("rule", ParamValue::Text("biased".into())),
+        ("walls", ParamValue::Text("plates".into())),
+    ]);
+    assert!(
+        e.contains("node `collide`") && e.contains("periodic boxes only"),
+        "{e}"
+    );
+    let e = load(&[
+        ("rule", ParamValue::Text("biased".into())),
+        ("box", ParamValue::Numbers(vec![15.0, 16.0, 16.0])),
+    ]);
+    assert!(e.contains("even number of cells"), "{e}");
+    let e = load(&[
+        ("thermostat", ParamValue::Text("rescale".into())),
+        ("temperature", ParamValue::Number(0.0)),
+    ]);
+    assert!(
+        e.contains("node `collide`") && e.contains("temperature > 0"),
+        "{e}"
+    );
+    // Cell sums of another grid: the collision names its port and the likely cause.
+    let dir = tmpdir("mpcd-errors");
+    let json = r#"{"mesoflow": 1,
+  "inputs": {"x": {"type": "particles", "rows": 10, "cols": 3}, "v": {"type": "particles", "rows": 10, "cols": 3}},
+  "nodes": [
+    {"id": "bin", "kind": "mpcd_bin", "params": {"box": [4, 4, 4]}, "inputs": {"positions": "inputs.x", "velocities": "inputs.v"}},
+    {"id": "collide", "kind": "mpcd_collide", "params": {"box": [4, 4, 6]}, "inputs": {"velocities": "inputs.v", "cell": "bin.cell", "sums": "bin.sums"}}
+  ],
+  "outputs": {"v": "collide.velocities"}}"#;
+    let g = crate::util::load(&write_graph(&dir, "bad.json", json));
+    let caps = mesoflow::gpu::DeviceCaps::baseline();
+    let e = plan::plan(
+        &g,
+        &PlanOptions {
+            outputs: None,
+            inputs: mesoflow::cli::declared_input_types(&g),
+            fuse: true,
+        },
+        &caps,
+    )
+    .err()
+    .map(|e| e.to_string())
+    .unwrap_or_default();
+    assert!(
+        e.contains("bad.json")
+            && e.contains("node `collide`")
+            && e.contains("sums")
+            && e.contains("same box"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
