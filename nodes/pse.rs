@@ -121,8 +121,7 @@ pub fn periodic_rpy(r: [f64; 3], l: f64, a: f64, eta: f64, xi: f64) -> [[f64; 3]
         let d2: f64 = d.iter().map(|x| x * x).sum();
         for i in 0..3 {
             for j in 0..3 {
-                m[i][j] += if i == j { f } else { 0.0 }
-                    + if d2 > 0.0 { g * d[i] * d[j] / d2 } else { 0.0 };
+                m[i][j] += if i == j { f } else { 0.0 } + if d2 > 0.0 { g * d[i] * d[j] / d2 } else { 0.0 };
             }
         }
     };
@@ -130,11 +129,7 @@ pub fn periodic_rpy(r: [f64; 3], l: f64, a: f64, eta: f64, xi: f64) -> [[f64; 3]
     for nx in -images..=images {
         for ny in -images..=images {
             for nz in -images..=images {
-                let d = [
-                    r[0] + nx as f64 * l,
-                    r[1] + ny as f64 * l,
-                    r[2] + nz as f64 * l,
-                ];
+                let d = [r[0] + nx as f64 * l, r[1] + ny as f64 * l, r[2] + nz as f64 * l];
                 let dist = d.iter().map(|x| x * x).sum::<f64>().sqrt();
                 if dist <= reach {
                     let (f, g) = table.at(dist);
@@ -187,11 +182,7 @@ mod tests {
     fn periodic_rpy_self_is_hasimoto() {
         let m = periodic_rpy([0.0; 3], 20.0, 1.0, 1.0, 0.7);
         let want = crate::nodes::fcm::plan::hasimoto(1.0, 20.0) / (6.0 * std::f64::consts::PI);
-        assert!(
-            (m[0][0] / want - 1.0).abs() < 1e-5,
-            "{} against {want}",
-            m[0][0]
-        );
+        assert!((m[0][0] / want - 1.0).abs() < 1e-5, "{} against {want}", m[0][0]);
     }
 
     #[test]

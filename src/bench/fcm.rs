@@ -78,11 +78,7 @@ impl Rng {
     }
 }
 
-pub(super) fn load(
-    path: &Path,
-    sets: &[(&str, ParamValue)],
-    registry: &Registry,
-) -> Result<Graph, CliError> {
+pub(super) fn load(path: &Path, sets: &[(&str, ParamValue)], registry: &Registry) -> Result<Graph, CliError> {
     let overrides = sets
         .iter()
         .map(|(k, v)| (k.to_string(), v.clone()))

@@ -71,11 +71,7 @@ fn accuracy(
         }
     }
     // The reference splits differently from every benchmarked split.
-    let xi_ref = if (split - 0.75).abs() < 0.1 {
-        0.95
-    } else {
-        0.75
-    };
+    let xi_ref = if (split - 0.75).abs() < 0.1 { 0.95 } else { 0.75 };
     let p = plan_for(gpu, &g, 2)?;
     let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(runtime)?;
     let mut pair_err: f64 = 0.0;
