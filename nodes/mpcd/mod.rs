@@ -1,6 +1,7 @@
 //! Multi-particle collision dynamics (MPCD): a particle solvent that streams ballistically
 //! and exchanges momentum inside the cells of a randomly shifted grid (stochastic rotation
-//! dynamics, SRD). One time step of `graphs/mpcd.json` is
+//! dynamics, SRD; or Ihle's biased collisions between cell pairs, MPCD-BC, with `rule`
+//! `biased`). One time step of `graphs/mpcd.json` (2D: `graphs/mpcd2d.json`) is
 //!
 //! `mpcd_stream` (x += v dt under the body force, walls, periodic wrap) ->
 //! `mpcd_bin` (cell of each particle in this step's shifted grid; per cell the count,
@@ -18,7 +19,8 @@
 //! Accuracy: cell sums are integers (velocity in units of v_th / 2^24, squared speed in
 //! units of v_th^2 / 2^16, v_th = sqrt(kT/m)), so they are exact and independent of the
 //! order of the atomics; velocities stay f32, so each collision conserves a cell's momentum
-//! up to the f32 rounding of its particles' new velocities (a random walk, no drift).
+//! and energy up to the f32 rounding of its particles' new velocities (a random walk, no
+//! drift: the 3D rotation is two reflections, norm-preserving whatever the f32 axis).
 //! Velocities must stay below 128 v_th (the range of the fixed point).
 
 mod collide;

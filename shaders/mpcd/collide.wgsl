@@ -1,13 +1,14 @@
-// SRD collision, one thread per particle: v <- u + S R (v - u), u the cell mean from the
-// cell sums, R the rotation by the angle about this cell's random axis (3D: uniform on the
-// sphere; 2D: by +-angle), S the cell thermostat factor (1, plain rescaling of the
+// MPCD collision, one thread per particle. SRD: v <- u + S R (v - u), u the cell mean
+// from the cell sums, R the rotation by the angle about this cell's random axis (3D:
+// uniform on the sphere, as two reflections; 2D: by +-angle), S the cell thermostat factor (1, plain rescaling of the
 // relative velocities to kT, or the Monte-Carlo cell scaling). Each cell's draws come from
 // one Philox block keyed by (seed, stream + j, step, cell), so every particle of a cell
 // recomputes the same rotation without a pass over the cells. Wall-cut cells (first and
 // last layer along the walled axis, with the grid shift) holding fewer than `density`
 // particles are filled up to it with virtual particles: u <- (n u + (M - n) q) / M with
 // q normal of variance kT / (m (M - n)) per component (the mean of M - n thermal
-// particles); those cells skip the thermostat.
+// particles); those cells skip the thermostat. MPCD-BC (rule 1): the thermostat, then
+// `biased` below.
 #import common/index.wgsl
 #import mpcd/common.wgsl
 
