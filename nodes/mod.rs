@@ -4,6 +4,7 @@ pub mod cells;
 pub mod fcm;
 pub mod fft;
 pub mod lanczos;
+pub mod mpcd;
 pub mod pairs;
 pub mod permute;
 pub mod planners;
@@ -25,6 +26,7 @@ pub fn register_all(r: &mut Registry) {
     pointwise::register(r);
     cells::register(r);
     lanczos::register(r);
+    mpcd::register(r);
     pairs::register(r);
     permute::register(r);
     random::register(r);

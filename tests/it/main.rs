@@ -9,6 +9,7 @@ mod fcm;
 mod fft;
 mod graph_files;
 mod lanczos;
+mod mpcd;
 mod nodes;
 mod pairs;
 mod plan;

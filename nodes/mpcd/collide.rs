@@ -1,0 +1,664 @@
+//! `mpcd_bin` (cells of the shifted grid and exact per-cell sums) and `mpcd_collide` (the
+//! SRD rotation with the cell thermostat and virtual particles in wall-cut cells).
+
+use super::{
+    CELL_WORDS, Geometry, check_rule, fixed_scales, fx_round, geometry_params, grid_shift,
+    key_into, key_of, rule_param, thermal_params, value_of, words_of,
+};
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::node::{
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+};
+use crate::nodes::random::{self, philox4x32_10};
+use crate::value::{PortType, RefArray, ValueType};
+
+fn key_params() -> [ParamSpec; 2] {
+    [random::seed_param(), random::stream_param()]
+}
+
+fn shift_param() -> ParamSpec {
+    ParamSpec::flag(
+        "shift",
+        true,
+        "random grid shift, uniform in [-a/2, a/2) per axis and step (Philox block 0 of (seed, stream) at the step)",
+    )
+}
+
+pub struct MpcdBinKind;
+
+impl NodeKind for MpcdBinKind {
+    fn name(&self) -> &'static str {
+        "mpcd_bin"
+    }
+
+    fn doc(&self) -> &'static str {
+        "MPCD cells of this step's randomly shifted grid, and per cell the count, sum v and sum |v|^2 (exact 64-bit fixed point)"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new("positions", PortType::Particles(None), "positions (N x d)"),
+            PortSpec::new(
+                "velocities",
+                PortType::Particles(None),
+                "velocities (N x d)",
+            ),
+        ]
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new("cell", PortType::Indices, "linear cell index per particle"),
+            PortSpec::new(
+                "sums",
+                PortType::Indices,
+                "9 words per cell: count, then (lo, hi) u32 pairs of the 64-bit sums of v_x, v_y, v_z (units v_th/2^24) and |v|^2 (units v_th^2/2^16)",
+            ),
+        ]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        let mut p = geometry_params();
+        p.extend(thermal_params());
+        p.push(shift_param());
+        p.push(rule_param());
+        p.extend(key_params());
+        p
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
+        let (seed, stream) = key_of(p);
+        let geo = Geometry::from_params(p)?;
+        let biased = p.text("rule") == "biased";
+        check_rule(&geo, biased)?;
+        let mut u = geo.uniform();
+        u.fix_v = fix_v;
+        u.fix_e = fix_e;
+        u.shift = u32::from(p.flag("shift"));
+        u.rule = u32::from(biased);
+        key_into(&mut u, p);
+        Ok(Box::new(MpcdBin {
+            geo,
+            u,
+            seed,
+            stream,
+        }))
+    }
+}
+
+struct MpcdBin {
+    geo: Geometry,
+    u: super::Uniform,
+    seed: u64,
+    stream: u32,
+}
+
+impl Node for MpcdBin {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let n = self.geo.particles("positions", inputs[0])?;
+        let nv = self.geo.particles("velocities", inputs[1])?;
+        if n != nv {
+            return Err(PortError::new(
+                "velocities",
+                format!("has {nv} rows but positions has {n}"),
+            ));
+        }
+        Ok(Signature::outputs(vec![
+            ValueType::Indices { n },
+            ValueType::Indices {
+                n: self.geo.ncells() * CELL_WORDS,
+            },
+        ]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
+        vec![format!(
+            "{:?} cells of size {}{}",
+            self.geo.cells,
+            self.geo.cell,
+            if self.u.shift == 1 {
+                ", randomly shifted"
+            } else {
+                ""
+            }
+        )]
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
+        let d = self.geo.dims();
+        let x = &inputs[0].as_ref().expect("required").data;
+        let v = &inputs[1].as_ref().expect("required").data;
+        let s = if self.u.shift == 1 {
+            grid_shift(
+                self.geo.cell * (1 + self.u.rule) as f64,
+                cx.step,
+                self.seed,
+                self.stream,
+            )
+        } else {
+            [0.0; 3]
+        };
+        let nc = self.geo.ncells() as usize;
+        let mut sums = vec![[0i64; 5]; nc];
+        let (cells, rest) = outputs.split_at_mut(1);
+        for p in 0..x.len() / d {
+            let c = self.geo.cell_of(&x[p * d..(p + 1) * d], &s);
+            cells[0].data[p] = c as f64;
+            let cs = &mut sums[c as usize];
+            cs[0] += 1;
+            let mut e = 0.0;
+            for a in 0..d {
+                let va = v[p * d + a];
+                cs[1 + a] += fx_round(va * self.u.fix_v as f64);
+                e += va * va;
+            }
+            cs[4] += (e * self.u.fix_e as f64).min(4_294_967_040.0).round() as i64;
+        }
+        for (c, cs) in sums.iter().enumerate() {
+            let o = &mut rest[0].data[c * CELL_WORDS as usize..(c + 1) * CELL_WORDS as usize];
+            o[0] = cs[0] as f64;
+            for j in 0..4 {
+                o[1 + 2 * j..3 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
+            }
+        }
+    }
+}
+
+impl GpuKernels for MpcdBin {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let pos = io.inputs[0].expect("required");
+        let vel = io.inputs[1].expect("required");
+        let ValueType::Particles { n, .. } = pos.ty else {
+            unreachable!()
+        };
+        let mut u = self.u;
+        u.n = n;
+        let kernel = cx.kernel(
+            &KernelSpec::new(
+                "mpcd_bin",
+                cx.shader("mpcd/bin.wgsl")?,
+                &[
+                    Binding::Uniform,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::StorageReadWrite,
+                ],
+            )
+            .constant("DIMS", self.geo.dims() as f64),
+        )?;
+        let params = cx.uniform("mpcd bin", bytemuck::bytes_of(&u));
+        let sums = io.outputs[1].buffer;
+        Ok(vec![
+            cx.fill(sums, io.outputs[1].ty.words(), 0)?,
+            cx.dispatch(
+                &kernel,
+                &[
+                    &params,
+                    cx.clock,
+                    pos.buffer,
+                    vel.buffer,
+                    io.outputs[0].buffer,
+                    sums,
+                ],
+                cx.grid_1d(n as u64, WG_1D),
+            ),
+        ])
+    }
+}
+
+pub struct MpcdCollideKind;
+
+impl NodeKind for MpcdCollideKind {
+    fn name(&self) -> &'static str {
+        "mpcd_collide"
+    }
+
+    fn doc(&self) -> &'static str {
+        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC)"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new(
+                "velocities",
+                PortType::Particles(None),
+                "velocities (N x d)",
+            ),
+            PortSpec::new("cell", PortType::Indices, "cell per particle (mpcd_bin)"),
+            PortSpec::new("sums", PortType::Indices, "cell sums (mpcd_bin)"),
+        ]
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![PortSpec::new(
+            "velocities",
+            PortType::Particles(None),
+            "velocities after the collision",
+        )]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        let mut p = geometry_params();
+        p.extend(thermal_params());
+        p.extend([
+            ParamSpec::flag(
+                "shift",
+                true,
+                "whether mpcd_bin shifts the grid (with walls, the first and last layers are then cut cells)",
+            ),
+            rule_param(),
+            ParamSpec::number(
+                "acceptance",
+                Some(0.01),
+                0.0,
+                f64::MAX,
+                "MPCD-BC acceptance parameter A: a cell pair collides with probability tanh(A du n1 n2)",
+            ),
+            ParamSpec::number(
+                "angle",
+                Some(130.0),
+                0.0,
+                180.0,
+                "rotation angle in degrees",
+            ),
+            ParamSpec::number(
+                "density",
+                Some(10.0),
+                f64::MIN_POSITIVE,
+                f64::MAX,
+                "mean particles per cell M (the fill level of virtual particles)",
+            ),
+            ParamSpec::flag(
+                "ghosts",
+                true,
+                "with walls: fill wall-cut cells holding fewer than M particles with virtual particles (Lamura et al.)",
+            ),
+            ParamSpec::choice(
+                "thermostat",
+                "none",
+                &["none", "rescale", "monte_carlo"],
+                "none; rescale: relative velocities of every cell scaled to kT; monte_carlo: Hecht's cell scaling",
+            ),
+            ParamSpec::number(
+                "mc_scale",
+                Some(0.3),
+                0.0,
+                10.0,
+                "Monte-Carlo thermostat: scale factor drawn from [1, 1 + c) or its inverse",
+            ),
+        ]);
+        p.extend(key_params());
+        p
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        let geo = Geometry::from_params(p)?;
+        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
+        let thermostat = match p.text("thermostat") {
+            "none" => 0,
+            "rescale" => 1,
+            _ => 2,
+        };
+        if thermostat != 0 && p.number("temperature") <= 0.0 {
+            return Err("a thermostat needs temperature > 0".into());
+        }
+        let angle = p.number("angle").to_radians();
+        let biased = p.text("rule") == "biased";
+        check_rule(&geo, biased)?;
+        let mut u = geo.uniform();
+        u.rule = u32::from(biased);
+        u.accept_a = p.number("acceptance") as f32;
+        u.fix_v = fix_v;
+        u.fix_e = fix_e;
+        u.shift = u32::from(p.flag("shift"));
+        u.kt = p.number("temperature") as f32;
+        u.mass = p.number("mass") as f32;
+        (u.cos_a, u.sin_a) = unit_pair(angle);
+        (u.half_cos, u.half_sin) = unit_pair(angle / 2.0);
+        u.density = p.number("density") as f32;
+        u.ghosts = u32::from(p.flag("ghosts"));
+        u.thermostat = thermostat;
+        u.mc_c = p.number("mc_scale") as f32;
+        key_into(&mut u, p);
+        let (seed, stream) = key_of(p);
+        Ok(Box::new(MpcdCollide {
+            geo,
+            u,
+            seed,
+            stream,
+            kt: p.number("temperature"),
+            mass: p.number("mass"),
+            density: p.number("density"),
+        }))
+    }
+}
+
+struct MpcdCollide {
+    geo: Geometry,
+    u: super::Uniform,
+    seed: u64,
+    stream: u32,
+    kt: f64,
+    mass: f64,
+    density: f64,
+}
+
+/// (cos, sin) of `angle` as an f32 pair within 64 ulps of each (an angle error below
+/// 1e-5 rad) for which the f32 rotation keeps |v - u| on average: 1 - cos is exact in f32
+/// (the kernel computes it; a rounded 1 - cos scales the component along the axis by
+/// 1 + eps in every collision) and c^2 + s^2 is the closest to 1 (else the components
+/// across the axis scale by it, 2.5e-8 per collision at 130 degrees for the nearest
+/// pair). Either bias, the same in every collision, heats or cools the fluid steadily.
+fn unit_pair(angle: f64) -> (f32, f32) {
+    let near = |x: f32| {
+        (-64i32..=64).filter_map(move |k| {
+            let b = x.to_bits() as i64 + k as i64;
+            (0..=u32::MAX as i64)
+                .contains(&b)
+                .then(|| f32::from_bits(b as u32))
+        })
+    };
+    let (c0, s0) = (angle.cos() as f32, angle.sin() as f32);
+    let mut best = (f64::MAX, c0, s0);
+    for c in near(c0).filter(|&c| ((1.0 - c as f64) as f32) as f64 == 1.0 - c as f64) {
+        for s in near(s0) {
+            let e = ((c as f64).powi(2) + (s as f64).powi(2) - 1.0).abs();
+            if e < best.0 {
+                best = (e, c, s);
+            }
+        }
+    }
+    (best.1, best.2)
+}
+
+fn unit(w: u32) -> f64 {
+    (w >> 8) as f64 / 16_777_216.0
+}
+
+fn open01(w: u32) -> f64 {
+    ((w >> 8) as f64 + 1.0) / 16_777_216.0
+}
+
+/// R d for the SRD rotation whose angle has cosine and sine (`ca`, `sa`) (the f32 pair
+/// the kernel uses, see `unit_pair`), drawn from the cell's Philox words `w` (f64 twin of
+/// the kernel's): 3D about the axis (sqrt(1 - c^2) cos phi, sqrt(1 - c^2) sin phi, c) with
+/// c = 2 u0 - 1, phi = 2 pi u1 (right-handed, Rodrigues' formula; the kernel composes two
+/// reflections, the same rotation in exact arithmetic); 2D by -angle when the top bit of w0
+/// is set, else +angle.
+pub fn srd_rotation(dims: usize, ca: f64, sa: f64, w: [u32; 4], d: [f64; 3]) -> [f64; 3] {
+    if dims == 3 {
+        let cz = 2.0 * unit(w[0]) - 1.0;
+        let phi = 2.0 * std::f64::consts::PI * unit(w[1]);
+        let sz = (1.0 - cz * cz).max(0.0).sqrt();
+        let k = [sz * phi.cos(), sz * phi.sin(), cz];
+        let kd = k[0] * d[0] + k[1] * d[1] + k[2] * d[2];
+        let kxd = [
+            k[1] * d[2] - k[2] * d[1],
+            k[2] * d[0] - k[0] * d[2],
+            k[0] * d[1] - k[1] * d[0],
+        ];
+        let mut r = [0.0; 3];
+        for a in 0..3 {
+            r[a] = d[a] * ca + kxd[a] * sa + k[a] * kd * (1.0 - ca);
+        }
+        r
+    } else {
+        let s = if w[0] & 0x8000_0000 != 0 { -sa } else { sa };
+        [d[0] * ca - d[1] * s, d[0] * s + d[1] * ca, 0.0]
+    }
+}
+
+impl MpcdCollide {
+    fn block(&self, c: u32, step: u64, j: u32) -> [u32; 4] {
+        philox4x32_10(
+            [c, step as u32, (self.seed >> 32) as u32, 0],
+            [self.seed as u32, self.stream.wrapping_add(j)],
+        )
+    }
+
+    fn mean(&self, c: u32, sums: &[f64]) -> ([f64; 3], f64) {
+        let s = &sums[(c * CELL_WORDS) as usize..((c + 1) * CELL_WORDS) as usize];
+        let mut u = [0.0; 3];
+        for a in 0..self.geo.dims() {
+            u[a] =
+                value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (s[0].max(1.0) * self.u.fix_v as f64);
+        }
+        (u, s[0])
+    }
+
+    /// MPCD-BC update of one particle (f64 twin of `biased` in shaders/mpcd/collide.wgsl).
+    fn biased(
+        &self,
+        c: u32,
+        step: u64,
+        u1: [f64; 3],
+        n1: f64,
+        v: [f64; 3],
+        sums: &[f64],
+    ) -> [f64; 3] {
+        let d = self.geo.dims();
+        let (nx, ny) = (self.geo.cells[0], self.geo.cells[1]);
+        let i = [
+            c % nx,
+            (c / nx) % ny,
+            if d == 3 { c / (nx * ny) } else { 0 },
+        ];
+        let sc = (i[0] >> 1) + (nx >> 1) * ((i[1] >> 1) + (ny >> 1) * (i[2] >> 1));
+        let t = unit(self.block(sc, step, 3)[0]);
+        let flip: [u32; 3] = if d == 3 {
+            let k = t * 13.0;
+            if k < 1.0 {
+                [1, 0, 0]
+            } else if k < 2.0 {
+                [0, 1, 0]
+            } else if k < 3.0 {
+                [0, 0, 1]
+            } else if k < 5.0 {
+                [1, 1, 0]
+            } else if k < 7.0 {
+                [1, 0, 1]
+            } else if k < 9.0 {
+                [0, 1, 1]
+            } else {
+                [1, 1, 1]
+            }
+        } else if t < 0.25 {
+            [1, 0, 0]
+        } else if t < 0.5 {
+            [0, 1, 0]
+        } else {
+            [1, 1, 0]
+        };
+        let j: Vec<u32> = (0..3).map(|a| i[a] ^ flip[a]).collect();
+        let cp = j[0] + nx * (j[1] + ny * j[2]);
+        let mut s = [0.0; 3];
+        for a in 0..3 {
+            s[a] = (1.0 - 2.0 * (i[a] & 1) as f64) * flip[a] as f64;
+        }
+        let norm = (s.iter().map(|x| x * x).sum::<f64>()).sqrt();
+        s.iter_mut().for_each(|x| *x /= norm);
+        let (u2, n2) = self.mean(cp, sums);
+        let du: f64 = (0..3).map(|a| s[a] * (u1[a] - u2[a])).sum();
+        let p = if du > 0.0 && n2 > 0.0 {
+            (self.u.accept_a as f64 * du * n1 * n2).tanh()
+        } else {
+            0.0
+        };
+        if unit(self.block(c.min(cp), step, 4)[0]) < p {
+            let mut up = [0.0; 3];
+            for a in 0..3 {
+                up[a] = (n1 * u1[a] + n2 * u2[a]) / (n1 + n2);
+            }
+            let proj: f64 = (0..3).map(|a| s[a] * (up[a] - v[a])).sum();
+            let mut out = v;
+            for a in 0..3 {
+                out[a] += 2.0 * s[a] * proj;
+            }
+            return out;
+        }
+        v
+    }
+}
+
+impl Node for MpcdCollide {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let n = self.geo.particles("velocities", inputs[0])?;
+        match inputs[1] {
+            Some(ValueType::Indices { n: nc }) if nc == n => {}
+            other => {
+                return Err(PortError::new(
+                    "cell",
+                    format!("expected {n} indices (one per particle), got {other:?}"),
+                ));
+            }
+        }
+        let want = self.geo.ncells() * CELL_WORDS;
+        match inputs[2] {
+            Some(ValueType::Indices { n: ns }) if ns == want => {}
+            other => {
+                return Err(PortError::new(
+                    "sums",
+                    format!(
+                        "expected {want} words ({} cells x {CELL_WORDS}), got {other:?}; do mpcd_bin and mpcd_collide have the same box, cell and walls?",
+                        self.geo.ncells()
+                    ),
+                ));
+            }
+        }
+        Ok(Signature::outputs(vec![inputs[0].expect("checked")]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
+        let d = self.geo.dims();
+        let v = &inputs[0].as_ref().expect("required").data;
+        let cells = &inputs[1].as_ref().expect("required").data;
+        let sums = &inputs[2].as_ref().expect("required").data;
+        let (fix_v, fix_e) = (self.u.fix_v as f64, self.u.fix_e as f64);
+        let w_layers = self.geo.cells[d - 1];
+        for p in 0..cells.len() {
+            let c = cells[p] as u32;
+            let s = &sums[(c * CELL_WORDS) as usize..((c + 1) * CELL_WORDS) as usize];
+            let count = s[0];
+            let mut u = [0.0; 3];
+            for a in 0..d {
+                u[a] = value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (count * fix_v);
+            }
+            let uu: f64 = u.iter().map(|x| x * x).sum();
+            let rel = (value_of(s[7], s[8]) as f64 / fix_e - count * uu).max(0.0);
+            let mut scale = 1.0;
+            let layer = self.geo.layer(c);
+            let cut = self.u.rule == 0
+                && self.geo.walls
+                && self.u.shift == 1
+                && (layer == 0 || layer == w_layers - 1);
+            if self.u.ghosts == 1 && cut && count < self.density {
+                let g = self.block(c, cx.step, 2);
+                let r0 = (-2.0 * open01(g[0]).ln()).sqrt();
+                let r1 = (-2.0 * open01(g[2]).ln()).sqrt();
+                let t0 = 2.0 * std::f64::consts::PI * open01(g[1]);
+                let t1 = 2.0 * std::f64::consts::PI * open01(g[3]);
+                let sd = (self.kt / (self.mass * (self.density - count))).sqrt();
+                let q = [r0 * t0.cos() * sd, r0 * t0.sin() * sd, r1 * t1.cos() * sd];
+                for a in 0..d {
+                    u[a] = (count * u[a] + (self.density - count) * q[a]) / self.density;
+                }
+            } else if self.u.thermostat != 0 && count >= 2.0 && rel > 0.0 {
+                let dof = d as f64 * (count - 1.0);
+                if self.u.thermostat == 1 {
+                    scale = (dof * self.kt / (self.mass * rel)).sqrt();
+                } else {
+                    let t = self.block(c, cx.step, 1);
+                    let psi = 1.0 + self.u.mc_c as f64 * unit(t[0]);
+                    let sc = if unit(t[1]) < 0.5 { psi } else { 1.0 / psi };
+                    let log_accept =
+                        dof * sc.ln() - 0.5 * self.mass / self.kt * rel * (sc * sc - 1.0);
+                    if open01(t[2]).ln() < log_accept {
+                        scale = sc;
+                    }
+                }
+            }
+            let mut dv = [0.0; 3];
+            for a in 0..d {
+                dv[a] = v[p * d + a] - u[a];
+            }
+            if self.u.rule == 1 {
+                let mut vt = [0.0; 3];
+                for a in 0..d {
+                    vt[a] = u[a] + scale * dv[a];
+                }
+                let out = self.biased(c, cx.step, u, count, vt, sums);
+                outputs[0].data[p * d..(p + 1) * d].copy_from_slice(&out[..d]);
+                continue;
+            }
+            let (ca, sa) = if d == 3 {
+                // The half angle: two reflections (see the kernel).
+                let (ch, sh) = (self.u.half_cos as f64, self.u.half_sin as f64);
+                (ch * ch - sh * sh, 2.0 * ch * sh)
+            } else {
+                (self.u.cos_a as f64, self.u.sin_a as f64)
+            };
+            let r = srd_rotation(d, ca, sa, self.block(c, cx.step, 0), dv);
+            for a in 0..d {
+                outputs[0].data[p * d + a] = u[a] + scale * r[a];
+            }
+        }
+    }
+}
+
+impl GpuKernels for MpcdCollide {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let vel = io.inputs[0].expect("required");
+        let ValueType::Particles { n, .. } = vel.ty else {
+            unreachable!()
+        };
+        let mut u = self.u;
+        u.n = n;
+        let kernel = cx.kernel(
+            &KernelSpec::new(
+                "mpcd_collide",
+                cx.shader("mpcd/collide.wgsl")?,
+                &[
+                    Binding::Uniform,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                ],
+            )
+            .constant("DIMS", self.geo.dims() as f64),
+        )?;
+        let params = cx.uniform("mpcd collide", bytemuck::bytes_of(&u));
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &[
+                &params,
+                cx.clock,
+                vel.buffer,
+                io.inputs[1].expect("required").buffer,
+                io.inputs[2].expect("required").buffer,
+                io.outputs[0].buffer,
+            ],
+            cx.grid_1d(n as u64, WG_1D),
+        )])
+    }
+}

@@ -1,0 +1,383 @@
+//! `mpcd_measure` (observables accumulated on the GPU after the warm-up, in a persistent
+//! block of exact 64-bit fixed-point sums) and `mpcd_average` (their means).
+
+use super::{
+    CELL_WORDS, Geometry, fixed_scales, fx_round, geometry_params, thermal_params, value_of,
+    words_of,
+};
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::node::{
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+};
+use crate::value::{PortType, RefArray, ValueType};
+
+/// Words of the accumulator before the profile bins.
+const HEAD: usize = 11;
+/// Most profile bins (workgroup memory of the measuring kernel).
+pub const MAX_BINS: f64 = 1024.0;
+
+fn bins_param() -> ParamSpec {
+    ParamSpec::integer(
+        "bins",
+        Some(16.0),
+        1.0,
+        MAX_BINS,
+        "profile bins: equal slabs along the last axis",
+    )
+}
+
+pub struct MpcdMeasureKind;
+
+impl NodeKind for MpcdMeasureKind {
+    fn name(&self) -> &'static str {
+        "mpcd_measure"
+    }
+
+    fn doc(&self) -> &'static str {
+        "MPCD observables summed over the sampled steps (step >= warmup, every `every`): momentum, cell temperature terms, v_x profile along the last axis"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new("positions", PortType::Particles(None), "positions (N x d)"),
+            PortSpec::new(
+                "velocities",
+                PortType::Particles(None),
+                "velocities (N x d): momentum and profile",
+            ),
+            PortSpec::new(
+                "sums",
+                PortType::Indices,
+                "cell sums (mpcd_bin): temperature from the velocities relative to the cell means",
+            ),
+        ]
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new(
+                "sums",
+                PortType::Indices,
+                "u32 words: samples; 64-bit (lo, hi) pairs of sum v_a (3), sum |v - u_c|^2, sum (n_c - 1); per bin sum v_x and count (fixed point of mpcd_bin)",
+            )
+            .persistent(),
+        ]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        let mut p = geometry_params();
+        p.extend(thermal_params());
+        p.extend([
+            bins_param(),
+            ParamSpec::integer(
+                "warmup",
+                Some(0.0),
+                0.0,
+                u32::MAX as f64,
+                "steps before the first sample",
+            ),
+            ParamSpec::integer(
+                "every",
+                Some(1.0),
+                1.0,
+                u32::MAX as f64,
+                "steps between samples",
+            ),
+        ]);
+        p
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        let geo = Geometry::from_params(p)?;
+        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
+        let mut u = geo.uniform();
+        u.fix_v = fix_v;
+        u.fix_e = fix_e;
+        u.bins = p.number("bins") as u32;
+        u.warmup = p.number("warmup") as u32;
+        u.every = p.number("every") as u32;
+        Ok(Box::new(MpcdMeasure { geo, u }))
+    }
+}
+
+struct MpcdMeasure {
+    geo: Geometry,
+    u: super::Uniform,
+}
+
+fn add(acc: &mut [f64], i: usize, v: i64) {
+    let w = words_of(value_of(acc[i], acc[i + 1]).wrapping_add(v));
+    acc[i..i + 2].copy_from_slice(&w);
+}
+
+impl Node for MpcdMeasure {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let n = self.geo.particles("positions", inputs[0])?;
+        let nv = self.geo.particles("velocities", inputs[1])?;
+        if n != nv {
+            return Err(PortError::new(
+                "velocities",
+                format!("has {nv} rows but positions has {n}"),
+            ));
+        }
+        let want = self.geo.ncells() * CELL_WORDS;
+        if inputs[2] != Some(ValueType::Indices { n: want }) {
+            return Err(PortError::new(
+                "sums",
+                format!("expected {want} words of cell sums, got {:?}", inputs[2]),
+            ));
+        }
+        Ok(Signature::outputs(vec![ValueType::Indices {
+            n: HEAD as u32 + 4 * self.u.bins,
+        }]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
+        let step = cx.step as u32;
+        if step < self.u.warmup || !(step - self.u.warmup).is_multiple_of(self.u.every) {
+            return;
+        }
+        let d = self.geo.dims();
+        let x = &inputs[0].as_ref().expect("required").data;
+        let v = &inputs[1].as_ref().expect("required").data;
+        let sums = &inputs[2].as_ref().expect("required").data;
+        let acc = &mut outputs[0].data;
+        let (fix_v, fix_e) = (self.u.fix_v as f64, self.u.fix_e as f64);
+        acc[0] += 1.0;
+        let (mut rel, mut dof) = (0.0, 0i64);
+        for s in sums.chunks(CELL_WORDS as usize) {
+            if s[0] > 0.0 {
+                let mut uu = 0.0;
+                for a in 0..d {
+                    let u = value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (s[0] * fix_v);
+                    uu += u * u;
+                }
+                rel += (value_of(s[7], s[8]) as f64 / fix_e - s[0] * uu).max(0.0);
+                dof += s[0] as i64 - 1;
+            }
+        }
+        add(acc, 7, (rel * fix_e).round() as i64);
+        add(acc, 9, dof);
+        let bins = self.u.bins as usize;
+        let w = d - 1;
+        for p in 0..x.len() / d {
+            for a in 0..d {
+                add(acc, 1 + 2 * a, fx_round(v[p * d + a] * fix_v));
+            }
+            let z = x[p * d + w];
+            let b = (((z / self.geo.lengths[w] + 0.5) * bins as f64).floor() as i64)
+                .clamp(0, bins as i64 - 1) as usize;
+            add(acc, HEAD + 4 * b, fx_round(v[p * d] * fix_v));
+            add(acc, HEAD + 4 * b + 2, 1);
+        }
+    }
+}
+
+impl GpuKernels for MpcdMeasure {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let pos = io.inputs[0].expect("required");
+        let ValueType::Particles { n, .. } = pos.ty else {
+            unreachable!()
+        };
+        let mut u = self.u;
+        u.n = n;
+        let bindings = [
+            Binding::Uniform,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+        ];
+        let src = cx.shader("mpcd/measure.wgsl")?;
+        let d = self.geo.dims() as f64;
+        let cells = cx.kernel(
+            &KernelSpec::new("mpcd_measure cells", src.clone(), &bindings)
+                .entry("cells")
+                .constant("DIMS", d),
+        )?;
+        let particles = cx.kernel(
+            &KernelSpec::new("mpcd_measure particles", src, &bindings)
+                .entry("particles")
+                .constant("DIMS", d),
+        )?;
+        let params = cx.uniform("mpcd measure", bytemuck::bytes_of(&u));
+        let buffers = [
+            &params,
+            cx.clock,
+            pos.buffer,
+            io.inputs[1].expect("required").buffer,
+            io.inputs[2].expect("required").buffer,
+            io.outputs[0].buffer,
+        ];
+        Ok(vec![
+            cx.dispatch(&cells, &buffers, cx.grid_1d(u.ncells as u64, WG_1D)),
+            cx.dispatch(&particles, &buffers, cx.grid_1d(n as u64, WG_1D)),
+        ])
+    }
+}
+
+pub struct MpcdAverageKind;
+
+impl NodeKind for MpcdAverageKind {
+    fn name(&self) -> &'static str {
+        "mpcd_average"
+    }
+
+    fn doc(&self) -> &'static str {
+        "MPCD averages of mpcd_measure's sums: mean v_x per profile bin, temperature m sum|v - u_c|^2 / (d sum(n_c - 1)), mean total momentum"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        vec![PortSpec::new(
+            "sums",
+            PortType::Indices,
+            "mpcd_measure's sums",
+        )]
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new(
+                "profile",
+                PortType::Particles(Some(1)),
+                "mean v_x per bin (bins x 1; NaN for a bin never sampled)",
+            ),
+            PortSpec::new(
+                "temperature",
+                PortType::Scalar,
+                "mean kT (NaN before a sample)",
+            ),
+            PortSpec::new(
+                "momentum",
+                PortType::Particles(None),
+                "mean total momentum (1 x d; NaN before a sample)",
+            ),
+        ]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        let mut p = geometry_params();
+        p.extend(thermal_params());
+        p.push(bins_param());
+        p
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        let geo = Geometry::from_params(p)?;
+        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
+        let mut u = geo.uniform();
+        u.fix_v = fix_v;
+        u.fix_e = fix_e;
+        u.mass = p.number("mass") as f32;
+        u.bins = p.number("bins") as u32;
+        Ok(Box::new(MpcdAverage { geo, u }))
+    }
+}
+
+struct MpcdAverage {
+    geo: Geometry,
+    u: super::Uniform,
+}
+
+impl Node for MpcdAverage {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let want = HEAD as u32 + 4 * self.u.bins;
+        if inputs[0] != Some(ValueType::Indices { n: want }) {
+            return Err(PortError::new(
+                "sums",
+                format!(
+                    "expected {want} words ({} bins), got {:?}; do mpcd_measure and mpcd_average have the same bins?",
+                    self.u.bins, inputs[0]
+                ),
+            ));
+        }
+        Ok(Signature::outputs(vec![
+            ValueType::Particles {
+                n: self.u.bins,
+                k: 1,
+            },
+            ValueType::Scalar,
+            ValueType::Particles {
+                n: 1,
+                k: self.geo.dims() as u32,
+            },
+        ]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let acc = &inputs[0].as_ref().expect("required").data;
+        let (fix_v, fix_e) = (self.u.fix_v as f64, self.u.fix_e as f64);
+        let mass = self.u.mass as f64;
+        let pair = |i: usize| value_of(acc[i], acc[i + 1]) as f64;
+        for b in 0..self.u.bins as usize {
+            let n = pair(HEAD + 4 * b + 2);
+            outputs[0].data[b] = if n > 0.0 {
+                pair(HEAD + 4 * b) / (n * fix_v)
+            } else {
+                f64::NAN
+            };
+        }
+        let d = self.geo.dims();
+        let dof = pair(9);
+        outputs[1].data[0] = if dof > 0.0 {
+            mass * pair(7) / (fix_e * d as f64 * dof)
+        } else {
+            f64::NAN
+        };
+        for a in 0..d {
+            outputs[2].data[a] = if acc[0] > 0.0 {
+                mass * pair(1 + 2 * a) / (fix_v * acc[0])
+            } else {
+                f64::NAN
+            };
+        }
+    }
+}
+
+impl GpuKernels for MpcdAverage {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let kernel = cx.kernel(
+            &KernelSpec::new(
+                "mpcd_average",
+                cx.shader("mpcd/average.wgsl")?,
+                &[
+                    Binding::Uniform,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::StorageReadWrite,
+                    Binding::StorageReadWrite,
+                ],
+            )
+            .constant("DIMS", self.geo.dims() as f64),
+        )?;
+        let params = cx.uniform("mpcd average", bytemuck::bytes_of(&self.u));
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &[
+                &params,
+                io.inputs[0].expect("required").buffer,
+                io.outputs[0].buffer,
+                io.outputs[1].buffer,
+                io.outputs[2].buffer,
+            ],
+            cx.grid_1d(self.u.bins as u64, WG_1D),
+        )])
+    }
+}

@@ -1,0 +1,311 @@
+//! Multi-particle collision dynamics (MPCD): a particle solvent that streams ballistically
+//! and exchanges momentum inside the cells of a randomly shifted grid (stochastic rotation
+//! dynamics, SRD; or Ihle's biased collisions between cell pairs, MPCD-BC, with `rule`
+//! `biased`). One time step of `graphs/mpcd.json` (2D: `graphs/mpcd2d.json`) is
+//!
+//! `mpcd_stream` (x += v dt under the body force, walls, periodic wrap) ->
+//! `mpcd_bin` (cell of each particle in this step's shifted grid; per cell the count,
+//! sum v and sum |v|^2 as exact 64-bit fixed-point sums by u32 atomics) ->
+//! `mpcd_collide` (v <- u_c + S R (v - u_c) per particle, the cell's rotation and thermostat
+//! factor recomputed from Philox by every particle of the cell, virtual particles in
+//! wall-cut cells) -> `mpcd_measure` (observables accumulated after the warm-up) ->
+//! `mpcd_average`; `mpcd_init` draws the initial state.
+//!
+//! Conventions: the box is centred at the origin, particle arrays are (N, d) with d = 2 or 3
+//! (the length of `box`), the body force acts along x, and walls (`plates`) are
+//! perpendicular to the last axis (z in 3D, y in 2D) at +-L/2. Cells are linear
+//! (x fastest); the walled axis has L/a + 1 layers (the grid shift cuts the first and last).
+//!
+//! Accuracy: cell sums are integers (velocity in units of v_th / 2^24, squared speed in
+//! units of v_th^2 / 2^16, v_th = sqrt(kT/m)), so they are exact and independent of the
+//! order of the atomics; velocities stay f32, so each collision conserves a cell's momentum
+//! and energy up to the f32 rounding of its particles' new velocities (a random walk, no
+//! drift: the 3D rotation is two reflections, norm-preserving whatever the f32 axis).
+//! Velocities must stay below 128 v_th (the range of the fixed point).
+
+mod collide;
+mod init;
+mod measure;
+mod stream;
+
+use crate::node::{ParamKind, ParamSpec, Params, PortError, Registry};
+use crate::value::ValueType;
+
+pub use collide::srd_rotation;
+
+/// Words per cell of `mpcd_bin`'s sums: count, sum v (3 pairs), sum |v|^2 (a pair).
+pub const CELL_WORDS: u32 = 9;
+
+/// The parameter block of every MPCD kernel (`struct Mpcd` of shaders/mpcd/common.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct Uniform {
+    pub box_len: [f32; 4],
+    pub cells: [u32; 4],
+    pub n: u32,
+    pub ncells: u32,
+    pub walls: u32,
+    pub wall_slip: u32,
+    pub seed_lo: u32,
+    pub seed_hi: u32,
+    pub stream: u32,
+    pub shift: u32,
+    pub cell: f32,
+    pub dt: f32,
+    pub mass: f32,
+    pub kt: f32,
+    pub cos_a: f32,
+    pub sin_a: f32,
+    pub density: f32,
+    pub thermostat: u32,
+    pub accel: f32,
+    pub force_shape: u32,
+    pub mc_c: f32,
+    pub ghosts: u32,
+    pub fix_v: f32,
+    pub fix_e: f32,
+    pub bins: u32,
+    pub warmup: u32,
+    pub every: u32,
+    pub rule: u32,
+    pub accept_a: f32,
+    pub half_cos: f32,
+    pub half_sin: f32,
+    pub pad: [u32; 3],
+}
+
+/// Box, cells and walls, shared by the MPCD kinds.
+#[derive(Clone, Debug)]
+pub(crate) struct Geometry {
+    pub lengths: Vec<f64>,
+    pub cell: f64,
+    pub walls: bool,
+    /// Cells per axis (the walled axis: L/a + 1 layers).
+    pub cells: Vec<u32>,
+}
+
+impl Geometry {
+    pub fn from_params(p: &Params) -> Result<Self, String> {
+        let lengths = p.numbers("box").to_vec();
+        let cell = p.number("cell");
+        let walls = p.text("walls") == "plates";
+        if !(2..=3).contains(&lengths.len()) {
+            return Err(format!("`box` needs 2 or 3 lengths, got {}", lengths.len()));
+        }
+        let mut cells = Vec::new();
+        for (a, &l) in lengths.iter().enumerate() {
+            let r = l / cell;
+            if (r - r.round()).abs() > 1e-9 * r.max(1.0) || r.round() < 1.0 {
+                return Err(format!(
+                    "box length {l} along axis {a} is not a whole number of cells of size {cell}"
+                ));
+            }
+            cells.push(r.round() as u32 + u32::from(walls && a == lengths.len() - 1));
+        }
+        let total: f64 = cells.iter().map(|&c| c as f64).product();
+        if total * CELL_WORDS as f64 > u32::MAX as f64 {
+            return Err(format!("{total} cells are too many (at most 2^32 / 9)"));
+        }
+        Ok(Geometry {
+            lengths,
+            cell,
+            walls,
+            cells,
+        })
+    }
+
+    pub fn dims(&self) -> usize {
+        self.lengths.len()
+    }
+
+    pub fn ncells(&self) -> u32 {
+        self.cells.iter().product()
+    }
+
+    /// The uniform with the geometry filled in.
+    pub fn uniform(&self) -> Uniform {
+        let mut u = Uniform::default();
+        for a in 0..self.dims() {
+            u.box_len[a] = self.lengths[a] as f32;
+            u.cells[a] = self.cells[a];
+        }
+        for a in self.dims()..4 {
+            u.box_len[a] = 1.0;
+            u.cells[a] = 1;
+        }
+        u.ncells = self.ncells();
+        u.walls = u32::from(self.walls);
+        u.cell = self.cell as f32;
+        u.every = 1;
+        u
+    }
+
+    /// Checks a particle array against the box; returns N.
+    pub fn particles(&self, port: &str, t: Option<ValueType>) -> Result<u32, PortError> {
+        match t {
+            Some(ValueType::Particles { n, k }) if k as usize == self.dims() => Ok(n),
+            Some(other) => Err(PortError::new(
+                port,
+                format!(
+                    "is {other} but the box has {} axes (N x {} expected)",
+                    self.dims(),
+                    self.dims()
+                ),
+            )),
+            None => Err(PortError::new(port, "is required")),
+        }
+    }
+
+    /// Reference cell of a position for grid shift `s` (f64 twin of `cell_of`).
+    pub fn cell_of(&self, x: &[f64], s: &[f64; 3]) -> u32 {
+        let d = self.dims();
+        let mut c = 0u64;
+        for a in (0..d).rev() {
+            let nc = self.cells[a] as i64;
+            let l = self.lengths[a];
+            let i = if self.walls && a == d - 1 {
+                (((x[a] + 0.5 * l + s[a] + 0.5 * self.cell) / self.cell).floor() as i64)
+                    .clamp(0, nc - 1)
+            } else {
+                (((x[a] + 0.5 * l + s[a]) / self.cell).floor() as i64).rem_euclid(nc)
+            };
+            c = c * nc as u64 + i as u64;
+        }
+        c as u32
+    }
+
+    /// Layer of a cell along the last axis.
+    pub fn layer(&self, c: u32) -> u32 {
+        let d = self.dims();
+        let below: u32 = self.cells[..d - 1].iter().product();
+        c / below
+    }
+}
+
+pub(crate) fn geometry_params() -> Vec<ParamSpec> {
+    vec![
+        ParamSpec {
+            name: "box",
+            kind: ParamKind::Numbers {
+                len: None,
+                min: f64::MIN_POSITIVE,
+                max: f64::MAX,
+            },
+            default: None,
+            doc: "box lengths per axis (2 or 3 values), centred at the origin",
+        },
+        ParamSpec::number(
+            "cell",
+            Some(1.0),
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            "collision cell size a (box lengths are whole numbers of cells)",
+        ),
+        ParamSpec::choice(
+            "walls",
+            "none",
+            &["none", "plates"],
+            "none: periodic; plates: walls perpendicular to the last axis at +-L/2",
+        ),
+    ]
+}
+
+pub(crate) fn thermal_params() -> Vec<ParamSpec> {
+    vec![
+        ParamSpec::number(
+            "temperature",
+            Some(1.0),
+            0.0,
+            f64::MAX,
+            "kT (sets the fixed-point unit v_th = sqrt(kT/m) of the cell sums)",
+        ),
+        ParamSpec::number(
+            "mass",
+            Some(1.0),
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            "particle mass m",
+        ),
+    ]
+}
+
+/// The fixed-point scales (fix_v, fix_e) for (kT, m), as f32 (the GPU's values).
+pub(crate) fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
+    let vth = if kt > 0.0 { (kt / mass).sqrt() } else { 1.0 };
+    ((16_777_216.0 / vth) as f32, (65_536.0 / (vth * vth)) as f32)
+}
+
+/// Seed and stream of a kind's params into the uniform.
+pub(crate) fn key_into(u: &mut Uniform, p: &Params) {
+    let seed = p.number("seed") as u64;
+    u.seed_lo = seed as u32;
+    u.seed_hi = (seed >> 32) as u32;
+    u.stream = p.number("stream") as u32;
+}
+
+/// The key (seed, stream) of a kind's params.
+pub(crate) fn key_of(p: &Params) -> (u64, u32) {
+    (p.number("seed") as u64, p.number("stream") as u32)
+}
+
+/// This step's grid shift (f64 twin of `grid_shift`): uniform in [-w/2, w/2) per axis for
+/// a width w = a (SRD) or 2a (MPCD-BC).
+pub fn grid_shift(width: f64, step: u64, seed: u64, stream: u32) -> [f64; 3] {
+    let w = super::random::block(0, step, seed, stream);
+    let mut s = [0.0; 3];
+    for a in 0..3 {
+        s[a] = ((w[a] >> 8) as f64 / 16_777_216.0 - 0.5) * width;
+    }
+    s
+}
+
+/// MPCD-BC needs supercells that tile a periodic box.
+pub(crate) fn check_rule(geo: &Geometry, biased: bool) -> Result<(), String> {
+    if !biased {
+        return Ok(());
+    }
+    if geo.walls {
+        return Err("rule `biased` supports periodic boxes only (walls none)".into());
+    }
+    if geo.cells.iter().any(|c| c % 2 != 0) {
+        return Err(format!(
+            "rule `biased` needs an even number of cells per axis (supercells of 2), got {:?}",
+            geo.cells
+        ));
+    }
+    Ok(())
+}
+
+pub(crate) fn rule_param() -> ParamSpec {
+    ParamSpec::choice(
+        "rule",
+        "srd",
+        &["srd", "biased"],
+        "srd: rotations within cells; biased: Ihle's biased collisions between cell pairs of 2 x 2 (x 2) supercells (MPCD-BC; grid shift in [-a, a); periodic boxes of even cell counts only)",
+    )
+}
+
+/// The fixed-point integer of x (clamped to the i32 range, as the GPU does).
+pub(crate) fn fx_round(x: f64) -> i64 {
+    x.clamp(-2_147_483_520.0, 2_147_483_520.0).round() as i64
+}
+
+/// A 64-bit sum as its (lo, hi) words.
+pub(crate) fn words_of(v: i64) -> [f64; 2] {
+    let u = v as u64;
+    [(u & 0xffff_ffff) as f64, (u >> 32) as f64]
+}
+
+/// The 64-bit sum held by (lo, hi) words.
+pub fn value_of(lo: f64, hi: f64) -> i64 {
+    ((hi as u64) << 32 | lo as u64) as i64
+}
+
+pub fn register(r: &mut Registry) {
+    r.add(init::MpcdInitKind);
+    r.add(stream::MpcdStreamKind);
+    r.add(collide::MpcdBinKind);
+    r.add(collide::MpcdCollideKind);
+    r.add(measure::MpcdMeasureKind);
+    r.add(measure::MpcdAverageKind);
+}
