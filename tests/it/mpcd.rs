@@ -1271,3 +1271,36 @@ fn bad_mpcd_input_gets_messages_naming_file_node_and_port() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn monte_carlo_thermostat_keeps_maxwell_boltzmann_and_cell_rescaling_flattens_it() {
+    if gpu().is_none() {
+        return;
+    }
+    // Digest V12/V13 (S2 Figs. 2.1, 2.2): Hecht's Monte-Carlo cell scaling keeps every
+    // velocity component Gaussian (excess kurtosis 0), while rescaling each cell's relative
+    // velocities to exactly d (n - 1) kT puts them on a sphere of D = d (n - 1) dimensions,
+    // whose components have excess kurtosis -6 / (D + 2) (measured -0.36 at M = 10, with the
+    // cell means mixed in; -0.03 for the Monte-Carlo scaling).
+    let excess = |thermostat: &str| {
+        let out = run_mpcd(
+            &[("box", "[10, 10, 10]"), ("thermostat", thermostat)],
+            200,
+            2,
+            &["velocities"],
+        );
+        let v = out["velocities"].data.to_f64();
+        let n = v.len() as f64;
+        let m2 = v.iter().map(|x| x * x).sum::<f64>() / n;
+        let m4 = v.iter().map(|x| x.powi(4)).sum::<f64>() / n;
+        m4 / (m2 * m2) - 3.0
+    };
+    let (mc, rescale) = (excess("\"monte_carlo\""), excess("\"rescale\""));
+    eprintln!("excess kurtosis: monte_carlo {mc:.4}, rescale {rescale:.4}");
+    // 3 x 10^4 components: standard error sqrt(24 / N) = 0.028; 0.1 is 3.5 sigma.
+    assert!(
+        mc.abs() < 0.1,
+        "Monte-Carlo thermostat: excess kurtosis {mc}"
+    );
+    assert!(rescale < -0.1, "cell rescaling: excess kurtosis {rescale}");
+}
