@@ -3,7 +3,7 @@
 
 use super::{
     CELL_WORDS, Geometry, check_rule, fixed_scales, fx_round, geometry_params, grid_shift,
-    key_into, key_of, rule_param, split_add, split_value, thermal_params,
+    key_into, key_of, rule_param, thermal_params, value_of, words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -144,7 +144,7 @@ impl Node for MpcdBin {
             [0.0; 3]
         };
         let nc = self.geo.ncells() as usize;
-        let mut sums = vec![[0u32; CELL_WORDS as usize]; nc];
+        let mut sums = vec![[0i64; 5]; nc];
         let (cells, rest) = outputs.split_at_mut(1);
         for p in 0..x.len() / d {
             let c = self.geo.cell_of(&x[p * d..(p + 1) * d], &s);
@@ -154,21 +154,16 @@ impl Node for MpcdBin {
             let mut e = 0.0;
             for a in 0..d {
                 let va = v[p * d + a];
-                split_add(
-                    &mut cs[1 + 2 * a..3 + 2 * a],
-                    fx_round(va * self.u.fix_v as f64),
-                );
+                cs[1 + a] += fx_round(va * self.u.fix_v as f64);
                 e += va * va;
             }
-            split_add(
-                &mut cs[7..9],
-                (e * self.u.fix_e as f64).min(4_294_967_040.0).round() as i64,
-            );
+            cs[4] += (e * self.u.fix_e as f64).min(4_294_967_040.0).round() as i64;
         }
         for (c, cs) in sums.iter().enumerate() {
             let o = &mut rest[0].data[c * CELL_WORDS as usize..(c + 1) * CELL_WORDS as usize];
-            for (w, &x) in o.iter_mut().zip(cs) {
-                *w = x as f64;
+            o[0] = cs[0] as f64;
+            for j in 0..4 {
+                o[1 + 2 * j..3 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
             }
         }
     }
@@ -436,8 +431,8 @@ impl MpcdCollide {
         let s = &sums[(c * CELL_WORDS) as usize..((c + 1) * CELL_WORDS) as usize];
         let mut u = [0.0; 3];
         for a in 0..self.geo.dims() {
-            u[a] = split_value(s[1 + 2 * a], s[2 + 2 * a]) as f64
-                / (s[0].max(1.0) * self.u.fix_v as f64);
+            u[a] =
+                value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (s[0].max(1.0) * self.u.fix_v as f64);
         }
         (u, s[0])
     }
@@ -561,10 +556,10 @@ impl Node for MpcdCollide {
             let count = s[0];
             let mut u = [0.0; 3];
             for a in 0..d {
-                u[a] = split_value(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (count * fix_v);
+                u[a] = value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (count * fix_v);
             }
             let uu: f64 = u.iter().map(|x| x * x).sum();
-            let rel = (split_value(s[7], s[8]) as f64 / fix_e - count * uu).max(0.0);
+            let rel = (value_of(s[7], s[8]) as f64 / fix_e - count * uu).max(0.0);
             let mut scale = 1.0;
             let layer = self.geo.layer(c);
             let cut = self.u.rule == 0

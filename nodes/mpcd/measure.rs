@@ -2,8 +2,8 @@
 //! block of exact 64-bit fixed-point sums) and `mpcd_average` (their means).
 
 use super::{
-    CELL_WORDS, Geometry, fixed_scales, fx_round, geometry_params, split_value, thermal_params,
-    value_of, words_of,
+    CELL_WORDS, Geometry, fixed_scales, fx_round, geometry_params, thermal_params, value_of,
+    words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -153,10 +153,10 @@ impl Node for MpcdMeasure {
             if s[0] > 0.0 {
                 let mut uu = 0.0;
                 for a in 0..d {
-                    let u = split_value(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (s[0] * fix_v);
+                    let u = value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (s[0] * fix_v);
                     uu += u * u;
                 }
-                rel += (split_value(s[7], s[8]) as f64 / fix_e - s[0] * uu).max(0.0);
+                rel += (value_of(s[7], s[8]) as f64 / fix_e - s[0] * uu).max(0.0);
                 dof += s[0] as i64 - 1;
             }
         }

@@ -301,19 +301,6 @@ pub fn value_of(lo: f64, hi: f64) -> i64 {
     ((hi as u64) << 32 | lo as u64) as i64
 }
 
-/// One particle's integer added to a split cell sum (shaders/mpcd/common.wgsl
-/// `cell_pair`): its low 16 bits to word 0, the rest (arithmetic shift) to word 1, each
-/// word wrapping at 2^32 as the GPU's u32 atomics do.
-pub(crate) fn split_add(words: &mut [u32], q: i64) {
-    words[0] = words[0].wrapping_add((q & 0xffff) as u32);
-    words[1] = words[1].wrapping_add((q >> 16) as u32);
-}
-
-/// The value of a split cell sum (words w0, w1): w1 * 2^16 + w0, w1 signed.
-pub fn split_value(w0: f64, w1: f64) -> i64 {
-    ((w1 as u32 as i32) as i64) * 65536 + w0 as i64
-}
-
 pub fn register(r: &mut Registry) {
     r.add(init::MpcdInitKind);
     r.add(stream::MpcdStreamKind);

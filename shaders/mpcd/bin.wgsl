@@ -1,7 +1,6 @@
 // MPCD binning, one thread per particle: the cell of each particle in the randomly shifted
-// grid of this step, and per cell the count, sum v and sum |v|^2 as exact fixed-point
-// sums split over two words (mpcd/common.wgsl `cell_pair`), by atomics. The sums start
-// at zero (a fill before).
+// grid of this step, and per cell the count, sum v and sum |v|^2 as exact 64-bit
+// fixed-point sums (mpcd/common.wgsl), by atomics. The sums start at zero (a fill before).
 #import common/index.wgsl
 #import mpcd/common.wgsl
 
@@ -12,13 +11,12 @@
 @group(0) @binding(4) var<storage, read_write> cell: array<u32>;
 @group(0) @binding(5) var<storage, read_write> sums: array<atomic<u32>>;
 
-// Adds q to a split cell sum (mpcd/common.wgsl `cell_pair`): its low 16 bits to the
-// first word, the rest (sign included) to the second. Neither add needs the other's
-// result, so both are plain atomic adds the GPU need not wait for (a carry between
-// the words, as in a 64-bit pair, would need the first add's old value).
-fn add_split(i: u32, q: u32, high: u32) {
-    atomicAdd(&sums[i], q & 0xffffu);
-    atomicAdd(&sums[i + 1u], high);
+fn add64(i: u32, q: vec2<u32>) {
+    let old = atomicAdd(&sums[i], q.x);
+    let hi = q.y + select(0u, 1u, old + q.x < old);
+    if (hi != 0u) {
+        atomicAdd(&sums[i + 1u], hi);
+    }
 }
 
 @compute @workgroup_size(256)
@@ -40,9 +38,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let base = c * CELL_WORDS;
     atomicAdd(&sums[base], 1u);
     for (var a = 0u; a < DIMS; a = a + 1u) {
-        let q = fx_round(v[a] * m.fix_v);
-        add_split(base + 1u + 2u * a, bitcast<u32>(q), bitcast<u32>(q >> 16u));
+        add64(base + 1u + 2u * a, fx_of_i32(fx_round(v[a] * m.fix_v)));
     }
     let e = u32(round(min(dot(v, v) * m.fix_e, 4294967040.0)));
-    add_split(base + 7u, e, e >> 16u);
+    add64(base + 7u, vec2<u32>(e, 0u));
 }

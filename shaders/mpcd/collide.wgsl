@@ -28,7 +28,7 @@ fn unit(w: u32) -> f32 {
 }
 
 fn pair(i: u32) -> vec2<u32> {
-    return cell_pair(sums[i], sums[i + 1u]);
+    return vec2<u32>(sums[i], sums[i + 1u]);
 }
 
 fn cell_mean(c: u32) -> vec4<f32> {

@@ -48,16 +48,7 @@ struct Mpcd {
 }
 
 // Words per cell of the cell sums: count, sum v (DIMS = up to 3 pairs), sum |v|^2 (a pair).
-// A cell pair is split, not a 64-bit (lo, hi): word 0 sums the low 16 bits of each
-// particle's integer, word 1 the rest (arithmetic shift, so signed): the value is
-// word1 * 2^16 + word0, exact for up to 65535 particles per cell, and each word takes a
-// plain atomic add (no carry between them).
 const CELL_WORDS: u32 = 9u;
-
-// The 64-bit (lo, hi) pair of a split cell sum (words w0, w1).
-fn cell_pair(w0: u32, w1: u32) -> vec2<u32> {
-    return fx_compose(bitcast<i32>(w1), w0);
-}
 
 // The 64-bit two's complement pair of an i32.
 fn fx_of_i32(q: i32) -> vec2<u32> {

@@ -52,10 +52,10 @@ fn cells(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
             let n = f32(count);
             var sv = vec3<f32>(0.0);
             for (var a = 0u; a < DIMS; a = a + 1u) {
-                sv[a] = fx_to_f32(cell_pair(sums[base + 1u + 2u * a], sums[base + 2u + 2u * a]));
+                sv[a] = fx_to_f32(vec2<u32>(sums[base + 1u + 2u * a], sums[base + 2u + 2u * a]));
             }
             let u = sv / (n * m.fix_v);
-            let se = fx_to_f32(cell_pair(sums[base + 7u], sums[base + 8u])) / m.fix_e;
+            let se = fx_to_f32(vec2<u32>(sums[base + 7u], sums[base + 8u])) / m.fix_e;
             rel = max(se - n * dot(u, u), 0.0);
             dof = count - 1u;
         }

@@ -10,7 +10,7 @@ use mesoflow::exec::{Profile, Program, RunOptions};
 use mesoflow::expr::ParamValue;
 use mesoflow::gpu::KernelCache;
 use mesoflow::graph::{self, Graph, LoadOptions};
-use mesoflow::nodes::mpcd::{CELL_WORDS, split_value, value_of};
+use mesoflow::nodes::mpcd::{CELL_WORDS, value_of};
 use mesoflow::nodes::random;
 use mesoflow::plan::{self, PlanOptions};
 use mesoflow::value::{HostArray, ValueType};
@@ -408,14 +408,14 @@ fn binning_uses_the_shifted_grid_and_exact_sums() {
             let w = &sums[c * CELL_WORDS as usize..(c + 1) * CELL_WORDS as usize];
             assert_eq!(w[0] as f64, m[c].0, "count of cell {c}");
             for a in 0..d {
-                let gpu_sum = split_value(w[1 + 2 * a] as f64, w[2 + 2 * a] as f64) as f64 / fix_v;
+                let gpu_sum = value_of(w[1 + 2 * a] as f64, w[2 + 2 * a] as f64) as f64 / fix_v;
                 assert!(
                     (gpu_sum - m[c].1[a]).abs() <= (0.5 * m[c].0 + 1.0) / fix_v,
                     "cell {c} axis {a}: {gpu_sum} vs {}",
                     m[c].1[a]
                 );
             }
-            let gpu_e = split_value(w[7] as f64, w[8] as f64) as f64 / fix_e;
+            let gpu_e = value_of(w[7] as f64, w[8] as f64) as f64 / fix_e;
             // f32 |v|^2 (relative 2^-23) then rounding to the unit.
             assert!(
                 (gpu_e - m[c].2).abs() <= m[c].0 / fix_e + 3e-7 * m[c].2,
