@@ -411,6 +411,46 @@ fn open_boundary_rpy_matches_the_closed_form() {
     assert!(worst < 1e-5 * scale, "rpy_open error {:e}", worst / scale);
 }
 
+/// rpy_open.json's Lanczos noise has the covariance of the closed-form RPY tensor, for an
+/// overlapping pair (the overlap form) along the line of centres and across it.
+#[test]
+fn open_boundary_noise_covariance_is_the_rpy_tensor() {
+    let Some(gpu) = gpu() else { return };
+    let a = 1.0;
+    let x = vec![[0.0, 0.0, 0.0], [1.5, 0.0, 0.0]];
+    let steps = 3000u64;
+    let (sq, pair) = crate::fcm::noise_statistics(
+        &gpu,
+        "rpy_open.json",
+        r#"{"radius": 1.0, "tolerance": 1e-3}"#,
+        &x,
+        steps,
+        23,
+    );
+    let (f, g) = rpy_fg(1.5, a);
+    let self_m = 1.0 / (6.0 * PI * a);
+    // Along x (the line of centres) the pair couples by f + g, across it by f.
+    let coupling = [f + g, f, f];
+    let s = steps as f64;
+    // A variance from s normal samples has relative standard deviation sqrt(2 / s)
+    // (2.6 % here); 5 of them is the bound.
+    let bound = 5.0 * (2.0 / s).sqrt();
+    for ax in 0..3 {
+        for (i, row) in sq.iter().enumerate() {
+            let ratio = row[ax] / s / self_m;
+            assert!(
+                (ratio - 1.0).abs() <= bound,
+                "particle {i} axis {ax}: {ratio}"
+            );
+        }
+        let ratio = pair[ax] / s / (2.0 * self_m + 2.0 * coupling[ax]);
+        assert!(
+            (ratio - 1.0).abs() <= bound,
+            "axis {ax}: variance of the sum / M = {ratio}"
+        );
+    }
+}
+
 #[test]
 fn bad_settings_get_clear_errors() {
     let load_err = |sets: &[(&str, &str)]| -> String {
