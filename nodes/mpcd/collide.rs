@@ -3,7 +3,7 @@
 
 use super::{
     CELL_WORDS, Geometry, check_rule, fixed_scales, fx_round, geometry_params, grid_shift,
-    key_into, key_of, rule_param, thermal_params, value_of, words_of,
+    key_into, key_of, rule_param, solute_sum_words, thermal_params, value_of, words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -225,7 +225,7 @@ impl NodeKind for MpcdCollideKind {
     }
 
     fn doc(&self) -> &'static str {
-        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC)"
+        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC). With mpcd_bin_solute's sums u_c is the mass-weighted mean of solvent and solute (plain SRD only), and the node run with the same params on the solute's velocities and cells rotates the solute by the same rotation of each cell"
     }
 
     fn inputs(&self) -> Vec<PortSpec> {
@@ -236,7 +236,11 @@ impl NodeKind for MpcdCollideKind {
                 "velocities (N x d)",
             ),
             PortSpec::new("cell", PortType::Indices, "cell per particle (mpcd_bin)"),
-            PortSpec::new("sums", PortType::Indices, "cell sums (mpcd_bin)"),
+            PortSpec::new(
+                "sums",
+                PortType::Indices,
+                "cell sums (mpcd_bin, or mpcd_bin_solute with a solute)",
+            ),
         ]
     }
 
@@ -524,13 +528,33 @@ impl Node for MpcdCollide {
             }
         }
         let want = self.geo.ncells() * CELL_WORDS;
+        let with_solute = solute_sum_words(self.geo.ncells());
         match inputs[2] {
             Some(ValueType::Indices { n: ns }) if ns == want => {}
+            Some(ValueType::Indices { n: ns }) if ns as u64 == with_solute => {
+                let refuse = if self.u.rule == 1 {
+                    Some("rule `biased`")
+                } else if self.u.thermostat != 0 {
+                    Some("a thermostat")
+                } else if self.geo.walls && self.u.shift == 1 && self.u.ghosts == 1 {
+                    Some("virtual particles (ghosts true with plates)")
+                } else {
+                    None
+                };
+                if let Some(what) = refuse {
+                    return Err(PortError::new(
+                        "sums",
+                        format!(
+                            "carries a solute (mpcd_bin_solute's {with_solute} words), which supports plain SRD only, not {what}"
+                        ),
+                    ));
+                }
+            }
             other => {
                 return Err(PortError::new(
                     "sums",
                     format!(
-                        "expected {want} words ({} cells x {CELL_WORDS}), got {other:?}; do mpcd_bin and mpcd_collide have the same box, cell and walls?",
+                        "expected {want} words ({} cells x {CELL_WORDS}; {with_solute} with a solute), got {other:?}; do mpcd_bin and mpcd_collide have the same box, cell and walls?",
                         self.geo.ncells()
                     ),
                 ));
@@ -550,16 +574,28 @@ impl Node for MpcdCollide {
         let sums = &inputs[2].as_ref().expect("required").data;
         let (fix_v, fix_e) = (self.u.fix_v as f64, self.u.fix_e as f64);
         let w_layers = self.geo.cells[d - 1];
+        // With a solute: M / m and the solute count per cell (mpcd_bin_solute's layout).
+        let nc = (self.geo.ncells() * CELL_WORDS) as usize;
+        let solute = (sums.len() as u64 == solute_sum_words(self.geo.ncells())).then(|| {
+            (
+                f32::from_bits(sums[sums.len() - 1] as u32) as f64,
+                &sums[nc..sums.len() - 1],
+            )
+        });
         for p in 0..cells.len() {
             let c = cells[p] as u32;
             let s = &sums[(c * CELL_WORDS) as usize..((c + 1) * CELL_WORDS) as usize];
             let count = s[0];
+            let mass_n = match solute {
+                Some((ratio, ns)) => count + ratio * ns[c as usize],
+                None => count,
+            };
             let mut u = [0.0; 3];
             for a in 0..d {
-                u[a] = value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (count * fix_v);
+                u[a] = value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (mass_n * fix_v);
             }
             let uu: f64 = u.iter().map(|x| x * x).sum();
-            let rel = (value_of(s[7], s[8]) as f64 / fix_e - count * uu).max(0.0);
+            let rel = (value_of(s[7], s[8]) as f64 / fix_e - mass_n * uu).max(0.0);
             let mut scale = 1.0;
             let layer = self.geo.layer(c);
             let cut = self.u.rule == 0
@@ -632,6 +668,9 @@ impl GpuKernels for MpcdCollide {
         };
         let mut u = self.u;
         u.n = n;
+        u.solute = u32::from(
+            io.inputs[2].expect("required").ty.words() == solute_sum_words(self.geo.ncells()),
+        );
         let kernel = cx.kernel(
             &KernelSpec::new(
                 "mpcd_collide",

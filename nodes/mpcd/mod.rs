@@ -11,6 +11,14 @@
 //! wall-cut cells) -> `mpcd_measure` (observables accumulated after the warm-up) ->
 //! `mpcd_average`; `mpcd_init` draws the initial state.
 //!
+//! A solute (`graphs/mpcd_solute.json`): a second species of mass M streams with its own
+//! `mpcd_stream`; `mpcd_bin_solute` adds it to `mpcd_bin`'s cell sums weighted by M / m
+//! (and appends the solute count per cell and M / m), so that `mpcd_collide` uses the
+//! mass-weighted means u = (m sum v + M sum V) / (m n + M n_s); a second `mpcd_collide`
+//! with the same params on the solute's velocities and cells applies the same rotation of
+//! each cell (V' = u + R (V - u)). Plain SRD only: with solute sums, `mpcd_collide`
+//! refuses thermostats, MPCD-BC and virtual particles.
+//!
 //! Conventions: the box is centred at the origin, particle arrays are (N, d) with d = 2 or 3
 //! (the length of `box`), the body force acts along x, and walls (`plates`) are
 //! perpendicular to the last axis (z in 3D, y in 2D) at +-L/2. Cells are linear
@@ -26,6 +34,7 @@
 mod collide;
 mod init;
 mod measure;
+mod solute;
 mod stream;
 
 use crate::node::{ParamKind, ParamSpec, Params, PortError, Registry};
@@ -35,6 +44,13 @@ pub use collide::srd_rotation;
 
 /// Words per cell of `mpcd_bin`'s sums: count, sum v (3 pairs), sum |v|^2 (a pair).
 pub const CELL_WORDS: u32 = 9;
+
+/// Words of cell sums with a solute (`mpcd_bin_solute`) for `ncells` cells: the 9 words per
+/// cell of `mpcd_bin` with the solute's contributions weighted by M / m, then the solute
+/// count per cell, then the f32 bits of M / m.
+pub fn solute_sum_words(ncells: u32) -> u64 {
+    ncells as u64 * (CELL_WORDS as u64 + 1) + 1
+}
 
 /// The parameter block of every MPCD kernel (`struct Mpcd` of shaders/mpcd/common.wgsl).
 #[repr(C)]
@@ -71,7 +87,11 @@ pub(crate) struct Uniform {
     pub accept_a: f32,
     pub half_cos: f32,
     pub half_sin: f32,
-    pub pad: [u32; 3],
+    /// 1: the cell sums carry a solute (`mpcd_bin_solute`'s layout).
+    pub solute: u32,
+    /// Solute mass over solvent mass M / m.
+    pub ratio: f32,
+    pub pad: u32,
 }
 
 /// Box, cells and walls, shared by the MPCD kinds.
@@ -306,6 +326,7 @@ pub fn register(r: &mut Registry) {
     r.add(stream::MpcdStreamKind);
     r.add(collide::MpcdBinKind);
     r.add(collide::MpcdCollideKind);
+    r.add(solute::MpcdBinSoluteKind);
     r.add(measure::MpcdMeasureKind);
     r.add(measure::MpcdAverageKind);
 }

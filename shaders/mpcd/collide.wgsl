@@ -8,7 +8,9 @@
 // particles are filled up to it with virtual particles: u <- (n u + (M - n) q) / M with
 // q normal of variance kT / (m (M - n)) per component (the mean of M - n thermal
 // particles); those cells skip the thermostat. MPCD-BC (rule 1): the thermostat, then
-// `biased` below.
+// `biased` below. With a solute (m.solute = 1, sums from mpcd_bin_solute; SRD without
+// thermostat or virtual particles) u is the mass-weighted mean, and the same kernel run on
+// the solute's velocities and cells applies the same rotation of each cell to it.
 #import common/index.wgsl
 #import mpcd/common.wgsl
 
@@ -115,14 +117,20 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let base = c * CELL_WORDS;
     let count = sums[base];
     let n = f32(count);
+    // The cell's mass in units of m: n, plus (M / m) n_s with a solute (mpcd_bin_solute's
+    // sums; the solute's velocity sums are already weighted by M / m).
+    var mass_n = n;
+    if (m.solute == 1u) {
+        mass_n = n + bitcast<f32>(sums[m.ncells * (CELL_WORDS + 1u)]) * f32(sums[m.ncells * CELL_WORDS + c]);
+    }
     var sv = vec3<f32>(0.0);
     var v = vec3<f32>(0.0);
     for (var a = 0u; a < DIMS; a = a + 1u) {
         sv[a] = fx_to_f32(pair(base + 1u + 2u * a));
         v[a] = vel[p * DIMS + a];
     }
-    var u = sv / (n * m.fix_v);
-    let rel = max(fx_to_f32(pair(base + 7u)) / m.fix_e - n * dot(u, u), 0.0);
+    var u = sv / (mass_n * m.fix_v);
+    let rel = max(fx_to_f32(pair(base + 7u)) / m.fix_e - mass_n * dot(u, u), 0.0);
     var scale = 1.0;
     let layer = cell_layer(m, c);
     let cut = m.rule == 0u && m.walls == 1u && m.shift == 1u && (layer == 0u || layer == m.cells[DIMS - 1u] - 1u);

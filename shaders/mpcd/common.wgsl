@@ -42,8 +42,8 @@ struct Mpcd {
     accept_a: f32,         // MPCD-BC acceptance parameter A
     half_cos: f32,         // cos and sin of half the SRD angle (3D rotations)
     half_sin: f32,
-    pad0: u32,
-    pad1: u32,
+    solute: u32,           // 1: the cell sums carry a solute (mpcd_bin_solute's layout)
+    ratio: f32,            // solute mass over solvent mass M / m
     pad2: u32,
 }
 

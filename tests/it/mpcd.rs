@@ -1304,3 +1304,390 @@ fn monte_carlo_thermostat_keeps_maxwell_boltzmann_and_cell_rescaling_flattens_it
     );
     assert!(rescale < -0.1, "cell rescaling: excess kurtosis {rescale}");
 }
+
+// ---------------------------------------------------------------- solute coupling
+
+/// mpcd_bin, mpcd_bin_solute and mpcd_collide on each species (the same params).
+fn solute_graph(
+    dir: &std::path::Path,
+    (n, ns, d): (usize, usize, usize),
+    geometry: &str,
+    solute_mass: f64,
+    collide: &str,
+) -> String {
+    let p = |rows: usize| format!(r#"{{"type": "particles", "rows": {rows}, "cols": {d}}}"#);
+    let json = format!(
+        r#"{{"mesoflow": 1,
+  "inputs": {{"x": {}, "v": {}, "xs": {}, "vs": {}}},
+  "nodes": [
+    {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}, "seed": 7, "stream": 2}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
+    {{"id": "bin_solute", "kind": "mpcd_bin_solute", "params": {{{geometry}, "solute_mass": {solute_mass}, "seed": 7, "stream": 2}}, "inputs": {{"sums": "bin.sums", "positions": "inputs.xs", "velocities": "inputs.vs"}}}},
+    {{"id": "collide", "kind": "mpcd_collide", "params": {{{geometry}, {collide}, "seed": 7, "stream": 3}}, "inputs": {{"velocities": "inputs.v", "cell": "bin.cell", "sums": "bin_solute.sums"}}}},
+    {{"id": "collide_solute", "kind": "mpcd_collide", "params": {{{geometry}, {collide}, "seed": 7, "stream": 3}}, "inputs": {{"velocities": "inputs.vs", "cell": "bin_solute.cell", "sums": "bin_solute.sums"}}}}
+  ],
+  "outputs": {{"cell": "bin.cell", "sums": "bin.sums", "scell": "bin_solute.cell", "ssums": "bin_solute.sums", "v": "collide.velocities", "vs": "collide_solute.velocities"}}}}"#,
+        p(n),
+        p(n),
+        p(ns),
+        p(ns)
+    );
+    write_graph(dir, "solute.json", &json)
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// A species: cell per particle, velocities, mass.
+type Species<'a> = (&'a [u32], &'a [Vec<f64>], f64);
+
+/// Per cell: mass (units of m), momentum and twice the kinetic energy of both species.
+fn mass_moments(species: &[Species<'_>], ncells: usize) -> Vec<(f64, [f64; 3], f64)> {
+    let mut m = vec![(0.0, [0.0; 3], 0.0); ncells];
+    for &(cells, v, mass) in species {
+        for (p, &c) in cells.iter().enumerate() {
+            let e = &mut m[c as usize];
+            e.0 += mass;
+            for (a, &va) in v[p].iter().enumerate() {
+                e.1[a] += mass * va;
+                e.2 += mass * va * va;
+            }
+        }
+    }
+    m
+}
+
+#[test]
+fn solute_collision_conserves_mass_weighted_cell_momentum_and_energy_and_matches_the_f64_reference()
+{
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("mpcd-solute");
+    let mut rng = Rng::new(11);
+    // (box, walls, M / m): a power of two (exact f32 weights) and not.
+    let cases: [(Vec<f64>, &str, f64); 3] = [
+        (vec![6.0, 5.0, 4.0], "none", 4.0),
+        (vec![8.0, 6.0], "none", 2.5),
+        (vec![6.0, 5.0, 4.0], "plates", 4.0),
+    ];
+    let mut compared = 0;
+    for (l, walls, ratio) in cases {
+        let d = l.len();
+        let (n, ns) = (1500, 400);
+        let (x, v) = random_particles(&mut rng, n, &l);
+        let (xs, mut vs) = random_particles(&mut rng, ns, &l);
+        // Solutes slower, drifting along x against a solvent at rest on average: the
+        // collision must pass momentum from the solute to the solvent.
+        for row in vs.iter_mut() {
+            for (a, va) in row.iter_mut().enumerate() {
+                *va = 0.5 * *va + if a == 0 { 1.0 } else { 0.0 };
+            }
+        }
+        let geometry =
+            format!(r#""box": {l:?}, "cell": 1, "walls": "{walls}", "mass": 1, "temperature": 1"#);
+        let collide = r#""angle": 130, "ghosts": false"#;
+        let path = solute_graph(&dir, (n, ns, d), &geometry, ratio, collide);
+        let g = crate::util::load(std::path::Path::new(&path));
+        let inputs: BTreeMap<String, HostArray> = [
+            ("x".to_string(), particles(&x)),
+            ("v".to_string(), particles(&v)),
+            ("xs".to_string(), particles(&xs)),
+            ("vs".to_string(), particles(&vs)),
+        ]
+        .into();
+        let out = run_loaded(
+            &g,
+            &inputs,
+            &["cell", "sums", "scell", "ssums", "v", "vs"],
+            1,
+        );
+        let cells = u32s(&out["cell"]);
+        let scells = u32s(&out["scell"]);
+        let ssums = u32s(&out["ssums"]);
+        let ncells = out["sums"].ty.words() as usize / CELL_WORDS as usize;
+        let cw = CELL_WORDS as usize;
+        assert_eq!(ssums.len(), ncells * (cw + 1) + 1);
+        assert_eq!(f32::from_bits(ssums[ssums.len() - 1]), ratio as f32);
+
+        // Binning against the f64 reference: the same cells (the solvent's grid shift),
+        // exact counts, and sums within the rounding of each solute term to the unit.
+        let sref = reference(
+            "mpcd_bin_solute",
+            &format!(r#"{{{geometry}, "solute_mass": {ratio}, "seed": 7, "stream": 2}}"#),
+            &[
+                Some(&out["sums"]),
+                Some(&particles(&xs)),
+                Some(&particles(&vs)),
+            ],
+        );
+        let ref_cells: Vec<u32> = sref[0].data.iter().map(|&c| c as u32).collect();
+        let same = ref_cells
+            .iter()
+            .zip(&scells)
+            .filter(|(a, b)| a == b)
+            .count();
+        assert!(same >= ns - 2, "{same} of {ns} solute cells agree");
+        if same == ns {
+            compared += 1;
+            let rs = &sref[1].data;
+            for c in 0..ncells {
+                let ns_c = ssums[ncells * cw + c] as f64;
+                assert_eq!(rs[ncells * cw + c], ns_c, "solute count of cell {c}");
+                assert_eq!(rs[c * cw], ssums[c * cw] as f64, "count of cell {c}");
+                for j in 0..4 {
+                    let g = value_of(
+                        ssums[c * cw + 1 + 2 * j] as f64,
+                        ssums[c * cw + 2 + 2 * j] as f64,
+                    );
+                    let r = value_of(rs[c * cw + 1 + 2 * j], rs[c * cw + 2 + 2 * j]);
+                    // Velocity words: f32 products emulated exactly, ties aside (1 unit);
+                    // energy: f32 |v|^2 (2^-22 relative of <= 2^20 units) rounded: 2 units.
+                    let tol = if j < 3 {
+                        ns_c
+                    } else {
+                        2.0 * ns_c + 1e-6 * r.abs() as f64
+                    };
+                    assert!(
+                        ((g - r) as f64).abs() <= tol,
+                        "cell {c} word {j}: {g} vs {r}"
+                    );
+                }
+            }
+        }
+        // The solvent's cell means are mass-weighted: per cell, m sum v + M sum V and
+        // m sum |v|^2 + M sum |V|^2 are conserved.
+        let vin = rows(&particles(&v), d);
+        let vsin = rows(&particles(&vs), d);
+        let vout = rows(&out["v"], d);
+        let vsout = rows(&out["vs"], d);
+        let before = mass_moments(&[(&cells, &vin, 1.0), (&scells, &vsin, ratio)], ncells);
+        let after = mass_moments(&[(&cells, &vout, 1.0), (&scells, &vsout, ratio)], ncells);
+        let mut with_solute = 0;
+        for c in 0..ncells {
+            let (mb, pb, eb) = before[c];
+            let (_, pa, ea) = after[c];
+            if mb == 0.0 {
+                continue;
+            }
+            with_solute += usize::from(scells.contains(&(c as u32)));
+            // f32 rounding of each new velocity (|v| < 5: 3e-7 per component, times M for
+            // a solute) and the f32 mean from the fixed-point sums (2^-24 relative): 1e-6
+            // per unit of mass bounds it; a wrong weight moves cell momentum by O(1).
+            for a in 0..d {
+                assert!(
+                    (pa[a] - pb[a]).abs() < 1e-6 * mb,
+                    "M/m {ratio} {walls}: cell {c} momentum {pb:?} -> {pa:?}"
+                );
+            }
+            assert!(
+                (ea - eb).abs() < 2e-6 * eb.max(1.0),
+                "M/m {ratio} {walls}: cell {c} energy {eb} -> {ea}"
+            );
+        }
+        assert!(with_solute > ncells / 2);
+        // Momentum moved from the solute to the solvent: the solute's x momentum M ns
+        // drops by a large fraction (the solvent outweighs it in most cells).
+        let px = |vv: &[Vec<f64>]| vv.iter().map(|r| r[0]).sum::<f64>();
+        assert!(
+            px(&vsout) < 0.6 * px(&vsin),
+            "solute x momentum {} -> {}",
+            px(&vsin),
+            px(&vsout)
+        );
+        // Both species against the f64 reference on the GPU's cells and sums.
+        let params = format!("{{{geometry}, {collide}, \"seed\": 7, \"stream\": 3}}");
+        for (vel, cell, name) in [
+            (particles(&v), &out["cell"], "v"),
+            (particles(&vs), &out["scell"], "vs"),
+        ] {
+            let r = reference(
+                "mpcd_collide",
+                &params,
+                &[Some(&vel), Some(cell), Some(&out["ssums"])],
+            );
+            let g = out[name].data.to_f64();
+            let worst = g
+                .iter()
+                .zip(&r[0].data)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            // f32 rotation of |v - u| < 6 with f32 trigonometry of the axis: ~1e-6.
+            assert!(
+                worst < 1e-5,
+                "{name} M/m {ratio}: largest |gpu - f64| {worst}"
+            );
+        }
+    }
+    // Cells on a cell edge to f32 precision may differ; most cases compare every word.
+    assert!(
+        compared >= 2,
+        "only {compared} cases had identical solute cells"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn solute_refuses_thermostats_biased_collisions_and_mismatched_sums() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("mpcd-solute-bad");
+    let gpu = gpu().expect("GPU");
+    let geometry =
+        r#""box": [4.0, 4.0, 4.0], "cell": 1, "walls": "none", "mass": 1, "temperature": 1"#;
+    let plan_error = |geometry: &str, solute_geometry: &str, collide: &str| {
+        let json = format!(
+            r#"{{"mesoflow": 1,
+  "inputs": {{"x": {{"type": "particles", "rows": 10, "cols": 3}}, "xs": {{"type": "particles", "rows": 4, "cols": 3}}}},
+  "nodes": [
+    {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.x"}}}},
+    {{"id": "bin_solute", "kind": "mpcd_bin_solute", "params": {{{solute_geometry}, "solute_mass": 3}}, "inputs": {{"sums": "bin.sums", "positions": "inputs.xs", "velocities": "inputs.xs"}}}},
+    {{"id": "collide", "kind": "mpcd_collide", "params": {{{solute_geometry}, {collide}}}, "inputs": {{"velocities": "inputs.xs", "cell": "bin_solute.cell", "sums": "bin_solute.sums"}}}}
+  ],
+  "outputs": {{"vs": "collide.velocities"}}}}"#
+        );
+        let g = crate::util::load(&write_graph(&dir, "bad.json", &json));
+        let opts = PlanOptions {
+            outputs: Some(vec!["vs".into()]),
+            inputs: [
+                ("x".to_string(), ValueType::Particles { n: 10, k: 3 }),
+                ("xs".to_string(), ValueType::Particles { n: 4, k: 3 }),
+            ]
+            .into(),
+            fuse: true,
+        };
+        plan::plan(&g, &opts, &gpu.caps)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default()
+    };
+    for (collide, what) in [
+        (r#""thermostat": "rescale""#, "thermostat"),
+        (r#""thermostat": "monte_carlo""#, "thermostat"),
+    ] {
+        let e = plan_error(geometry, geometry, collide);
+        assert!(
+            e.contains("collide") && e.contains("sums") && e.contains(what),
+            "{e}"
+        );
+    }
+    let plates =
+        r#""box": [4.0, 4.0, 4.0], "cell": 1, "walls": "plates", "mass": 1, "temperature": 1"#;
+    let e = plan_error(plates, plates, r#""ghosts": true"#);
+    assert!(e.contains("sums") && e.contains("virtual particles"), "{e}");
+    let biased = format!("{geometry}, \"rule\": \"biased\"");
+    let e = plan_error(geometry, geometry, r#""rule": "biased""#);
+    assert!(e.contains("sums") && e.contains("biased"), "{biased}: {e}");
+    // Solvent sums of another grid.
+    let other =
+        r#""box": [4.0, 4.0, 6.0], "cell": 1, "walls": "none", "mass": 1, "temperature": 1"#;
+    let e = plan_error(geometry, other, r#""angle": 130"#);
+    assert!(
+        e.contains("bin_solute")
+            && e.contains("sums")
+            && e.contains("864 words")
+            && e.contains("576"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn solute_and_solvent_share_the_temperature_in_equilibrium() {
+    if gpu().is_none() {
+        return;
+    }
+    // 5120 solvent particles with uniform velocities of variance 1 per component (not
+    // Maxwellian) and 1000 solutes of mass 4 at rest: energy conservation and equipartition
+    // give both species kT_eq = m sum |v|^2 / (3 (N + N_s)) after equilibration. The
+    // solute's kinetic temperature M <|V|^2> / 3 over 3000 degrees of freedom has a
+    // relative standard deviation sqrt(2/3000) = 2.6% (the solvent's 1.1%); 10% is 3.5
+    // sigma of the difference. A solute weighted as mass m instead of M would come out at
+    // 4 kT_eq; a solute left out of the cell means breaks energy conservation.
+    let l = 8.0;
+    let (n, ns, ratio) = (5120, 1000, 4.0);
+    let mut rng = Rng::new(21);
+    let a = 3f64.sqrt();
+    let x: Vec<Vec<f64>> = (0..n)
+        .map(|_| (0..3).map(|_| rng.uniform(-l / 2.0, l / 2.0)).collect())
+        .collect();
+    let mut v: Vec<Vec<f64>> = (0..n)
+        .map(|_| (0..3).map(|_| rng.uniform(-a, a)).collect())
+        .collect();
+    // Zero total momentum (so kT_eq needs no centre-of-mass term).
+    for k in 0..3 {
+        let mean = v.iter().map(|r| r[k]).sum::<f64>() / n as f64;
+        v.iter_mut().for_each(|r| r[k] -= mean);
+    }
+    let xs: Vec<Vec<f64>> = (0..ns)
+        .map(|_| (0..3).map(|_| rng.uniform(-l / 2.0, l / 2.0)).collect())
+        .collect();
+    let vs = vec![vec![0.0; 3]; ns];
+    let vin = particles(&v);
+    let e0: f64 = vin.data.to_f64().iter().map(|x| x * x).sum();
+    let kt_eq = e0 / (3.0 * (n + ns) as f64);
+    let dir = tmpdir("mpcd-solute-eq");
+    let steps = 150;
+    let g = graph::load(
+        &root().join("graphs/mpcd_solute.json"),
+        registry(),
+        &LoadOptions {
+            overrides: [
+                ("box".to_string(), ParamValue::Numbers(vec![l, l, l])),
+                ("solute_mass".to_string(), ParamValue::Number(ratio)),
+            ]
+            .into(),
+            steps,
+            seed: 5,
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let inputs: BTreeMap<String, HostArray> = [
+        ("positions".to_string(), particles(&x)),
+        ("velocities".to_string(), vin),
+        ("solute_positions".to_string(), particles(&xs)),
+        ("solute_velocities".to_string(), particles(&vs)),
+    ]
+    .into();
+    let out = run_loaded(
+        &g,
+        &inputs,
+        &["velocities", "solute_velocities", "solute_positions"],
+        steps,
+    );
+    let e_solvent: f64 = out["velocities"].data.to_f64().iter().map(|x| x * x).sum();
+    let e_solute: f64 = ratio
+        * out["solute_velocities"]
+            .data
+            .to_f64()
+            .iter()
+            .map(|x| x * x)
+            .sum::<f64>();
+    let t_solvent = e_solvent / (3.0 * n as f64);
+    let t_solute = e_solute / (3.0 * ns as f64);
+    eprintln!(
+        "kT_eq {kt_eq}: solvent {t_solvent}, solute {t_solute}, energy {e0} -> {}",
+        e_solvent + e_solute
+    );
+    // Energy: f32 rounding per collision, a random walk of ~1e-7 per particle and step.
+    assert!(
+        ((e_solvent + e_solute) / e0 - 1.0).abs() < 1e-4,
+        "energy {e0} -> {}",
+        e_solvent + e_solute
+    );
+    assert!(
+        (t_solute / t_solvent - 1.0).abs() < 0.1,
+        "solute kT {t_solute}, solvent kT {t_solvent} (kT_eq {kt_eq})"
+    );
+    assert!(
+        (t_solvent / kt_eq - 1.0).abs() < 0.05,
+        "solvent kT {t_solvent} vs {kt_eq}"
+    );
+    assert!(
+        (t_solute / kt_eq - 1.0).abs() < 0.1,
+        "solute kT {t_solute} vs {kt_eq}"
+    );
+    // The solutes moved and stayed in the box.
+    let pos = out["solute_positions"].data.to_f64();
+    assert!(pos.iter().all(|&p| p.abs() <= l / 2.0));
+    let _ = std::fs::remove_dir_all(&dir);
+}

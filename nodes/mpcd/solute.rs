@@ -1,0 +1,268 @@
+//! `mpcd_bin_solute`: a second species of mass M (colloids, polymer beads) joins the cell
+//! sums of `mpcd_bin`, so that `mpcd_collide` uses mass-weighted cell means
+//! u = (m sum v + M sum V) / (m n + M n_s) and, applied to the solute's velocities and
+//! cells with the same params, rotates both species by the same rotation of each cell:
+//! v' = u + R (v - u), V' = u + R (V - u), conserving each cell's momentum and energy.
+
+use super::{
+    CELL_WORDS, Geometry, fixed_scales, geometry_params, grid_shift, key_into, key_of,
+    solute_sum_words, thermal_params, value_of, words_of,
+};
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::node::{
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+};
+use crate::nodes::random;
+use crate::value::{PortType, RefArray, ValueType};
+
+pub struct MpcdBinSoluteKind;
+
+impl NodeKind for MpcdBinSoluteKind {
+    fn name(&self) -> &'static str {
+        "mpcd_bin_solute"
+    }
+
+    fn doc(&self) -> &'static str {
+        "MPCD solute coupling: the cells of a second species of mass M in this step's shifted grid (the solvent's: same seed, stream and box) and the solvent's cell sums with the solute added, weighted by M / m (the mass-weighted cell means of mpcd_collide); SRD only, no thermostat or virtual particles"
+    }
+
+    fn inputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new(
+                "sums",
+                PortType::Indices,
+                "the solvent's cell sums (mpcd_bin)",
+            ),
+            PortSpec::new(
+                "positions",
+                PortType::Particles(None),
+                "solute positions (N_s x d)",
+            ),
+            PortSpec::new(
+                "velocities",
+                PortType::Particles(None),
+                "solute velocities (N_s x d)",
+            ),
+        ]
+    }
+
+    fn outputs(&self) -> Vec<PortSpec> {
+        vec![
+            PortSpec::new(
+                "cell",
+                PortType::Indices,
+                "linear cell index per solute particle",
+            ),
+            PortSpec::new(
+                "sums",
+                PortType::Indices,
+                "10 ncells + 1 words: mpcd_bin's 9 words per cell with the solute's M/m-weighted velocity and |v|^2 sums added, then the solute count per cell, then the f32 bits of M/m",
+            ),
+        ]
+    }
+
+    fn params(&self) -> Vec<ParamSpec> {
+        let mut p = geometry_params();
+        p.extend(thermal_params());
+        p.push(ParamSpec::number(
+            "solute_mass",
+            Some(1.0),
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            "solute particle mass M",
+        ));
+        p.push(ParamSpec::flag(
+            "shift",
+            true,
+            "random grid shift (as mpcd_bin: give both the same seed and stream)",
+        ));
+        p.extend([random::seed_param(), random::stream_param()]);
+        p
+    }
+
+    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
+        let geo = Geometry::from_params(p)?;
+        let ratio = p.number("solute_mass") / p.number("mass");
+        let r32 = ratio as f32;
+        if !(r32.is_finite() && r32 > 0.0) {
+            return Err(format!(
+                "solute_mass / mass = {ratio} is outside the f32 range"
+            ));
+        }
+        let mut u = geo.uniform();
+        u.fix_v = fix_v;
+        u.fix_e = fix_e;
+        u.shift = u32::from(p.flag("shift"));
+        u.solute = 1;
+        u.ratio = r32;
+        key_into(&mut u, p);
+        let (seed, stream) = key_of(p);
+        Ok(Box::new(MpcdBinSolute {
+            geo,
+            u,
+            seed,
+            stream,
+        }))
+    }
+}
+
+struct MpcdBinSolute {
+    geo: Geometry,
+    u: super::Uniform,
+    seed: u64,
+    stream: u32,
+}
+
+/// round(x) with ties to even (WGSL's `round`).
+fn round_even(x: f64) -> i64 {
+    x.round_ties_even() as i64
+}
+
+impl Node for MpcdBinSolute {
+    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+        let want = self.geo.ncells() * CELL_WORDS;
+        match inputs[0] {
+            Some(ValueType::Indices { n }) if n == want => {}
+            other => {
+                return Err(PortError::new(
+                    "sums",
+                    format!(
+                        "expected mpcd_bin's {want} words ({} cells x {CELL_WORDS}), got {}; do mpcd_bin and mpcd_bin_solute have the same box, cell and walls?",
+                        self.geo.ncells(),
+                        other.map_or("nothing".to_string(), |t| t.to_string())
+                    ),
+                ));
+            }
+        }
+        let n = self.geo.particles("positions", inputs[1])?;
+        let nv = self.geo.particles("velocities", inputs[2])?;
+        if n != nv {
+            return Err(PortError::new(
+                "velocities",
+                format!("has {nv} rows but positions has {n}"),
+            ));
+        }
+        let words = solute_sum_words(self.geo.ncells());
+        if words > u32::MAX as u64 {
+            return Err(PortError::new(
+                "sums",
+                format!("{words} words are too many"),
+            ));
+        }
+        Ok(Signature::outputs(vec![
+            ValueType::Indices { n },
+            ValueType::Indices { n: words as u32 },
+        ]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
+        vec![format!("solute mass M = {} m", self.u.ratio)]
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
+        let d = self.geo.dims();
+        let solvent = &inputs[0].as_ref().expect("required").data;
+        let x = &inputs[1].as_ref().expect("required").data;
+        let v = &inputs[2].as_ref().expect("required").data;
+        let s = if self.u.shift == 1 {
+            grid_shift(self.geo.cell, cx.step, self.seed, self.stream)
+        } else {
+            [0.0; 3]
+        };
+        let nc = self.geo.ncells() as usize;
+        let cw = CELL_WORDS as usize;
+        let mut sums: Vec<[i64; 5]> = (0..nc)
+            .map(|c| {
+                let w = &solvent[c * cw..(c + 1) * cw];
+                let mut e = [w[0] as i64, 0, 0, 0, 0];
+                for j in 0..4 {
+                    e[1 + j] = value_of(w[1 + 2 * j], w[2 + 2 * j]);
+                }
+                e
+            })
+            .collect();
+        let mut counts = vec![0u32; nc];
+        let ratio = self.u.ratio as f64;
+        let (cells, rest) = outputs.split_at_mut(1);
+        for p in 0..x.len() / d {
+            let c = self.geo.cell_of(&x[p * d..(p + 1) * d], &s);
+            cells[0].data[p] = c as f64;
+            counts[c as usize] += 1;
+            let cs = &mut sums[c as usize];
+            let mut e = 0.0;
+            for a in 0..d {
+                let va = v[p * d + a];
+                // The kernel's f32 products (v fix_v) ratio, exact here as in the kernel.
+                let q = (va as f32 * self.u.fix_v) * self.u.ratio;
+                cs[1 + a] += round_even(q as f64);
+                e += va * va;
+            }
+            cs[4] += round_even(e * self.u.fix_e as f64 * ratio);
+        }
+        let o = &mut rest[0].data;
+        for (c, cs) in sums.iter().enumerate() {
+            let w = &mut o[c * cw..(c + 1) * cw];
+            w[0] = cs[0] as f64;
+            for j in 0..4 {
+                w[1 + 2 * j..3 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
+            }
+            o[nc * cw + c] = counts[c] as f64;
+        }
+        o[nc * (cw + 1)] = self.u.ratio.to_bits() as f64;
+    }
+}
+
+impl GpuKernels for MpcdBinSolute {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let solvent = io.inputs[0].expect("required");
+        let pos = io.inputs[1].expect("required");
+        let vel = io.inputs[2].expect("required");
+        let ValueType::Particles { n, .. } = pos.ty else {
+            unreachable!()
+        };
+        let mut u = self.u;
+        u.n = n;
+        let bindings = [
+            Binding::Uniform,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+            Binding::StorageReadWrite,
+        ];
+        let source = cx.shader("mpcd/bin_solute.wgsl")?;
+        let dims = self.geo.dims() as f64;
+        let copy = cx.kernel(
+            &KernelSpec::new("mpcd_bin_solute_copy", source.clone(), &bindings)
+                .entry("copy")
+                .constant("DIMS", dims),
+        )?;
+        let add = cx.kernel(
+            &KernelSpec::new("mpcd_bin_solute", source, &bindings).constant("DIMS", dims),
+        )?;
+        let params = cx.uniform("mpcd bin solute", bytemuck::bytes_of(&u));
+        let buffers = [
+            &params,
+            cx.clock,
+            pos.buffer,
+            vel.buffer,
+            solvent.buffer,
+            io.outputs[0].buffer,
+            io.outputs[1].buffer,
+        ];
+        Ok(vec![
+            cx.dispatch(&copy, &buffers, cx.grid_1d(io.outputs[1].ty.words(), WG_1D)),
+            cx.dispatch(&add, &buffers, cx.grid_1d(n as u64, WG_1D)),
+        ])
+    }
+}

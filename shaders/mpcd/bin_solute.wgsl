@@ -1,0 +1,74 @@
+// MPCD binning of a solute (particles of mass M = ratio * m) into the cell sums of the
+// solvent (mpcd_bin), one thread per solute particle. `copy` first writes the solvent's
+// 9 words per cell, zero solute counts and the f32 bits of M / m; `main` then adds each
+// solute particle: count + 1 in the solute block (word 9 ncells + c), round(ratio v fix_v)
+// to the cell's velocity sums and round(ratio |v|^2 fix_e) to its energy sum (exact 64-bit
+// integer sums, order independent), so the cell means become mass-weighted:
+// u = (m sum v + M sum V) / (m n + M n_s). The grid shift is the solvent's (the same seed,
+// stream and step), SRD width a.
+#import common/index.wgsl
+#import mpcd/common.wgsl
+
+@group(0) @binding(0) var<uniform> m: Mpcd;
+@group(0) @binding(1) var<storage, read> clock: array<u32>;
+@group(0) @binding(2) var<storage, read> pos: array<f32>;
+@group(0) @binding(3) var<storage, read> vel: array<f32>;
+@group(0) @binding(4) var<storage, read> solvent: array<u32>;
+@group(0) @binding(5) var<storage, read_write> cell: array<u32>;
+@group(0) @binding(6) var<storage, read_write> sums: array<atomic<u32>>;
+
+fn add64(i: u32, q: vec2<u32>) {
+    let old = atomicAdd(&sums[i], q.x);
+    let hi = q.y + select(0u, 1u, old + q.x < old);
+    if (hi != 0u) {
+        atomicAdd(&sums[i + 1u], hi);
+    }
+}
+
+// The 64-bit pair of round(x) for |x| < 2^63 (negatives as two's complement).
+fn fx_of_signed(x: f32) -> vec2<u32> {
+    let p = fx_of_f32(abs(x));
+    if (x >= 0.0) {
+        return p;
+    }
+    let lo = ~p.x + 1u;
+    return vec2<u32>(lo, ~p.y + select(0u, 1u, lo == 0u));
+}
+
+@compute @workgroup_size(256)
+fn copy(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wid, nwg, lid, 256u);
+    let words = m.ncells * CELL_WORDS;
+    if (i < words) {
+        atomicStore(&sums[i], solvent[i]);
+    } else if (i < words + m.ncells) {
+        atomicStore(&sums[i], 0u);
+    } else if (i == words + m.ncells) {
+        atomicStore(&sums[i], bitcast<u32>(m.ratio));
+    }
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let p = flat_index(wid, nwg, lid, 256u);
+    if (p >= m.n) {
+        return;
+    }
+    let s = grid_shift(m, clock[0]);
+    var x = vec3<f32>(0.0);
+    var v = vec3<f32>(0.0);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        x[a] = pos[p * DIMS + a];
+        v[a] = vel[p * DIMS + a];
+    }
+    let c = cell_of(m, x, s);
+    cell[p] = c;
+    let base = c * CELL_WORDS;
+    atomicAdd(&sums[m.ncells * CELL_WORDS + c], 1u);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        add64(base + 1u + 2u * a, fx_of_signed((v[a] * m.fix_v) * m.ratio));
+    }
+    add64(base + 7u, fx_of_f32((dot(v, v) * m.fix_e) * m.ratio));
+}
