@@ -60,10 +60,10 @@ impl PairKernel {
                 if split <= 0.0 {
                     return Err("kernel rpy_near needs `split` (the Ewald parameter xi) > 0".into());
                 }
-                if !cutoff.is_finite() {
-                    return Err(
-                        "kernel rpy_near needs a finite `cutoff` (its table ends there)".into(),
-                    );
+                if !cutoff.is_finite() || cutoff <= 0.0 {
+                    return Err(format!(
+                        "kernel rpy_near needs a positive finite `cutoff` (its table ends there), got {cutoff}"
+                    ));
                 }
                 let points = p.number("table_points") as usize;
                 PairKernel::RpyNear {
