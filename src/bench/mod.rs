@@ -300,6 +300,9 @@ pub enum BenchCommand {
         density: f64,
         #[arg(long, default_value_t = 20)]
         reps: u64,
+        /// Other graph params (NAME=VALUE, as in `run`).
+        #[arg(long = "set")]
+        sets: Vec<String>,
     },
     /// PSE speed against error per split (time of one M F, with --noise also M F +
     /// M^(1/2) W; self- and pair-mobility errors against f64 references).
@@ -407,11 +410,13 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             sizes,
             density,
             reps,
+            sets,
         } => mpcd::run(&mpcd::MpcdBench {
             graph,
             sizes,
             density,
             reps,
+            sets: crate::cli::parse_sets(&sets)?.into_iter().collect(),
         }),
         BenchCommand::Pse {
             graph,

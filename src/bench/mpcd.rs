@@ -20,6 +20,8 @@ pub struct MpcdBench {
     pub sizes: Vec<u64>,
     pub density: f64,
     pub reps: u64,
+    /// Other graph params.
+    pub sets: Vec<(String, ParamValue)>,
 }
 
 pub fn run(bench: &MpcdBench) -> Result<(), CliError> {
@@ -43,10 +45,11 @@ pub fn run(bench: &MpcdBench) -> Result<(), CliError> {
     );
     for &target in &bench.sizes {
         let side = ((target as f64 / bench.density).cbrt().round()).max(2.0);
-        let sets = [
+        let mut sets = vec![
             ("box", ParamValue::Numbers(vec![side; 3])),
             ("density", ParamValue::Number(bench.density)),
         ];
+        sets.extend(bench.sets.iter().map(|(k, v)| (k.as_str(), v.clone())));
         let g = load(&bench.graph, &sets, &registry)?;
         let density = match param(&g, "density") {
             Some(ParamValue::Number(d)) => d,

@@ -1691,3 +1691,40 @@ fn solute_and_solvent_share_the_temperature_in_equilibrium() {
     assert!(pos.iter().all(|&p| p.abs() <= l / 2.0));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Reordering the particles by cell (sort_particles) changes only the order of the state:
+/// streaming is per particle, the cell sums are exact integers and the random draws are
+/// per cell, so the set of (position, velocity) rows after any number of steps is the
+/// same, bit for bit, with or without it (plates and a force included).
+#[test]
+fn sorting_particles_by_cell_changes_only_their_order() {
+    if gpu().is_none() {
+        return;
+    }
+    let sets = [
+        ("box", "[6, 6, 6]"),
+        ("density", "5"),
+        ("walls", "\"plates\""),
+        ("force", "0.05"),
+        ("thermostat", "\"monte_carlo\""),
+    ];
+    let state = |sort: &str| {
+        let mut s = sets.to_vec();
+        s.push(("sort_particles", sort));
+        let out = run_mpcd(&s, 25, 3, &["positions", "velocities"]);
+        let x = rows(&out["positions"], 3);
+        let v = rows(&out["velocities"], 3);
+        let mut r: Vec<Vec<u32>> = x
+            .iter()
+            .zip(&v)
+            .map(|(a, b)| a.iter().chain(b).map(|&f| (f as f32).to_bits()).collect())
+            .collect();
+        r.sort();
+        (r, x)
+    };
+    let (plain, plain_x) = state("false");
+    let (sorted, sorted_x) = state("true");
+    assert_eq!(plain.len(), 6 * 6 * 6 * 5);
+    assert_eq!(plain, sorted, "the same particles");
+    assert_ne!(plain_x, sorted_x, "in another order");
+}
