@@ -2,12 +2,11 @@
 // grid of this step, and per cell the count, sum v and sum |v|^2 as exact 64-bit
 // fixed-point sums (mpcd/common.wgsl), by atomics. The sums start at zero (a fill before).
 //
-// Particles sorted by cell (mpcd.json's sort_particles, by the previous step's grid) give
-// a workgroup a compact block of cells: it sums them in workgroup memory first (a block
-// of LX x LY x LZ cells from its lowest cell per axis: a run along x, spread over a few
-// rows by the new grid shift) and adds each touched cell to the grid once; a particle
-// outside the block (unsorted input, a block across a periodic face) adds straight to
-// the grid. Integer sums: the result is the same either way.
+// Particles sorted by cell (mpcd.json's sort_particles) give a workgroup a few
+// consecutive cells: it sums them in workgroup memory first (LOCAL_CELLS from its
+// lowest cell) and adds each touched cell to the grid once; a particle outside that
+// range (unsorted input) adds straight to the grid. Integer sums: the result is the same
+// either way.
 #import common/index.wgsl
 #import mpcd/common.wgsl
 
@@ -26,23 +25,10 @@ fn add64(i: u32, q: vec2<u32>) {
     }
 }
 
-const LX: u32 = 32u;
-const LY: u32 = 4u;
-const LZ: u32 = 4u;
-const LOCAL_CELLS: u32 = 512u;   // LX * LY * LZ
+const LOCAL_CELLS: u32 = 256u;
 
-var<workgroup> wg_low: array<atomic<u32>, 3>;
-var<workgroup> local_sums: array<atomic<u32>, 4608>;  // LOCAL_CELLS * CELL_WORDS
-
-// The cell coordinates of a linear cell index.
-fn cell_coords(c: u32) -> vec3<u32> {
-    let nx = m.cells.x;
-    if (DIMS == 3u) {
-        let ny = m.cells.y;
-        return vec3<u32>(c % nx, (c / nx) % ny, c / (nx * ny));
-    }
-    return vec3<u32>(c % nx, c / nx, 0u);
-}
+var<workgroup> wg_low: atomic<u32>;
+var<workgroup> local_sums: array<atomic<u32>, 2304>;  // LOCAL_CELLS * CELL_WORDS
 
 fn add64_local(i: u32, q: vec2<u32>) {
     let old = atomicAdd(&local_sums[i], q.x);
@@ -57,14 +43,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         @builtin(local_invocation_index) lid: u32) {
     let p = flat_index(wid, nwg, lid, 256u);
     let valid = p < m.n;
-    if (lid < 3u) {
-        atomicStore(&wg_low[lid], 0xffffffffu);
+    if (lid == 0u) {
+        atomicStore(&wg_low, 0xffffffffu);
     }
     for (var w = lid; w < LOCAL_CELLS * CELL_WORDS; w = w + 256u) {
         atomicStore(&local_sums[w], 0u);
     }
     var c = 0u;
-    var q = vec3<u32>(0u);
     var v = vec3<f32>(0.0);
     if (valid) {
         let s = grid_shift(m, clock[0]);
@@ -75,21 +60,18 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         }
         c = cell_of(m, x, s);
         cell[p] = c;
-        q = cell_coords(c);
     }
     workgroupBarrier();
     if (valid) {
-        atomicMin(&wg_low[0], q.x);
-        atomicMin(&wg_low[1], q.y);
-        atomicMin(&wg_low[2], q.z);
+        atomicMin(&wg_low, c);
     }
     workgroupBarrier();
-    let low = vec3<u32>(atomicLoad(&wg_low[0]), atomicLoad(&wg_low[1]), atomicLoad(&wg_low[2]));
+    let low = atomicLoad(&wg_low);
     if (valid) {
-        let d = q - low;
+        let local = c - low;
         let e = u32(round(min(dot(v, v) * m.fix_e, 4294967040.0)));
-        if (d.x < LX && d.y < LY && d.z < LZ) {
-            let base = (d.x + LX * (d.y + LY * d.z)) * CELL_WORDS;
+        if (local < LOCAL_CELLS) {
+            let base = local * CELL_WORDS;
             atomicAdd(&local_sums[base], 1u);
             for (var a = 0u; a < DIMS; a = a + 1u) {
                 add64_local(base + 1u + 2u * a, fx_of_i32(fx_round(v[a] * m.fix_v)));
@@ -105,21 +87,15 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         }
     }
     workgroupBarrier();
-    // Each thread adds its local cells to the grid (those with particles).
-    for (var lc = lid; lc < LOCAL_CELLS; lc = lc + 256u) {
+    // One thread per local cell adds its sums to the grid.
+    let lc = lid;
+    let count = atomicLoad(&local_sums[lc * CELL_WORDS]);
+    if (count > 0u) {
+        let gbase = (low + lc) * CELL_WORDS;
         let lbase = lc * CELL_WORDS;
-        let count = atomicLoad(&local_sums[lbase]);
-        if (count > 0u) {
-            let g = low + vec3<u32>(lc % LX, (lc / LX) % LY, lc / (LX * LY));
-            var gc = g.x + m.cells.x * g.y;
-            if (DIMS == 3u) {
-                gc = g.x + m.cells.x * (g.y + m.cells.y * g.z);
-            }
-            let gbase = gc * CELL_WORDS;
-            atomicAdd(&sums[gbase], count);
-            for (var w = 1u; w < CELL_WORDS; w = w + 2u) {
-                add64(gbase + w, vec2<u32>(atomicLoad(&local_sums[lbase + w]), atomicLoad(&local_sums[lbase + w + 1u])));
-            }
+        atomicAdd(&sums[gbase], count);
+        for (var w = 1u; w < CELL_WORDS; w = w + 2u) {
+            add64(gbase + w, vec2<u32>(atomicLoad(&local_sums[lbase + w]), atomicLoad(&local_sums[lbase + w + 1u])));
         }
     }
 }
