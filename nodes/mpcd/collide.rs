@@ -3,7 +3,8 @@
 
 use super::{
     CELL_WORDS, Geometry, check_rule, fixed_scales, fx_round, geometry_params, grid_shift,
-    key_into, key_of, rule_param, solute_sum_words, thermal_params, value_of, words_of,
+    key_into, key_of, particle_ports, rule_param, solute_sum_words, thermal_params, value_of,
+    words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -36,14 +37,7 @@ impl NodeKind for MpcdBinKind {
     }
 
     fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("positions", PortType::Particles(None), "positions (N x d)"),
-            PortSpec::new(
-                "velocities",
-                PortType::Particles(None),
-                "velocities (N x d)",
-            ),
-        ]
+        particle_ports()
     }
 
     fn outputs(&self) -> Vec<PortSpec> {

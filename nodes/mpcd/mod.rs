@@ -37,8 +37,8 @@ mod measure;
 mod solute;
 mod stream;
 
-use crate::node::{ParamKind, ParamSpec, Params, PortError, Registry};
-use crate::value::ValueType;
+use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry};
+use crate::value::{PortType, ValueType};
 
 pub use collide::srd_rotation;
 
@@ -303,6 +303,18 @@ pub(crate) fn rule_param() -> ParamSpec {
         &["srd", "biased"],
         "srd: rotations within cells; biased: Ihle's biased collisions between cell pairs of 2 x 2 (x 2) supercells (MPCD-BC; grid shift in [-a, a); periodic boxes of even cell counts only)",
     )
+}
+
+/// The (positions, velocities) pair of a per-particle MPCD node, N x d each.
+pub(crate) fn particle_ports() -> Vec<PortSpec> {
+    vec![
+        PortSpec::new("positions", PortType::Particles(None), "positions (N x d)"),
+        PortSpec::new(
+            "velocities",
+            PortType::Particles(None),
+            "velocities (N x d)",
+        ),
+    ]
 }
 
 /// The fixed-point integer of x (clamped to the i32 range, as the GPU does).

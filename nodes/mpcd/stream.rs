@@ -1,7 +1,7 @@
 //! `mpcd_stream`: ballistic streaming for one step under a body force along x, with
 //! plates (bounce-back or specular) perpendicular to the last axis and a periodic wrap.
 
-use super::{Geometry, geometry_params};
+use super::{Geometry, geometry_params, particle_ports};
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
@@ -20,14 +20,7 @@ impl NodeKind for MpcdStreamKind {
     }
 
     fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("positions", PortType::Particles(None), "positions (N x d)"),
-            PortSpec::new(
-                "velocities",
-                PortType::Particles(None),
-                "velocities (N x d)",
-            ),
-        ]
+        particle_ports()
     }
 
     fn outputs(&self) -> Vec<PortSpec> {

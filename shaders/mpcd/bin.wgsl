@@ -3,21 +3,15 @@
 // fixed-point sums (mpcd/common.wgsl), by atomics. The sums start at zero (a fill before).
 #import common/index.wgsl
 #import mpcd/common.wgsl
+#import mpcd/add64.wgsl
 
 @group(0) @binding(0) var<uniform> m: Mpcd;
 @group(0) @binding(1) var<storage, read> clock: array<u32>;
 @group(0) @binding(2) var<storage, read> pos: array<f32>;
 @group(0) @binding(3) var<storage, read> vel: array<f32>;
 @group(0) @binding(4) var<storage, read_write> cell: array<u32>;
-@group(0) @binding(5) var<storage, read_write> sums: array<atomic<u32>>;
+@group(0) @binding(5) var<storage, read_write> sums64: array<atomic<u32>>;
 
-fn add64(i: u32, q: vec2<u32>) {
-    let old = atomicAdd(&sums[i], q.x);
-    let hi = q.y + select(0u, 1u, old + q.x < old);
-    if (hi != 0u) {
-        atomicAdd(&sums[i + 1u], hi);
-    }
-}
 
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -36,7 +30,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let c = cell_of(m, x, s);
     cell[p] = c;
     let base = c * CELL_WORDS;
-    atomicAdd(&sums[base], 1u);
+    atomicAdd(&sums64[base], 1u);
     for (var a = 0u; a < DIMS; a = a + 1u) {
         add64(base + 1u + 2u * a, fx_of_i32(fx_round(v[a] * m.fix_v)));
     }

@@ -8,6 +8,7 @@
 // stream and step), SRD width a.
 #import common/index.wgsl
 #import mpcd/common.wgsl
+#import mpcd/add64.wgsl
 
 @group(0) @binding(0) var<uniform> m: Mpcd;
 @group(0) @binding(1) var<storage, read> clock: array<u32>;
@@ -15,15 +16,8 @@
 @group(0) @binding(3) var<storage, read> vel: array<f32>;
 @group(0) @binding(4) var<storage, read> solvent: array<u32>;
 @group(0) @binding(5) var<storage, read_write> cell: array<u32>;
-@group(0) @binding(6) var<storage, read_write> sums: array<atomic<u32>>;
+@group(0) @binding(6) var<storage, read_write> sums64: array<atomic<u32>>;
 
-fn add64(i: u32, q: vec2<u32>) {
-    let old = atomicAdd(&sums[i], q.x);
-    let hi = q.y + select(0u, 1u, old + q.x < old);
-    if (hi != 0u) {
-        atomicAdd(&sums[i + 1u], hi);
-    }
-}
 
 // The 64-bit pair of round(x) for |x| < 2^63 (negatives as two's complement).
 fn fx_of_signed(x: f32) -> vec2<u32> {
@@ -41,11 +35,11 @@ fn copy(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let i = flat_index(wid, nwg, lid, 256u);
     let words = m.ncells * CELL_WORDS;
     if (i < words) {
-        atomicStore(&sums[i], solvent[i]);
+        atomicStore(&sums64[i], solvent[i]);
     } else if (i < words + m.ncells) {
-        atomicStore(&sums[i], 0u);
+        atomicStore(&sums64[i], 0u);
     } else if (i == words + m.ncells) {
-        atomicStore(&sums[i], bitcast<u32>(m.ratio));
+        atomicStore(&sums64[i], bitcast<u32>(m.ratio));
     }
 }
 
@@ -66,7 +60,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let c = cell_of(m, x, s);
     cell[p] = c;
     let base = c * CELL_WORDS;
-    atomicAdd(&sums[m.ncells * CELL_WORDS + c], 1u);
+    atomicAdd(&sums64[m.ncells * CELL_WORDS + c], 1u);
     for (var a = 0u; a < DIMS; a = a + 1u) {
         add64(base + 1u + 2u * a, fx_of_signed((v[a] * m.fix_v) * m.ratio));
     }

@@ -5,22 +5,16 @@
 // workgroup and axis); `center` subtracts the mean velocity.
 #import common/index.wgsl
 #import mpcd/common.wgsl
+#import mpcd/add64.wgsl
 
 @group(0) @binding(0) var<uniform> m: Mpcd;
 @group(0) @binding(1) var<storage, read_write> pos: array<f32>;
 @group(0) @binding(2) var<storage, read_write> vel: array<f32>;
-@group(0) @binding(3) var<storage, read_write> total: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> sums64: array<atomic<u32>>;
 
 var<workgroup> wg_lo: array<atomic<u32>, 3>;
 var<workgroup> wg_hi: array<atomic<i32>, 3>;
 
-fn add64(i: u32, q: vec2<u32>) {
-    let old = atomicAdd(&total[i], q.x);
-    let hi = q.y + select(0u, 1u, old + q.x < old);
-    if (hi != 0u) {
-        atomicAdd(&total[i + 1u], hi);
-    }
-}
 
 @compute @workgroup_size(256)
 fn draw(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -58,7 +52,7 @@ fn center(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
         return;
     }
     for (var a = 0u; a < DIMS; a = a + 1u) {
-        let mean = fx_to_f32(vec2<u32>(atomicLoad(&total[2u * a]), atomicLoad(&total[2u * a + 1u]))) / (f32(m.n) * m.fix_v);
+        let mean = fx_to_f32(vec2<u32>(atomicLoad(&sums64[2u * a]), atomicLoad(&sums64[2u * a + 1u]))) / (f32(m.n) * m.fix_v);
         vel[p * DIMS + a] = vel[p * DIMS + a] - mean;
     }
 }

@@ -8,6 +8,7 @@
 // workgroup memory as 16-bit split integers, then one 64-bit atomic per bin).
 #import common/index.wgsl
 #import mpcd/common.wgsl
+#import mpcd/add64.wgsl
 
 const MAX_BINS: u32 = 1024u;
 
@@ -16,7 +17,7 @@ const MAX_BINS: u32 = 1024u;
 @group(0) @binding(2) var<storage, read> pos: array<f32>;
 @group(0) @binding(3) var<storage, read> vel: array<f32>;
 @group(0) @binding(4) var<storage, read> sums: array<u32>;
-@group(0) @binding(5) var<storage, read_write> acc: array<atomic<u32>>;
+@group(0) @binding(5) var<storage, read_write> sums64: array<atomic<u32>>;
 
 var<workgroup> rel_sum: array<f32, 256>;
 var<workgroup> dof_sum: array<u32, 256>;
@@ -26,13 +27,6 @@ var<workgroup> bin_n: array<atomic<u32>, MAX_BINS>;
 var<workgroup> mom_lo: array<atomic<u32>, 3>;
 var<workgroup> mom_hi: array<atomic<i32>, 3>;
 
-fn add64(i: u32, q: vec2<u32>) {
-    let old = atomicAdd(&acc[i], q.x);
-    let hi = q.y + select(0u, 1u, old + q.x < old);
-    if (hi != 0u) {
-        atomicAdd(&acc[i + 1u], hi);
-    }
-}
 
 fn sampled(step: u32) -> bool {
     return step >= m.warmup && (step - m.warmup) % m.every == 0u;
@@ -74,7 +68,7 @@ fn cells(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
         add64(7u, fx_of_f32(rel_sum[0] * m.fix_e));
         add64(9u, vec2<u32>(dof_sum[0], 0u));
         if (i == 0u) {
-            atomicAdd(&acc[0], 1u);
+            atomicAdd(&sums64[0], 1u);
         }
     }
 }
