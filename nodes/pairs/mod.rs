@@ -42,7 +42,7 @@ pub enum PairKernel {
         radius: f64,
         viscosity: f64,
         split: f64,
-        table: NearTable,
+        table: std::sync::Arc<NearTable>,
     },
     /// Lennard-Jones force 24 eps (2 (s/r)^12 - (s/r)^6) r / r^2 (values unused); with
     /// cutoff 2^(1/6) sigma it is the WCA force.
@@ -70,7 +70,7 @@ impl PairKernel {
                     radius,
                     viscosity,
                     split,
-                    table: NearTable::new(radius, viscosity, split, cutoff, points),
+                    table: NearTable::shared(radius, viscosity, split, cutoff, points),
                 }
             }
             "lj" => PairKernel::Lj {

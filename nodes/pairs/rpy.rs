@@ -15,7 +15,9 @@
 //! The integral is Gaussian-damped and is done by composite Gauss-Legendre quadrature in
 //! f64; the near field decays as exp(-xi^2 r^2), which sets the cutoff.
 
+use std::collections::HashMap;
 use std::f64::consts::PI;
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Free-space RPY tensor (f, g) at distance r for spheres of radius a in a fluid of
 /// viscosity eta; the overlap form for r < 2a (regular at r = 0: f = 1 / (6 pi eta a)).
@@ -122,6 +124,24 @@ impl NearTable {
             g.push(rg - fg);
         }
         NearTable { cutoff, f, g }
+    }
+
+    /// [`NearTable::new`], computed once per set of arguments in a process: a graph that
+    /// applies the near field twice (PSE's product and its Lanczos body) builds one table.
+    pub fn shared(a: f64, eta: f64, xi: f64, cutoff: f64, points: usize) -> Arc<NearTable> {
+        type Key = ([u64; 4], usize);
+        static TABLES: OnceLock<Mutex<HashMap<Key, Arc<NearTable>>>> = OnceLock::new();
+        let key = ([a, eta, xi, cutoff].map(f64::to_bits), points);
+        let tables = TABLES.get_or_init(Default::default);
+        if let Some(t) = tables.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+            return t.clone();
+        }
+        let table = Arc::new(NearTable::new(a, eta, xi, cutoff, points));
+        tables
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .insert(key, table.clone());
+        table
     }
 
     /// Linear interpolation, as the GPU does it (0 past the cutoff).
