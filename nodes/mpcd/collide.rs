@@ -2,11 +2,10 @@
 //! SRD rotation with the cell thermostat and virtual particles in wall-cut cells).
 
 use super::{
-    CELL_WORDS, Geometry, check_rule, fixed_scales, fx_round, geometry_params, grid_shift,
-    key_into, key_of, particle_ports, rule_param, solute_sum_words, thermal_params, value_of,
-    words_of,
+    CELL_WORDS, Geometry, SUM_V, SumsLayout, check_rule, fixed_scales, fx_round, geometry_params,
+    grid_shift, key_into, key_of, particle_ports, rule_param, thermal_params, value_of, words_of,
 };
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D, shaders};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
 };
@@ -33,7 +32,7 @@ impl NodeKind for MpcdBinKind {
     }
 
     fn doc(&self) -> &'static str {
-        "MPCD cells of this step's randomly shifted grid, and per cell the count, sum v and sum |v|^2 (exact 64-bit fixed point)"
+        "MPCD cells of this step's randomly shifted grid, and per cell the count, sum v and, for a thermostat, sum |v|^2 (exact 64-bit fixed point; native 64-bit atomics where the adapter has them)"
     }
 
     fn inputs(&self) -> Vec<PortSpec> {
@@ -46,7 +45,7 @@ impl NodeKind for MpcdBinKind {
             PortSpec::new(
                 "sums",
                 PortType::Indices,
-                "9 words per cell: count, then (lo, hi) u32 pairs of the 64-bit sums of v_x, v_y, v_z (units v_th/2^24) and |v|^2 (units v_th^2/2^16)",
+                "8 words per cell: (lo, hi) u32 pairs of the 64-bit count and sums of v_x, v_y, v_z (units v_th/2^24); then with a thermostat a pair of sum |v|^2 per cell (units v_th^2/2^16)",
             ),
         ]
     }
@@ -56,6 +55,15 @@ impl NodeKind for MpcdBinKind {
         p.extend(thermal_params());
         p.push(shift_param());
         p.push(rule_param());
+        p.push(thermostat_param(
+            "the collision's thermostat: any but none adds the sums of |v|^2 it needs",
+        ));
+        p.push(ParamSpec::choice(
+            "atomics",
+            "auto",
+            &["auto", "int64", "int32"],
+            "auto: native 64-bit atomics where the adapter has them (one return-less add per sum), else int32; int32: pairs of 32-bit atomics with a carry (any adapter). Both give the same exact sums",
+        ));
         p.extend(key_params());
         p
     }
@@ -63,6 +71,12 @@ impl NodeKind for MpcdBinKind {
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
         let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
         let (seed, stream) = key_of(p);
+        let energy = p.text("thermostat") != "none";
+        let atomics = match p.text("atomics") {
+            "int64" => Some(true),
+            "int32" => Some(false),
+            _ => None,
+        };
         let geo = Geometry::from_params(p)?;
         let biased = p.text("rule") == "biased";
         check_rule(&geo, biased)?;
@@ -71,14 +85,26 @@ impl NodeKind for MpcdBinKind {
         u.fix_e = fix_e;
         u.shift = u32::from(p.flag("shift"));
         u.rule = u32::from(biased);
+        u.energy = u32::from(energy);
         key_into(&mut u, p);
         Ok(Box::new(MpcdBin {
             geo,
             u,
             seed,
             stream,
+            atomics,
         }))
     }
+}
+
+/// The thermostat choice (mpcd_collide's; mpcd_bin's says whether to sum |v|^2).
+fn thermostat_param(doc: &'static str) -> ParamSpec {
+    ParamSpec::choice(
+        "thermostat",
+        "none",
+        &["none", "rescale", "monte_carlo"],
+        doc,
+    )
 }
 
 struct MpcdBin {
@@ -86,6 +112,18 @@ struct MpcdBin {
     u: super::Uniform,
     seed: u64,
     stream: u32,
+    /// Some(true): native 64-bit atomics required; Some(false): 32-bit pairs; None: auto.
+    atomics: Option<bool>,
+}
+
+impl MpcdBin {
+    fn layout(&self) -> SumsLayout {
+        SumsLayout {
+            ncells: self.geo.ncells(),
+            energy: self.u.energy == 1,
+            solute: false,
+        }
+    }
 }
 
 impl Node for MpcdBin {
@@ -101,7 +139,7 @@ impl Node for MpcdBin {
         Ok(Signature::outputs(vec![
             ValueType::Indices { n },
             ValueType::Indices {
-                n: self.geo.ncells() * CELL_WORDS,
+                n: self.layout().words() as u32,
             },
         ]))
     }
@@ -153,11 +191,18 @@ impl Node for MpcdBin {
             }
             cs[4] += (e * self.u.fix_e as f64).min(4_294_967_040.0).round() as i64;
         }
+        let layout = self.layout();
+        let o = &mut rest[0].data;
+        o.fill(0.0);
         for (c, cs) in sums.iter().enumerate() {
-            let o = &mut rest[0].data[c * CELL_WORDS as usize..(c + 1) * CELL_WORDS as usize];
-            o[0] = cs[0] as f64;
-            for j in 0..4 {
-                o[1 + 2 * j..3 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
+            let b = layout.cell(c);
+            o[b..b + 2].copy_from_slice(&words_of(cs[0]));
+            for j in 0..3 {
+                o[b + SUM_V + 2 * j..b + SUM_V + 2 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
+            }
+            if layout.energy {
+                let e = layout.energy_word(c);
+                o[e..e + 2].copy_from_slice(&words_of(cs[4]));
             }
         }
     }
@@ -176,10 +221,32 @@ impl GpuKernels for MpcdBin {
         };
         let mut u = self.u;
         u.n = n;
+        let native = cx.caps().int64_atomics;
+        let int64 = match self.atomics {
+            Some(true) if !native => {
+                return Err(CompileError::Unsupported(format!(
+                    "mpcd_bin: atomics int64 needs 64-bit storage atomics (SHADER_INT64_ATOMIC_ALL_OPS), which {} lacks; use auto or int32",
+                    cx.caps().adapter
+                )));
+            }
+            Some(want) => want,
+            None => native,
+        };
+        let sums_file = if int64 {
+            "mpcd/sums_int64.wgsl"
+        } else {
+            "mpcd/sums_int32.wgsl"
+        };
+        let source = shaders::resolve(&format!("#import {sums_file}\n#import mpcd/bin.wgsl\n"))
+            .map_err(CompileError::Library)?;
         let kernel = cx.kernel(
             &KernelSpec::new(
-                "mpcd_bin",
-                cx.shader("mpcd/bin.wgsl")?,
+                if int64 {
+                    "mpcd_bin_int64"
+                } else {
+                    "mpcd_bin_int32"
+                },
+                source,
                 &[
                     Binding::Uniform,
                     Binding::StorageRead,
@@ -282,11 +349,8 @@ impl NodeKind for MpcdCollideKind {
                 true,
                 "with walls: fill wall-cut cells holding fewer than M particles with virtual particles (Lamura et al.)",
             ),
-            ParamSpec::choice(
-                "thermostat",
-                "none",
-                &["none", "rescale", "monte_carlo"],
-                "none; rescale: relative velocities of every cell scaled to kT; monte_carlo: Hecht's cell scaling",
+            thermostat_param(
+                "none; rescale: relative velocities of every cell scaled to kT; monte_carlo: Hecht's cell scaling (give mpcd_bin the same: it then sums |v|^2)",
             ),
             ParamSpec::number(
                 "mc_scale",
@@ -429,8 +493,8 @@ impl MpcdCollide {
         let s = &sums[(c * CELL_WORDS) as usize..((c + 1) * CELL_WORDS) as usize];
         let mut u = [0.0; 3];
         for a in 0..self.geo.dims() {
-            u[a] =
-                value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (s[0].max(1.0) * self.u.fix_v as f64);
+            u[a] = value_of(s[SUM_V + 2 * a], s[SUM_V + 1 + 2 * a]) as f64
+                / (s[0].max(1.0) * self.u.fix_v as f64);
         }
         (u, s[0])
     }
@@ -521,35 +585,43 @@ impl Node for MpcdCollide {
                 ));
             }
         }
-        let want = self.geo.ncells() * CELL_WORDS;
-        let with_solute = solute_sum_words(self.geo.ncells());
-        match inputs[2] {
-            Some(ValueType::Indices { n: ns }) if ns == want => {}
-            Some(ValueType::Indices { n: ns }) if ns as u64 == with_solute => {
-                let refuse = if self.u.rule == 1 {
-                    Some("rule `biased`")
-                } else if self.u.thermostat != 0 {
-                    Some("a thermostat")
-                } else if self.geo.walls && self.u.shift == 1 && self.u.ghosts == 1 {
-                    Some("virtual particles (ghosts true with plates)")
-                } else {
-                    None
-                };
-                if let Some(what) = refuse {
-                    return Err(PortError::new(
-                        "sums",
-                        format!(
-                            "carries a solute (mpcd_bin_solute's {with_solute} words), which supports plain SRD only, not {what}"
-                        ),
-                    ));
-                }
-            }
-            other => {
+        let ncells = self.geo.ncells();
+        let layout = match inputs[2] {
+            Some(ValueType::Indices { n: ns }) => SumsLayout::of_words(ncells, ns as u64),
+            _ => None,
+        };
+        let Some(layout) = layout else {
+            return Err(PortError::new(
+                "sums",
+                format!(
+                    "expected the cell sums of mpcd_bin for {ncells} cells: {}; got {:?}; do mpcd_bin and mpcd_collide have the same box, cell and walls?",
+                    SumsLayout::describe(ncells),
+                    inputs[2]
+                ),
+            ));
+        };
+        if self.u.thermostat != 0 && !layout.energy {
+            return Err(PortError::new(
+                "sums",
+                "carries no sums of |v|^2, which the thermostat needs: give mpcd_bin the same `thermostat`",
+            ));
+        }
+        if layout.solute {
+            let refuse = if self.u.rule == 1 {
+                Some("rule `biased`")
+            } else if self.u.thermostat != 0 {
+                Some("a thermostat")
+            } else if self.geo.walls && self.u.shift == 1 && self.u.ghosts == 1 {
+                Some("virtual particles (ghosts true with plates)")
+            } else {
+                None
+            };
+            if let Some(what) = refuse {
                 return Err(PortError::new(
                     "sums",
                     format!(
-                        "expected {want} words ({} cells x {CELL_WORDS}; {with_solute} with a solute), got {other:?}; do mpcd_bin and mpcd_collide have the same box, cell and walls?",
-                        self.geo.ncells()
+                        "carries a solute (mpcd_bin_solute's {} words), which supports plain SRD only, not {what}",
+                        layout.words()
                     ),
                 ));
             }
@@ -568,12 +640,13 @@ impl Node for MpcdCollide {
         let sums = &inputs[2].as_ref().expect("required").data;
         let (fix_v, fix_e) = (self.u.fix_v as f64, self.u.fix_e as f64);
         let w_layers = self.geo.cells[d - 1];
+        let layout =
+            SumsLayout::of_words(self.geo.ncells(), sums.len() as u64).expect("checked in infer");
         // With a solute: M / m and the solute count per cell (mpcd_bin_solute's layout).
-        let nc = (self.geo.ncells() * CELL_WORDS) as usize;
-        let solute = (sums.len() as u64 == solute_sum_words(self.geo.ncells())).then(|| {
+        let solute = layout.solute.then(|| {
             (
                 f32::from_bits(sums[sums.len() - 1] as u32) as f64,
-                &sums[nc..sums.len() - 1],
+                &sums[layout.solute_word(0)..sums.len() - 1],
             )
         });
         for p in 0..cells.len() {
@@ -586,10 +659,15 @@ impl Node for MpcdCollide {
             };
             let mut u = [0.0; 3];
             for a in 0..d {
-                u[a] = value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (mass_n * fix_v);
+                u[a] = value_of(s[SUM_V + 2 * a], s[SUM_V + 1 + 2 * a]) as f64 / (mass_n * fix_v);
             }
             let uu: f64 = u.iter().map(|x| x * x).sum();
-            let rel = (value_of(s[7], s[8]) as f64 / fix_e - mass_n * uu).max(0.0);
+            let rel = if layout.energy {
+                let e = layout.energy_word(c as usize);
+                (value_of(sums[e], sums[e + 1]) as f64 / fix_e - mass_n * uu).max(0.0)
+            } else {
+                0.0
+            };
             let mut scale = 1.0;
             let layer = self.geo.layer(c);
             let cut = self.u.rule == 0
@@ -662,9 +740,13 @@ impl GpuKernels for MpcdCollide {
         };
         let mut u = self.u;
         u.n = n;
-        u.solute = u32::from(
-            io.inputs[2].expect("required").ty.words() == solute_sum_words(self.geo.ncells()),
-        );
+        let layout = SumsLayout::of_words(
+            self.geo.ncells(),
+            io.inputs[2].expect("required").ty.words(),
+        )
+        .expect("checked in infer");
+        u.solute = u32::from(layout.solute);
+        u.energy = u32::from(layout.energy);
         let kernel = cx.kernel(
             &KernelSpec::new(
                 "mpcd_collide",

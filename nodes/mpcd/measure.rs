@@ -2,8 +2,8 @@
 //! block of exact 64-bit fixed-point sums) and `mpcd_average` (their means).
 
 use super::{
-    CELL_WORDS, Geometry, fixed_scales, fx_round, geometry_params, thermal_params, value_of,
-    words_of,
+    CELL_WORDS, Geometry, SUM_V, SumsLayout, fixed_scales, fx_round, geometry_params,
+    thermal_params, value_of, words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -48,7 +48,13 @@ impl NodeKind for MpcdMeasureKind {
             PortSpec::new(
                 "sums",
                 PortType::Indices,
-                "cell sums (mpcd_bin): temperature from the velocities relative to the cell means",
+                "cell sums (mpcd_bin): the cell means and counts of the temperature",
+            ),
+            PortSpec::new("cell", PortType::Indices, "cell per particle (mpcd_bin)"),
+            PortSpec::new(
+                "before",
+                PortType::Particles(None),
+                "velocities before the collision (N x d): temperature from them relative to the cell means",
             ),
         ]
     }
@@ -120,11 +126,35 @@ impl Node for MpcdMeasure {
                 format!("has {nv} rows but positions has {n}"),
             ));
         }
-        let want = self.geo.ncells() * CELL_WORDS;
-        if inputs[2] != Some(ValueType::Indices { n: want }) {
+        let ncells = self.geo.ncells();
+        let layout = match inputs[2] {
+            Some(ValueType::Indices { n }) => SumsLayout::of_words(ncells, n as u64),
+            _ => None,
+        };
+        if layout.is_none() {
             return Err(PortError::new(
                 "sums",
-                format!("expected {want} words of cell sums, got {:?}", inputs[2]),
+                format!(
+                    "expected the cell sums of mpcd_bin for {ncells} cells: {}; got {:?}",
+                    SumsLayout::describe(ncells),
+                    inputs[2]
+                ),
+            ));
+        }
+        if inputs[3] != Some(ValueType::Indices { n }) {
+            return Err(PortError::new(
+                "cell",
+                format!(
+                    "expected {n} indices (one per particle), got {:?}",
+                    inputs[3]
+                ),
+            ));
+        }
+        let nb = self.geo.particles("before", inputs[4])?;
+        if nb != n {
+            return Err(PortError::new(
+                "before",
+                format!("has {nb} rows but positions has {n}"),
             ));
         }
         Ok(Signature::outputs(vec![ValueType::Indices {
@@ -148,16 +178,21 @@ impl Node for MpcdMeasure {
         let acc = &mut outputs[0].data;
         let (fix_v, fix_e) = (self.u.fix_v as f64, self.u.fix_e as f64);
         acc[0] += 1.0;
-        let (mut rel, mut dof) = (0.0, 0i64);
-        for s in sums.chunks(CELL_WORDS as usize) {
-            if s[0] > 0.0 {
-                let mut uu = 0.0;
-                for a in 0..d {
-                    let u = value_of(s[1 + 2 * a], s[2 + 2 * a]) as f64 / (s[0] * fix_v);
-                    uu += u * u;
-                }
-                rel += (value_of(s[7], s[8]) as f64 / fix_e - s[0] * uu).max(0.0);
-                dof += s[0] as i64 - 1;
+        let cell = &inputs[3].as_ref().expect("required").data;
+        let before = &inputs[4].as_ref().expect("required").data;
+        let mut dof = 0i64;
+        for c in 0..self.geo.ncells() as usize {
+            let count = sums[c * CELL_WORDS as usize];
+            if count > 0.0 {
+                dof += count as i64 - 1;
+            }
+        }
+        let mut rel = 0.0;
+        for p in 0..cell.len() {
+            let s = &sums[cell[p] as usize * CELL_WORDS as usize..];
+            for a in 0..d {
+                let u = value_of(s[SUM_V + 2 * a], s[SUM_V + 1 + 2 * a]) as f64 / (s[0] * fix_v);
+                rel += (before[p * d + a] - u).powi(2);
             }
         }
         add(acc, 7, (rel * fix_e).round() as i64);
@@ -195,6 +230,8 @@ impl GpuKernels for MpcdMeasure {
             Binding::StorageRead,
             Binding::StorageRead,
             Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageRead,
             Binding::StorageReadWrite,
         ];
         let src = cx.shader("mpcd/measure.wgsl")?;
@@ -216,6 +253,8 @@ impl GpuKernels for MpcdMeasure {
             pos.buffer,
             io.inputs[1].expect("required").buffer,
             io.inputs[2].expect("required").buffer,
+            io.inputs[3].expect("required").buffer,
+            io.inputs[4].expect("required").buffer,
             io.outputs[0].buffer,
         ];
         Ok(vec![

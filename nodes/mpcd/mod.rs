@@ -5,7 +5,8 @@
 //!
 //! `mpcd_stream` (x += v dt under the body force, walls, periodic wrap) ->
 //! `mpcd_bin` (cell of each particle in this step's shifted grid; per cell the count,
-//! sum v and sum |v|^2 as exact 64-bit fixed-point sums by u32 atomics) ->
+//! sum v and, for a thermostat, sum |v|^2 as exact 64-bit fixed-point sums by native
+//! 64-bit atomics, or pairs of u32 atomics where the adapter lacks them) ->
 //! `mpcd_collide` (v <- u_c + S R (v - u_c) per particle, the cell's rotation and thermostat
 //! factor recomputed from Philox by every particle of the cell, virtual particles in
 //! wall-cut cells) -> `mpcd_measure` (observables accumulated after the warm-up) ->
@@ -42,14 +43,77 @@ use crate::value::{PortType, ValueType};
 
 pub use collide::srd_rotation;
 
-/// Words per cell of `mpcd_bin`'s sums: count, sum v (3 pairs), sum |v|^2 (a pair).
-pub const CELL_WORDS: u32 = 9;
+/// Words per cell of the cell sums' first block: the count and sum v as 64-bit (lo, hi)
+/// pairs, [0, 1] count (hi zero) and [SUM_V + 2a, SUM_V + 2a + 1] sum v_a (v_z zero in 2D):
+/// 32 bytes, so that a cell's sums are one aligned memory sector and one 64-bit atomic each.
+pub const CELL_WORDS: u32 = 8;
 
-/// Words of cell sums with a solute (`mpcd_bin_solute`) for `ncells` cells: the 9 words per
-/// cell of `mpcd_bin` with the solute's contributions weighted by M / m, then the solute
-/// count per cell, then the f32 bits of M / m.
-pub fn solute_sum_words(ncells: u32) -> u64 {
-    ncells as u64 * (CELL_WORDS as u64 + 1) + 1
+/// The first word of the pair of sum v_x within a cell's block.
+pub const SUM_V: usize = 2;
+
+/// Where things are in the cell sums of `mpcd_bin` (and `mpcd_bin_solute`): `CELL_WORDS`
+/// per cell; then, when a thermostat needs them, the pair of sum |v|^2 per cell; then,
+/// with a solute, the solute count per cell and the f32 bits of M / m.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SumsLayout {
+    pub ncells: u32,
+    pub energy: bool,
+    pub solute: bool,
+}
+
+impl SumsLayout {
+    pub fn words(&self) -> u64 {
+        let n = self.ncells as u64;
+        n * CELL_WORDS as u64
+            + if self.energy { 2 * n } else { 0 }
+            + if self.solute { n + 1 } else { 0 }
+    }
+
+    /// First word of cell c's block.
+    pub fn cell(&self, c: usize) -> usize {
+        c * CELL_WORDS as usize
+    }
+
+    /// The low word of cell c's sum |v|^2 (with `energy`).
+    pub fn energy_word(&self, c: usize) -> usize {
+        self.ncells as usize * CELL_WORDS as usize + 2 * c
+    }
+
+    /// The solute count of cell c (with `solute`); the M / m word follows the last one.
+    pub fn solute_word(&self, c: usize) -> usize {
+        self.ncells as usize * (CELL_WORDS as usize + if self.energy { 2 } else { 0 }) + c
+    }
+
+    /// The layout a buffer of `words` words has for `ncells` cells, if any.
+    pub fn of_words(ncells: u32, words: u64) -> Option<SumsLayout> {
+        [(false, false), (true, false), (false, true), (true, true)]
+            .into_iter()
+            .map(|(energy, solute)| SumsLayout {
+                ncells,
+                energy,
+                solute,
+            })
+            .find(|l| l.words() == words)
+    }
+
+    /// The word counts of the four layouts, for error messages.
+    pub fn describe(ncells: u32) -> String {
+        let w = |energy, solute| {
+            SumsLayout {
+                ncells,
+                energy,
+                solute,
+            }
+            .words()
+        };
+        format!(
+            "{} words ({ncells} cells x {CELL_WORDS}), {} with the energy sums of a thermostat, {} / {} with a solute",
+            w(false, false),
+            w(true, false),
+            w(false, true),
+            w(true, true)
+        )
+    }
 }
 
 /// The parameter block of every MPCD kernel (`struct Mpcd` of shaders/mpcd/common.wgsl).
@@ -91,7 +155,8 @@ pub(crate) struct Uniform {
     pub solute: u32,
     /// Solute mass over solvent mass M / m.
     pub ratio: f32,
-    pub pad: u32,
+    /// 1: the cell sums carry sum |v|^2 per cell (a thermostat needs them).
+    pub energy: u32,
 }
 
 /// Box, cells and walls, shared by the MPCD kinds.
@@ -123,8 +188,11 @@ impl Geometry {
             cells.push(r.round() as u32 + u32::from(walls && a == lengths.len() - 1));
         }
         let total: f64 = cells.iter().map(|&c| c as f64).product();
-        if total * CELL_WORDS as f64 > u32::MAX as f64 {
-            return Err(format!("{total} cells are too many (at most 2^32 / 9)"));
+        if total * (CELL_WORDS as f64 + 3.0) + 1.0 > u32::MAX as f64 {
+            return Err(format!(
+                "{total} cells are too many (at most about 2^32 / {})",
+                CELL_WORDS + 3
+            ));
         }
         Ok(Geometry {
             lengths,

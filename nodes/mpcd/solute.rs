@@ -5,8 +5,8 @@
 //! v' = u + R (v - u), V' = u + R (V - u), conserving each cell's momentum and energy.
 
 use super::{
-    CELL_WORDS, Geometry, fixed_scales, geometry_params, grid_shift, key_into, key_of,
-    solute_sum_words, thermal_params, value_of, words_of,
+    Geometry, SUM_V, SumsLayout, fixed_scales, geometry_params, grid_shift, key_into, key_of,
+    thermal_params, value_of, words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -56,7 +56,7 @@ impl NodeKind for MpcdBinSoluteKind {
             PortSpec::new(
                 "sums",
                 PortType::Indices,
-                "10 ncells + 1 words: mpcd_bin's 9 words per cell with the solute's M/m-weighted velocity and |v|^2 sums added, then the solute count per cell, then the f32 bits of M/m",
+                "mpcd_bin's sums with the solute's M/m-weighted velocity (and, when present, |v|^2) sums added, then the solute count per cell, then the f32 bits of M/m",
             ),
         ]
     }
@@ -121,20 +121,33 @@ fn round_even(x: f64) -> i64 {
 
 impl Node for MpcdBinSolute {
     fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
-        let want = self.geo.ncells() * CELL_WORDS;
-        match inputs[0] {
-            Some(ValueType::Indices { n }) if n == want => {}
-            other => {
-                return Err(PortError::new(
-                    "sums",
-                    format!(
-                        "expected mpcd_bin's {want} words ({} cells x {CELL_WORDS}), got {}; do mpcd_bin and mpcd_bin_solute have the same box, cell and walls?",
-                        self.geo.ncells(),
-                        other.map_or("nothing".to_string(), |t| t.to_string())
-                    ),
-                ));
-            }
+        let ncells = self.geo.ncells();
+        let solvent = match inputs[0] {
+            Some(ValueType::Indices { n }) => SumsLayout::of_words(ncells, n as u64),
+            _ => None,
         }
+        .filter(|l| !l.solute);
+        let Some(solvent) = solvent else {
+            return Err(PortError::new(
+                "sums",
+                format!(
+                    "expected mpcd_bin's sums for {ncells} cells ({} or {} words), got {}; do mpcd_bin and mpcd_bin_solute have the same box, cell and walls?",
+                    SumsLayout {
+                        ncells,
+                        energy: false,
+                        solute: false
+                    }
+                    .words(),
+                    SumsLayout {
+                        ncells,
+                        energy: true,
+                        solute: false
+                    }
+                    .words(),
+                    inputs[0].map_or("nothing".to_string(), |t| t.to_string())
+                ),
+            ));
+        };
         let n = self.geo.particles("positions", inputs[1])?;
         let nv = self.geo.particles("velocities", inputs[2])?;
         if n != nv {
@@ -143,7 +156,11 @@ impl Node for MpcdBinSolute {
                 format!("has {nv} rows but positions has {n}"),
             ));
         }
-        let words = solute_sum_words(self.geo.ncells());
+        let words = SumsLayout {
+            solute: true,
+            ..solvent
+        }
+        .words();
         if words > u32::MAX as u64 {
             return Err(PortError::new(
                 "sums",
@@ -175,13 +192,18 @@ impl Node for MpcdBinSolute {
             [0.0; 3]
         };
         let nc = self.geo.ncells() as usize;
-        let cw = CELL_WORDS as usize;
+        let layout = SumsLayout::of_words(nc as u32, solvent.len() as u64 + nc as u64 + 1)
+            .expect("checked in infer");
         let mut sums: Vec<[i64; 5]> = (0..nc)
             .map(|c| {
-                let w = &solvent[c * cw..(c + 1) * cw];
+                let w = &solvent[layout.cell(c)..];
                 let mut e = [w[0] as i64, 0, 0, 0, 0];
-                for j in 0..4 {
-                    e[1 + j] = value_of(w[1 + 2 * j], w[2 + 2 * j]);
+                for j in 0..3 {
+                    e[1 + j] = value_of(w[SUM_V + 2 * j], w[SUM_V + 1 + 2 * j]);
+                }
+                if layout.energy {
+                    let k = layout.energy_word(c);
+                    e[4] = value_of(solvent[k], solvent[k + 1]);
                 }
                 e
             })
@@ -205,15 +227,20 @@ impl Node for MpcdBinSolute {
             cs[4] += round_even(e * self.u.fix_e as f64 * ratio);
         }
         let o = &mut rest[0].data;
+        o.fill(0.0);
         for (c, cs) in sums.iter().enumerate() {
-            let w = &mut o[c * cw..(c + 1) * cw];
-            w[0] = cs[0] as f64;
-            for j in 0..4 {
-                w[1 + 2 * j..3 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
+            let b = layout.cell(c);
+            o[b..b + 2].copy_from_slice(&words_of(cs[0]));
+            for j in 0..3 {
+                o[b + SUM_V + 2 * j..b + SUM_V + 2 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
             }
-            o[nc * cw + c] = counts[c] as f64;
+            if layout.energy {
+                let k = layout.energy_word(c);
+                o[k..k + 2].copy_from_slice(&words_of(cs[4]));
+            }
+            o[layout.solute_word(c)] = counts[c] as f64;
         }
-        o[nc * (cw + 1)] = self.u.ratio.to_bits() as f64;
+        o[layout.solute_word(nc)] = self.u.ratio.to_bits() as f64;
     }
 }
 
@@ -231,6 +258,11 @@ impl GpuKernels for MpcdBinSolute {
         };
         let mut u = self.u;
         u.n = n;
+        u.energy = u32::from(
+            SumsLayout::of_words(self.geo.ncells(), solvent.ty.words())
+                .expect("checked in infer")
+                .energy,
+        );
         let bindings = [
             Binding::Uniform,
             Binding::StorageRead,

@@ -1,17 +1,17 @@
+// template: composed after mpcd/sums_int64.wgsl or mpcd/sums_int32.wgsl (nodes/mpcd/collide.rs).
+//
 // MPCD binning, one thread per particle: the cell of each particle in the randomly shifted
-// grid of this step, and per cell the count, sum v and sum |v|^2 as exact 64-bit
-// fixed-point sums (mpcd/common.wgsl), by atomics. The sums start at zero (a fill before).
+// grid of this step, and per cell the count, sum v and (with `energy`) sum |v|^2 as exact
+// 64-bit fixed-point sums (mpcd/common.wgsl), by atomics. The sums start at zero (a fill
+// before). The file composed before it declares binding 5 and the add_* functions.
 #import common/index.wgsl
 #import mpcd/common.wgsl
-#import mpcd/add64.wgsl
 
 @group(0) @binding(0) var<uniform> m: Mpcd;
 @group(0) @binding(1) var<storage, read> clock: array<u32>;
 @group(0) @binding(2) var<storage, read> pos: array<f32>;
 @group(0) @binding(3) var<storage, read> vel: array<f32>;
 @group(0) @binding(4) var<storage, read_write> cell: array<u32>;
-@group(0) @binding(5) var<storage, read_write> sums64: array<atomic<u32>>;
-
 
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -30,10 +30,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let c = cell_of(m, x, s);
     cell[p] = c;
     let base = c * CELL_WORDS;
-    atomicAdd(&sums64[base], 1u);
+    add_count(base);
     for (var a = 0u; a < DIMS; a = a + 1u) {
-        add64(base + 1u + 2u * a, fx_of_i32(fx_round(v[a] * m.fix_v)));
+        add_signed(base + SUM_V + 2u * a, fx_round(v[a] * m.fix_v));
     }
-    let e = u32(round(min(dot(v, v) * m.fix_e, 4294967040.0)));
-    add64(base + 7u, vec2<u32>(e, 0u));
+    if (m.energy == 1u) {
+        add_unsigned(energy_word(m, c), u32(round(min(dot(v, v) * m.fix_e, 4294967040.0))));
+    }
 }

@@ -1,8 +1,9 @@
 // MPCD binning of a solute (particles of mass M = ratio * m) into the cell sums of the
 // solvent (mpcd_bin), one thread per solute particle. `copy` first writes the solvent's
-// 9 words per cell, zero solute counts and the f32 bits of M / m; `main` then adds each
-// solute particle: count + 1 in the solute block (word 9 ncells + c), round(ratio v fix_v)
-// to the cell's velocity sums and round(ratio |v|^2 fix_e) to its energy sum (exact 64-bit
+// sums (cell blocks and, when present, energies), zero solute counts and the f32 bits of
+// M / m; `main` then adds each solute particle: count + 1 in the solute block
+// (solute_base + c), round(ratio v fix_v) to the cell's velocity sums and, with energies,
+// round(ratio |v|^2 fix_e) to its energy sum (exact 64-bit
 // integer sums, order independent), so the cell means become mass-weighted:
 // u = (m sum v + M sum V) / (m n + M n_s). The grid shift is the solvent's (the same seed,
 // stream and step), SRD width a.
@@ -33,7 +34,7 @@ fn fx_of_signed(x: f32) -> vec2<u32> {
 fn copy(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wid, nwg, lid, 256u);
-    let words = m.ncells * CELL_WORDS;
+    let words = solute_base(m);
     if (i < words) {
         atomicStore(&sums64[i], solvent[i]);
     } else if (i < words + m.ncells) {
@@ -60,9 +61,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let c = cell_of(m, x, s);
     cell[p] = c;
     let base = c * CELL_WORDS;
-    atomicAdd(&sums64[m.ncells * CELL_WORDS + c], 1u);
+    atomicAdd(&sums64[solute_base(m) + c], 1u);
     for (var a = 0u; a < DIMS; a = a + 1u) {
-        add64(base + 1u + 2u * a, fx_of_signed((v[a] * m.fix_v) * m.ratio));
+        add64(base + SUM_V + 2u * a, fx_of_signed((v[a] * m.fix_v) * m.ratio));
     }
-    add64(base + 7u, fx_of_f32((dot(v, v) * m.fix_e) * m.ratio));
+    if (m.energy == 1u) {
+        add64(energy_word(m, c), fx_of_f32((dot(v, v) * m.fix_e) * m.ratio));
+    }
 }

@@ -38,7 +38,7 @@ fn cell_mean(c: u32) -> vec4<f32> {
     let n = f32(sums[base]);
     var sv = vec3<f32>(0.0);
     for (var a = 0u; a < DIMS; a = a + 1u) {
-        sv[a] = fx_to_f32(pair(base + 1u + 2u * a));
+        sv[a] = fx_to_f32(pair(base + SUM_V + 2u * a));
     }
     return vec4<f32>(sv / (max(n, 1.0) * m.fix_v), n);
 }
@@ -121,16 +121,20 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     // sums; the solute's velocity sums are already weighted by M / m).
     var mass_n = n;
     if (m.solute == 1u) {
-        mass_n = n + bitcast<f32>(sums[m.ncells * (CELL_WORDS + 1u)]) * f32(sums[m.ncells * CELL_WORDS + c]);
+        let sb = solute_base(m);
+        mass_n = n + bitcast<f32>(sums[sb + m.ncells]) * f32(sums[sb + c]);
     }
     var sv = vec3<f32>(0.0);
     var v = vec3<f32>(0.0);
     for (var a = 0u; a < DIMS; a = a + 1u) {
-        sv[a] = fx_to_f32(pair(base + 1u + 2u * a));
+        sv[a] = fx_to_f32(pair(base + SUM_V + 2u * a));
         v[a] = vel[p * DIMS + a];
     }
     var u = sv / (mass_n * m.fix_v);
-    let rel = max(fx_to_f32(pair(base + 7u)) / m.fix_e - mass_n * dot(u, u), 0.0);
+    var rel = 0.0;
+    if (m.thermostat != 0u) {
+        rel = max(fx_to_f32(pair(energy_word(m, c))) / m.fix_e - mass_n * dot(u, u), 0.0);
+    }
     var scale = 1.0;
     let layer = cell_layer(m, c);
     let cut = m.rule == 0u && m.walls == 1u && m.shift == 1u && (layer == 0u || layer == m.cells[DIMS - 1u] - 1u);

@@ -44,11 +44,25 @@ struct Mpcd {
     half_sin: f32,
     solute: u32,           // 1: the cell sums carry a solute (mpcd_bin_solute's layout)
     ratio: f32,            // solute mass over solvent mass M / m
-    pad2: u32,
+    energy: u32,           // 1: the cell sums carry sum |v|^2 per cell (for a thermostat)
 }
 
-// Words per cell of the cell sums: count, sum v (DIMS = up to 3 pairs), sum |v|^2 (a pair).
-const CELL_WORDS: u32 = 9u;
+// The cell sums (nodes/mpcd/mod.rs, SumsLayout): per cell CELL_WORDS words, the count and
+// sum v as 64-bit pairs ([0, 1] count, [SUM_V + 2a, SUM_V + 2a + 1] sum v_a): 32 bytes, one
+// aligned sector; then with `energy` the pair of sum |v|^2 per cell; then with a solute the
+// solute count per cell and the f32 bits of M / m.
+const CELL_WORDS: u32 = 8u;
+const SUM_V: u32 = 2u;
+
+// The low word of cell c's sum |v|^2.
+fn energy_word(m: Mpcd, c: u32) -> u32 {
+    return m.ncells * CELL_WORDS + 2u * c;
+}
+
+// The first word after the cells' blocks and energies: the solute counts.
+fn solute_base(m: Mpcd) -> u32 {
+    return m.ncells * (CELL_WORDS + 2u * m.energy);
+}
 
 // The 64-bit two's complement pair of an i32.
 fn fx_of_i32(q: i32) -> vec2<u32> {

@@ -1,11 +1,12 @@
 // MPCD observables, accumulated on sampled steps (step >= warmup, every `every` steps)
 // into a persistent block of u32 words (64-bit fixed-point pairs, mpcd/common.wgsl):
-//   [0] samples, [1 + 2a] sum of v_a over particles and samples, [7] sum over cells of
-//   sum |v - u_c|^2 (the cell sums before the collision), [9] sum over occupied cells of
-//   n_c - 1, then per profile bin b: [11 + 4b] sum of v_x, [13 + 4b] particle count.
-// `cells`: one thread per cell (temperature terms, summed in the workgroup first);
+//   [0] samples, [1 + 2a] sum of v_a over particles and samples, [7] sum over particles of
+//   |v - u_c|^2 before the collision (u_c from the cell sums), [9] sum over occupied cells
+//   of n_c - 1, then per profile bin b: [11 + 4b] sum of v_x, [13 + 4b] particle count.
+// `cells`: one thread per cell (degrees of freedom, summed in the workgroup first);
 // `particles`: one thread per particle (momentum and profile, summed exactly in
-// workgroup memory as 16-bit split integers, then one 64-bit atomic per bin).
+// workgroup memory as 16-bit split integers, then one 64-bit atomic per bin; the relative
+// squares summed in the workgroup in f32, then one 64-bit atomic).
 #import common/index.wgsl
 #import mpcd/common.wgsl
 #import mpcd/add64.wgsl
@@ -17,7 +18,9 @@ const MAX_BINS: u32 = 1024u;
 @group(0) @binding(2) var<storage, read> pos: array<f32>;
 @group(0) @binding(3) var<storage, read> vel: array<f32>;
 @group(0) @binding(4) var<storage, read> sums: array<u32>;
-@group(0) @binding(5) var<storage, read_write> sums64: array<atomic<u32>>;
+@group(0) @binding(5) var<storage, read> cell: array<u32>;
+@group(0) @binding(6) var<storage, read> before: array<f32>;
+@group(0) @binding(7) var<storage, read_write> sums64: array<atomic<u32>>;
 
 var<workgroup> rel_sum: array<f32, 256>;
 var<workgroup> dof_sum: array<u32, 256>;
@@ -37,35 +40,22 @@ fn cells(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
          @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wid, nwg, lid, 256u);
     let on = sampled(clock[0]);
-    var rel = 0.0;
     var dof = 0u;
     if (on && i < m.ncells) {
-        let base = i * CELL_WORDS;
-        let count = sums[base];
+        let count = sums[i * CELL_WORDS];
         if (count > 0u) {
-            let n = f32(count);
-            var sv = vec3<f32>(0.0);
-            for (var a = 0u; a < DIMS; a = a + 1u) {
-                sv[a] = fx_to_f32(vec2<u32>(sums[base + 1u + 2u * a], sums[base + 2u + 2u * a]));
-            }
-            let u = sv / (n * m.fix_v);
-            let se = fx_to_f32(vec2<u32>(sums[base + 7u], sums[base + 8u])) / m.fix_e;
-            rel = max(se - n * dot(u, u), 0.0);
             dof = count - 1u;
         }
     }
-    rel_sum[lid] = rel;
     dof_sum[lid] = dof;
     workgroupBarrier();
     for (var w = 128u; w > 0u; w = w >> 1u) {
         if (lid < w) {
-            rel_sum[lid] = rel_sum[lid] + rel_sum[lid + w];
             dof_sum[lid] = dof_sum[lid] + dof_sum[lid + w];
         }
         workgroupBarrier();
     }
     if (on && lid == 0u) {
-        add64(7u, fx_of_f32(rel_sum[0] * m.fix_e));
         add64(9u, vec2<u32>(dof_sum[0], 0u));
         if (i == 0u) {
             atomicAdd(&sums64[0], 1u);
@@ -88,7 +78,25 @@ fn particles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg
         atomicStore(&mom_lo[lid], 0u);
         atomicStore(&mom_hi[lid], 0);
     }
+    var rel = 0.0;
+    if (on && p < m.n) {
+        let base = cell[p] * CELL_WORDS;
+        let n = f32(sums[base]);
+        var d = vec3<f32>(0.0);
+        for (var a = 0u; a < DIMS; a = a + 1u) {
+            let sv = fx_to_f32(vec2<u32>(sums[base + SUM_V + 2u * a], sums[base + SUM_V + 1u + 2u * a]));
+            d[a] = before[p * DIMS + a] - sv / (n * m.fix_v);
+        }
+        rel = dot(d, d);
+    }
+    rel_sum[lid] = rel;
     workgroupBarrier();
+    for (var w = 128u; w > 0u; w = w >> 1u) {
+        if (lid < w) {
+            rel_sum[lid] = rel_sum[lid] + rel_sum[lid + w];
+        }
+        workgroupBarrier();
+    }
     if (on && p < m.n) {
         let w = DIMS - 1u;
         for (var a = 0u; a < DIMS; a = a + 1u) {
@@ -116,5 +124,8 @@ fn particles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg
     }
     if (lid < DIMS) {
         add64(1u + 2u * lid, fx_compose(atomicLoad(&mom_hi[lid]), atomicLoad(&mom_lo[lid])));
+    }
+    if (lid == 0u) {
+        add64(7u, fx_of_f32(rel_sum[0] * m.fix_e));
     }
 }

@@ -35,6 +35,9 @@ pub struct DeviceCaps {
     pub driver: String,
     /// `atomic<f32>` add on storage buffers (not workgroup memory).
     pub f32_atomics: bool,
+    /// `atomic<u64>` / `atomic<i64>` add on storage buffers (exact fixed-point sums in one
+    /// return-less atomic instead of a 32-bit add and a carry).
+    pub int64_atomics: bool,
     /// Subgroup operations, with the (min, max) subgroup size the kernel must cope with.
     pub subgroups: Option<(u32, u32)>,
     pub timestamps: bool,
@@ -56,6 +59,7 @@ impl DeviceCaps {
             device_type: "none".into(),
             driver: String::new(),
             f32_atomics: false,
+            int64_atomics: false,
             subgroups: None,
             timestamps: false,
             f64: false,
@@ -72,6 +76,9 @@ impl DeviceCaps {
         let mut feats = Vec::new();
         if self.f32_atomics {
             feats.push("f32-atomics".to_string());
+        }
+        if self.int64_atomics {
+            feats.push("i64-atomics".to_string());
         }
         if let Some((a, b)) = self.subgroups {
             feats.push(format!("subgroups {a}..{b}"));
@@ -135,7 +142,8 @@ impl GpuContext {
             | wgpu::Features::TIMESTAMP_QUERY
             | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS
             | wgpu::Features::SHADER_F64
-            | wgpu::Features::SHADER_INT64;
+            | wgpu::Features::SHADER_INT64
+            | wgpu::Features::SHADER_INT64_ATOMIC_ALL_OPS;
         let features = adapter.features() & want;
         let lim = adapter.limits();
         let required_limits = wgpu::Limits {
@@ -176,6 +184,9 @@ impl GpuContext {
                 .trim()
                 .to_string(),
             f32_atomics: features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC),
+            int64_atomics: features.contains(
+                wgpu::Features::SHADER_INT64 | wgpu::Features::SHADER_INT64_ATOMIC_ALL_OPS,
+            ),
             subgroups: features
                 .contains(wgpu::Features::SUBGROUP)
                 .then_some((info.subgroup_min_size, info.subgroup_max_size)),

@@ -10,7 +10,7 @@ use mesoflow::exec::{Profile, Program, RunOptions};
 use mesoflow::expr::ParamValue;
 use mesoflow::gpu::KernelCache;
 use mesoflow::graph::{self, Graph, LoadOptions};
-use mesoflow::nodes::mpcd::{CELL_WORDS, value_of};
+use mesoflow::nodes::mpcd::{CELL_WORDS, SUM_V, SumsLayout, value_of};
 use mesoflow::nodes::random;
 use mesoflow::plan::{self, PlanOptions};
 use mesoflow::value::{HostArray, ValueType};
@@ -314,11 +314,33 @@ fn collide_graph(
     geometry: &str,
     collide: &str,
 ) -> Graph {
+    collide_graph_with(dir, n, d, geometry, "", collide)
+}
+
+/// As `collide_graph`, with `bin` added to mpcd_bin's params; mpcd_bin gets the
+/// collision's thermostat (it sums |v|^2 for one).
+fn collide_graph_with(
+    dir: &std::path::Path,
+    n: usize,
+    d: usize,
+    geometry: &str,
+    bin: &str,
+    collide: &str,
+) -> Graph {
+    let thermostat = ["rescale", "monte_carlo"]
+        .into_iter()
+        .find(|t| collide.contains(&format!(r#""thermostat": "{t}""#)))
+        .unwrap_or("none");
+    let bin = if bin.is_empty() {
+        format!(r#", "thermostat": "{thermostat}""#)
+    } else {
+        format!(r#", "thermostat": "{thermostat}", {bin}"#)
+    };
     let json = format!(
         r#"{{"mesoflow": 1,
   "inputs": {{"x": {{"type": "particles", "rows": {n}, "cols": {d}}}, "v": {{"type": "particles", "rows": {n}, "cols": {d}}}}},
   "nodes": [
-    {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}, "seed": 7, "stream": 2}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
+    {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}{bin}, "seed": 7, "stream": 2}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
     {{"id": "collide", "kind": "mpcd_collide", "params": {{{geometry}, {collide}, "seed": 7, "stream": 3}}, "inputs": {{"velocities": "inputs.v", "cell": "bin.cell", "sums": "bin.sums"}}}}
   ],
   "outputs": {{"cell": "bin.cell", "sums": "bin.sums", "v": "collide.velocities"}}}}"#
@@ -361,13 +383,42 @@ fn binning_uses_the_shifted_grid_and_exact_sums() {
         let (x, v) = random_particles(&mut rng, n, &l);
         let geometry =
             format!(r#""box": {l:?}, "cell": 1, "walls": "{walls}", "temperature": 1, "mass": 1"#);
-        let g = collide_graph(&dir, n, d, &geometry, r#""angle": 130"#);
         let inputs: BTreeMap<String, HostArray> = [
             ("x".to_string(), particles(&x)),
             ("v".to_string(), particles(&v)),
         ]
         .into();
-        let out = run_loaded(&g, &inputs, &["cell", "sums"], 1);
+        // Native 64-bit atomics (where the adapter has them) and 32-bit pairs give the
+        // same exact integers; without a thermostat the energy block is left out.
+        let int64 = gpu().is_some_and(|g| g.caps.int64_atomics);
+        let bin = |atomics: &str, thermostat: &str| {
+            let g = collide_graph_with(
+                &dir,
+                n,
+                d,
+                &geometry,
+                &format!(r#""atomics": "{atomics}""#),
+                &format!(r#""angle": 130, "thermostat": "{thermostat}""#),
+            );
+            run_loaded(&g, &inputs, &["cell", "sums"], 1)
+        };
+        let out = bin("int32", "rescale");
+        if int64 {
+            let native = bin("int64", "rescale");
+            assert_eq!(
+                u32s(&native["sums"]),
+                u32s(&out["sums"]),
+                "{walls} {d}D int64"
+            );
+            assert_eq!(u32s(&native["cell"]), u32s(&out["cell"]));
+        }
+        let plain = bin("auto", "none");
+        let ncells_all = u32s(&out["sums"]).len() / (CELL_WORDS as usize + 2);
+        assert_eq!(
+            u32s(&plain["sums"]),
+            u32s(&out["sums"])[..ncells_all * CELL_WORDS as usize],
+            "{walls} {d}D: the sums without a thermostat are the first block"
+        );
         let cells = u32s(&out["cell"]);
         // The shift of step 0: Philox block 0 of (seed 7, stream 2), words 0..d, each mapped
         // to [-a/2, a/2).
@@ -404,18 +455,30 @@ fn binning_uses_the_shifted_grid_and_exact_sums() {
         let m = cell_moments(&cells, &rows(&particles(&v), d), ncells as usize);
         let sums = u32s(&out["sums"]);
         let (fix_v, fix_e) = (16_777_216.0, 65_536.0);
+        let layout = SumsLayout {
+            ncells,
+            energy: true,
+            solute: false,
+        };
+        assert_eq!(sums.len() as u64, layout.words());
         for c in 0..ncells as usize {
-            let w = &sums[c * CELL_WORDS as usize..(c + 1) * CELL_WORDS as usize];
-            assert_eq!(w[0] as f64, m[c].0, "count of cell {c}");
-            for a in 0..d {
-                let gpu_sum = value_of(w[1 + 2 * a] as f64, w[2 + 2 * a] as f64) as f64 / fix_v;
+            let w = &sums[layout.cell(c)..layout.cell(c) + CELL_WORDS as usize];
+            assert_eq!(
+                value_of(w[0] as f64, w[1] as f64) as f64,
+                m[c].0,
+                "count of cell {c}"
+            );
+            for a in 0..3 {
+                let gpu_sum =
+                    value_of(w[SUM_V + 2 * a] as f64, w[SUM_V + 1 + 2 * a] as f64) as f64 / fix_v;
+                let want = if a < d { m[c].1[a] } else { 0.0 };
                 assert!(
-                    (gpu_sum - m[c].1[a]).abs() <= (0.5 * m[c].0 + 1.0) / fix_v,
-                    "cell {c} axis {a}: {gpu_sum} vs {}",
-                    m[c].1[a]
+                    (gpu_sum - want).abs() <= (0.5 * m[c].0 + 1.0) / fix_v,
+                    "cell {c} axis {a}: {gpu_sum} vs {want}"
                 );
             }
-            let gpu_e = value_of(w[7] as f64, w[8] as f64) as f64 / fix_e;
+            let e = layout.energy_word(c);
+            let gpu_e = value_of(sums[e] as f64, sums[e + 1] as f64) as f64 / fix_e;
             // f32 |v|^2 (relative 2^-23) then rounding to the unit.
             assert!(
                 (gpu_e - m[c].2).abs() <= m[c].0 / fix_e + 3e-7 * m[c].2,
@@ -473,7 +536,8 @@ fn srd_collision_conserves_cell_momentum_and_energy_and_matches_the_f64_referenc
         let cells = u32s(&out["cell"]);
         let vin = rows(&particles(&v), d);
         let vout = rows(&out["v"], d);
-        let ncells = out["sums"].ty.words() as usize / CELL_WORDS as usize;
+        let layers = l[d - 1] as usize + usize::from(walls == "plates");
+        let ncells = l[..d - 1].iter().map(|&x| x as usize).product::<usize>() * layers;
         let before = cell_moments(&cells, &vin, ncells);
         let after = cell_moments(&cells, &vout, ncells);
         let layers = if walls == "plates" {
@@ -863,10 +927,10 @@ fn measure_and_average_match_their_f64_references() {
   "inputs": {{"x": {{"type": "particles", "rows": {n}, "cols": 3}}, "v": {{"type": "particles", "rows": {n}, "cols": 3}}}},
   "nodes": [
     {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}, "shift": false}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
-    {{"id": "measure", "kind": "mpcd_measure", "params": {{{geometry}, "bins": 7}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v", "sums": "bin.sums"}}}},
+    {{"id": "measure", "kind": "mpcd_measure", "params": {{{geometry}, "bins": 7}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v", "sums": "bin.sums", "cell": "bin.cell", "before": "inputs.v"}}}},
     {{"id": "average", "kind": "mpcd_average", "params": {{{geometry}, "bins": 7}}, "inputs": {{"sums": "measure.sums"}}}}
   ],
-  "outputs": {{"sums": "bin.sums", "acc": "measure.sums", "profile": "average.profile", "temperature": "average.temperature", "momentum": "average.momentum"}}}}"#
+  "outputs": {{"sums": "bin.sums", "cell": "bin.cell", "acc": "measure.sums", "profile": "average.profile", "temperature": "average.temperature", "momentum": "average.momentum"}}}}"#
     );
     let g = crate::util::load(&write_graph(&dir, "measure.json", &json));
     let inputs: BTreeMap<String, HostArray> = [
@@ -878,7 +942,7 @@ fn measure_and_average_match_their_f64_references() {
     let out = run_loaded(
         &g,
         &inputs,
-        &["sums", "acc", "profile", "temperature", "momentum"],
+        &["sums", "cell", "acc", "profile", "temperature", "momentum"],
         3,
     );
     let p = format!("{{{geometry}, \"bins\": 7}}");
@@ -898,6 +962,8 @@ fn measure_and_average_match_their_f64_references() {
             Some(particles(&x).to_ref()),
             Some(particles(&v).to_ref()),
             Some(out["sums"].to_ref()),
+            Some(out["cell"].to_ref()),
+            Some(particles(&v).to_ref()),
         ];
         for step in 0..3 {
             node.cpu_reference(
@@ -1404,8 +1470,12 @@ fn solute_collision_conserves_mass_weighted_cell_momentum_and_energy_and_matches
         let scells = u32s(&out["scell"]);
         let ssums = u32s(&out["ssums"]);
         let ncells = out["sums"].ty.words() as usize / CELL_WORDS as usize;
-        let cw = CELL_WORDS as usize;
-        assert_eq!(ssums.len(), ncells * (cw + 1) + 1);
+        let layout = SumsLayout {
+            ncells: ncells as u32,
+            energy: false,
+            solute: true,
+        };
+        assert_eq!(ssums.len() as u64, layout.words());
         assert_eq!(f32::from_bits(ssums[ssums.len() - 1]), ratio as f32);
 
         // Binning against the f64 reference: the same cells (the solvent's grid shift),
@@ -1430,24 +1500,17 @@ fn solute_collision_conserves_mass_weighted_cell_momentum_and_energy_and_matches
             compared += 1;
             let rs = &sref[1].data;
             for c in 0..ncells {
-                let ns_c = ssums[ncells * cw + c] as f64;
-                assert_eq!(rs[ncells * cw + c], ns_c, "solute count of cell {c}");
-                assert_eq!(rs[c * cw], ssums[c * cw] as f64, "count of cell {c}");
-                for j in 0..4 {
-                    let g = value_of(
-                        ssums[c * cw + 1 + 2 * j] as f64,
-                        ssums[c * cw + 2 + 2 * j] as f64,
-                    );
-                    let r = value_of(rs[c * cw + 1 + 2 * j], rs[c * cw + 2 + 2 * j]);
-                    // Velocity words: f32 products emulated exactly, ties aside (1 unit);
-                    // energy: f32 |v|^2 (2^-22 relative of <= 2^20 units) rounded: 2 units.
-                    let tol = if j < 3 {
-                        ns_c
-                    } else {
-                        2.0 * ns_c + 1e-6 * r.abs() as f64
-                    };
+                let ns_c = ssums[layout.solute_word(c)] as f64;
+                assert_eq!(rs[layout.solute_word(c)], ns_c, "solute count of cell {c}");
+                let b = layout.cell(c);
+                assert_eq!(rs[b], ssums[b] as f64, "count of cell {c}");
+                for j in 0..3 {
+                    let w = b + SUM_V + 2 * j;
+                    let g = value_of(ssums[w] as f64, ssums[w + 1] as f64);
+                    let r = value_of(rs[w], rs[w + 1]);
+                    // f32 products emulated exactly, ties aside (1 unit per solute).
                     assert!(
-                        ((g - r) as f64).abs() <= tol,
+                        ((g - r) as f64).abs() <= ns_c,
                         "cell {c} word {j}: {g} vs {r}"
                     );
                 }
@@ -1584,8 +1647,8 @@ fn solute_refuses_thermostats_biased_collisions_and_mismatched_sums() {
     assert!(
         e.contains("bin_solute")
             && e.contains("sums")
-            && e.contains("864 words")
-            && e.contains("576"),
+            && e.contains("768 or 960 words")
+            && e.contains("512"),
         "{e}"
     );
     let _ = std::fs::remove_dir_all(&dir);
@@ -1727,4 +1790,81 @@ fn sorting_particles_by_cell_changes_only_their_order() {
     assert_eq!(plain.len(), 6 * 6 * 6 * 5);
     assert_eq!(plain, sorted, "the same particles");
     assert_ne!(plain_x, sorted_x, "in another order");
+}
+
+#[test]
+fn solute_binning_adds_to_the_energy_sums_when_the_solvent_has_them() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("mpcd-solute-energy");
+    let mut rng = Rng::new(23);
+    let l = vec![5.0, 4.0, 3.0];
+    let (n, ns) = (600, 40);
+    let (x, v) = random_particles(&mut rng, n, &l);
+    let (xs, vs) = random_particles(&mut rng, ns, &l);
+    let geometry =
+        r#""box": [5.0, 4.0, 3.0], "cell": 1, "walls": "none", "mass": 1, "temperature": 1"#;
+    let json = format!(
+        r#"{{"mesoflow": 1,
+  "inputs": {{"x": {{"type": "particles", "rows": {n}, "cols": 3}}, "v": {{"type": "particles", "rows": {n}, "cols": 3}},
+             "xs": {{"type": "particles", "rows": {ns}, "cols": 3}}, "vs": {{"type": "particles", "rows": {ns}, "cols": 3}}}},
+  "nodes": [
+    {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}, "thermostat": "rescale", "seed": 7, "stream": 2}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
+    {{"id": "bin_solute", "kind": "mpcd_bin_solute", "params": {{{geometry}, "solute_mass": 2.5, "seed": 7, "stream": 2}}, "inputs": {{"sums": "bin.sums", "positions": "inputs.xs", "velocities": "inputs.vs"}}}}
+  ],
+  "outputs": {{"sums": "bin.sums", "scell": "bin_solute.cell", "ssums": "bin_solute.sums"}}}}"#
+    );
+    let g = crate::util::load(&write_graph(&dir, "energy.json", &json));
+    let inputs: BTreeMap<String, HostArray> = [
+        ("x".to_string(), particles(&x)),
+        ("v".to_string(), particles(&v)),
+        ("xs".to_string(), particles(&xs)),
+        ("vs".to_string(), particles(&vs)),
+    ]
+    .into();
+    let out = run_loaded(&g, &inputs, &["sums", "scell", "ssums"], 1);
+    let layout = SumsLayout {
+        ncells: 60,
+        energy: true,
+        solute: true,
+    };
+    let ssums = u32s(&out["ssums"]);
+    assert_eq!(ssums.len() as u64, layout.words());
+    let sref = reference(
+        "mpcd_bin_solute",
+        &format!(r#"{{{geometry}, "solute_mass": 2.5, "seed": 7, "stream": 2}}"#),
+        &[
+            Some(&out["sums"]),
+            Some(&particles(&xs)),
+            Some(&particles(&vs)),
+        ],
+    );
+    let ref_cells: Vec<u32> = sref[0].data.iter().map(|&c| c as u32).collect();
+    assert_eq!(ref_cells, u32s(&out["scell"]), "solute cells");
+    let (solvent, rs) = (u32s(&out["sums"]), &sref[1].data);
+    let mut with_solute = 0;
+    for c in 0..60 {
+        let ns_c = ssums[layout.solute_word(c)] as f64;
+        assert_eq!(rs[layout.solute_word(c)], ns_c, "solute count of cell {c}");
+        let e = layout.energy_word(c);
+        let (g, r) = (
+            value_of(ssums[e] as f64, ssums[e + 1] as f64),
+            value_of(rs[e], rs[e + 1]),
+        );
+        // f32 |v|^2 M/m (2^-22 relative of <= 2^20 units) rounded: 2 units per solute.
+        assert!(
+            ((g - r) as f64).abs() <= 2.0 * ns_c + 1e-6 * r.abs() as f64,
+            "cell {c} energy: {g} vs {r}"
+        );
+        let s = value_of(solvent[e] as f64, solvent[e + 1] as f64);
+        if ns_c > 0.0 {
+            with_solute += 1;
+            assert!(g > s, "cell {c}: the solute's energy is added");
+        } else {
+            assert_eq!(g, s, "cell {c}: no solute, the solvent's energy");
+        }
+    }
+    assert!(with_solute > 10);
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -9,7 +9,8 @@ fn validate(name: &str, src: &str) {
     let caps = naga::valid::Capabilities::FLOAT64
         | naga::valid::Capabilities::SHADER_FLOAT32_ATOMIC
         | naga::valid::Capabilities::SUBGROUP
-        | naga::valid::Capabilities::SHADER_INT64;
+        | naga::valid::Capabilities::SHADER_INT64
+        | naga::valid::Capabilities::SHADER_INT64_ATOMIC_ALL_OPS;
     let mut v = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), caps);
     v.subgroup_stages(naga::valid::ShaderStages::COMPUTE);
     v.subgroup_operations(naga::valid::SubgroupOperationSet::all());
@@ -30,6 +31,15 @@ fn every_shader_file_validates() {
         n += 1;
     }
     assert!(n >= 3);
+}
+
+#[test]
+fn mpcd_binning_validates_with_either_sum_atomics() {
+    for sums in ["mpcd/sums_int64.wgsl", "mpcd/sums_int32.wgsl"] {
+        let src = shaders::resolve(&format!("#import {sums}\n#import mpcd/bin.wgsl\n"))
+            .unwrap_or_else(|e| panic!("{sums}: {e}"));
+        validate(&format!("mpcd/bin.wgsl after {sums}"), &src);
+    }
 }
 
 #[test]
