@@ -294,13 +294,26 @@ impl CompileCtx<'_> {
     }
 
     /// A dispatch that sets the first `words` 4-byte words of `buffer` to `value` (a
-    /// node's first dispatch before accumulating into an output, say).
+    /// node's first dispatch before accumulating into an output, say), and, where the
+    /// buffer has room, up to 3 words past them (its padding: whole 16-byte stores).
     pub fn fill(
         &mut self,
         buffer: &wgpu::Buffer,
         words: u64,
         value: u32,
     ) -> Result<Dispatch, CompileError> {
+        // 16-byte stores where the buffer has room for whole quads (every engine buffer:
+        // sizes are multiples of 16), one word per thread otherwise.
+        let quads = words.div_ceil(4);
+        if buffer.size() >= quads * 16 {
+            let kernel = self.kernel(&KernelSpec::new(
+                "fill4",
+                self.shader("engine/fill4.wgsl")?,
+                &[Binding::StorageReadWrite, Binding::Uniform],
+            ))?;
+            let params = self.uniform("fill", bytemuck::cast_slice(&[quads as u32, value]));
+            return Ok(self.dispatch(&kernel, &[buffer, &params], self.grid_1d(quads, WG_1D)));
+        }
         let kernel = self.kernel(&KernelSpec::new(
             "fill",
             self.shader("engine/fill.wgsl")?,

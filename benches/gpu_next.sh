@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# The measurements waiting for a GPU (written 2026-12-01 evening, when none was lent):
+# one device call, from the repository root, with the kit and a release binary in .gpu/
+# (../shared/gpu/README.md). Each pair of rows compares a change with what it replaced,
+# in the same call:
+#   - MPCD cell sums: native 64-bit atomics on 32-byte cells without the energy block
+#     (the default now) against int32 pairs (`--set atomics=int32`, the old atomics on the
+#     new layout); per dispatch, unsorted and sorted.
+#   - The 16-byte fill (engine/fill4.wgsl) shows in every clear: FCM's grid clear at 384^3
+#     (0.44 ms on the H100 with the 4-byte fill), MPCD's sums clear.
+#   - FCM, spread and PSE tables again (the fill is in all of them).
+# A torch copy in the same call gives the copy bandwidth. Output also in $OUT/bench.log.
+set -uo pipefail
+source .gpu/gpu-env.sh
+export PYTHONUNBUFFERED=1
+bin=.gpu/mesoflow
+log=${OUT:-/tmp}/bench.log
+: > "$log"
+run() { echo "== $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
+echo "date: $(date -u +%Y-%m-%dT%H:%MZ)" | tee -a "$log"
+nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee -a "$log"
+run $bin info
+export MESOFLOW_BENCH_DISPATCHES=1
+run $bin bench mpcd --reps 20
+run $bin bench mpcd --reps 20 --set atomics=int32
+run $bin bench mpcd --reps 20 --sizes 10000000,50000000 --set sort_particles=true
+run $bin bench fcm --tolerances 1e-3 --reps 20
+unset MESOFLOW_BENCH_DISPATCHES
+run $bin bench fcm --noise --reps 20
+run $bin bench spread --cells 128 --reps 20 --workgroups 256
+run $bin bench pse --noise --reps 20
+run python3 benches/torch_primitives.py
+exit 0
