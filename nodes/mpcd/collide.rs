@@ -286,7 +286,7 @@ impl NodeKind for MpcdCollideKind {
     }
 
     fn doc(&self) -> &'static str {
-        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC). With mpcd_bin_solute's sums u_c is the mass-weighted mean of solvent and solute (plain SRD only), and the node run with the same params on the solute's velocities and cells rotates the solute by the same rotation of each cell"
+        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC). With mpcd_bin_solute's sums (SRD) u_c is the mass-weighted mean of solvent and solute, the thermostat counts both species, and the node run with the same params on the solute's velocities and cells rotates and scales the solute by the same rotation and factor of each cell"
     }
 
     fn inputs(&self) -> Vec<PortSpec> {
@@ -606,25 +606,14 @@ impl Node for MpcdCollide {
                 "carries no sums of |v|^2, which the thermostat needs: give mpcd_bin the same `thermostat`",
             ));
         }
-        if layout.solute {
-            let refuse = if self.u.rule == 1 {
-                Some("rule `biased`")
-            } else if self.u.thermostat != 0 {
-                Some("a thermostat")
-            } else if self.geo.walls && self.u.shift == 1 && self.u.ghosts == 1 {
-                Some("virtual particles (ghosts true with plates)")
-            } else {
-                None
-            };
-            if let Some(what) = refuse {
-                return Err(PortError::new(
-                    "sums",
-                    format!(
-                        "carries a solute (mpcd_bin_solute's {} words), which supports plain SRD only, not {what}",
-                        layout.words()
-                    ),
-                ));
-            }
+        if layout.solute && self.u.rule == 1 {
+            return Err(PortError::new(
+                "sums",
+                format!(
+                    "carries a solute (mpcd_bin_solute's {} words), which rule `biased` does not take (its acceptance rule is defined for one species); use srd",
+                    layout.words()
+                ),
+            ));
         }
         Ok(Signature::outputs(vec![inputs[0].expect("checked")]))
     }
@@ -653,9 +642,9 @@ impl Node for MpcdCollide {
             let c = cells[p] as u32;
             let s = &sums[(c * CELL_WORDS) as usize..((c + 1) * CELL_WORDS) as usize];
             let count = s[0];
-            let mass_n = match solute {
-                Some((ratio, ns)) => count + ratio * ns[c as usize],
-                None => count,
+            let (mass_n, count_all) = match solute {
+                Some((ratio, ns)) => (count + ratio * ns[c as usize], count + ns[c as usize]),
+                None => (count, count),
             };
             let mut u = [0.0; 3];
             for a in 0..d {
@@ -683,10 +672,11 @@ impl Node for MpcdCollide {
                 let sd = (self.kt / (self.mass * (self.density - count))).sqrt();
                 let q = [r0 * t0.cos() * sd, r0 * t0.sin() * sd, r1 * t1.cos() * sd];
                 for a in 0..d {
-                    u[a] = (count * u[a] + (self.density - count) * q[a]) / self.density;
+                    u[a] = (mass_n * u[a] + (self.density - count) * q[a])
+                        / (mass_n + self.density - count);
                 }
-            } else if self.u.thermostat != 0 && count >= 2.0 && rel > 0.0 {
-                let dof = d as f64 * (count - 1.0);
+            } else if self.u.thermostat != 0 && count_all >= 2.0 && rel > 0.0 {
+                let dof = d as f64 * (count_all - 1.0);
                 if self.u.thermostat == 1 {
                     scale = (dof * self.kt / (self.mass * rel)).sqrt();
                 } else {

@@ -17,8 +17,10 @@
 //! (and appends the solute count per cell and M / m), so that `mpcd_collide` uses the
 //! mass-weighted means u = (m sum v + M sum V) / (m n + M n_s); a second `mpcd_collide`
 //! with the same params on the solute's velocities and cells applies the same rotation of
-//! each cell (V' = u + R (V - u)). Plain SRD only: with solute sums, `mpcd_collide`
-//! refuses thermostats, MPCD-BC and virtual particles.
+//! each cell (V' = u + S R (V - u)). The cell thermostat S counts the relative energy and
+//! degrees of freedom of both species; virtual particles in wall-cut cells add to the
+//! cell's mass. SRD only: with solute sums, `mpcd_collide` refuses MPCD-BC (its acceptance
+//! rule is defined for one species).
 //!
 //! Conventions: the box is centred at the origin, particle arrays are (N, d) with d = 2 or 3
 //! (the length of `box`), the body force acts along x, and walls (`plates`) are

@@ -23,7 +23,7 @@ impl NodeKind for MpcdBinSoluteKind {
     }
 
     fn doc(&self) -> &'static str {
-        "MPCD solute coupling: the cells of a second species of mass M in this step's shifted grid (the solvent's: same seed, stream and box) and the solvent's cell sums with the solute added, weighted by M / m (the mass-weighted cell means of mpcd_collide); SRD only, no thermostat or virtual particles"
+        "MPCD solute coupling: the cells of a second species of mass M in this step's shifted grid (the solvent's: same seed, stream and box) and the solvent's cell sums with the solute added, weighted by M / m (the mass-weighted cell means of mpcd_collide, its thermostat and virtual particles); SRD only"
     }
 
     fn inputs(&self) -> Vec<PortSpec> {

@@ -1,16 +1,18 @@
 // MPCD collision, one thread per particle. SRD: v <- u + S R (v - u), u the cell mean
 // from the cell sums, R the rotation by the angle about this cell's random axis (3D:
-// uniform on the sphere, as two reflections; 2D: by +-angle), S the cell thermostat factor (1, plain rescaling of the
-// relative velocities to kT, or the Monte-Carlo cell scaling). Each cell's draws come from
-// one Philox block keyed by (seed, stream + j, step, cell), so every particle of a cell
-// recomputes the same rotation without a pass over the cells. Wall-cut cells (first and
-// last layer along the walled axis, with the grid shift) holding fewer than `density`
-// particles are filled up to it with virtual particles: u <- (n u + (M - n) q) / M with
+// uniform on the sphere, as two reflections; 2D: by +-angle), S the cell thermostat
+// factor (1, plain rescaling of the relative velocities to kT, or the Monte-Carlo cell
+// scaling). Each cell's draws come from one Philox block keyed by (seed, stream + j, step,
+// cell), so every particle of a cell recomputes the same rotation without a pass over the
+// cells. Wall-cut cells (first and last layer along the walled axis, with the grid shift)
+// holding fewer than `density` solvent particles are filled up to it with virtual
+// particles: u <- (n_m u + (M - n) q) / (n_m + M - n), n_m the cell's mass in units of m,
 // q normal of variance kT / (m (M - n)) per component (the mean of M - n thermal
 // particles); those cells skip the thermostat. MPCD-BC (rule 1): the thermostat, then
-// `biased` below. With a solute (m.solute = 1, sums from mpcd_bin_solute; SRD without
-// thermostat or virtual particles) u is the mass-weighted mean, and the same kernel run on
-// the solute's velocities and cells applies the same rotation of each cell to it.
+// `biased` below. With a solute (m.solute = 1, sums from mpcd_bin_solute; SRD) u is the
+// mass-weighted mean, the thermostat counts the relative energy and the degrees of freedom
+// of both species, and the same kernel run on the solute's velocities and cells applies
+// the same rotation and scaling of each cell to it.
 #import common/index.wgsl
 #import mpcd/common.wgsl
 
@@ -119,10 +121,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let n = f32(count);
     // The cell's mass in units of m: n, plus (M / m) n_s with a solute (mpcd_bin_solute's
     // sums; the solute's velocity sums are already weighted by M / m).
+    // count_all: particles of both species (the thermostat's degrees of freedom).
     var mass_n = n;
+    var count_all = count;
     if (m.solute == 1u) {
         let sb = solute_base(m);
         mass_n = n + bitcast<f32>(sums[sb + m.ncells]) * f32(sums[sb + c]);
+        count_all = count + sums[sb + c];
     }
     var sv = vec3<f32>(0.0);
     var v = vec3<f32>(0.0);
@@ -145,12 +150,12 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         let t0 = 6.283185307179586 * philox_open01(g.y);
         let t1 = 6.283185307179586 * philox_open01(g.w);
         let q = vec3<f32>(r0 * cos(t0), r0 * sin(t0), r1 * cos(t1)) * sqrt(m.kt / (m.mass * (m.density - n)));
-        u = (n * u + (m.density - n) * q) / m.density;
+        u = (mass_n * u + (m.density - n) * q) / (mass_n + m.density - n);
         if (DIMS == 2u) {
             u.z = 0.0;
         }
-    } else if (m.thermostat != 0u && count >= 2u && rel > 0.0) {
-        let dof = f32(DIMS * (count - 1u));
+    } else if (m.thermostat != 0u && count_all >= 2u && rel > 0.0) {
+        let dof = f32(DIMS * (count_all - 1u));
         if (m.thermostat == 1u) {
             scale = sqrt(dof * m.kt / (m.mass * rel));
         } else {

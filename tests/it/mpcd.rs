@@ -1382,11 +1382,15 @@ fn solute_graph(
     collide: &str,
 ) -> String {
     let p = |rows: usize| format!(r#"{{"type": "particles", "rows": {rows}, "cols": {d}}}"#);
+    let thermostat = ["rescale", "monte_carlo"]
+        .into_iter()
+        .find(|t| collide.contains(&format!(r#""thermostat": "{t}""#)))
+        .unwrap_or("none");
     let json = format!(
         r#"{{"mesoflow": 1,
   "inputs": {{"x": {}, "v": {}, "xs": {}, "vs": {}}},
   "nodes": [
-    {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}, "seed": 7, "stream": 2}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
+    {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}, "thermostat": "{thermostat}", "seed": 7, "stream": 2}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
     {{"id": "bin_solute", "kind": "mpcd_bin_solute", "params": {{{geometry}, "solute_mass": {solute_mass}, "seed": 7, "stream": 2}}, "inputs": {{"sums": "bin.sums", "positions": "inputs.xs", "velocities": "inputs.vs"}}}},
     {{"id": "collide", "kind": "mpcd_collide", "params": {{{geometry}, {collide}, "seed": 7, "stream": 3}}, "inputs": {{"velocities": "inputs.v", "cell": "bin.cell", "sums": "bin_solute.sums"}}}},
     {{"id": "collide_solute", "kind": "mpcd_collide", "params": {{{geometry}, {collide}, "seed": 7, "stream": 3}}, "inputs": {{"velocities": "inputs.vs", "cell": "bin_solute.cell", "sums": "bin_solute.sums"}}}}
@@ -1589,7 +1593,7 @@ fn solute_collision_conserves_mass_weighted_cell_momentum_and_energy_and_matches
 }
 
 #[test]
-fn solute_refuses_thermostats_biased_collisions_and_mismatched_sums() {
+fn solute_refuses_biased_collisions_and_mismatched_sums() {
     if gpu().is_none() {
         return;
     }
@@ -1623,20 +1627,20 @@ fn solute_refuses_thermostats_biased_collisions_and_mismatched_sums() {
             .map(|e| e.to_string())
             .unwrap_or_default()
     };
-    for (collide, what) in [
-        (r#""thermostat": "rescale""#, "thermostat"),
-        (r#""thermostat": "monte_carlo""#, "thermostat"),
+    // A thermostat needs the energy sums, which this mpcd_bin (no thermostat) leaves out.
+    for collide in [
+        r#""thermostat": "rescale""#,
+        r#""thermostat": "monte_carlo""#,
     ] {
         let e = plan_error(geometry, geometry, collide);
         assert!(
-            e.contains("collide") && e.contains("sums") && e.contains(what),
+            e.contains("collide") && e.contains("sums") && e.contains("thermostat"),
             "{e}"
         );
     }
     let plates =
         r#""box": [4.0, 4.0, 4.0], "cell": 1, "walls": "plates", "mass": 1, "temperature": 1"#;
-    let e = plan_error(plates, plates, r#""ghosts": true"#);
-    assert!(e.contains("sums") && e.contains("virtual particles"), "{e}");
+    assert_eq!(plan_error(plates, plates, r#""ghosts": true"#), "");
     let biased = format!("{geometry}, \"rule\": \"biased\"");
     let e = plan_error(geometry, geometry, r#""rule": "biased""#);
     assert!(e.contains("sums") && e.contains("biased"), "{biased}: {e}");
@@ -1866,5 +1870,124 @@ fn solute_binning_adds_to_the_energy_sums_when_the_solvent_has_them() {
         }
     }
     assert!(with_solute > 10);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn solute_thermostats_and_virtual_particles_count_both_species() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("mpcd-solute-thermostat");
+    let mut rng = Rng::new(31);
+    let l = vec![6.0, 5.0, 4.0];
+    let (n, ns) = (1500, 300);
+    // (walls, M / m, collision params)
+    let cases = [
+        (
+            "none",
+            4.0,
+            r#""angle": 130, "thermostat": "rescale", "ghosts": false"#,
+        ),
+        (
+            "none",
+            2.5,
+            r#""angle": 130, "thermostat": "monte_carlo", "mc_scale": 0.5, "ghosts": false"#,
+        ),
+        (
+            "plates",
+            4.0,
+            r#""angle": 130, "density": 10, "ghosts": true"#,
+        ),
+    ];
+    for (walls, ratio, collide) in cases {
+        let (x, v) = random_particles(&mut rng, n, &l);
+        let (xs, vs) = random_particles(&mut rng, ns, &l);
+        let geometry =
+            format!(r#""box": {l:?}, "cell": 1, "walls": "{walls}", "mass": 1, "temperature": 1"#);
+        let path = solute_graph(&dir, (n, ns, 3), &geometry, ratio, collide);
+        let g = crate::util::load(std::path::Path::new(&path));
+        let inputs: BTreeMap<String, HostArray> = [
+            ("x".to_string(), particles(&x)),
+            ("v".to_string(), particles(&v)),
+            ("xs".to_string(), particles(&xs)),
+            ("vs".to_string(), particles(&vs)),
+        ]
+        .into();
+        let out = run_loaded(&g, &inputs, &["cell", "scell", "ssums", "v", "vs"], 1);
+        let (cells, scells) = (u32s(&out["cell"]), u32s(&out["scell"]));
+        let layers = l[2] as usize + usize::from(walls == "plates");
+        let ncells = 30 * layers;
+        let (vin, vsin) = (rows(&particles(&v), 3), rows(&particles(&vs), 3));
+        let (vout, vsout) = (rows(&out["v"], 3), rows(&out["vs"], 3));
+        let species = |a: &[Vec<f64>], b: &[Vec<f64>]| {
+            mass_moments(&[(&cells, a, 1.0), (&scells, b, ratio)], ncells)
+        };
+        let (before, after) = (species(&vin, &vsin), species(&vout, &vsout));
+        let mut count = vec![0usize; ncells];
+        for &c in cells.iter().chain(&scells) {
+            count[c as usize] += 1;
+        }
+        let mut scaled = 0;
+        for c in 0..ncells {
+            let ((mb, pb, eb), (_, pa, ea)) = (before[c], after[c]);
+            if mb == 0.0 {
+                continue;
+            }
+            let cut = walls == "plates" && (c / 30 == 0 || c / 30 == layers - 1);
+            if cut {
+                continue;
+            }
+            for a in 0..3 {
+                assert!(
+                    (pa[a] - pb[a]).abs() < 1e-6 * mb,
+                    "{collide}: cell {c} momentum {pb:?} -> {pa:?}"
+                );
+            }
+            // Twice the relative kinetic energy (units of m) after the collision.
+            let rel_after = ea - pa.iter().map(|p| p * p).sum::<f64>() / mb;
+            if collide.contains("rescale") {
+                if count[c] >= 2 {
+                    let want = 3.0 * (count[c] as f64 - 1.0);
+                    assert!(
+                        (rel_after / want - 1.0).abs() < 1e-5,
+                        "cell {c}: relative energy {rel_after} against d (n + n_s - 1) kT = {want}"
+                    );
+                }
+            } else if collide.contains("monte_carlo") {
+                scaled += usize::from((ea - eb).abs() > 1e-4 * eb);
+            } else {
+                assert!(
+                    (ea - eb).abs() < 2e-6 * eb.max(1.0),
+                    "{collide}: cell {c} energy {eb} -> {ea}"
+                );
+            }
+        }
+        if collide.contains("monte_carlo") {
+            assert!(scaled > ncells / 10, "{scaled} cells scaled");
+        }
+        // Both species against the f64 reference on the GPU's cells and sums.
+        let params = format!("{{{geometry}, {collide}, \"seed\": 7, \"stream\": 3}}");
+        for (vel, cell, name) in [
+            (particles(&v), &out["cell"], "v"),
+            (particles(&vs), &out["scell"], "vs"),
+        ] {
+            let r = reference(
+                "mpcd_collide",
+                &params,
+                &[Some(&vel), Some(cell), Some(&out["ssums"])],
+            );
+            let g = out[name].data.to_f64();
+            let worst = g
+                .iter()
+                .zip(&r[0].data)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                worst < 1e-5,
+                "{name} {collide}: largest |gpu - f64| {worst}"
+            );
+        }
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
