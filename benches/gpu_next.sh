@@ -5,7 +5,8 @@
 # in the same call:
 #   - MPCD cell sums: native 64-bit atomics on 32-byte cells without the energy block
 #     (the default now) against int32 pairs (`--set atomics=int32`, the old atomics on the
-#     new layout); per dispatch, unsorted and sorted.
+#     new layout); streaming and binning fused (graphs/mpcd.json) against unfused
+#     (graphs/fixtures/mpcd_unfused.json); per dispatch, unsorted and sorted.
 #   - The 16-byte fill (engine/fill4.wgsl) shows in every clear: FCM's grid clear at 384^3
 #     (0.44 ms on the H100 with the 4-byte fill), MPCD's sums clear.
 #   - FCM, spread and PSE tables again (the fill is in all of them).
@@ -23,6 +24,7 @@ run $bin info
 export MESOFLOW_BENCH_DISPATCHES=1
 run $bin bench mpcd --reps 20
 run $bin bench mpcd --reps 20 --set atomics=int32
+run $bin bench mpcd --reps 20 --graph graphs/fixtures/mpcd_unfused.json
 run $bin bench mpcd --reps 20 --sizes 10000000,50000000 --set sort_particles=true
 run $bin bench fcm --tolerances 1e-3 --reps 20
 unset MESOFLOW_BENCH_DISPATCHES

@@ -69,6 +69,31 @@ impl NodeKind for MpcdBinKind {
     }
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        Ok(Box::new(MpcdBin::from_params(p)?))
+    }
+}
+
+/// The thermostat choice (mpcd_collide's; mpcd_bin's says whether to sum |v|^2).
+fn thermostat_param(doc: &'static str) -> ParamSpec {
+    ParamSpec::choice(
+        "thermostat",
+        "none",
+        &["none", "rescale", "monte_carlo"],
+        doc,
+    )
+}
+
+pub(crate) struct MpcdBin {
+    geo: Geometry,
+    u: super::Uniform,
+    seed: u64,
+    stream: u32,
+    /// Some(true): native 64-bit atomics required; Some(false): 32-bit pairs; None: auto.
+    atomics: Option<bool>,
+}
+
+impl MpcdBin {
+    pub(crate) fn from_params(p: &Params) -> Result<Self, String> {
         let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
         let (seed, stream) = key_of(p);
         let energy = p.text("thermostat") != "none";
@@ -87,37 +112,51 @@ impl NodeKind for MpcdBinKind {
         u.rule = u32::from(biased);
         u.energy = u32::from(energy);
         key_into(&mut u, p);
-        Ok(Box::new(MpcdBin {
+        Ok(MpcdBin {
             geo,
             u,
             seed,
             stream,
             atomics,
-        }))
+        })
     }
-}
 
-/// The thermostat choice (mpcd_collide's; mpcd_bin's says whether to sum |v|^2).
-fn thermostat_param(doc: &'static str) -> ParamSpec {
-    ParamSpec::choice(
-        "thermostat",
-        "none",
-        &["none", "rescale", "monte_carlo"],
-        doc,
-    )
-}
+    /// A binning kernel's label and source: `main_file` (mpcd/bin.wgsl or
+    /// mpcd/stream_bin.wgsl) composed after the cell-sum atomics this adapter takes.
+    pub(crate) fn source(
+        &self,
+        cx: &CompileCtx<'_>,
+        main_file: &str,
+    ) -> Result<(String, String), CompileError> {
+        let native = cx.caps().int64_atomics;
+        let int64 = match self.atomics {
+            Some(true) if !native => {
+                return Err(CompileError::Unsupported(format!(
+                    "mpcd_bin: atomics int64 needs 64-bit storage atomics (SHADER_INT64_ATOMIC_ALL_OPS), which {} lacks; use auto or int32",
+                    cx.caps().adapter
+                )));
+            }
+            Some(want) => want,
+            None => native,
+        };
+        let sums = if int64 { "int64" } else { "int32" };
+        let source = shaders::resolve(&format!(
+            "#import mpcd/sums_{sums}.wgsl\n#import {main_file}\n"
+        ))
+        .map_err(CompileError::Library)?;
+        Ok((format!("{main_file} ({sums} atomics)"), source))
+    }
 
-struct MpcdBin {
-    geo: Geometry,
-    u: super::Uniform,
-    seed: u64,
-    stream: u32,
-    /// Some(true): native 64-bit atomics required; Some(false): 32-bit pairs; None: auto.
-    atomics: Option<bool>,
-}
+    /// The parameter block of the binning (without the particle count).
+    pub(crate) fn uniform(&self) -> super::Uniform {
+        self.u
+    }
 
-impl MpcdBin {
-    fn layout(&self) -> SumsLayout {
+    pub(crate) fn dims(&self) -> usize {
+        self.geo.dims()
+    }
+
+    pub(crate) fn layout(&self) -> SumsLayout {
         SumsLayout {
             ncells: self.geo.ncells(),
             energy: self.u.energy == 1,
@@ -221,31 +260,10 @@ impl GpuKernels for MpcdBin {
         };
         let mut u = self.u;
         u.n = n;
-        let native = cx.caps().int64_atomics;
-        let int64 = match self.atomics {
-            Some(true) if !native => {
-                return Err(CompileError::Unsupported(format!(
-                    "mpcd_bin: atomics int64 needs 64-bit storage atomics (SHADER_INT64_ATOMIC_ALL_OPS), which {} lacks; use auto or int32",
-                    cx.caps().adapter
-                )));
-            }
-            Some(want) => want,
-            None => native,
-        };
-        let sums_file = if int64 {
-            "mpcd/sums_int64.wgsl"
-        } else {
-            "mpcd/sums_int32.wgsl"
-        };
-        let source = shaders::resolve(&format!("#import {sums_file}\n#import mpcd/bin.wgsl\n"))
-            .map_err(CompileError::Library)?;
+        let (label, source) = self.source(cx, "mpcd/bin.wgsl")?;
         let kernel = cx.kernel(
             &KernelSpec::new(
-                if int64 {
-                    "mpcd_bin_int64"
-                } else {
-                    "mpcd_bin_int32"
-                },
+                label,
                 source,
                 &[
                     Binding::Uniform,

@@ -10,7 +10,9 @@
 //! `mpcd_collide` (v <- u_c + S R (v - u_c) per particle, the cell's rotation and thermostat
 //! factor recomputed from Philox by every particle of the cell, virtual particles in
 //! wall-cut cells) -> `mpcd_measure` (observables accumulated after the warm-up) ->
-//! `mpcd_average`; `mpcd_init` draws the initial state.
+//! `mpcd_average`; `mpcd_init` draws the initial state. The graph runs the first two as
+//! one kernel, `mpcd_stream_bin` (the same arithmetic, without the binning's second read
+//! of the particles).
 //!
 //! A solute (`graphs/mpcd_solute.json`): a second species of mass M streams with its own
 //! `mpcd_stream`; `mpcd_bin_solute` adds it to `mpcd_bin`'s cell sums weighted by M / m
@@ -39,6 +41,7 @@ mod init;
 mod measure;
 mod solute;
 mod stream;
+mod stream_bin;
 
 use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry};
 use crate::value::{PortType, ValueType};
@@ -406,6 +409,7 @@ pub fn value_of(lo: f64, hi: f64) -> i64 {
 pub fn register(r: &mut Registry) {
     r.add(init::MpcdInitKind);
     r.add(stream::MpcdStreamKind);
+    r.add(stream_bin::MpcdStreamBinKind);
     r.add(collide::MpcdBinKind);
     r.add(collide::MpcdCollideKind);
     r.add(solute::MpcdBinSoluteKind);

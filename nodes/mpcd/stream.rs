@@ -67,13 +67,7 @@ impl NodeKind for MpcdStreamKind {
     }
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
-        Ok(Box::new(MpcdStream {
-            geo: Geometry::from_params(p)?,
-            slip: p.text("wall_bc") == "slip",
-            dt: p.number("dt"),
-            accel: p.number("force") / p.number("mass"),
-            sine: p.text("force_shape") == "sine",
-        }))
+        Ok(Box::new(MpcdStream::from_params(p)?))
     }
 }
 
@@ -94,6 +88,24 @@ fn advance(x: &mut [f64], v: &mut [f64], g: f64, t: f64) {
 }
 
 impl MpcdStream {
+    pub(crate) fn from_params(p: &Params) -> Result<Self, String> {
+        Ok(MpcdStream {
+            geo: Geometry::from_params(p)?,
+            slip: p.text("wall_bc") == "slip",
+            dt: p.number("dt"),
+            accel: p.number("force") / p.number("mass"),
+            sine: p.text("force_shape") == "sine",
+        })
+    }
+
+    /// Sets the streaming fields of an MPCD parameter block.
+    pub(crate) fn uniform_into(&self, u: &mut super::Uniform) {
+        u.wall_slip = u32::from(self.slip);
+        u.dt = self.dt as f32;
+        u.accel = self.accel as f32;
+        u.force_shape = u32::from(self.sine);
+    }
+
     /// One particle's step in f64 (the reference of the kernel).
     pub fn step(&self, x: &mut [f64], v: &mut [f64]) {
         let d = self.geo.dims();
@@ -195,10 +207,7 @@ impl GpuKernels for MpcdStream {
         };
         let mut u = self.geo.uniform();
         u.n = n;
-        u.wall_slip = u32::from(self.slip);
-        u.dt = self.dt as f32;
-        u.accel = self.accel as f32;
-        u.force_shape = u32::from(self.sine);
+        self.uniform_into(&mut u);
         let kernel = cx.kernel(
             &KernelSpec::new(
                 "mpcd_stream",

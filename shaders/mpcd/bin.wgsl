@@ -2,8 +2,8 @@
 //
 // MPCD binning, one thread per particle: the cell of each particle in the randomly shifted
 // grid of this step, and per cell the count, sum v and (with `energy`) sum |v|^2 as exact
-// 64-bit fixed-point sums (mpcd/common.wgsl), by atomics. The sums start at zero (a fill
-// before). The file composed before it declares binding 5 and the add_* functions.
+// 64-bit fixed-point sums (mpcd/bin_common.wgsl), by atomics. The sums start at zero (a
+// fill before). The file composed before it declares binding 5 and the add_* functions.
 #import common/index.wgsl
 #import mpcd/common.wgsl
 
@@ -13,6 +13,8 @@
 @group(0) @binding(3) var<storage, read> vel: array<f32>;
 @group(0) @binding(4) var<storage, read_write> cell: array<u32>;
 
+#import mpcd/bin_common.wgsl
+
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
@@ -20,21 +22,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     if (p >= m.n) {
         return;
     }
-    let s = grid_shift(m, clock[0]);
     var x = vec3<f32>(0.0);
     var v = vec3<f32>(0.0);
     for (var a = 0u; a < DIMS; a = a + 1u) {
         x[a] = pos[p * DIMS + a];
         v[a] = vel[p * DIMS + a];
     }
-    let c = cell_of(m, x, s);
-    cell[p] = c;
-    let base = c * CELL_WORDS;
-    add_count(base);
-    for (var a = 0u; a < DIMS; a = a + 1u) {
-        add_signed(base + SUM_V + 2u * a, fx_round(v[a] * m.fix_v));
-    }
-    if (m.energy == 1u) {
-        add_unsigned(energy_word(m, c), u32(round(min(dot(v, v) * m.fix_e, 4294967040.0))));
-    }
+    bin_particle(p, x, v);
 }

@@ -13,12 +13,7 @@
 @group(0) @binding(3) var<storage, read_write> pos_out: array<f32>;
 @group(0) @binding(4) var<storage, read_write> vel_out: array<f32>;
 
-// Moves (x, v) ballistically for time t under acceleration g along x.
-fn advance(x: ptr<function, vec3<f32>>, v: ptr<function, vec3<f32>>, g: f32, t: f32) {
-    *x = *x + *v * t;
-    (*x).x = (*x).x + 0.5 * g * t * t;
-    (*v).x = (*v).x + g * t;
-}
+#import mpcd/stream_common.wgsl
 
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -33,54 +28,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         x[a] = pos_in[p * DIMS + a];
         v[a] = vel_in[p * DIMS + a];
     }
-    let w = DIMS - 1u;
-    var g = m.accel;
-    if (m.force_shape == 1u) {
-        g = m.accel * sin(6.283185307179586 * x[w] / m.box[w]);
-    }
-    if (m.walls == 0u) {
-        advance(&x, &v, g, m.dt);
-    } else {
-        let h = 0.5 * m.box[w];
-        var left = m.dt;
-        // Each pass ends at a wall or at the end of the step; a particle crosses the gap at
-        // most once per L / |v_z| of time, so a few passes are enough for any sane dt.
-        for (var k = 0u; k < 16u && left > 0.0; k = k + 1u) {
-            let vz = v[w];
-            var hit = left;
-            var wall = 0.0;
-            if (vz > 0.0) {
-                hit = max((h - x[w]) / vz, 0.0);
-                wall = h;
-            } else if (vz < 0.0) {
-                hit = max((-h - x[w]) / vz, 0.0);
-                wall = -h;
-            }
-            if (hit >= left) {
-                advance(&x, &v, g, left);
-                left = 0.0;
-            } else {
-                advance(&x, &v, g, hit);
-                x[w] = wall;
-                if (m.wall_slip == 1u) {
-                    v[w] = -v[w];
-                } else {
-                    v = -v;
-                }
-                left = left - hit;
-            }
-        }
-        x[w] = clamp(x[w], -h, h);
-    }
+    stream_particle(&x, &v);
     for (var a = 0u; a < DIMS; a = a + 1u) {
-        if (m.walls == 0u || a != w) {
-            let l = m.box[a];
-            var y = x[a] - l * floor(x[a] / l + 0.5);
-            if (y >= 0.5 * l) {
-                y = y - l;
-            }
-            x[a] = y;
-        }
         pos_out[p * DIMS + a] = x[a];
         vel_out[p * DIMS + a] = v[a];
     }

@@ -1280,7 +1280,7 @@ fn bad_mpcd_input_gets_messages_naming_file_node_and_port() {
     let e = load(&[("box", ParamValue::Numbers(vec![10.5, 10.0, 10.0]))]);
     assert!(
         e.contains("mpcd.json")
-            && e.contains("node `bin`")
+            && e.contains("node `stream_bin`")
             && e.contains("not a whole number of cells"),
         "{e}"
     );
@@ -1990,4 +1990,140 @@ fn solute_thermostats_and_virtual_particles_count_both_species() {
         }
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn stream_bin_is_stream_then_bin_bitwise() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("mpcd-stream-bin");
+    let mut rng = Rng::new(41);
+    // (box, walls, wall_bc, force shape, thermostat, atomics)
+    let cases = [
+        (
+            vec![6.0, 5.0, 4.0],
+            "none",
+            "no_slip",
+            "sine",
+            "none",
+            "auto",
+        ),
+        (
+            vec![6.0, 5.0, 4.0],
+            "plates",
+            "slip",
+            "constant",
+            "rescale",
+            "int32",
+        ),
+        (
+            vec![8.0, 6.0],
+            "plates",
+            "no_slip",
+            "constant",
+            "monte_carlo",
+            "auto",
+        ),
+    ];
+    for (l, walls, wall_bc, shape, thermostat, atomics) in cases {
+        let d = l.len();
+        let n = 2500;
+        let (x, mut v) = random_particles(&mut rng, n, &l);
+        // Fast particles too: several wall crossings in one step.
+        for row in v.iter_mut().take(50) {
+            row.iter_mut().for_each(|c| *c *= 40.0);
+        }
+        let common = format!(r#""box": {l:?}, "cell": 1, "walls": "{walls}", "mass": 1.5"#);
+        let stream = format!(
+            r#"{common}, "wall_bc": "{wall_bc}", "dt": 0.1, "force": 0.3, "force_shape": "{shape}""#
+        );
+        let bin = format!(
+            r#"{common}, "temperature": 1.2, "thermostat": "{thermostat}", "atomics": "{atomics}", "seed": 9, "stream": 2"#
+        );
+        let json = format!(
+            r#"{{"mesoflow": 1,
+  "inputs": {{"x": {{"type": "particles", "rows": {n}, "cols": {d}}}, "v": {{"type": "particles", "rows": {n}, "cols": {d}}}}},
+  "nodes": [
+    {{"id": "stream", "kind": "mpcd_stream", "params": {{{stream}}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
+    {{"id": "bin", "kind": "mpcd_bin", "params": {{{bin}}}, "inputs": {{"positions": "stream.positions", "velocities": "stream.velocities"}}}},
+    {{"id": "both", "kind": "mpcd_stream_bin", "params": {{{stream}, "temperature": 1.2, "thermostat": "{thermostat}", "atomics": "{atomics}", "seed": 9, "stream": 2}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}}
+  ],
+  "outputs": {{"x1": "stream.positions", "v1": "stream.velocities", "c1": "bin.cell", "s1": "bin.sums",
+              "x2": "both.positions", "v2": "both.velocities", "c2": "both.cell", "s2": "both.sums"}}}}"#
+        );
+        let g = crate::util::load(&write_graph(&dir, "stream_bin.json", &json));
+        let inputs: BTreeMap<String, HostArray> = [
+            ("x".to_string(), particles(&x)),
+            ("v".to_string(), particles(&v)),
+        ]
+        .into();
+        let out = run_loaded(
+            &g,
+            &inputs,
+            &["x1", "v1", "c1", "s1", "x2", "v2", "c2", "s2"],
+            1,
+        );
+        for (a, b) in [("x1", "x2"), ("v1", "v2"), ("c1", "c2"), ("s1", "s2")] {
+            let (p, q) = (out[a].data.to_f64(), out[b].data.to_f64());
+            assert_eq!(p.len(), q.len(), "{a} {b}");
+            let differ = p
+                .iter()
+                .zip(&q)
+                .filter(|(s, t)| s.to_bits() != t.to_bits())
+                .count();
+            assert_eq!(
+                differ, 0,
+                "{walls} {d}D {thermostat}: {a} and {b} differ in {differ} words"
+            );
+        }
+        // And the node's f64 reference (the two references composed) near the GPU.
+        let r = reference(
+            "mpcd_stream_bin",
+            &format!(
+                r#"{{{stream}, "temperature": 1.2, "thermostat": "{thermostat}", "seed": 9, "stream": 2}}"#
+            ),
+            &[Some(&particles(&x)), Some(&particles(&v))],
+        );
+        let (e, i) = crate::util::rel_max_err(&out["x2"], &r[0]);
+        assert!(e < 1e-5, "{walls} {d}D positions: {e} at {i}");
+        let cells = u32s(&out["c2"]);
+        let same = cells
+            .iter()
+            .zip(&r[2].data)
+            .filter(|(a, b)| **a as f64 == **b)
+            .count();
+        assert!(same >= n - 5, "{same} of {n} cells as the reference");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_fused_graph_runs_bitwise_like_the_unfused_one() {
+    if gpu().is_none() {
+        return;
+    }
+    // Plates, a force and a thermostat: every branch of streaming and binning; observables
+    // too (they read the fused node's outputs).
+    let sets = [
+        ("box", "[6, 5, 6]"),
+        ("density", "5"),
+        ("walls", "\"plates\""),
+        ("force", "0.05"),
+        ("thermostat", "\"rescale\""),
+        ("temperature", "1.1"),
+    ];
+    let outputs = ["positions", "velocities", "velocity_profile", "temperature"];
+    let fused = run_graph_file("mpcd.json", &sets, 12, 5, &outputs);
+    let unfused = run_graph_file("fixtures/mpcd_unfused.json", &sets, 12, 5, &outputs);
+    for name in outputs {
+        let (a, b) = (fused[name].data.to_f64(), unfused[name].data.to_f64());
+        assert!(!a.is_empty() && a.len() == b.len(), "{name}");
+        let differ = a
+            .iter()
+            .zip(&b)
+            .filter(|(p, q)| p.to_bits() != q.to_bits())
+            .count();
+        assert_eq!(differ, 0, "{name}: {differ} of {} values differ", a.len());
+    }
 }

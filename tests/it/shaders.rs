@@ -36,9 +36,11 @@ fn every_shader_file_validates() {
 #[test]
 fn mpcd_binning_validates_with_either_sum_atomics() {
     for sums in ["mpcd/sums_int64.wgsl", "mpcd/sums_int32.wgsl"] {
-        let src = shaders::resolve(&format!("#import {sums}\n#import mpcd/bin.wgsl\n"))
-            .unwrap_or_else(|e| panic!("{sums}: {e}"));
-        validate(&format!("mpcd/bin.wgsl after {sums}"), &src);
+        for main in ["mpcd/bin.wgsl", "mpcd/stream_bin.wgsl"] {
+            let src = shaders::resolve(&format!("#import {sums}\n#import {main}\n"))
+                .unwrap_or_else(|e| panic!("{sums}: {e}"));
+            validate(&format!("{main} after {sums}"), &src);
+        }
     }
 }
 

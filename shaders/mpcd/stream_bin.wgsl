@@ -1,0 +1,41 @@
+// template: composed after mpcd/sums_int64.wgsl or mpcd/sums_int32.wgsl (nodes/mpcd/stream.rs).
+//
+// MPCD streaming and binning in one kernel, one thread per particle: the particle streams
+// (mpcd/stream_common.wgsl), is written out, and is binned from the values in registers
+// (mpcd/bin_common.wgsl): the same arithmetic as mpcd_stream then mpcd_bin, without the
+// binning's second read of positions and velocities (24 bytes a particle in 3D) or its
+// launch. The cell sums start at zero (a fill before).
+#import common/index.wgsl
+#import mpcd/common.wgsl
+
+@group(0) @binding(0) var<uniform> m: Mpcd;
+@group(0) @binding(1) var<storage, read> clock: array<u32>;
+@group(0) @binding(2) var<storage, read> pos_in: array<f32>;
+@group(0) @binding(3) var<storage, read> vel_in: array<f32>;
+@group(0) @binding(4) var<storage, read_write> cell: array<u32>;
+@group(0) @binding(6) var<storage, read_write> pos_out: array<f32>;
+@group(0) @binding(7) var<storage, read_write> vel_out: array<f32>;
+
+#import mpcd/stream_common.wgsl
+#import mpcd/bin_common.wgsl
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let p = flat_index(wid, nwg, lid, 256u);
+    if (p >= m.n) {
+        return;
+    }
+    var x = vec3<f32>(0.0);
+    var v = vec3<f32>(0.0);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        x[a] = pos_in[p * DIMS + a];
+        v[a] = vel_in[p * DIMS + a];
+    }
+    stream_particle(&x, &v);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        pos_out[p * DIMS + a] = x[a];
+        vel_out[p * DIMS + a] = v[a];
+    }
+    bin_particle(p, x, v);
+}
