@@ -1406,6 +1406,37 @@ fn solute_graph(
         .into_owned()
 }
 
+/// The collisions of a solute graph run (`solute_graph`: outputs v, vs, cell, scell,
+/// ssums) against mpcd_collide's f64 reference, for both species: within 1e-5 (f32
+/// rotations of |v - u| < 6 with f32 trigonometry of the axis: about 1e-6).
+fn collisions_match_the_reference(
+    geometry: &str,
+    collide: &str,
+    (v, vs): (&[Vec<f64>], &[Vec<f64>]),
+    out: &BTreeMap<String, HostArray>,
+    case: &str,
+) {
+    let params = format!("{{{geometry}, {collide}, \"seed\": 7, \"stream\": 3}}");
+    for (vel, cell, name) in [
+        (particles(v), &out["cell"], "v"),
+        (particles(vs), &out["scell"], "vs"),
+    ] {
+        let r = reference(
+            "mpcd_collide",
+            &params,
+            &[Some(&vel), Some(cell), Some(&out["ssums"])],
+        );
+        let worst = out[name]
+            .data
+            .to_f64()
+            .iter()
+            .zip(&r[0].data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-5, "{name} {case}: largest |gpu - f64| {worst}");
+    }
+}
+
 /// A species: cell per particle, velocities, mass.
 type Species<'a> = (&'a [u32], &'a [Vec<f64>], f64);
 
@@ -1561,28 +1592,13 @@ fn solute_collision_conserves_mass_weighted_cell_momentum_and_energy_and_matches
             px(&vsout)
         );
         // Both species against the f64 reference on the GPU's cells and sums.
-        let params = format!("{{{geometry}, {collide}, \"seed\": 7, \"stream\": 3}}");
-        for (vel, cell, name) in [
-            (particles(&v), &out["cell"], "v"),
-            (particles(&vs), &out["scell"], "vs"),
-        ] {
-            let r = reference(
-                "mpcd_collide",
-                &params,
-                &[Some(&vel), Some(cell), Some(&out["ssums"])],
-            );
-            let g = out[name].data.to_f64();
-            let worst = g
-                .iter()
-                .zip(&r[0].data)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
-            // f32 rotation of |v - u| < 6 with f32 trigonometry of the axis: ~1e-6.
-            assert!(
-                worst < 1e-5,
-                "{name} M/m {ratio}: largest |gpu - f64| {worst}"
-            );
-        }
+        collisions_match_the_reference(
+            &geometry,
+            collide,
+            (&v, &vs),
+            &out,
+            &format!("M/m {ratio}"),
+        );
     }
     // Cells on a cell edge to f32 precision may differ; most cases compare every word.
     assert!(
@@ -1967,27 +1983,7 @@ fn solute_thermostats_and_virtual_particles_count_both_species() {
             assert!(scaled > ncells / 10, "{scaled} cells scaled");
         }
         // Both species against the f64 reference on the GPU's cells and sums.
-        let params = format!("{{{geometry}, {collide}, \"seed\": 7, \"stream\": 3}}");
-        for (vel, cell, name) in [
-            (particles(&v), &out["cell"], "v"),
-            (particles(&vs), &out["scell"], "vs"),
-        ] {
-            let r = reference(
-                "mpcd_collide",
-                &params,
-                &[Some(&vel), Some(cell), Some(&out["ssums"])],
-            );
-            let g = out[name].data.to_f64();
-            let worst = g
-                .iter()
-                .zip(&r[0].data)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
-            assert!(
-                worst < 1e-5,
-                "{name} {collide}: largest |gpu - f64| {worst}"
-            );
-        }
+        collisions_match_the_reference(&geometry, collide, (&v, &vs), &out, collide);
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
