@@ -6,7 +6,8 @@
 #   - MPCD cell sums: native 64-bit atomics on 32-byte cells without the energy block
 #     (the default now) against int32 pairs (`--set atomics=int32`, the old atomics on the
 #     new layout); streaming and binning fused (graphs/mpcd.json) against unfused
-#     (graphs/fixtures/mpcd_unfused.json); per dispatch, unsorted and sorted.
+#     (graphs/fixtures/mpcd_unfused.json); per dispatch, unsorted and sorted every step
+#     (sort_every=1); then sorted every 5, 10, 20 steps (rates from the mean step).
 #   - The 16-byte fill (engine/fill4.wgsl) shows in every clear: FCM's grid clear at 384^3
 #     (0.44 ms on the H100 with the 4-byte fill), MPCD's sums clear.
 #   - FCM, spread and PSE tables again (the fill is in all of them).
@@ -25,7 +26,10 @@ export MESOFLOW_BENCH_DISPATCHES=1
 run $bin bench mpcd --reps 20
 run $bin bench mpcd --reps 20 --set atomics=int32
 run $bin bench mpcd --reps 20 --graph graphs/fixtures/mpcd_unfused.json
-run $bin bench mpcd --reps 20 --sizes 10000000,50000000 --set sort_particles=true
+run $bin bench mpcd --reps 20 --sizes 10000000,50000000 --set sort_every=1
+unset MESOFLOW_BENCH_DISPATCHES
+for k in 5 10 20; do run $bin bench mpcd --reps 40 --sizes 10000000,50000000 --set sort_every=$k; done
+export MESOFLOW_BENCH_DISPATCHES=1
 run $bin bench fcm --tolerances 1e-3 --reps 20
 unset MESOFLOW_BENCH_DISPATCHES
 run $bin bench fcm --noise --reps 20

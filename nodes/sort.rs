@@ -336,12 +336,22 @@ impl NodeKind for SortKind {
     }
 }
 
-struct SortNode {
+pub(crate) struct SortNode {
     bits: u32,
     variant: SortVariant,
 }
 
 impl SortNode {
+    /// The stable radix sort of `bits`-bit keys the device's kernels do best, for a node
+    /// that sorts within its own dispatches: `infer` gives its scratch, `compile` its
+    /// dispatches (inputs: the keys; outputs: sorted keys, permutation).
+    pub(crate) fn radix(bits: u32) -> SortNode {
+        SortNode {
+            bits: bits.clamp(1, 32),
+            variant: SortVariant::Auto,
+        }
+    }
+
     fn mask(&self) -> u32 {
         u32::MAX >> (32 - self.bits)
     }

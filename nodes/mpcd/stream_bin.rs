@@ -3,14 +3,26 @@
 //! registers, so the binning does not read positions and velocities again (24 of the
 //! about 107 bytes a 3D particle-step moves) and the step has one launch fewer. The same
 //! arithmetic as the two nodes (tested bitwise against them).
+//!
+//! With `sort_every` K > 0, steps 0, K, 2K, ... also reorder the particles by cell: the
+//! streamed particles and their cells go to scratch (`stream_cell`), a stable radix sort
+//! orders the cells, and `gather_bin` writes the particles in cell order and bins them. The
+//! other steps run the fused kernel. Particles move about 0.1 cell a step, so for some
+//! steps after a reordering the binning and the collision touch the cell sums nearly in
+//! order (coherent atomics and reads where the sums outgrow the cache). Every step is
+//! complete in itself (the schedule is `Period` on the node's dispatches), and the results
+//! are those of the unsorted node up to the order of the particles.
 
 use super::collide::{MpcdBin, MpcdBinKind};
 use super::particle_ports;
 use super::stream::{MpcdStream, MpcdStreamKind};
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::gpu::{
+    Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Period, Slot, WG_1D,
+};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
 };
+use crate::nodes::sort::SortNode;
 use crate::value::{RefArray, ValueType};
 
 pub struct MpcdStreamBinKind;
@@ -41,13 +53,24 @@ impl NodeKind for MpcdStreamBinKind {
                 p.push(q);
             }
         }
+        p.push(ParamSpec::integer(
+            "sort_every",
+            Some(0.0),
+            0.0,
+            u32::MAX as f64,
+            "reorder the particles by cell on steps 0, K, 2K, ... (stable sort of the cells; outputs in cell order); 0: never",
+        ));
         p
     }
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        let bin = MpcdBin::from_params(p)?;
+        let bits = (bin.layout().ncells as f64).log2().ceil().max(1.0) as u32;
         Ok(Box::new(MpcdStreamBin {
             stream: MpcdStream::from_params(p)?,
-            bin: MpcdBin::from_params(p)?,
+            bin,
+            sort_every: p.number("sort_every") as u64,
+            sorter: SortNode::radix(bits),
         }))
     }
 }
@@ -55,15 +78,31 @@ impl NodeKind for MpcdStreamBinKind {
 struct MpcdStreamBin {
     stream: MpcdStream,
     bin: MpcdBin,
+    /// 0: never reorder.
+    sort_every: u64,
+    sorter: SortNode,
 }
 
 impl Node for MpcdStreamBin {
     fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
         let moved = self.stream.infer(inputs)?.outputs;
         let binned = self.bin.infer(&[Some(moved[0]), Some(moved[1])])?.outputs;
-        Ok(Signature::outputs(vec![
-            moved[0], moved[1], binned[0], binned[1],
-        ]))
+        let mut sig = Signature::outputs(vec![moved[0], moved[1], binned[0], binned[1]]);
+        if self.sort_every > 0 {
+            // Streamed positions and velocities, cells, sorted cells, permutation, then
+            // the sort's own scratch.
+            let cells = binned[0];
+            sig.scratch = vec![
+                moved[0].bytes(),
+                moved[1].bytes(),
+                cells.bytes(),
+                cells.bytes(),
+                cells.bytes(),
+            ];
+            sig.scratch
+                .extend(self.sorter.infer(&[Some(cells)])?.scratch);
+        }
+        Ok(sig)
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -97,41 +136,98 @@ impl GpuKernels for MpcdStreamBin {
         u.n = n;
         self.stream.uniform_into(&mut u);
         let (label, source) = self.bin.source(cx, "mpcd/stream_bin.wgsl")?;
-        let kernel = cx.kernel(
-            &KernelSpec::new(
-                label,
-                source,
-                &[
-                    Binding::Uniform,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                ],
-            )
-            .constant("DIMS", self.bin.dims() as f64),
-        )?;
+        let bindings = [
+            Binding::Uniform,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+            Binding::StorageReadWrite,
+            Binding::StorageReadWrite,
+            Binding::StorageReadWrite,
+            Binding::StorageRead,
+            Binding::StorageRead,
+        ];
+        let dims = self.bin.dims() as f64;
+        let spec = |entry: &str| {
+            KernelSpec::new(format!("{label} {entry}"), source.clone(), &bindings)
+                .entry(entry)
+                .constant("DIMS", dims)
+        };
+        let fused = cx.kernel(&spec("main"))?;
         let params = cx.uniform("mpcd stream bin", bytemuck::bytes_of(&u));
-        let sums = io.outputs[3].buffer;
-        Ok(vec![
-            cx.fill(sums, io.outputs[3].ty.words(), 0)?,
+        let (x, v, cell, sums) = (
+            io.outputs[0].buffer,
+            io.outputs[1].buffer,
+            io.outputs[2].buffer,
+            io.outputs[3].buffer,
+        );
+        let grid = cx.grid_1d(n as u64, WG_1D);
+        // Bindings 8 and 9 (permutation, sorted cells) are read by gather_bin only; the
+        // other entry points get a read-only stand-in.
+        let main = cx.dispatch(
+            &fused,
+            &[
+                &params, cx.clock, pos.buffer, vel.buffer, cell, sums, x, v, pos.buffer, pos.buffer,
+            ],
+            grid,
+        );
+        let mut out = vec![cx.fill(sums, io.outputs[3].ty.words(), 0)?];
+        if self.sort_every == 0 {
+            out.push(main);
+            return Ok(out);
+        }
+        let missing = || CompileError::Unsupported("mpcd_stream_bin: scratch missing".into());
+        let [xt, vt, ct, sorted, perm, sort_scratch @ ..] = io.scratch.as_slice() else {
+            return Err(missing());
+        };
+        let stream_cell = cx.kernel(&spec("stream_cell"))?;
+        let gather_bin = cx.kernel(&spec("gather_bin"))?;
+        let on = Period {
+            every: self.sort_every,
+            on: true,
+        };
+        out.push(
             cx.dispatch(
-                &kernel,
+                &stream_cell,
                 &[
-                    &params,
-                    cx.clock,
+                    &params, cx.clock, pos.buffer, vel.buffer, ct, sums, xt, vt, pos.buffer,
                     pos.buffer,
-                    vel.buffer,
-                    io.outputs[2].buffer,
-                    sums,
-                    io.outputs[0].buffer,
-                    io.outputs[1].buffer,
                 ],
-                cx.grid_1d(n as u64, WG_1D),
-            ),
-        ])
+                grid,
+            )
+            .on_steps(on),
+        );
+        let cells = io.outputs[2].ty;
+        let sort_io = NodeIo {
+            inputs: vec![Some(Slot {
+                buffer: ct,
+                ty: cells,
+            })],
+            outputs: vec![
+                Slot {
+                    buffer: sorted,
+                    ty: cells,
+                },
+                Slot {
+                    buffer: perm,
+                    ty: cells,
+                },
+            ],
+            scratch: sort_scratch.to_vec(),
+        };
+        for d in self.sorter.compile(cx, &sort_io)? {
+            out.push(d.on_steps(on));
+        }
+        out.push(
+            cx.dispatch(
+                &gather_bin,
+                &[&params, cx.clock, xt, vt, cell, sums, x, v, perm, sorted],
+                grid,
+            )
+            .on_steps(on),
+        );
+        out.push(main.on_steps(Period { on: false, ..on }));
+        Ok(out)
     }
 }

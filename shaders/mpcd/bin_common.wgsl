@@ -10,6 +10,11 @@
 fn bin_particle(p: u32, x: vec3<f32>, v: vec3<f32>) {
     let c = cell_of(m, x, grid_shift(m, clock[0]));
     cell[p] = c;
+    bin_add(c, v);
+}
+
+// Adds a particle of velocity v to the sums of cell c.
+fn bin_add(c: u32, v: vec3<f32>) {
     let base = c * CELL_WORDS;
     add_count(base);
     for (var a = 0u; a < DIMS; a = a + 1u) {

@@ -5,6 +5,11 @@
 // (mpcd/bin_common.wgsl): the same arithmetic as mpcd_stream then mpcd_bin, without the
 // binning's second read of positions and velocities (24 bytes a particle in 3D) or its
 // launch. The cell sums start at zero (a fill before).
+//
+// With a reordering every few steps (nodes/mpcd/stream_bin.rs), those steps run
+// `stream_cell` instead (the streamed particles and their cells to scratch), a stable sort
+// of the cells, then `gather_bin` (the particles in cell order to the outputs, binned),
+// so that binning, collision and the next steps touch the cell sums in order.
 #import common/index.wgsl
 #import mpcd/common.wgsl
 
@@ -15,6 +20,8 @@
 @group(0) @binding(4) var<storage, read_write> cell: array<u32>;
 @group(0) @binding(6) var<storage, read_write> pos_out: array<f32>;
 @group(0) @binding(7) var<storage, read_write> vel_out: array<f32>;
+@group(0) @binding(8) var<storage, read> perm: array<u32>;
+@group(0) @binding(9) var<storage, read> sorted_cells: array<u32>;
 
 #import mpcd/stream_common.wgsl
 #import mpcd/bin_common.wgsl
@@ -38,4 +45,47 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         vel_out[p * DIMS + a] = v[a];
     }
     bin_particle(p, x, v);
+}
+
+// Streaming and cells only (pos_out, vel_out and cell are scratch here).
+@compute @workgroup_size(256)
+fn stream_cell(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+               @builtin(local_invocation_index) lid: u32) {
+    let p = flat_index(wid, nwg, lid, 256u);
+    if (p >= m.n) {
+        return;
+    }
+    var x = vec3<f32>(0.0);
+    var v = vec3<f32>(0.0);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        x[a] = pos_in[p * DIMS + a];
+        v[a] = vel_in[p * DIMS + a];
+    }
+    stream_particle(&x, &v);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        pos_out[p * DIMS + a] = x[a];
+        vel_out[p * DIMS + a] = v[a];
+    }
+    cell[p] = cell_of(m, x, grid_shift(m, clock[0]));
+}
+
+// Output row p is streamed particle perm[p] (pos_in and vel_in are stream_cell's scratch,
+// sorted_cells its cells in sorted order), binned.
+@compute @workgroup_size(256)
+fn gather_bin(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+              @builtin(local_invocation_index) lid: u32) {
+    let p = flat_index(wid, nwg, lid, 256u);
+    if (p >= m.n) {
+        return;
+    }
+    let q = perm[p];
+    var v = vec3<f32>(0.0);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        pos_out[p * DIMS + a] = pos_in[q * DIMS + a];
+        v[a] = vel_in[q * DIMS + a];
+        vel_out[p * DIMS + a] = v[a];
+    }
+    let c = sorted_cells[p];
+    cell[p] = c;
+    bin_add(c, v);
 }

@@ -32,6 +32,9 @@ use crate::value::{HostArray, ValueType};
 pub struct Timing {
     pub label: String,
     pub median: Duration,
+    /// Mean over the timed steps: the amortised cost of a launch whose dispatches run on
+    /// some steps only (`Period`), which its median does not show.
+    pub mean: Duration,
     pub min: Duration,
     /// With MESOFLOW_BENCH_DISPATCHES set: each dispatch's kernel and median time (each
     /// in a pass of its own, so their sum is a little above `median`).
@@ -72,6 +75,11 @@ impl TimedRun {
     /// Sum of the launches' medians: the GPU time of one step.
     pub fn step_time(&self) -> Duration {
         self.timings.iter().map(|t| t.median).sum()
+    }
+
+    /// Sum of the launches' means: one step amortised over the timed steps.
+    pub fn mean_step_time(&self) -> Duration {
+        self.timings.iter().map(|t| t.mean).sum()
     }
 }
 
@@ -167,6 +175,7 @@ pub fn time_loaded(
         .map(|r| Timing {
             label: r.label.clone(),
             median: r.median(),
+            mean: r.total / (r.calls.max(1) as u32),
             min: r.samples.iter().min().copied().unwrap_or_default(),
             dispatches: per_dispatch
                 .iter()

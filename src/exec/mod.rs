@@ -468,9 +468,10 @@ impl<'a> Program<'a> {
         Ok(())
     }
 
-    fn record(pass: &mut wgpu::ComputePass, dispatches: &[Dispatch]) {
+    /// Records the dispatches that run on step `step` (see `Period`).
+    fn record(pass: &mut wgpu::ComputePass, dispatches: &[Dispatch], step: u64) {
         for d in dispatches {
-            if d.workgroups.contains(&0) {
+            if d.workgroups.contains(&0) || !d.runs_at(step) {
                 continue;
             }
             pass.set_pipeline(&d.kernel.pipeline);
@@ -491,7 +492,7 @@ impl<'a> Program<'a> {
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
             for c in &self.prologue {
-                Self::record(&mut pass, &c.dispatches);
+                Self::record(&mut pass, &c.dispatches, 0);
             }
         }
         let idx = self.gpu.queue.submit([enc.finish()]);
@@ -505,13 +506,13 @@ impl<'a> Program<'a> {
         self.step[0].iter().any(|c| c.looped.is_some())
     }
 
-    /// Submits dispatches in one compute pass.
-    fn submit(&self, dispatches: &[&Dispatch]) -> wgpu::SubmissionIndex {
+    /// Submits the dispatches that run on step `step` in one compute pass.
+    fn submit(&self, dispatches: &[&Dispatch], step: u64) -> wgpu::SubmissionIndex {
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
             for d in dispatches {
-                Self::record(&mut pass, std::slice::from_ref(*d));
+                Self::record(&mut pass, std::slice::from_ref(*d), step);
             }
         }
         self.gpu.queue.submit([enc.finish()])
@@ -545,7 +546,7 @@ impl<'a> Program<'a> {
             {
                 let mut pass = enc.begin_compute_pass(&Default::default());
                 for d in pending.iter() {
-                    Self::record(&mut pass, std::slice::from_ref(*d));
+                    Self::record(&mut pass, std::slice::from_ref(*d), step);
                 }
             }
             enc.copy_buffer_to_buffer(&lp.kernels.status, 0, &lp.staging[k % 2], 0, bytes);
@@ -614,7 +615,7 @@ impl<'a> Program<'a> {
             }
         }
         pending.push(&self.clock_tick);
-        Ok((self.submit(&pending), counts))
+        Ok((self.submit(&pending, step), counts))
     }
 
     /// Runs a loop alone and waits for it: its wall time (host round trips included) and
@@ -623,7 +624,7 @@ impl<'a> Program<'a> {
         let t = Instant::now();
         let mut pending = Vec::new();
         let k = self.run_loop(lp, &mut pending, step)?;
-        let idx = self.submit(&pending);
+        let idx = self.submit(&pending, step);
         self.gpu.wait(idx)?;
         Ok((t.elapsed(), k))
     }
@@ -707,11 +708,12 @@ impl<'a> Program<'a> {
             {
                 let mut pass = enc.begin_compute_pass(&Default::default());
                 for s in 0..n {
-                    let parity = ((self.steps_done + done + s) % 2) as usize;
+                    let step = self.steps_done + done + s;
+                    let parity = (step % 2) as usize;
                     for c in &self.step[parity] {
-                        Self::record(&mut pass, &c.dispatches);
+                        Self::record(&mut pass, &c.dispatches, step);
                     }
-                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick));
+                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), step);
                 }
             }
             let idx = self.gpu.queue.submit([enc.finish()]);
@@ -822,14 +824,17 @@ impl<'a> Program<'a> {
                             end_of_pass_write_index: Some(2 * u as u32 + 1),
                         }),
                     });
+                    let step = self.steps_done + s;
                     match d {
-                        Some(d) => Self::record(&mut pass, std::slice::from_ref(&c.dispatches[d])),
-                        None => Self::record(&mut pass, &c.dispatches),
+                        Some(d) => {
+                            Self::record(&mut pass, std::slice::from_ref(&c.dispatches[d]), step)
+                        }
+                        None => Self::record(&mut pass, &c.dispatches, step),
                     }
                 }
                 {
                     let mut pass = enc.begin_compute_pass(&Default::default());
-                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick));
+                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), 0);
                 }
                 if timed > 0 {
                     enc.resolve_query_set(qs, 0..2 * timed as u32, &resolve, 0);
@@ -875,7 +880,7 @@ impl<'a> Program<'a> {
                     let mut enc = self.gpu.device.create_command_encoder(&Default::default());
                     {
                         let mut pass = enc.begin_compute_pass(&Default::default());
-                        Self::record(&mut pass, &c.dispatches);
+                        Self::record(&mut pass, &c.dispatches, self.steps_done + s);
                     }
                     let idx = self.gpu.queue.submit([enc.finish()]);
                     self.gpu.wait(idx)?;
@@ -887,7 +892,7 @@ impl<'a> Program<'a> {
                 let mut enc = self.gpu.device.create_command_encoder(&Default::default());
                 {
                     let mut pass = enc.begin_compute_pass(&Default::default());
-                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick));
+                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), 0);
                 }
                 let idx = self.gpu.queue.submit([enc.finish()]);
                 self.gpu.wait(idx)?;

@@ -185,6 +185,33 @@ pub struct Dispatch {
     pub kernel: Arc<Kernel>,
     pub bind_group: wgpu::BindGroup,
     pub workgroups: [u32; 3],
+    /// Steps it runs on (every step when `None`); the executor skips it on the others.
+    pub period: Option<Period>,
+}
+
+/// A step schedule within a node's dispatches: `on` runs on the steps s with
+/// s % every == 0 (the first step, 0, included), `!on` on all the other steps. A node
+/// uses the pair to do one thing every `every` steps and another in between (MPCD:
+/// reorder the particles by cell every few steps), all within a step, so that no value
+/// depends on which dispatches an earlier step ran.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Period {
+    pub every: u64,
+    pub on: bool,
+}
+
+impl Dispatch {
+    /// Whether it runs on step `step`.
+    pub fn runs_at(&self, step: u64) -> bool {
+        self.period
+            .is_none_or(|p| step.is_multiple_of(p.every.max(1)) == p.on)
+    }
+
+    /// The same dispatch on a schedule.
+    pub fn on_steps(mut self, period: Period) -> Dispatch {
+        self.period = Some(period);
+        self
+    }
 }
 
 /// A value's buffer as a node sees it.
@@ -290,6 +317,7 @@ impl CompileCtx<'_> {
             kernel: kernel.clone(),
             bind_group,
             workgroups,
+            period: None,
         }
     }
 

@@ -1775,7 +1775,7 @@ fn solute_and_solvent_share_the_temperature_in_equilibrium() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Reordering the particles by cell (sort_particles) changes only the order of the state:
+/// Reordering the particles by cell (sort_every) changes only the order of the state:
 /// streaming is per particle, the cell sums are exact integers and the random draws are
 /// per cell, so the set of (position, velocity) rows after any number of steps is the
 /// same, bit for bit, with or without it (plates and a force included).
@@ -1793,7 +1793,7 @@ fn sorting_particles_by_cell_changes_only_their_order() {
     ];
     let state = |sort: &str| {
         let mut s = sets.to_vec();
-        s.push(("sort_particles", sort));
+        s.push(("sort_every", sort));
         let out = run_mpcd(&s, 25, 3, &["positions", "velocities"]);
         let x = rows(&out["positions"], 3);
         let v = rows(&out["velocities"], 3);
@@ -1805,8 +1805,8 @@ fn sorting_particles_by_cell_changes_only_their_order() {
         r.sort();
         (r, x)
     };
-    let (plain, plain_x) = state("false");
-    let (sorted, sorted_x) = state("true");
+    let (plain, plain_x) = state("0");
+    let (sorted, sorted_x) = state("3");
     assert_eq!(plain.len(), 6 * 6 * 6 * 5);
     assert_eq!(plain, sorted, "the same particles");
     assert_ne!(plain_x, sorted_x, "in another order");
@@ -2122,4 +2122,80 @@ fn the_fused_graph_runs_bitwise_like_the_unfused_one() {
             .count();
         assert_eq!(differ, 0, "{name}: {differ} of {} values differ", a.len());
     }
+}
+
+#[test]
+fn reordering_steps_give_the_stable_cell_order_of_the_same_particles() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("mpcd-sort-every");
+    let mut rng = Rng::new(43);
+    for (l, walls, atomics) in [
+        (vec![6.0, 5.0, 4.0], "none", "auto"),
+        (vec![8.0, 6.0], "plates", "int32"),
+    ] {
+        let d = l.len();
+        let n = 3000;
+        let (x, v) = random_particles(&mut rng, n, &l);
+        let params = format!(
+            r#""box": {l:?}, "cell": 1, "walls": "{walls}", "mass": 1, "temperature": 1, "dt": 0.1, "force": 0.2, "atomics": "{atomics}", "seed": 9, "stream": 2"#
+        );
+        let json = format!(
+            r#"{{"mesoflow": 1,
+  "inputs": {{"x": {{"type": "particles", "rows": {n}, "cols": {d}}}, "v": {{"type": "particles", "rows": {n}, "cols": {d}}}}},
+  "nodes": [
+    {{"id": "plain", "kind": "mpcd_stream_bin", "params": {{{params}}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
+    {{"id": "sorted", "kind": "mpcd_stream_bin", "params": {{{params}, "sort_every": 2}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}}
+  ],
+  "outputs": {{"x1": "plain.positions", "v1": "plain.velocities", "c1": "plain.cell", "s1": "plain.sums",
+              "x2": "sorted.positions", "v2": "sorted.velocities", "c2": "sorted.cell", "s2": "sorted.sums"}}}}"#
+        );
+        let g = crate::util::load(&write_graph(&dir, "sort_every.json", &json));
+        let inputs: BTreeMap<String, HostArray> = [
+            ("x".to_string(), particles(&x)),
+            ("v".to_string(), particles(&v)),
+        ]
+        .into();
+        let names = ["x1", "v1", "c1", "s1", "x2", "v2", "c2", "s2"];
+        let bits =
+            |a: &HostArray| -> Vec<u64> { a.data.to_f64().iter().map(|f| f.to_bits()).collect() };
+        // Step 0 reorders: row i of the sorted node is row perm[i] of the plain one, perm
+        // the stable order of the cells; the sums are the same integers.
+        let out = run_loaded(&g, &inputs, &names, 1);
+        let c1 = u32s(&out["c1"]);
+        let mut perm: Vec<usize> = (0..n).collect();
+        perm.sort_by_key(|&i| c1[i]);
+        let (x1, v1, x2, v2) = (
+            bits(&out["x1"]),
+            bits(&out["v1"]),
+            bits(&out["x2"]),
+            bits(&out["v2"]),
+        );
+        let c2 = u32s(&out["c2"]);
+        assert!(
+            c2.windows(2).all(|w| w[0] <= w[1]),
+            "{walls} {d}D: cells in order"
+        );
+        for (i, &q) in perm.iter().enumerate() {
+            assert_eq!(c2[i], c1[q], "row {i}");
+            assert_eq!(
+                x2[i * d..(i + 1) * d],
+                x1[q * d..(q + 1) * d],
+                "row {i} position"
+            );
+            assert_eq!(
+                v2[i * d..(i + 1) * d],
+                v1[q * d..(q + 1) * d],
+                "row {i} velocity"
+            );
+        }
+        assert_eq!(bits(&out["s1"]), bits(&out["s2"]), "{walls} {d}D sums");
+        // Step 1 does not reorder: the same rows as the plain node.
+        let out = run_loaded(&g, &inputs, &names, 2);
+        for (a, b) in [("x1", "x2"), ("v1", "v2"), ("c1", "c2"), ("s1", "s2")] {
+            assert_eq!(bits(&out[a]), bits(&out[b]), "{walls} {d}D step 1: {a} {b}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
