@@ -12,6 +12,7 @@
 #     (0.44 ms on the H100 with the 4-byte fill), MPCD's sums clear.
 #   - FCM, spread and PSE tables again (the fill is in all of them).
 # A torch copy in the same call gives the copy bandwidth. Output also in $OUT/bench.log.
+#   bash benches/gpu_next.sh [mpcd] [fcm] [rest]     (default all three; each under 10 minutes)
 set -uo pipefail
 source .gpu/gpu-env.sh
 export PYTHONUNBUFFERED=1
@@ -21,19 +22,26 @@ log=${OUT:-/tmp}/bench.log
 run() { echo "== $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
 echo "date: $(date -u +%Y-%m-%dT%H:%MZ)" | tee -a "$log"
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee -a "$log"
+want=("$@")
+[ ${#want[@]} -eq 0 ] && want=(mpcd fcm rest)
+has() { [[ " ${want[*]} " == *" $1 "* ]]; }
 run $bin info
-export MESOFLOW_BENCH_DISPATCHES=1
-run $bin bench mpcd --reps 20
-run $bin bench mpcd --reps 20 --set atomics=int32
-run $bin bench mpcd --reps 20 --graph graphs/fixtures/mpcd_unfused.json
-run $bin bench mpcd --reps 20 --sizes 10000000,50000000 --set sort_every=1
-unset MESOFLOW_BENCH_DISPATCHES
-for k in 5 10 20; do run $bin bench mpcd --reps 40 --sizes 10000000,50000000 --set sort_every=$k; done
-export MESOFLOW_BENCH_DISPATCHES=1
-run $bin bench fcm --tolerances 1e-3 --reps 20
-unset MESOFLOW_BENCH_DISPATCHES
-run $bin bench fcm --noise --reps 20
-run $bin bench spread --cells 128 --reps 20 --workgroups 256
-run $bin bench pse --noise --reps 20
-run python3 benches/torch_primitives.py
+if has mpcd; then
+  export MESOFLOW_BENCH_DISPATCHES=1
+  run $bin bench mpcd --reps 20
+  run $bin bench mpcd --reps 20 --set atomics=int32
+  run $bin bench mpcd --reps 20 --graph graphs/fixtures/mpcd_unfused.json
+  run $bin bench mpcd --reps 20 --sizes 10000000,50000000 --set sort_every=1
+  unset MESOFLOW_BENCH_DISPATCHES
+  for k in 5 10 20; do run $bin bench mpcd --reps 40 --sizes 10000000,50000000 --set sort_every=$k; done
+  run python3 benches/torch_reduce.py
+fi
+if has fcm; then
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench fcm --tolerances 1e-3 --reps 20
+  run $bin bench fcm --noise --reps 20
+fi
+if has rest; then
+  run $bin bench spread --cells 128 --reps 20 --workgroups 256
+  run $bin bench pse --noise --reps 20
+fi
 exit 0
