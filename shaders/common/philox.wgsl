@@ -12,7 +12,10 @@ const PHILOX_M1: u32 = 0xCD9E8D57u;
 const PHILOX_W0: u32 = 0x9E3779B9u;
 const PHILOX_W1: u32 = 0xBB67AE85u;
 
-// High 32 bits of the 64-bit product a * b.
+// High 32 bits of the 64-bit product a * b. On adapters with 64-bit integers the engine
+// replaces this function, between the markers, by one 64-bit multiply (same bits;
+// src/gpu/shaders.rs, `specialise`).
+// begin portable philox_mulhi
 fn philox_mulhi(a: u32, b: u32) -> u32 {
     let a_lo = a & 0xFFFFu;
     let a_hi = a >> 16u;
@@ -25,6 +28,7 @@ fn philox_mulhi(a: u32, b: u32) -> u32 {
     let mid = (ll >> 16u) + (hl & 0xFFFFu) + (lh & 0xFFFFu);
     return hh + (hl >> 16u) + (lh >> 16u) + (mid >> 16u);
 }
+// end portable philox_mulhi
 
 fn philox_round(c: vec4<u32>, k: vec2<u32>) -> vec4<u32> {
     let hi0 = philox_mulhi(PHILOX_M0, c.x);

@@ -38,6 +38,8 @@ pub struct DeviceCaps {
     /// `atomic<u64>` / `atomic<i64>` add on storage buffers (exact fixed-point sums in one
     /// return-less atomic instead of a 32-bit add and a carry).
     pub int64_atomics: bool,
+    /// `i64` / `u64` in shaders (SHADER_INT64).
+    pub int64: bool,
     /// Subgroup operations, with the (min, max) subgroup size the kernel must cope with.
     pub subgroups: Option<(u32, u32)>,
     pub timestamps: bool,
@@ -60,6 +62,7 @@ impl DeviceCaps {
             driver: String::new(),
             f32_atomics: false,
             int64_atomics: false,
+            int64: false,
             subgroups: None,
             timestamps: false,
             f64: false,
@@ -76,6 +79,9 @@ impl DeviceCaps {
         let mut feats = Vec::new();
         if self.f32_atomics {
             feats.push("f32-atomics".to_string());
+        }
+        if self.int64 {
+            feats.push("i64".to_string());
         }
         if self.int64_atomics {
             feats.push("i64-atomics".to_string());
@@ -187,6 +193,7 @@ impl GpuContext {
             int64_atomics: features.contains(
                 wgpu::Features::SHADER_INT64 | wgpu::Features::SHADER_INT64_ATOMIC_ALL_OPS,
             ),
+            int64: features.contains(wgpu::Features::SHADER_INT64),
             subgroups: features
                 .contains(wgpu::Features::SUBGROUP)
                 .then_some((info.subgroup_min_size, info.subgroup_max_size)),

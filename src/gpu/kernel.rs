@@ -42,6 +42,9 @@ pub struct KernelSpec {
     /// WGSL `override` constants, as (name, value bits) so the key is hashable.
     pub constants: Vec<(String, u64)>,
     pub bindings: Vec<Binding>,
+    /// Whether the library's device-specific forms may replace its portable functions
+    /// (`shaders::specialise`); off only to test the portable forms on any device.
+    pub specialise: bool,
 }
 
 impl KernelSpec {
@@ -52,7 +55,14 @@ impl KernelSpec {
             entry: "main".into(),
             constants: Vec::new(),
             bindings: bindings.to_vec(),
+            specialise: true,
         }
+    }
+
+    /// The same kernel with the library's portable functions kept on every device.
+    pub fn portable(mut self) -> Self {
+        self.specialise = false;
+        self
     }
 
     pub fn entry(mut self, entry: &str) -> Self {
@@ -145,9 +155,14 @@ fn build_kernel(gpu: &GpuContext, spec: &KernelSpec) -> Result<Kernel, CompileEr
         bind_group_layouts: &[Some(&layout)],
         immediate_size: 0,
     });
+    let source = if spec.specialise {
+        shaders::specialise(&spec.source, &gpu.caps)
+    } else {
+        std::borrow::Cow::Borrowed(spec.source.as_str())
+    };
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(&spec.label),
-        source: wgpu::ShaderSource::Wgsl(spec.source.as_str().into()),
+        source: wgpu::ShaderSource::Wgsl(source),
     });
     let constants: Vec<(&str, f64)> = spec
         .constants

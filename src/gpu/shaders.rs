@@ -4,6 +4,8 @@
 //! `#import common/index.wgsl`; [`source`] replaces each with that file's text (each file
 //! once, recursively). Everything else is plain WGSL.
 
+use super::DeviceCaps;
+
 mod files {
     include!(concat!(env!("OUT_DIR"), "/shader_files.rs"));
 }
@@ -74,4 +76,33 @@ fn append_text(
         }
     }
     Ok(())
+}
+
+/// The start and end markers of a portable function in the library that a device may
+/// replace, and the replacement for devices with `SHADER_INT64`.
+const PHILOX_MULHI: (&str, &str, &str) = (
+    "// begin portable philox_mulhi",
+    "// end portable philox_mulhi",
+    "fn philox_mulhi(a: u32, b: u32) -> u32 {\n    return u32((u64(a) * u64(b)) >> 32u);\n}\n",
+);
+
+/// A kernel's source for this device: where it has 64-bit integers, Philox's high-half
+/// multiply (`common/philox.wgsl`, built from 16-bit halves, about 14 integer operations)
+/// becomes one 64-bit multiply. The same bits either way (exact integer arithmetic); the
+/// random draws of MPCD collisions, noise and random nodes are unchanged.
+pub fn specialise<'a>(source: &'a str, caps: &DeviceCaps) -> std::borrow::Cow<'a, str> {
+    let (begin, end, int64) = PHILOX_MULHI;
+    if !caps.int64 {
+        return std::borrow::Cow::Borrowed(source);
+    }
+    match (source.find(begin), source.find(end)) {
+        (Some(b), Some(e)) if b < e => {
+            let mut out = String::with_capacity(source.len());
+            out.push_str(&source[..b]);
+            out.push_str(int64);
+            out.push_str(&source[e + end.len()..]);
+            std::borrow::Cow::Owned(out)
+        }
+        _ => std::borrow::Cow::Borrowed(source),
+    }
 }

@@ -193,3 +193,80 @@ fn normals_pass_statistical_tests() {
     eprintln!("correlation between streams {r_streams:.2e}, lag 1 {r_lag1:.2e}");
     assert!(r_streams.abs() < 5.0 / nf.sqrt() && r_lag1.abs() < 5.0 / nf.sqrt());
 }
+
+/// Philox's high-half multiply: the portable form (16-bit halves) and the one 64-bit
+/// multiply the engine swaps in on adapters with 64-bit integers give the exact high
+/// words, checked against u64 products on the host.
+#[test]
+fn both_forms_of_the_philox_multiply_are_exact() {
+    use mesoflow::gpu::{Binding, CompileCtx, KernelCache, KernelSpec, shaders};
+    use wgpu::util::DeviceExt;
+    let Some(gpu) = gpu() else {
+        return;
+    };
+    let mut rng = crate::util::Rng::new(77);
+    let mut pairs: Vec<u32> = vec![0, 0, 1, 1, u32::MAX, u32::MAX, 0xD2511F53, 0xCD9E8D57];
+    for _ in 0..4000 {
+        pairs.push((rng.uniform(0.0, 1.0) * 4294967296.0) as u32);
+    }
+    let n = pairs.len() / 2;
+    let src = shaders::resolve(
+        "#import common/philox.wgsl\n@group(0) @binding(0) var<storage, read> ab: array<u32>;\n@group(0) @binding(1) var<storage, read_write> hi: array<u32>;\n@compute @workgroup_size(64)\nfn main(@builtin(global_invocation_id) id: vec3<u32>) {\n    let i = id.x;\n    if (i < arrayLength(&hi)) { hi[i] = philox_mulhi(ab[2u * i], ab[2u * i + 1u]); }\n}\n",
+    )
+    .unwrap();
+    let input = gpu
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents: bytemuck::cast_slice(&pairs),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+    let clock = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: 16,
+        usage: wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    });
+    let mut kernels = KernelCache::default();
+    for portable in [false, true] {
+        let out = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: 4 * n as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let mut cx = CompileCtx {
+            gpu: &gpu,
+            kernels: &mut kernels,
+            clock: &clock,
+            allocated: Default::default(),
+        };
+        let mut spec = KernelSpec::new(
+            "mulhi",
+            src.clone(),
+            &[Binding::StorageRead, Binding::StorageReadWrite],
+        );
+        if portable {
+            spec = spec.portable();
+        }
+        let k = cx.kernel(&spec).unwrap();
+        let d = cx.dispatch(&k, &[&input, &out], [(n as u32).div_ceil(64), 1, 1]);
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&d.kernel.pipeline);
+            pass.set_bind_group(0, &d.bind_group, &[]);
+            pass.dispatch_workgroups(d.workgroups[0], 1, 1);
+        }
+        gpu.wait(gpu.queue.submit([enc.finish()])).unwrap();
+        let got: Vec<u32> =
+            bytemuck::pod_collect_to_vec(&gpu.read_buffer(&out, 4 * n as u64).unwrap());
+        for i in 0..n {
+            let want = ((pairs[2 * i] as u64 * pairs[2 * i + 1] as u64) >> 32) as u32;
+            assert_eq!(got[i], want, "portable {portable}: pair {i}");
+        }
+    }
+    // The swap happens where the adapter has 64-bit integers, and only there.
+    let specialised = shaders::specialise(&src, &gpu.caps);
+    assert_eq!(gpu.caps.int64, specialised.contains("u64(a) * u64(b)"));
+}
