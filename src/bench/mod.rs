@@ -36,9 +36,10 @@ pub struct Timing {
     /// some steps only (`Period`), which its median does not show.
     pub mean: Duration,
     pub min: Duration,
-    /// With MESOFLOW_BENCH_DISPATCHES set: each dispatch's kernel and median time (each
-    /// in a pass of its own, so their sum is a little above `median`).
-    pub dispatches: Vec<(String, Duration)>,
+    /// With MESOFLOW_BENCH_DISPATCHES set: each dispatch's kernel, median and mean time
+    /// (each in a pass of its own, so their sum is a little above `median`; the mean
+    /// shows what a dispatch that runs every K steps costs amortised).
+    pub dispatches: Vec<(String, Duration, Duration)>,
 }
 
 impl Timing {
@@ -47,12 +48,13 @@ impl Timing {
         self.dispatches
             .iter()
             .enumerate()
-            .map(|(i, (k, d))| {
+            .map(|(i, (k, median, mean))| {
                 format!(
-                    "      {} #{i:<2} {:<44} {:>10.4} ms\n",
+                    "      {} #{i:<2} {:<44} {:>10.4} ms (mean {:.4})\n",
                     self.label,
                     k,
-                    d.as_secs_f64() * 1e3
+                    median.as_secs_f64() * 1e3,
+                    mean.as_secs_f64() * 1e3
                 )
             })
             .collect()
@@ -183,7 +185,11 @@ pub fn time_loaded(
                 .map(|d| {
                     d.dispatch_samples
                         .iter()
-                        .map(|(kernel, samples)| (kernel.clone(), median_duration(samples)))
+                        .map(|(kernel, samples)| {
+                            let mean =
+                                samples.iter().sum::<Duration>() / (samples.len().max(1) as u32);
+                            (kernel.clone(), median_duration(samples), mean)
+                        })
                         .collect()
                 })
                 .unwrap_or_default(),
