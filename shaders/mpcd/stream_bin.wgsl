@@ -26,13 +26,8 @@
 #import mpcd/stream_common.wgsl
 #import mpcd/bin_common.wgsl
 
-@compute @workgroup_size(256)
-fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
-        @builtin(local_invocation_index) lid: u32) {
-    let p = flat_index(wid, nwg, lid, 256u);
-    if (p >= m.n) {
-        return;
-    }
+// Particle p streamed from pos_in, vel_in and written to pos_out, vel_out.
+fn stream_row(p: u32) -> array<vec3<f32>, 2> {
     var x = vec3<f32>(0.0);
     var v = vec3<f32>(0.0);
     for (var a = 0u; a < DIMS; a = a + 1u) {
@@ -44,7 +39,18 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         pos_out[p * DIMS + a] = x[a];
         vel_out[p * DIMS + a] = v[a];
     }
-    bin_particle(p, x, v);
+    return array<vec3<f32>, 2>(x, v);
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let p = flat_index(wid, nwg, lid, 256u);
+    if (p >= m.n) {
+        return;
+    }
+    let xv = stream_row(p);
+    bin_particle(p, xv[0], xv[1]);
 }
 
 // Streaming and cells only (pos_out, vel_out and cell are scratch here).
@@ -55,18 +61,8 @@ fn stream_cell(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) n
     if (p >= m.n) {
         return;
     }
-    var x = vec3<f32>(0.0);
-    var v = vec3<f32>(0.0);
-    for (var a = 0u; a < DIMS; a = a + 1u) {
-        x[a] = pos_in[p * DIMS + a];
-        v[a] = vel_in[p * DIMS + a];
-    }
-    stream_particle(&x, &v);
-    for (var a = 0u; a < DIMS; a = a + 1u) {
-        pos_out[p * DIMS + a] = x[a];
-        vel_out[p * DIMS + a] = v[a];
-    }
-    cell[p] = cell_of(m, x, grid_shift(m, clock[0]));
+    let xv = stream_row(p);
+    cell[p] = cell_of(m, xv[0], grid_shift(m, clock[0]));
 }
 
 // Output row p is streamed particle perm[p] (pos_in and vel_in are stream_cell's scratch,
