@@ -2,8 +2,8 @@
 //! SRD rotation with the cell thermostat and virtual particles in wall-cut cells).
 
 use super::{
-    CELL_WORDS, Geometry, SUM_V, SumsLayout, check_rule, fixed_scales, fx_round, geometry_params,
-    grid_shift, key_into, key_of, particle_ports, rule_param, thermal_params, value_of, words_of,
+    CELL_WORDS, Geometry, SUM_V, SumsLayout, check_rule, fx_round, geometry_params, grid_shift,
+    key_into, key_of, particle_ports, rule_param, thermal_params, value_of, words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D, shaders};
 use crate::node::{
@@ -94,7 +94,6 @@ pub(crate) struct MpcdBin {
 
 impl MpcdBin {
     pub(crate) fn from_params(p: &Params) -> Result<Self, String> {
-        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
         let (seed, stream) = key_of(p);
         let energy = p.text("thermostat") != "none";
         let atomics = match p.text("atomics") {
@@ -105,9 +104,7 @@ impl MpcdBin {
         let geo = Geometry::from_params(p)?;
         let biased = p.text("rule") == "biased";
         check_rule(&geo, biased)?;
-        let mut u = geo.uniform();
-        u.fix_v = fix_v;
-        u.fix_e = fix_e;
+        let mut u = geo.thermal_uniform(p);
         u.shift = u32::from(p.flag("shift"));
         u.rule = u32::from(biased);
         u.energy = u32::from(energy);
@@ -384,7 +381,6 @@ impl NodeKind for MpcdCollideKind {
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
         let geo = Geometry::from_params(p)?;
-        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
         let thermostat = match p.text("thermostat") {
             "none" => 0,
             "rescale" => 1,
@@ -396,11 +392,9 @@ impl NodeKind for MpcdCollideKind {
         let angle = p.number("angle").to_radians();
         let biased = p.text("rule") == "biased";
         check_rule(&geo, biased)?;
-        let mut u = geo.uniform();
+        let mut u = geo.thermal_uniform(p);
         u.rule = u32::from(biased);
         u.accept_a = p.number("acceptance") as f32;
-        u.fix_v = fix_v;
-        u.fix_e = fix_e;
         u.shift = u32::from(p.flag("shift"));
         u.kt = p.number("temperature") as f32;
         u.mass = p.number("mass") as f32;

@@ -2,7 +2,7 @@
 //! can start from it): round(density x cells) particles uniform in the box, velocities
 //! Maxwell-Boltzmann at kT with the mean velocity (summed in exact fixed point) removed.
 
-use super::{Geometry, fixed_scales, geometry_params, key_into, key_of, thermal_params};
+use super::{Geometry, geometry_params, key_into, key_of, thermal_params};
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
@@ -76,11 +76,8 @@ impl NodeKind for MpcdInitKind {
                 p.number("density")
             ));
         }
-        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
-        let mut u = geo.uniform();
+        let mut u = geo.thermal_uniform(p);
         u.n = n as u32;
-        u.fix_v = fix_v;
-        u.fix_e = fix_e;
         u.kt = p.number("temperature") as f32;
         u.mass = p.number("mass") as f32;
         key_into(&mut u, p);

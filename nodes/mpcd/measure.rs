@@ -2,8 +2,8 @@
 //! block of exact 64-bit fixed-point sums) and `mpcd_average` (their means).
 
 use super::{
-    CELL_WORDS, Geometry, SUM_V, SumsLayout, fixed_scales, fx_round, geometry_params,
-    thermal_params, value_of, words_of,
+    CELL_WORDS, Geometry, SUM_V, SumsLayout, fx_round, geometry_params, thermal_params, value_of,
+    words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -95,10 +95,7 @@ impl NodeKind for MpcdMeasureKind {
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
         let geo = Geometry::from_params(p)?;
-        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
-        let mut u = geo.uniform();
-        u.fix_v = fix_v;
-        u.fix_e = fix_e;
+        let mut u = geo.thermal_uniform(p);
         u.bins = p.number("bins") as u32;
         u.warmup = p.number("warmup") as u32;
         u.every = p.number("every") as u32;
@@ -312,10 +309,7 @@ impl NodeKind for MpcdAverageKind {
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
         let geo = Geometry::from_params(p)?;
-        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
-        let mut u = geo.uniform();
-        u.fix_v = fix_v;
-        u.fix_e = fix_e;
+        let mut u = geo.thermal_uniform(p);
         u.mass = p.number("mass") as f32;
         u.bins = p.number("bins") as u32;
         Ok(Box::new(MpcdAverage { geo, u }))

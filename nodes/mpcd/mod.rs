@@ -215,6 +215,14 @@ impl Geometry {
         self.cells.iter().product()
     }
 
+    /// The uniform with the geometry and the fixed-point scales of the kind's
+    /// `temperature` and `mass` (`thermal_params`) filled in.
+    pub(crate) fn thermal_uniform(&self, p: &Params) -> Uniform {
+        let mut u = self.uniform();
+        (u.fix_v, u.fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
+        u
+    }
+
     /// The uniform with the geometry filled in.
     pub fn uniform(&self) -> Uniform {
         let mut u = Uniform::default();
@@ -323,7 +331,7 @@ pub(crate) fn thermal_params() -> Vec<ParamSpec> {
 }
 
 /// The fixed-point scales (fix_v, fix_e) for (kT, m), as f32 (the GPU's values).
-pub(crate) fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
+fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
     let vth = if kt > 0.0 { (kt / mass).sqrt() } else { 1.0 };
     ((16_777_216.0 / vth) as f32, (65_536.0 / (vth * vth)) as f32)
 }

@@ -5,8 +5,8 @@
 //! v' = u + R (v - u), V' = u + R (V - u), conserving each cell's momentum and energy.
 
 use super::{
-    Geometry, SUM_V, SumsLayout, fixed_scales, geometry_params, grid_shift, key_into, key_of,
-    thermal_params, value_of, words_of,
+    Geometry, SUM_V, SumsLayout, geometry_params, grid_shift, key_into, key_of, thermal_params,
+    value_of, words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -81,7 +81,6 @@ impl NodeKind for MpcdBinSoluteKind {
     }
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
-        let (fix_v, fix_e) = fixed_scales(p.number("temperature"), p.number("mass"));
         let geo = Geometry::from_params(p)?;
         let ratio = p.number("solute_mass") / p.number("mass");
         let r32 = ratio as f32;
@@ -90,9 +89,7 @@ impl NodeKind for MpcdBinSoluteKind {
                 "solute_mass / mass = {ratio} is outside the f32 range"
             ));
         }
-        let mut u = geo.uniform();
-        u.fix_v = fix_v;
-        u.fix_e = fix_e;
+        let mut u = geo.thermal_uniform(p);
         u.shift = u32::from(p.flag("shift"));
         u.solute = 1;
         u.ratio = r32;

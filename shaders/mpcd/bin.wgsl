@@ -9,11 +9,12 @@
 
 @group(0) @binding(0) var<uniform> m: Mpcd;
 @group(0) @binding(1) var<storage, read> clock: array<u32>;
-@group(0) @binding(2) var<storage, read> pos: array<f32>;
-@group(0) @binding(3) var<storage, read> vel: array<f32>;
+@group(0) @binding(2) var<storage, read> pos_in: array<f32>;
+@group(0) @binding(3) var<storage, read> vel_in: array<f32>;
 @group(0) @binding(4) var<storage, read_write> cell: array<u32>;
 
 #import mpcd/bin_common.wgsl
+#import mpcd/rows.wgsl
 
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -22,11 +23,6 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     if (p >= m.n) {
         return;
     }
-    var x = vec3<f32>(0.0);
-    var v = vec3<f32>(0.0);
-    for (var a = 0u; a < DIMS; a = a + 1u) {
-        x[a] = pos[p * DIMS + a];
-        v[a] = vel[p * DIMS + a];
-    }
-    bin_particle(p, x, v);
+    let r = load_row(p);
+    bin_particle(p, r[0], r[1]);
 }

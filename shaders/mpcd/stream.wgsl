@@ -22,15 +22,5 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     if (p >= m.n) {
         return;
     }
-    var x = vec3<f32>(0.0);
-    var v = vec3<f32>(0.0);
-    for (var a = 0u; a < DIMS; a = a + 1u) {
-        x[a] = pos_in[p * DIMS + a];
-        v[a] = vel_in[p * DIMS + a];
-    }
-    stream_particle(&x, &v);
-    for (var a = 0u; a < DIMS; a = a + 1u) {
-        pos_out[p * DIMS + a] = x[a];
-        vel_out[p * DIMS + a] = v[a];
-    }
+    _ = stream_row(p);
 }

@@ -26,22 +26,6 @@
 #import mpcd/stream_common.wgsl
 #import mpcd/bin_common.wgsl
 
-// Particle p streamed from pos_in, vel_in and written to pos_out, vel_out.
-fn stream_row(p: u32) -> array<vec3<f32>, 2> {
-    var x = vec3<f32>(0.0);
-    var v = vec3<f32>(0.0);
-    for (var a = 0u; a < DIMS; a = a + 1u) {
-        x[a] = pos_in[p * DIMS + a];
-        v[a] = vel_in[p * DIMS + a];
-    }
-    stream_particle(&x, &v);
-    for (var a = 0u; a < DIMS; a = a + 1u) {
-        pos_out[p * DIMS + a] = x[a];
-        vel_out[p * DIMS + a] = v[a];
-    }
-    return array<vec3<f32>, 2>(x, v);
-}
-
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {

@@ -1,5 +1,6 @@
 // template: the MPCD streaming of one particle, shared by mpcd/stream.wgsl and
-// mpcd/stream_bin.wgsl (which declare the parameter block `m`). Ballistic motion for dt
+// mpcd/stream_bin.wgsl (which declare the parameter block `m` and the bindings `pos_in`,
+// `vel_in`, `pos_out`, `vel_out`). Ballistic motion for dt
 // under the body force
 // (acceleration g along x: x += v t + g t^2 / 2, v_x += g t, exact for a constant force;
 // the sine force is evaluated at the start of the step), plates perpendicular to the last
@@ -7,6 +8,7 @@
 // does not change: bounce-back v -> -v or specular v_z -> -v_z, then the rest of the step),
 // and a periodic wrap into [-L/2, L/2) on the other axes.
 #import mpcd/common.wgsl
+#import mpcd/rows.wgsl
 
 // Moves (x, v) ballistically for time t under acceleration g along x.
 fn advance(x: ptr<function, vec3<f32>>, v: ptr<function, vec3<f32>>, g: f32, t: f32) {
@@ -70,4 +72,17 @@ fn stream_particle(xp: ptr<function, vec3<f32>>, vp: ptr<function, vec3<f32>>) {
     }
     *xp = x;
     *vp = v;
+}
+
+// Particle p streamed from pos_in, vel_in and written to pos_out, vel_out.
+fn stream_row(p: u32) -> array<vec3<f32>, 2> {
+    let r = load_row(p);
+    var x = r[0];
+    var v = r[1];
+    stream_particle(&x, &v);
+    for (var a = 0u; a < DIMS; a = a + 1u) {
+        pos_out[p * DIMS + a] = x[a];
+        vel_out[p * DIMS + a] = v[a];
+    }
+    return array<vec3<f32>, 2>(x, v);
 }
