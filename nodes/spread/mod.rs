@@ -8,6 +8,7 @@
 //! <S F, v>_dV = <F, J v> by construction. Grid cells are centred at -L/2 + (j + 1/2) h.
 
 pub mod boxgen;
+pub mod interpgen;
 pub mod window;
 
 use crate::expr::ParamValue;
@@ -36,6 +37,9 @@ pub struct GridWindow {
     pub contiguous: bool,
     /// Decide `contiguous` from the grid's size.
     pub auto_order: bool,
+    /// Per-particle kernels with a segment of subgroup lanes per particle (interpgen.rs)
+    /// where the adapter and the support allow; false: the workgroup-table kernels.
+    pub lanes: bool,
     /// Gaussian window: the fewest cells its standard deviation may span (0: no check).
     /// Checked when the node is planned, not built, so an unused node never fails.
     pub min_width_cells: f64,
@@ -63,6 +67,14 @@ impl GridWindow {
             1
         } else {
             chunks(count)
+        }
+    }
+
+    /// Lanes per particle of the lane kernels (interpgen.rs) on this adapter, or None.
+    pub fn lane_segment(&self, cx: &CompileCtx) -> Option<u32> {
+        match cx.caps().subgroups {
+            Some((min, _)) if self.lanes => interpgen::segment(self.window.support(), min),
+            _ => None,
         }
     }
 
@@ -214,6 +226,12 @@ fn grid_params() -> Vec<ParamSpec> {
             "threads per workgroup (tuning: the workgroup serves workgroup / support^2 particles)",
         ),
         ParamSpec::choice(
+            "lanes",
+            "auto",
+            &["auto", "off"],
+            "per-particle kernels: auto: a segment of subgroup lanes per particle, no workgroup memory, where the adapter has subgroups at least as wide as the support; off: the workgroup-table kernels",
+        ),
+        ParamSpec::choice(
             "variant",
             "auto",
             &["auto", "atomic", "portable"],
@@ -267,6 +285,7 @@ fn grid_window(p: &Params) -> Result<GridWindow, String> {
         min_width_cells: p.number("min_width_cells"),
         contiguous: p.text("order") == "contiguous",
         auto_order: p.text("order") == "auto",
+        lanes: p.text("lanes") == "auto",
     })
 }
 
@@ -339,6 +358,14 @@ fn per_particle(cx: &CompileCtx, count: u32, chunks: u32, support: u32, wg: u32)
     let c = chunks as u64;
     let slots = c * (count as u64).div_ceil(c);
     cx.grid_1d(slots.div_ceil(per_workgroup), 1)
+}
+
+/// Dispatch shape of the lane kernels (interpgen.rs): `wg / seg` particles per workgroup,
+/// served in `chunks` interleaved runs like the per-particle kernels.
+fn lane_groups(cx: &CompileCtx, count: u32, chunks: u32, seg: u32, wg: u32) -> [u32; 3] {
+    let c = chunks as u64;
+    let slots = c * (count as u64).div_ceil(c);
+    cx.grid_1d(slots.div_ceil((wg / seg) as u64), 1)
 }
 
 fn check_positions(gw: &GridWindow, t: Option<ValueType>) -> Result<u32, PortError> {
@@ -492,6 +519,7 @@ impl GpuKernels for Spread {
         };
         let ns = self.gw.window.support();
         let boxed = self.uses_boxes(n);
+        let lanes = self.gw.lane_segment(cx);
         let prefix = format!("{}{}", cx.shader(self.gw.window.shader())?, cx.shader(add)?);
         let plain = format!("{prefix}{}", cx.shader("spread/spread.wgsl")?);
         let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
@@ -503,40 +531,45 @@ impl GpuKernels for Spread {
                 Binding::StorageReadWrite,
                 Binding::Uniform,
             ];
-            let spec = KernelSpec::new(
-                format!(
-                    "spread ({}{})",
-                    self.gw.window.shader(),
-                    if boxed { ", boxes" } else { "" }
-                ),
-                if boxed {
-                    let generated = boxgen::spread_source(ns, self.gw.dims() as u32, chunk, comps);
-                    format!(
-                        "{prefix}{}",
-                        crate::gpu::shaders::resolve(&generated).map_err(CompileError::Library)?
-                    )
-                } else {
-                    plain.clone()
-                },
-                &bindings,
-            );
+            let chunks = self.gw.chunks(n, comps);
+            let name = |how: &str| format!("spread ({}{how})", self.gw.window.shader());
+            let generated = |text: String| -> Result<String, CompileError> {
+                Ok(format!(
+                    "{prefix}{}",
+                    crate::gpu::shaders::resolve(&text).map_err(CompileError::Library)?
+                ))
+            };
             let (spec, groups) = if boxed {
+                let text = boxgen::spread_source(ns, self.gw.dims() as u32, chunk, comps);
                 (
-                    spec,
+                    KernelSpec::new(name(", boxes"), generated(text)?, &bindings),
                     cx.grid_1d(
                         (n as u64).div_ceil(box_run(n, self.gw.cell_count() as u64) as u64),
                         1,
                     ),
                 )
+            } else if let Some(seg) = lanes {
+                let text = interpgen::spread_source(
+                    ns,
+                    self.gw.dims() as u32,
+                    chunk,
+                    comps,
+                    seg,
+                    self.gw.workgroup,
+                );
+                let spec = KernelSpec::new(name(", lanes"), generated(text)?, &bindings)
+                    .constant("CHUNKS", chunks as f64);
+                (spec, lane_groups(cx, n, chunks, seg, self.gw.workgroup))
             } else {
                 (
-                    spec.constant("NS", ns as f64)
+                    KernelSpec::new(name(""), plain.clone(), &bindings)
+                        .constant("NS", ns as f64)
                         .constant("DIMS", self.gw.dims() as f64)
                         .constant("TOTAL", comps as f64)
                         .constant("COMPS", chunk as f64)
-                        .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
+                        .constant("CHUNKS", chunks as f64)
                         .constant("WG", self.gw.workgroup as f64),
-                    per_particle(cx, n, self.gw.chunks(n, comps), ns, self.gw.workgroup),
+                    per_particle(cx, n, chunks, ns, self.gw.workgroup),
                 )
             };
             let kernel = cx.kernel(&spec)?;
@@ -710,43 +743,69 @@ impl GpuKernels for Interpolate {
         let ValueType::Particles { n, .. } = pos.ty else {
             unreachable!()
         };
-        // Subgroup shuffles reduce each particle's threads when the adapter has them
-        // (variant "portable" forces the workgroup-memory tree).
+        // With subgroups, a segment of lanes per particle and no workgroup memory
+        // (interpgen.rs) where the support fits a subgroup; else the per-particle kernel,
+        // reducing with subgroup shuffles where it can (variant "portable" forces the
+        // workgroup-memory tree).
         let portable = self.params.get("variant") == Some(&ParamValue::Text("portable".into()));
+        let ns = self.gw.window.support();
+        let lanes = self.gw.lane_segment(cx).filter(|_| !portable);
         let file = if cx.caps().subgroups.is_some() && !portable {
             "spread/interpolate_subgroup.wgsl"
         } else {
             "spread/interpolate.wgsl"
         };
-        let source = format!(
-            "{}{}",
-            cx.shader(self.gw.window.shader())?,
-            cx.shader(file)?
-        );
+        let window = cx.shader(self.gw.window.shader())?;
+        let source = format!("{window}{}", cx.shader(file)?);
         // Without weights the binding still needs a buffer; the kernel never reads it.
         let quadrature = weights.map(|w| w.buffer).unwrap_or(grid.buffer);
         let mut dispatches = Vec::new();
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
-            let spec = KernelSpec::new(
-                format!("interpolate ({})", self.gw.window.shader()),
-                source.clone(),
-                &[
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::Uniform,
-                ],
-            );
-            let spec = spec
-                .constant("NS", self.gw.window.support() as f64)
+            let bindings = [
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ];
+            let chunks = self.gw.chunks(n, comps);
+            let (spec, groups) = if let Some(seg) = lanes {
+                let generated = interpgen::interpolate_source(
+                    ns,
+                    self.gw.dims() as u32,
+                    chunk,
+                    comps,
+                    weights.is_some(),
+                    seg,
+                    self.gw.workgroup,
+                );
+                let source = format!(
+                    "{window}{}",
+                    crate::gpu::shaders::resolve(&generated).map_err(CompileError::Library)?
+                );
+                let spec = KernelSpec::new(
+                    format!("interpolate ({}, lanes)", self.gw.window.shader()),
+                    source,
+                    &bindings,
+                )
+                .constant("CHUNKS", chunks as f64);
+                (spec, lane_groups(cx, n, chunks, seg, self.gw.workgroup))
+            } else {
+                let spec = KernelSpec::new(
+                    format!("interpolate ({})", self.gw.window.shader()),
+                    source.clone(),
+                    &bindings,
+                )
+                .constant("NS", ns as f64)
                 .constant("DIMS", self.gw.dims() as f64)
                 .constant("COMPS", chunk as f64)
                 .constant("TOTAL", comps as f64)
                 .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some())))
-                .constant("CHUNKS", self.gw.chunks(n, comps) as f64)
+                .constant("CHUNKS", chunks as f64)
                 .constant("WG", self.gw.workgroup as f64);
+                (spec, per_particle(cx, n, chunks, ns, self.gw.workgroup))
+            };
             let kernel = cx.kernel(&spec)?;
             let geo = cx.uniform(
                 "interpolate geometry",
@@ -754,13 +813,6 @@ impl GpuKernels for Interpolate {
                     comp_offset: first,
                     ..geometry(&self.gw, n)
                 }),
-            );
-            let groups = per_particle(
-                cx,
-                n,
-                self.gw.chunks(n, comps),
-                self.gw.window.support(),
-                self.gw.workgroup,
             );
             dispatches.push(cx.dispatch(
                 &kernel,

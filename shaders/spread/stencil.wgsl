@@ -9,15 +9,11 @@
 // segment owns one (x, y) column of the NS^3 support and walks it along z. The window
 // weights and the wrapped cell offsets of every axis are computed once per particle into
 // workgroup memory, so the inner loop is two loads, a multiply and an add per cell.
-//
-// Particles are taken in a decorrelated order: slot g serves particle
-// (g % CHUNKS) * chunk + g / CHUNKS, so workgroups running at the same time work far apart
-// even when the particles are sorted in space (sorted input otherwise piles every
-// concurrent access onto the same few cache lines). CHUNKS must exceed the slots a GPU
-// runs at once (about 17k on an H100); it comes from the host, which sizes the dispatch.
+// Particles are taken in the decorrelated order of spread/slots.wgsl.
+
+#import spread/slots.wgsl
 
 override WG: u32 = 64u;
-override CHUNKS: u32 = 65536u;
 
 // Tables of the workgroup's particles: slot s, axis a, support index k at
 // s*DIMS*NS + a*NS + k. 384 entries suffice: a segment holds at least NS^2 threads (or
@@ -34,18 +30,6 @@ fn seg_size() -> u32 {
         s = s * 2u;
     }
     return s;
-}
-
-// Particle served by global slot g, or geo.count when the slot is empty. The map is one
-// to one on g < CHUNKS * chunk; the dispatch may round up past that (folded grids), and
-// those slots must stay empty.
-fn slot_particle(g: u32) -> u32 {
-    let chunk = (geo.count + CHUNKS - 1u) / CHUNKS;
-    if (g >= CHUNKS * chunk) {
-        return geo.count;
-    }
-    let p = (g % CHUNKS) * chunk + g / CHUNKS;
-    return select(geo.count, p, p < geo.count);
 }
 
 // Fills the stencil tables of the PPW particles of this workgroup. The caller puts one

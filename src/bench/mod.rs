@@ -221,6 +221,9 @@ pub enum BenchCommand {
         /// Workgroup sizes to time (64, 128, 256).
         #[arg(long, value_delimiter = ',', default_values_t = [256])]
         workgroups: Vec<u32>,
+        /// Rows of the table to run (0-7, in its order; default all).
+        #[arg(long, value_delimiter = ',')]
+        cases: Vec<usize>,
     },
     /// Sum (blocked and compensated), dot and max of n f32.
     Reduce {
@@ -376,7 +379,8 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             cells,
             reps,
             workgroups,
-        } => spread::run(cells, reps, &workgroups),
+            cases,
+        } => spread::run(cells, reps, &workgroups, &cases),
         BenchCommand::Sort { n, reps, variant } => primitives::sort(n, reps, &variant),
         BenchCommand::Scan { n, reps, variant } => primitives::scan(n, reps, &variant),
         BenchCommand::Fft {

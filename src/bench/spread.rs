@@ -26,7 +26,13 @@ const CASES: [(u32, f64, bool, u32); 8] = [
     (8, 1.0, true, 3),
 ];
 
-pub fn run(n_cells: u32, reps: u64, workgroups: &[u32]) -> Result<(), CliError> {
+pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Result<(), CliError> {
+    if let Some(bad) = cases.iter().find(|&&c| c >= CASES.len()) {
+        return Err(CliError::Input(format!(
+            "--cases: no row {bad} (rows 0 to {})",
+            CASES.len() - 1
+        )));
+    }
     let gpu = GpuContext::new().map_err(runtime)?;
     let l = n_cells as f64;
     println!("adapter: {}", gpu.caps.summary());
@@ -53,7 +59,10 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32]) -> Result<(), CliError> 
         s ^= s << 17;
         (s >> 11) as f64 / (1u64 << 53) as f64
     };
-    for (support, density, sorted, comps) in CASES {
+    for (row, &(support, density, sorted, comps)) in CASES.iter().enumerate() {
+        if !cases.is_empty() && !cases.contains(&row) {
+            continue;
+        }
         let n = (density * l * l * l) as u32;
         let mut pos: Vec<[f32; 3]> = (0..n)
             .map(|_| [0, 1, 2].map(|_| ((next() - 0.5) * l) as f32))
@@ -117,6 +126,12 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32]) -> Result<(), CliError> 
             .iter()
             .map(|wg| (wg.to_string(), format!(r#""workgroup": "{wg}""#), false))
             .collect();
+        // The workgroup-table kernels the lane kernels replaced, for comparison.
+        runs.push((
+            "tables".into(),
+            r#""workgroup": "256", "lanes": "off""#.into(),
+            false,
+        ));
         runs.push((
             if sorted { "box" } else { "sort+box" }.into(),
             r#""sorted_input": true, "order": "contiguous""#.into(),

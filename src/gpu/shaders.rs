@@ -15,12 +15,41 @@ pub fn paths() -> impl Iterator<Item = &'static str> {
     files::FILES.iter().map(|(p, _)| *p)
 }
 
-/// The raw text of one shader file.
+/// The raw text of one shader file: the embedded one, or, for kernel development, the
+/// file of that path under the folder `MESOFLOW_SHADER_DIR` names when it has one (so
+/// variants of a kernel can be timed without a rebuild; each file used is named on stderr).
 pub fn raw(path: &str) -> Option<&'static str> {
+    if let Some(text) = overridden(path) {
+        return Some(text);
+    }
     files::FILES
         .iter()
         .find(|(p, _)| *p == path)
         .map(|(_, s)| *s)
+}
+
+/// The folder of shader overrides, if `MESOFLOW_SHADER_DIR` names one.
+pub fn override_dir() -> Option<&'static std::path::Path> {
+    static DIR: std::sync::OnceLock<Option<std::path::PathBuf>> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| std::env::var_os("MESOFLOW_SHADER_DIR").map(Into::into))
+        .as_deref()
+}
+
+fn overridden(path: &str) -> Option<&'static str> {
+    use std::collections::HashMap;
+    use std::sync::Mutex;
+    static CACHE: Mutex<Option<HashMap<String, &'static str>>> = Mutex::new(None);
+    let file = override_dir()?.join(path);
+    let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+    let cache = cache.get_or_insert_with(HashMap::new);
+    if let Some(text) = cache.get(path) {
+        return Some(text);
+    }
+    // Read once per process and kept for its lifetime, like the embedded files.
+    let text: &'static str = Box::leak(std::fs::read_to_string(&file).ok()?.into_boxed_str());
+    eprintln!("mesoflow: shader {path} overridden by {}", file.display());
+    cache.insert(path.to_string(), text);
+    Some(text)
 }
 
 /// A shader's text with its `#import` lines resolved.

@@ -95,46 +95,55 @@ fn many_particles_spread_and_interpolate_like_the_reference() {
         dims[..cells.len()].copy_from_slice(&cells);
         let field = rng.array(ValueType::RealGrid { dims, comps: 3 }, -1.0, 1.0);
         let quad = rng.array(ValueType::RealGrid { dims, comps: 1 }, 0.5, 1.5);
+        // Both per-particle kernels: lanes (a segment of subgroup lanes per particle,
+        // where the support fits the subgroup) and the workgroup-table kernels.
         for (w, extra) in WINDOWS {
-            for variant in ["atomic", "portable"] {
-                let p = params(w, extra, &lengths, &cells, variant);
+            for lanes in ["auto", "off"] {
+                let extra = if extra.is_empty() {
+                    format!(r#""lanes": "{lanes}""#)
+                } else {
+                    format!(r#"{extra}, "lanes": "{lanes}""#)
+                };
+                for variant in ["atomic", "portable"] {
+                    let p = params(w, &extra, &lengths, &cells, variant);
+                    let (g, r) = run_node(
+                        "spread",
+                        &p,
+                        &[("positions", pos.clone()), ("values", vals.clone())],
+                    );
+                    let (err, at) = rel_max_err(&g, &r);
+                    // Hundreds of f32 atomic adds per cell, in any order.
+                    assert!(
+                        err < 1e-5,
+                        "spread {w} {extra} {variant} {lengths:?}: error {err:e} at {at}"
+                    );
+                }
+                let p = params(w, &extra, &lengths, &cells, "auto");
                 let (g, r) = run_node(
-                    "spread",
+                    "interpolate",
                     &p,
-                    &[("positions", pos.clone()), ("values", vals.clone())],
+                    &[("grid", field.clone()), ("positions", pos.clone())],
                 );
                 let (err, at) = rel_max_err(&g, &r);
-                // Hundreds of f32 atomic adds per cell, in any order.
                 assert!(
                     err < 1e-5,
-                    "spread {w} {variant} {lengths:?}: error {err:e} at {at}"
+                    "interpolate {w} {extra} {lengths:?}: error {err:e} at {at}"
+                );
+                let (g, r) = run_node(
+                    "interpolate",
+                    &p,
+                    &[
+                        ("grid", field.clone()),
+                        ("positions", pos.clone()),
+                        ("weights", quad.clone()),
+                    ],
+                );
+                let (err, at) = rel_max_err(&g, &r);
+                assert!(
+                    err < 1e-5,
+                    "interpolate {w} {extra} with weights: error {err:e} at {at}"
                 );
             }
-            let p = params(w, extra, &lengths, &cells, "auto");
-            let (g, r) = run_node(
-                "interpolate",
-                &p,
-                &[("grid", field.clone()), ("positions", pos.clone())],
-            );
-            let (err, at) = rel_max_err(&g, &r);
-            assert!(
-                err < 1e-5,
-                "interpolate {w} {lengths:?}: error {err:e} at {at}"
-            );
-            let (g, r) = run_node(
-                "interpolate",
-                &p,
-                &[
-                    ("grid", field.clone()),
-                    ("positions", pos.clone()),
-                    ("weights", quad.clone()),
-                ],
-            );
-            let (err, at) = rel_max_err(&g, &r);
-            assert!(
-                err < 1e-5,
-                "interpolate {w} with weights: error {err:e} at {at}"
-            );
         }
     }
 }
@@ -620,8 +629,10 @@ fn interpolation_reductions_agree_on_every_segment_width() {
     if gpu().is_none() {
         return;
     }
-    // Segments of 4 (support 2) to 64 threads: narrower than a subgroup (the shuffle-only
-    // path, taken at support <= 5 on 32-wide subgroups), wider (shuffles plus one
+    // Lane kernels (supports up to the subgroup width: several particles per subgroup,
+    // one, and one column or several per lane), the workgroup-table kernel's segments of
+    // 4 (support 2) to 64 threads (lanes off, and supports wider than the subgroup):
+    // narrower than a subgroup (the shuffle-only path), wider (shuffles plus one
     // workgroup step), and the workgroup-memory tree of the portable variant.
     let mut rng = Rng::new(99);
     let lengths = [10.0, 10.0, 10.0];
@@ -643,12 +654,12 @@ fn interpolation_reductions_agree_on_every_segment_width() {
         ("gaussian", r#""width": 0.9, "support": 11"#),
     ];
     for (w, extra) in windows {
-        for variant in ["auto", "portable"] {
+        for (variant, lanes) in [("auto", "auto"), ("auto", "off"), ("portable", "auto")] {
             for wg in ["64", "256"] {
                 let extra = if extra.is_empty() {
-                    format!(r#""workgroup": "{wg}""#)
+                    format!(r#""workgroup": "{wg}", "lanes": "{lanes}""#)
                 } else {
-                    format!(r#"{extra}, "workgroup": "{wg}""#)
+                    format!(r#"{extra}, "workgroup": "{wg}", "lanes": "{lanes}""#)
                 };
                 let p = params(w, &extra, &lengths, &cells, variant);
                 let (g, r) = run_node(
