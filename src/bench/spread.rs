@@ -40,7 +40,7 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         "{n_cells}^3 grid (h = 1); support 8: Gaussian, support 4: Peskin 4-point; median GPU time of {reps} runs per launch"
     );
     println!(
-        "{:>7} {:>7} {:>9} {:>6} {:>5} {:>4} {:>11} {:>11} {:>11} {:>11}",
+        "{:>7} {:>7} {:>9} {:>6} {:>5} {:>9} {:>11} {:>11} {:>11} {:>11}",
         "support",
         "density",
         "N",
@@ -122,32 +122,49 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         // random input runs them after sorting in the graph (Morton order of 4-cell
         // blocks, as graphs/fcm.json does), shown as "sort+box", the sort, the gathers
         // and the scatter back included in the times.
-        let mut runs: Vec<(String, String, bool)> = workgroups
+        // (label, params of both nodes, params of spreading only, sort in the graph first)
+        let mut runs: Vec<(String, String, &str, bool)> = workgroups
             .iter()
-            .map(|wg| (wg.to_string(), format!(r#""workgroup": "{wg}""#), false))
+            .map(|wg| {
+                (
+                    format!("lanes {wg}"),
+                    format!(r#""workgroup": "{wg}""#),
+                    r#", "tiles": "off""#,
+                    false,
+                )
+            })
             .collect();
         // The workgroup-table kernels the lane kernels replaced, for comparison.
         runs.push((
             "tables".into(),
             r#""workgroup": "256", "lanes": "off""#.into(),
+            r#", "tiles": "off""#,
             false,
         ));
+        runs.push(("tiles".into(), r#""workgroup": "256""#.into(), r#", "tiles": "on""#, false));
         runs.push((
             if sorted { "box" } else { "sort+box" }.into(),
-            r#""sorted_input": true, "order": "contiguous""#.into(),
+            r#""order": "contiguous""#.into(),
+            r#", "sorted_input": true, "tiles": "off""#,
             !sorted,
         ));
         if sorted {
             // The per-particle kernels serving sorted input in its own order (cache
             // reuse between neighbouring particles, which interleaved runs give up).
-            runs.push(("contig".into(), r#""order": "contiguous""#.into(), false));
+            runs.push((
+                "contig".into(),
+                r#""order": "contiguous""#.into(),
+                r#", "tiles": "off""#,
+                false,
+            ));
         }
-        for (wg, extra, sort_first) in runs {
-            let params = format!(
+        for (wg, extra, spread_only, sort_first) in runs {
+            let interp_params = format!(
                 r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, {extra}}}"#
             );
-            // Interpolation has no sorted_input (one kernel whatever the order).
-            let interp_params = params.replace(r#""sorted_input": true, "#, "");
+            let params = format!(
+                r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, {extra}{spread_only}}}"#
+            );
             let blocks = n_cells.div_ceil(4);
             let bits = 3 * (blocks as f64).log2().ceil().max(1.0) as u32;
             let (sorting, spread_in, interp_in, u) = if sort_first {
@@ -203,7 +220,7 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
                 ""
             };
             println!(
-                "{support:>7} {density:>7} {n:>9} {sorted:>6} {comps:>5} {wg:>4} {:>11.4} {:>11.3} {:>11.4} {:>11.3}{mass}",
+                "{support:>7} {density:>7} {n:>9} {sorted:>6} {comps:>5} {wg:>9} {:>11.4} {:>11.3} {:>11.4} {:>11.3}{mass}",
                 ts * 1e3,
                 ts * 1e9 / n as f64,
                 ti * 1e3,
