@@ -459,14 +459,16 @@ impl Spread {
     }
 
     /// Scratch of tiled spreading, by role: tile counts, tile starts, tile, rank and list
-    /// slot per particle, the stencil per particle (vec4).
+    /// slot per particle, the anchor cell per particle (vec4), the window weights per
+    /// particle (3 x support).
     fn tile_scratch(&self, n: u32) -> Vec<u64> {
         let tiles: u64 = tilegen::tiles_per_axis(&self.gw.cells)
             .iter()
             .map(|&t| t as u64)
             .product();
         let n = n as u64;
-        vec![4 * tiles, 4 * tiles, 4 * n, 4 * n, 4 * n, 16 * n]
+        let support = self.gw.window.support() as u64;
+        vec![4 * tiles, 4 * tiles, 4 * n, 4 * n, 4 * n, 16 * n, 12 * support * n]
     }
 
     /// Whether spreading `n` particles goes box by box (shaders/spread/box.wgsl): sorted
@@ -650,7 +652,7 @@ impl Spread {
         let pos = io.inputs[0].expect("required");
         let vals = io.inputs[1].expect("required");
         let out = io.outputs[0];
-        let [count, start, ptile, rank, order, stencil] = io.scratch[..] else {
+        let [count, start, ptile, rank, order, anchors, weights] = io.scratch[..] else {
             unreachable!("scratch from infer")
         };
         let ns = self.gw.window.support();
@@ -663,7 +665,10 @@ impl Spread {
             "spread tiles",
             bytemuck::bytes_of(&TilesUniform {
                 nt,
-                size: [tilegen::TX, tilegen::TY, if dims == 3 { tilegen::TZ } else { 1 }, 0],
+                size: {
+                    let [x, y, z] = tilegen::tile_size(dims);
+                    [x, y, z, 0]
+                },
             }),
         );
         let geo = cx.uniform("spread geometry", bytemuck::bytes_of(&geometry(&self.gw, n)));
@@ -673,8 +678,10 @@ impl Spread {
             cx.shader("spread/tiles.wgsl")?
         );
         let mut setup_bindings = vec![Binding::StorageRead, Binding::Uniform, Binding::Uniform];
-        setup_bindings.extend([Binding::StorageReadWrite; 6]);
-        let setup_buffers = [pos.buffer, &geo, &tiles, count, start, ptile, rank, order, stencil];
+        setup_bindings.extend([Binding::StorageReadWrite; 7]);
+        let setup_buffers = [
+            pos.buffer, &geo, &tiles, count, start, ptile, rank, order, anchors, weights,
+        ];
         let mut dispatches = vec![cx.fill(count, nt[3] as u64, 0)?];
         for (entry, groups) in [
             ("tile_count", cx.grid_1d(n as u64, 256)),
@@ -711,6 +718,7 @@ impl Spread {
                     Binding::StorageRead,
                     Binding::StorageRead,
                     Binding::StorageRead,
+                    Binding::StorageRead,
                 ],
             );
             let kernel = cx.kernel(&spec)?;
@@ -723,8 +731,8 @@ impl Spread {
             );
             dispatches.push(cx.dispatch(
                 &kernel,
-                &[vals.buffer, out.buffer, &geo, &tiles, count, start, order, stencil],
-                cx.grid_1d(nt[3] as u64 * 256, 256),
+                &[vals.buffer, out.buffer, &geo, &tiles, count, start, order, anchors, weights],
+                cx.grid_1d(nt[3] as u64, 1),
             ));
         }
         Ok(dispatches)

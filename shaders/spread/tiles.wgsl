@@ -1,10 +1,12 @@
+// template: composed with a window file (window_phi).
+//
 // The set-up kernels of tiled spreading (nodes/spread/tilegen.rs writes the spreading
 // kernel itself).
 //
-// The grid is cut into tiles (16 x 16 x 8 cells in 3D, 16 x 16 in 2D; the last tile
+// The grid is cut into tiles (8 x 8 x 8 cells in 3D, 16 x 16 in 2D; the last tile
 // along an axis may be shorter). Each particle is filed under the tile of its anchor,
 // the first cell of its support; a counting sort lists the particles tile by tile:
-//   tile_count:   the anchor and the window offsets of each particle, its tile, and its
+//   tile_count:   the anchor and the window weights of each particle, its tile, and its
 //                 rank among the tile's particles (one u32 atomic per particle);
 //   tile_scan:    the first list slot of each tile (exclusive scan, one workgroup);
 //   tile_scatter: the particle at each slot.
@@ -31,10 +33,11 @@ struct Tiles {
 @group(0) @binding(5) var<storage, read_write> ptile: array<u32>;
 @group(0) @binding(6) var<storage, read_write> rank: array<u32>;
 @group(0) @binding(7) var<storage, read_write> order: array<u32>;
-// Per particle: the window argument of support index 0 per axis (x, y, z) and the
-// anchor cell as a flat index (w, as bits). Spreading evaluates support index k at
-// stencil[a] + k: the anchor and the weights come from one computation.
-@group(0) @binding(8) var<storage, read_write> stencil: array<vec4<f32>>;
+// Per particle: its anchor cell per axis (x, y, z) and its window weights (per unit
+// length) at support index k of axis a, at p * 3 * NS + a * NS + k: the anchor and the
+// weights come from one computation, so the tile lists and the weights agree.
+@group(0) @binding(8) var<storage, read_write> anchors: array<vec4<u32>>;
+@group(0) @binding(9) var<storage, read_write> weights: array<f32>;
 
 @compute @workgroup_size(256)
 fn tile_count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -43,23 +46,21 @@ fn tile_count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nw
     if (p >= geo.count) {
         return;
     }
-    var s = vec4<f32>(0.0);
-    var anchor = 0u;
+    var anchor = vec4<u32>(0u);
     var tile = 0u;
-    var cell_stride = 1u;
     var tile_stride = 1u;
     for (var a = 0u; a < DIMS; a = a + 1u) {
         let t = centre_units(pos[p * DIMS + a], a, geo);
         let j0 = floor(t - 0.5 * f32(NS)) + 1.0;
-        s[a] = j0 - t;
+        for (var k = 0u; k < NS; k = k + 1u) {
+            weights[(p * 3u + a) * NS + k] = window_phi(j0 + f32(k) - t, geo.win[a]) * geo.inv_h[a];
+        }
         let c = wrap_cell(i32(j0), geo.n[a]);
-        anchor = anchor + c * cell_stride;
+        anchor[a] = c;
         tile = tile + (c / tiles.size[a]) * tile_stride;
-        cell_stride = cell_stride * geo.n[a];
         tile_stride = tile_stride * tiles.nt[a];
     }
-    s.w = bitcast<f32>(anchor);
-    stencil[p] = s;
+    anchors[p] = anchor;
     ptile[p] = tile;
     rank[p] = atomicAdd(&count[tile], 1u);
 }

@@ -226,6 +226,9 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
                 ti * 1e3,
                 ti * 1e9 / n as f64
             );
+            for timing in &run.timings {
+                print!("{}", timing.breakdown());
+            }
         }
     }
     Ok(())
