@@ -9,7 +9,6 @@
 
 pub mod boxgen;
 pub mod interpgen;
-pub mod tilegen;
 pub mod window;
 
 use crate::expr::ParamValue;
@@ -418,12 +417,6 @@ impl NodeKind for SpreadKind {
 
     fn params(&self) -> Vec<ParamSpec> {
         let mut p = grid_params();
-        p.push(ParamSpec::choice(
-            "tiles",
-            "auto",
-            &["auto", "on", "off"],
-            "spreading tile by tile: the particles are listed by the tile of grid cells their support starts in (a counting sort inside the node), and each workgroup sums the particles reaching its tile and writes each of its cells once: no float atomics, any input order, 28 bytes of scratch per particle. auto: where it is faster than the other kernels (3D, supports of 4 to 16 cells); on: always; off: never",
-        ));
         p.push(ParamSpec {
             name: "sorted_input",
             kind: ParamKind::Bool,
@@ -447,30 +440,6 @@ struct Spread {
 }
 
 impl Spread {
-    /// Whether spreading `n` particles goes tile by tile (tilegen.rs): the `tiles` param,
-    /// and for `auto` the rule measured in BENCHMARKS.md.
-    fn uses_tiles(&self, n: u32) -> bool {
-        n > 0
-            && match self.params.text("tiles") {
-                "on" => true,
-                "off" => false,
-                _ => tiles_pay(&self.gw),
-            }
-    }
-
-    /// Scratch of tiled spreading, by role: tile counts, tile starts, tile, rank and list
-    /// slot per particle, the anchor cell per particle (vec4), the window weights per
-    /// particle (3 x support).
-    fn tile_scratch(&self, n: u32) -> Vec<u64> {
-        let tiles: u64 = tilegen::tiles_per_axis(&self.gw.cells)
-            .iter()
-            .map(|&t| t as u64)
-            .product();
-        let n = n as u64;
-        let support = self.gw.window.support() as u64;
-        vec![4 * tiles, 4 * tiles, 4 * n, 4 * n, 4 * n, 16 * n, 12 * support * n]
-    }
-
     /// Whether spreading `n` particles goes box by box (shaders/spread/box.wgsl): sorted
     /// input, dense enough, and a support wide enough to pay and narrow enough to fit.
     fn uses_boxes(&self, n: u32) -> bool {
@@ -493,11 +462,7 @@ impl Node for Spread {
             ));
         }
         self.gw.check_resolution("values")?;
-        let mut sig = Signature::outputs(vec![self.gw.grid_type(comps)]);
-        if self.uses_tiles(n) {
-            sig.scratch = self.tile_scratch(n);
-        }
-        Ok(sig)
+        Ok(Signature::outputs(vec![self.gw.grid_type(comps)]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -553,9 +518,6 @@ impl GpuKernels for Spread {
             "spread/add_cas.wgsl"
         };
         let ns = self.gw.window.support();
-        if self.uses_tiles(n) {
-            return self.compile_tiles(cx, io, n, comps);
-        }
         let boxed = self.uses_boxes(n);
         let lanes = self.gw.lane_segment(cx);
         let prefix = format!("{}{}", cx.shader(self.gw.window.shader())?, cx.shader(add)?);
@@ -622,117 +584,6 @@ impl GpuKernels for Spread {
                 &kernel,
                 &[pos.buffer, vals.buffer, out.buffer, &geo],
                 groups,
-            ));
-        }
-        Ok(dispatches)
-    }
-}
-
-/// Where `tiles: auto` spreads tile by tile.
-fn tiles_pay(gw: &GridWindow) -> bool {
-    gw.dims() == 3 && (4..=16).contains(&gw.window.support())
-}
-
-/// Layout of `Tiles` in shaders/spread/tiles.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct TilesUniform {
-    nt: [u32; 4],
-    size: [u32; 4],
-}
-
-impl Spread {
-    fn compile_tiles(
-        &self,
-        cx: &mut CompileCtx<'_>,
-        io: &NodeIo<'_>,
-        n: u32,
-        comps: u32,
-    ) -> Result<Vec<Dispatch>, CompileError> {
-        let pos = io.inputs[0].expect("required");
-        let vals = io.inputs[1].expect("required");
-        let out = io.outputs[0];
-        let [count, start, ptile, rank, order, anchors, weights] = io.scratch[..] else {
-            unreachable!("scratch from infer")
-        };
-        let ns = self.gw.window.support();
-        let dims = self.gw.dims() as u32;
-        let per_axis = tilegen::tiles_per_axis(&self.gw.cells);
-        let mut nt = [1u32; 4];
-        nt[..per_axis.len()].copy_from_slice(&per_axis);
-        nt[3] = per_axis.iter().product();
-        let tiles = cx.uniform(
-            "spread tiles",
-            bytemuck::bytes_of(&TilesUniform {
-                nt,
-                size: {
-                    let [x, y, z] = tilegen::tile_size(dims);
-                    [x, y, z, 0]
-                },
-            }),
-        );
-        let geo = cx.uniform("spread geometry", bytemuck::bytes_of(&geometry(&self.gw, n)));
-        let setup = format!(
-            "{}{}",
-            cx.shader(self.gw.window.shader())?,
-            cx.shader("spread/tiles.wgsl")?
-        );
-        let mut setup_bindings = vec![Binding::StorageRead, Binding::Uniform, Binding::Uniform];
-        setup_bindings.extend([Binding::StorageReadWrite; 7]);
-        let setup_buffers = [
-            pos.buffer, &geo, &tiles, count, start, ptile, rank, order, anchors, weights,
-        ];
-        let mut dispatches = vec![cx.fill(count, nt[3] as u64, 0)?];
-        for (entry, groups) in [
-            ("tile_count", cx.grid_1d(n as u64, 256)),
-            ("tile_scan", [1, 1, 1]),
-            ("tile_scatter", cx.grid_1d(n as u64, 256)),
-        ] {
-            let spec = KernelSpec::new(
-                format!("spread tiles: {entry}"),
-                setup.clone(),
-                &setup_bindings,
-            )
-            .entry(entry)
-            .constant("NS", ns as f64)
-            .constant("DIMS", dims as f64);
-            let kernel = cx.kernel(&spec)?;
-            dispatches.push(cx.dispatch(&kernel, &setup_buffers, groups));
-        }
-        let window = cx.shader(self.gw.window.shader())?;
-        for first in (0..comps).step_by(CHUNK_COMPS as usize) {
-            let chunk = CHUNK_COMPS.min(comps - first);
-            let text = tilegen::spread_source(ns, dims, chunk, comps);
-            let spec = KernelSpec::new(
-                format!("spread ({}, tiles)", self.gw.window.shader()),
-                format!(
-                    "{window}{}",
-                    crate::gpu::shaders::resolve(&text).map_err(CompileError::Library)?
-                ),
-                &[
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::Uniform,
-                    Binding::Uniform,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                ],
-            );
-            let kernel = cx.kernel(&spec)?;
-            let geo = cx.uniform(
-                "spread geometry",
-                bytemuck::bytes_of(&GeometryUniform {
-                    comp_offset: first,
-                    ..geometry(&self.gw, n)
-                }),
-            );
-            dispatches.push(cx.dispatch(
-                &kernel,
-                &[vals.buffer, out.buffer, &geo, &tiles, count, start, order, anchors, weights],
-                cx.grid_1d(nt[3] as u64, 1),
             ));
         }
         Ok(dispatches)

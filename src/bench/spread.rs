@@ -129,7 +129,7 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
                 (
                     format!("lanes {wg}"),
                     format!(r#""workgroup": "{wg}""#),
-                    r#", "tiles": "off""#,
+                    "",
                     false,
                 )
             })
@@ -138,14 +138,13 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         runs.push((
             "tables".into(),
             r#""workgroup": "256", "lanes": "off""#.into(),
-            r#", "tiles": "off""#,
+            "",
             false,
         ));
-        runs.push(("tiles".into(), r#""workgroup": "256""#.into(), r#", "tiles": "on""#, false));
         runs.push((
             if sorted { "box" } else { "sort+box" }.into(),
             r#""order": "contiguous""#.into(),
-            r#", "sorted_input": true, "tiles": "off""#,
+            r#", "sorted_input": true"#,
             !sorted,
         ));
         if sorted {
@@ -154,7 +153,7 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
             runs.push((
                 "contig".into(),
                 r#""order": "contiguous""#.into(),
-                r#", "tiles": "off""#,
+                "",
                 false,
             ));
         }

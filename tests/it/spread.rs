@@ -44,12 +44,6 @@ fn params(window: &str, extra: &str, lengths: &[f64], cells: &[u32], variant: &s
     )
 }
 
-/// Spreading params `p` (a JSON object) with the `tiles` param set (interpolation has no
-/// such param).
-fn with_tiles(p: &str, tiles: &str) -> String {
-    format!(r#"{}, "tiles": "{tiles}"}}"#, p.trim_end().trim_end_matches('}'))
-}
-
 /// f32 window weights and accumulation against f64: relative to the largest value.
 const TOL: f64 = 2e-6;
 
@@ -110,19 +104,18 @@ fn many_particles_spread_and_interpolate_like_the_reference() {
                 } else {
                     format!(r#"{extra}, "lanes": "{lanes}""#)
                 };
-                // Per-particle kernels (atomic and compare-and-swap adds), and tiles.
-                for (variant, tiles) in [("atomic", "off"), ("portable", "off"), ("auto", "on")] {
-                    let p = with_tiles(&params(w, &extra, &lengths, &cells, variant), tiles);
+                for variant in ["atomic", "portable"] {
+                    let p = params(w, &extra, &lengths, &cells, variant);
                     let (g, r) = run_node(
                         "spread",
                         &p,
                         &[("positions", pos.clone()), ("values", vals.clone())],
                     );
                     let (err, at) = rel_max_err(&g, &r);
-                    // Hundreds of f32 adds per cell, in any order.
+                    // Hundreds of f32 atomic adds per cell, in any order.
                     assert!(
                         err < 1e-5,
-                        "spread {w} {extra} {variant} tiles {tiles} {lengths:?}: error {err:e} at {at}"
+                        "spread {w} {extra} {variant} {lengths:?}: error {err:e} at {at}"
                     );
                 }
                 let p = params(w, &extra, &lengths, &cells, "auto");
@@ -211,29 +204,21 @@ fn atomic_and_portable_spreading_agree() {
         }
     }
     let vals = rng.array(ValueType::Particles { n: 500, k: 1 }, 0.0, 1.0);
-    let p_atomic = with_tiles(&params("peskin4", "", &lengths, &cells, "atomic"), "off");
-    let p_cas = with_tiles(&params("peskin4", "", &lengths, &cells, "portable"), "off");
-    let p_tiles = with_tiles(&params("peskin4", "", &lengths, &cells, "auto"), "on");
+    let p_atomic = params("peskin4", "", &lengths, &cells, "atomic");
+    let p_cas = params("peskin4", "", &lengths, &cells, "portable");
     let (a, r) = run_node(
         "spread",
         &p_atomic,
         &[("positions", pos.clone()), ("values", vals.clone())],
     );
+    let (b, _) = run_node("spread", &p_cas, &[("positions", pos), ("values", vals)]);
     let (err, _) = rel_max_err(&a, &r);
     assert!(err < 1e-5, "{err}");
-    for (name, p) in [("compare-and-swap", &p_cas), ("tiles", &p_tiles)] {
-        let (b, _) = run_node(
-            "spread",
-            p,
-            &[("positions", pos.clone()), ("values", vals.clone())],
-        );
-        let (diff, at) =
-            rel_max_err(&a, &mesoflow::value::RefArray::new(b.ty, b.data.to_f64()));
-        assert!(
-            diff < 1e-5,
-            "atomics and {name} differ by {diff:e} at {at} (f32 summation order only)"
-        );
-    }
+    let (diff, at) = rel_max_err(&a, &mesoflow::value::RefArray::new(b.ty, b.data.to_f64()));
+    assert!(
+        diff < 1e-5,
+        "variants differ by {diff:e} at {at} (f32 summation order only)"
+    );
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -438,15 +423,14 @@ fn folded_dispatches_serve_every_particle_once() {
     ]
     .into_iter()
     .collect();
-    for (w, extra, tiles) in [("peskin6", "", "off"), ("peskin3", "", "off"), ("peskin6", "", "on")] {
+    for (w, extra) in [("peskin6", ""), ("peskin3", "")] {
         let p = params(w, extra, &lengths, &cells, "auto");
-        let p_spread = with_tiles(&p, tiles);
         let (s, i) = crate::util::with_caps(
             &mut gpu,
             |c| c.max_workgroups_per_dim = 3,
             |g| {
                 (
-                    crate::util::run_node(g, "spread", &p_spread, &data_s),
+                    crate::util::run_node(g, "spread", &p, &data_s),
                     crate::util::run_node(g, "interpolate", &p, &data_i),
                 )
             },
@@ -455,7 +439,7 @@ fn folded_dispatches_serve_every_particle_once() {
         let ri = reference("interpolate", &p, &[Some(&field), Some(&pos), None]).remove(0);
         assert!(
             rel_max_err(&s["out"], &rs).0 < 1e-5,
-            "{w}: spread (tiles {tiles}) with folded dispatch"
+            "{w}: spread with folded dispatch"
         );
         assert!(
             rel_max_err(&i["out"], &ri).0 < 1e-5,
@@ -492,7 +476,7 @@ fn every_workgroup_size_gives_the_same_grid() {
             let p = params(w, &extra, &lengths, &cells, "auto");
             let (g, r) = run_node(
                 "spread",
-                &with_tiles(&p, "off"),
+                &p,
                 &[("positions", pos.clone()), ("values", vals.clone())],
             );
             assert!(rel_max_err(&g, &r).0 < 1e-5, "spread {w} workgroup {wg}");
@@ -559,17 +543,17 @@ fn sorted_input_spreading_matches_the_reference() {
             );
             for (w, extra) in WINDOWS {
                 let extra = if extra.is_empty() {
-                    r#""sorted_input": true, "tiles": "off""#.to_string()
+                    r#""sorted_input": true"#.to_string()
                 } else {
-                    format!(r#"{extra}, "sorted_input": true, "tiles": "off""#)
+                    format!(r#"{extra}, "sorted_input": true"#)
                 };
                 for variant in ["atomic", "portable"] {
                     let p = params(w, &extra, &lengths, &cells, variant);
                     // Interpolation takes no sorted_input: it serves sorted input with
                     // its usual kernel.
                     let p_interp = p
-                        .replace(r#", "sorted_input": true, "tiles": "off""#, "")
-                        .replace(r#""sorted_input": true, "tiles": "off", "#, "");
+                        .replace(r#", "sorted_input": true"#, "")
+                        .replace(r#""sorted_input": true, "#, "");
                     // Sorted (the box path) and random (mostly the direct path) input.
                     for pos in [&sorted, &random] {
                         let (g, r) = run_node(
@@ -630,17 +614,13 @@ fn boxes_wrap_across_the_periodic_faces() {
         } else {
             format!(r#"{extra}, "sorted_input": true"#)
         };
-        // Box by box, and tile by tile (one tile holds the whole 8^3 grid: every
-        // support wraps onto it).
-        for tiles in ["off", "on"] {
-            let p = with_tiles(&params(w, &extra, &lengths, &cells, "auto"), tiles);
-            let (g, r) = run_node(
-                "spread",
-                &p,
-                &[("positions", pos.clone()), ("values", vals.clone())],
-            );
-            assert!(rel_max_err(&g, &r).0 < 1e-5, "{w} tiles {tiles}");
-        }
+        let p = params(w, &extra, &lengths, &cells, "auto");
+        let (g, r) = run_node(
+            "spread",
+            &p,
+            &[("positions", pos.clone()), ("values", vals.clone())],
+        );
+        assert!(rel_max_err(&g, &r).0 < 1e-5, "{w}");
     }
 }
 
