@@ -199,7 +199,7 @@ pub static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "fcm_sort_cells",
-        doc: "fcm_sort_cells(grid): cells per axis of the Morton order particles are sorted in before spreading (4 grid cells each, at most 1024 per axis)",
+        doc: "fcm_sort_cells(grid): cells per axis of the Morton order particles are sorted in before spreading (8 grid cells each, at most 1024 per axis)",
         call: |a| {
             arity(a, 1)?;
             Ok(ParamValue::Numbers(

@@ -602,7 +602,7 @@ const BOX_MIN_DENSITY: f64 = 0.5;
 const BOX_MIN_SUPPORT: u32 = 6;
 
 /// Particles per workgroup of the box kernels (shaders/spread/box.wgsl): about as many
-/// as a 4^3 block of cells holds (fcm.json sorts by such blocks), a power of two from 4
+/// as a 4^3 block of cells holds (a Morton order of cells visits such blocks whole), a power of two from 4
 /// to 64, so that a run's box stays within 16 cells per axis: 64 at one particle per
 /// cell, 8 at 0.1.
 fn box_run(count: u32, cells: u64) -> u32 {
