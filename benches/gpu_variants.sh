@@ -5,6 +5,9 @@
 # kit and a release binary in .gpu/ (../shared/gpu/README.md):
 #   bash benches/gpu_variants.sh CASES VARIANT...    (CASES: rows of `bench spread`, e.g. 0,2,6;
 #                                                    VARIANT "base" is the embedded shaders)
+# The variants under benches/variants/interp_* replace files of the workgroup-table
+# interpolation kernel: since the lane kernels (generated, nodes/spread/interpgen.rs) they
+# show in the rows labelled "tables" only.
 set -uo pipefail
 source .gpu/gpu-env.sh
 bin=.gpu/mesoflow

@@ -1,16 +1,21 @@
-//! WGSL of the lane interpolation kernel, generated for one support, dimension, component
-//! count and segment width with every loop written out.
+//! WGSL of the lane kernels (interpolation, and spreading with one grid add per cell),
+//! generated for one support, dimension, component count and segment width with every
+//! loop written out.
 //!
 //! Each particle is served by a segment of `seg` consecutive lanes of one subgroup (a
 //! power of two, at least the support and at most the adapter's smallest subgroup): lane
 //! k < NS of the segment evaluates the window and the wrapped cell offset of support index
 //! k on every axis, the other lanes fetch them with subgroup shuffles, each lane sums its
 //! (x, y) columns of the support along z into named scalars, and a shuffle butterfly
-//! adds the segment. No workgroup memory and no barrier. The per-particle kernel of
-//! spread/interpolate_subgroup.wgsl spends most of its time outside the grid loads: 64
-//! threads per particle each ran the table set-up, a workgroup barrier and a WGSL loop
-//! over z (on an H200 at support 8: 0.81 ns per particle with the column sums taken
-//! out, 1.06 with the z loop written out, against 1.73; see BENCHMARKS.md).
+//! adds the segment. No workgroup memory and no barrier. Assumes full subgroups of
+//! consecutive invocations (lane = invocation index mod subgroup size), as every driver
+//! gives for workgroups that are multiples of the subgroup, so that particle slot
+//! lid / seg and the lanes of its segment coincide. Why: the workgroup-table kernel of
+//! spread/interpolate_subgroup.wgsl spent most of its time outside the grid loads, its
+//! 64 threads per particle each running the table set-up, a workgroup barrier and a WGSL
+//! loop over z (on an H200 at support 8: 0.81 ns per particle with the column sums taken
+//! out, 1.06 with the z loop written out, against 1.73); this kernel interpolates in
+//! 0.56 ns (see BENCHMARKS.md).
 
 use std::fmt::Write;
 

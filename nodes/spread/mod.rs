@@ -223,7 +223,7 @@ fn grid_params() -> Vec<ParamSpec> {
             "workgroup",
             "256",
             &["64", "128", "256"],
-            "threads per workgroup (tuning: the workgroup serves workgroup / support^2 particles)",
+            "threads per workgroup (tuning: the workgroup-table kernels serve workgroup / support^2 particles per workgroup, the lane kernels workgroup / lanes per particle)",
         ),
         ParamSpec::choice(
             "lanes",
@@ -602,9 +602,9 @@ const BOX_MIN_DENSITY: f64 = 0.5;
 const BOX_MIN_SUPPORT: u32 = 6;
 
 /// Particles per workgroup of the box kernels (shaders/spread/box.wgsl): about as many
-/// as a 4^3 block of cells holds (a Morton order of cells visits such blocks whole), a power of two from 4
-/// to 64, so that a run's box stays within 16 cells per axis: 64 at one particle per
-/// cell, 8 at 0.1.
+/// as a 4^3 block of cells holds (a Morton order of cells visits such blocks whole), a
+/// power of two from 4 to 64, so that a run's box stays within 16 cells per axis: 64 at
+/// one particle per cell, 8 at 0.1.
 fn box_run(count: u32, cells: u64) -> u32 {
     let per_block = (64.0 * count as f64 / cells.max(1) as f64).ceil() as u32;
     per_block.next_power_of_two().clamp(4, 64)
