@@ -84,10 +84,33 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         return;
     }
     let x = lid % b.n.x;
-    let y = min(lid / b.n.x, BMAX - 1u);
+    let y = lid / b.n.x;
+    // Only the box's columns sum (whole warps past them skip the loop), over as many z
+    // cells as the box has: runs of dense sorted particles give boxes of about 11 cells
+    // a side, so the z sums go to SHORT_Z registers when they fit.
+    if (y >= b.n.y) {
+        return;
+    }
 ",
     );
-    for z in 0..zmax {
+    if zmax > SHORT_Z {
+        let _ = writeln!(w, "    if (b.n.z <= {SHORT_Z}u) {{");
+        column_sums(&mut w, SHORT_Z, comps);
+        w.push_str("        return;\n    }\n");
+    }
+    column_sums(&mut w, zmax, comps);
+    w.push_str("}\n");
+    w
+}
+
+/// Box cells along z summed in registers when the box has no more (the short version of
+/// the column sums).
+const SHORT_Z: u32 = 12;
+
+/// The column (x, y)'s sums over the run's particles in `nz` z registers per component,
+/// and its flush to the grid.
+fn column_sums(w: &mut String, nz: u32, comps: u32) {
+    for z in 0..nz {
         for c in 0..comps {
             let _ = writeln!(w, "    var a{z}_{c} = 0.0;");
         }
@@ -100,7 +123,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             let wz = (s * 3u + 2u) * BMAX;
 ",
     );
-    for z in 0..zmax {
+    for z in 0..nz {
         let _ = writeln!(w, "            let w{z} = box_w[wz + {z}u];");
         for c in 0..comps {
             let _ = writeln!(
@@ -113,23 +136,20 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     w.push_str(
         "        }
     }
-    if (lid < b.n.x * b.n.y) {
-        let xy = box_wrap[x] + box_wrap[BMAX + y];
+    let xy = box_wrap[x] + box_wrap[BMAX + y];
 ",
     );
-    for z in 0..zmax {
+    for z in 0..nz {
         let _ = writeln!(
             w,
-            "        if ({z}u < b.n.z) {{\n            let cell = xy + box_wrap[2u * BMAX + {z}u];"
+            "    if ({z}u < b.n.z) {{\n        let cell = xy + box_wrap[2u * BMAX + {z}u];"
         );
         for c in 0..comps {
             let _ = writeln!(
                 w,
-                "            if (a{z}_{c} != 0.0) {{ grid_add((geo.comp_offset + {c}u) * cells + cell, a{z}_{c}); }}"
+                "        if (a{z}_{c} != 0.0) {{ grid_add((geo.comp_offset + {c}u) * cells + cell, a{z}_{c}); }}"
             );
         }
-        w.push_str("        }\n");
+        w.push_str("    }\n");
     }
-    w.push_str("    }\n}\n");
-    w
 }
