@@ -13,15 +13,7 @@
 #   - FCM, spread and PSE tables again (the fill is in all of them).
 # A torch copy in the same call gives the copy bandwidth. Output also in $OUT/bench.log.
 #   bash benches/gpu_next.sh [mpcd] [fcm] [rest]     (default all three; each under 10 minutes)
-set -uo pipefail
-source .gpu/gpu-env.sh
-export PYTHONUNBUFFERED=1
-bin=.gpu/mesoflow
-log=${OUT:-/tmp}/bench.log
-: > "$log"
-run() { echo "== $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
-echo "date: $(date -u +%Y-%m-%dT%H:%MZ)" | tee -a "$log"
-nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee -a "$log"
+source benches/common.sh
 want=("$@")
 [ ${#want[@]} -eq 0 ] && want=(mpcd fcm rest)
 has() { [[ " ${want[*]} " == *" $1 "* ]]; }

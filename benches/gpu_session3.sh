@@ -2,14 +2,7 @@
 # The measurements of BENCHMARKS.md's 2026-12-01 sections in one device call: spreading
 # (per-particle and box kernels), FCM (Gaussian, with noise), PSE per split (with noise)
 # and where PSE's time goes. Output also in $OUT/bench.log.
-set -uo pipefail
-source .gpu/gpu-env.sh
-bin=.gpu/mesoflow
-log=${OUT:-/tmp}/bench.log
-: > "$log"
-run() { echo "== $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
-echo "date: $(date -u +%Y-%m-%dT%H:%MZ)" | tee -a "$log"
-nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee -a "$log"
+source benches/common.sh
 run $bin bench spread --cells 128 --reps 20 --workgroups 256
 run $bin bench fcm --noise --reps 20
 run $bin bench pse --noise --reps 20

@@ -5,19 +5,11 @@
 # workgroup-table kernels they replaced as "tables"), FCM with them (every tolerance,
 # with noise; the equal-error rows at 3e-3 and 5e-5; the 1e-2, 10^5 breakdown), every
 # FCM kernel, and PSE with the far field in cell-list order. Output also in $OUT/bench.log.
-set -uo pipefail
-source .gpu/gpu-env.sh
-bin=.gpu/mesoflow
-log=${OUT:-/tmp}/bench.log
-: > "$log"
-run() { echo "== $*" | tee -a "$log"; "$@" 2>&1 | tee -a "$log"; }
-echo "date: $(date -u +%Y-%m-%dT%H:%MZ)" | tee -a "$log"
-nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee -a "$log"
+source benches/common.sh
 run $bin bench spread --cells 128 --reps 20
 run $bin bench fcm --noise --reps 20
 run $bin bench fcm --tolerances 3e-3,5e-5 --sizes 128:100000,256:1000000 --reps 20
 MESOFLOW_BENCH_DISPATCHES=1 run $bin bench fcm --tolerances 1e-2 --sizes 127:100000 --reps 20
 run $bin bench pse --noise --reps 20
 run $bin bench fcm --kernels es,peskin3,peskin4,peskin6 --reps 10 --plot "${OUT:-/tmp}/fcm_kernels.svg"
-echo "date: $(date -u +%Y-%m-%dT%H:%MZ)" | tee -a "$log"
 exit 0

@@ -1,0 +1,74 @@
+"""Writes the shader variants benches/gpu_variants.sh times, each a folder that
+MESOFLOW_SHADER_DIR can name, derived from the shipped files under shaders/ so they
+follow them:
+  interp_noload   the workgroup-table interpolation without grid loads
+  interp_l1       its grid loads folded into 4 KiB (L1 hits)
+  interp_setup    no column sums at all (tables, barrier, reduction, store)
+  interp_unroll8  the column sums' z loop written out for support 8 in 3D
+(BENCHMARKS.md, issue 5, fifth version: what they showed). Usage:
+  python3 benches/variants.py OUT_DIR"""
+import pathlib
+import sys
+
+LOAD = "r[c] = r[c] + w * dv * grid[(geo.comp_offset + c) * cells + cell];"
+
+
+def unroll8(src):
+    start = src.index("// This thread's share")
+    end = src.index("// Writes particle")
+    loads = "\n".join(f"            let o{k} = oxy + stencil_o[tz + {k}u];" for k in range(8))
+
+    def comp(c):
+        terms = " + ".join(f"stencil_w[tz + {k}u] * grid[b{c} + o{k}]" for k in range(8))
+        return f"            acc[{c}] = acc[{c}] + wxy * geo.dv * ({terms});"
+
+    extra = "".join(
+        f"            if (COMPS > {c}u) {{\n                let b{c} = b0 + {c}u * cells;\n{comp(c)}\n            }}\n"
+        for c in range(1, 4)
+    )
+    body = f"""// This thread's share of its particle's sum (zero for threads without a particle).
+// Variant: support 8 in 3D written out (all eight z loads of a column issued together).
+fn column_sums(lid: u32, seg: u32, ppw: u32) -> vec4<f32> {{
+    let s = lid / seg;
+    var acc = vec4<f32>(0.0);
+    if (s < ppw && stencil_p[s] < geo.count) {{
+        let tw = s * DIMS * NS;
+        let cells = geo.n.w;
+        for (var pair = lid % seg; pair < NS * NS; pair = pair + seg) {{
+            let ix = pair % NS;
+            let iy = pair / NS;
+            let wxy = stencil_w[tw + ix] * stencil_w[tw + NS + iy];
+            let oxy = stencil_o[tw + ix] + stencil_o[tw + NS + iy];
+            let tz = tw + 2u * NS;
+{loads}
+            let b0 = geo.comp_offset * cells;
+{comp(0)}
+{extra}        }}
+    }}
+    return acc;
+}}
+
+"""
+    return src[:start] + body + src[end:]
+
+
+def main():
+    out = pathlib.Path(sys.argv[1])
+    common = pathlib.Path("shaders/spread/interpolate_common.wgsl").read_text()
+    subgroup = pathlib.Path("shaders/spread/interpolate_subgroup.wgsl").read_text()
+    assert LOAD in common, "interpolate_common.wgsl changed: update benches/variants.py"
+    variants = {
+        "interp_noload": ("interpolate_common.wgsl", common.replace(LOAD, "r[c] = r[c] + w * dv * f32(cell & 7u);")),
+        "interp_l1": ("interpolate_common.wgsl", common.replace(LOAD, LOAD.replace("+ cell]", "+ (cell & 1023u)]"))),
+        "interp_setup": ("interpolate_subgroup.wgsl", subgroup.replace(
+            "    var v = column_sums(lid, seg, ppw);", "    var v = vec4<f32>(stencil_w[lid % 384u]);")),
+        "interp_unroll8": ("interpolate_common.wgsl", unroll8(common)),
+    }
+    for name, (file, text) in variants.items():
+        d = out / name / "spread"
+        d.mkdir(parents=True, exist_ok=True)
+        (d / file).write_text(text)
+        print(d / file)
+
+
+main()
