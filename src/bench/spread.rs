@@ -120,8 +120,8 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         };
         // Sorted input also runs the box kernels (sorted_input), shown as wg "box";
         // random input runs them after sorting in the graph (Morton order of 4-cell
-        // blocks, as graphs/fcm.json does), shown as "sort+box", the sort, the gathers
-        // and the scatter back included in the times.
+        // blocks, whole blocks of about 64 particles at 1 per cell: one box run), shown
+        // as "sort+box", the sort, the gathers and the scatter back included in the times.
         // (label, params of both nodes, params of spreading only, sort in the graph first)
         let mut runs: Vec<(String, String, &str, bool)> = workgroups
             .iter()
