@@ -153,7 +153,10 @@ pub fn interpolate_source(
             let dv = if weights { " * quadrature[oxy]" } else { "" };
             let _ = writeln!(w, "        let wc = wxy{dv};");
             for c in 0..comps {
-                let _ = writeln!(w, "        a{c} = fma(wc, grid[b0 + {c}u * cells + oxy], a{c});");
+                let _ = writeln!(
+                    w,
+                    "        a{c} = fma(wc, grid[b0 + {c}u * cells + oxy], a{c});"
+                );
             }
         }
         w.push_str("    }\n");
@@ -212,7 +215,10 @@ pub fn spread_source(ns: u32, dims: u32, comps: u32, total: u32, seg: u32, wg: u
             }
         } else {
             for c in 0..comps {
-                let _ = writeln!(w, "            grid_add(b0 + {c}u * cells + oxy, wxy * v{c});");
+                let _ = writeln!(
+                    w,
+                    "            grid_add(b0 + {c}u * cells + oxy, wxy * v{c});"
+                );
             }
         }
         w.push_str("        }\n    }\n");

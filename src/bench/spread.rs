@@ -213,11 +213,16 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
             }
             // Mass check: the grid integrates to the sum of the values (a wrong kernel fails).
             let total: f64 = run.outputs["grid"].data.to_f64().iter().sum();
-            let mass = if (total - want).abs() > 1e-3 * want.abs().max(1.0) + 1e-2 {
+            let mut mass = if (total - want).abs() > 1e-3 * want.abs().max(1.0) + 1e-2 {
                 "  MASS MISMATCH"
             } else {
                 ""
             };
+            // Interpolation check: the first particles against the node's f64 reference.
+            let err = interpolation_error(&interp_params, &inputs, &run.outputs["u"])?;
+            if err > 1e-4 {
+                mass = "  INTERPOLATION MISMATCH";
+            }
             println!(
                 "{support:>7} {density:>7} {n:>9} {sorted:>6} {comps:>5} {wg:>9} {:>11.4} {:>11.3} {:>11.4} {:>11.3}{mass}",
                 ts * 1e3,
@@ -231,4 +236,64 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         }
     }
     Ok(())
+}
+
+/// Largest error of the first `CHECKED` interpolated values against the interpolate
+/// node's f64 reference, relative to the largest reference value.
+fn interpolation_error(
+    params: &str,
+    inputs: &BTreeMap<String, HostArray>,
+    got: &HostArray,
+) -> Result<f64, CliError> {
+    use crate::node::{RefCtx, Registry, check_params};
+    use crate::value::RefArray;
+    const CHECKED: u32 = 256;
+    let pos = &inputs["positions"];
+    let field = &inputs["field"];
+    let ValueType::Particles { n, k } = pos.ty else {
+        unreachable!("positions are particles")
+    };
+    let ValueType::RealGrid { comps, .. } = field.ty else {
+        unreachable!("the field is a grid")
+    };
+    let m = n.min(CHECKED);
+    let some = HostArray::f32(
+        ValueType::Particles { n: m, k },
+        pos.data.to_f64()[..(m * k) as usize]
+            .iter()
+            .map(|&x| x as f32)
+            .collect(),
+    );
+    let registry = Registry::standard();
+    let kind = registry
+        .get("interpolate")
+        .ok_or_else(|| runtime("no interpolate node"))?;
+    let raw: BTreeMap<String, serde_json::Value> = serde_json::from_str(params).map_err(runtime)?;
+    let raw = raw
+        .into_iter()
+        .map(|(n, v)| crate::expr::ParamValue::from_json(&v).map(|v| (n, v)))
+        .collect::<Result<_, _>>()
+        .map_err(runtime)?;
+    let p = check_params(&kind.params(), &raw).map_err(|e| runtime(format!("{e:?}")))?;
+    let node = kind.build(&p).map_err(runtime)?;
+    let sig = node
+        .infer(&[Some(field.ty), Some(some.ty), None])
+        .map_err(|e| runtime(format!("{e:?}")))?;
+    let mut out = vec![RefArray::new(
+        sig.outputs[0],
+        vec![0.0; sig.outputs[0].words() as usize],
+    )];
+    node.cpu_reference(
+        &[Some(field.to_ref()), Some(some.to_ref()), None],
+        &mut out,
+        RefCtx::default(),
+    );
+    let want = &out[0].data;
+    let got = got.data.to_f64();
+    let scale = want.iter().fold(f64::MIN_POSITIVE, |a, x| a.max(x.abs()));
+    Ok(want
+        .iter()
+        .zip(&got[..(m * comps) as usize])
+        .map(|(w, g)| (w - g).abs() / scale)
+        .fold(0.0, f64::max))
 }
