@@ -2,8 +2,8 @@
 //! SRD rotation with the cell thermostat and virtual particles in wall-cut cells).
 
 use super::{
-    CELL_WORDS, Geometry, SUM_V, SumsLayout, check_rule, fx_round, geometry_params, grid_shift,
-    key_into, key_of, particle_ports, rule_param, thermal_params, value_of, words_of,
+    CellSums, Geometry, SUM_V, SumsLayout, check_rule, fx_round, geometry_params, grid_shift,
+    key_into, key_of, particle_ports, rule_param, thermal_params, value_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D, shaders};
 use crate::node::{
@@ -212,7 +212,7 @@ impl Node for MpcdBin {
             [0.0; 3]
         };
         let nc = self.geo.ncells() as usize;
-        let mut sums = vec![[0i64; 5]; nc];
+        let mut sums: Vec<CellSums> = vec![[0; 5]; nc];
         let (cells, rest) = outputs.split_at_mut(1);
         for p in 0..x.len() / d {
             let c = self.geo.cell_of(&x[p * d..(p + 1) * d], &s);
@@ -231,15 +231,7 @@ impl Node for MpcdBin {
         let o = &mut rest[0].data;
         o.fill(0.0);
         for (c, cs) in sums.iter().enumerate() {
-            let b = layout.cell(c);
-            o[b..b + 2].copy_from_slice(&words_of(cs[0]));
-            for j in 0..3 {
-                o[b + SUM_V + 2 * j..b + SUM_V + 2 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
-            }
-            if layout.energy {
-                let e = layout.energy_word(c);
-                o[e..e + 2].copy_from_slice(&words_of(cs[4]));
-            }
+            layout.write(o, c, cs);
         }
     }
 }
@@ -502,7 +494,7 @@ impl MpcdCollide {
     }
 
     fn mean(&self, c: u32, sums: &[f64]) -> ([f64; 3], f64) {
-        let s = &sums[(c * CELL_WORDS) as usize..((c + 1) * CELL_WORDS) as usize];
+        let s = SumsLayout::block(sums, c as usize);
         let mut u = [0.0; 3];
         for a in 0..self.geo.dims() {
             u[a] = value_of(s[SUM_V + 2 * a], s[SUM_V + 1 + 2 * a]) as f64
@@ -652,7 +644,7 @@ impl Node for MpcdCollide {
         });
         for p in 0..cells.len() {
             let c = cells[p] as u32;
-            let s = &sums[(c * CELL_WORDS) as usize..((c + 1) * CELL_WORDS) as usize];
+            let s = SumsLayout::block(sums, c as usize);
             let count = s[0];
             let (mass_n, count_all) = match solute {
                 Some((ratio, ns)) => (count + ratio * ns[c as usize], count + ns[c as usize]),

@@ -2,8 +2,7 @@
 //! block of exact 64-bit fixed-point sums) and `mpcd_average` (their means).
 
 use super::{
-    CELL_WORDS, Geometry, SUM_V, SumsLayout, fx_round, geometry_params, thermal_params, value_of,
-    words_of,
+    Geometry, SUM_V, SumsLayout, fx_round, geometry_params, thermal_params, value_of, words_of,
 };
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -179,14 +178,14 @@ impl Node for MpcdMeasure {
         let before = &inputs[4].as_ref().expect("required").data;
         let mut dof = 0i64;
         for c in 0..self.geo.ncells() as usize {
-            let count = sums[c * CELL_WORDS as usize];
+            let count = SumsLayout::block(sums, c)[0];
             if count > 0.0 {
                 dof += count as i64 - 1;
             }
         }
         let mut rel = 0.0;
         for p in 0..cell.len() {
-            let s = &sums[cell[p] as usize * CELL_WORDS as usize..];
+            let s = SumsLayout::block(sums, cell[p] as usize);
             for a in 0..d {
                 let u = value_of(s[SUM_V + 2 * a], s[SUM_V + 1 + 2 * a]) as f64 / (s[0] * fix_v);
                 rel += (before[p * d + a] - u).powi(2);

@@ -66,7 +66,22 @@ pub struct SumsLayout {
     pub solute: bool,
 }
 
+/// One cell's exact sums as integers: the count, sum v_x, v_y, v_z and sum |v|^2 (zero
+/// where the layout has no energy sums), in the fixed-point units of the kernels.
+pub type CellSums = [i64; 5];
+
 impl SumsLayout {
+    /// The four layouts for `ncells` cells: plain, with energy sums, with a solute, both.
+    pub fn all(ncells: u32) -> [SumsLayout; 4] {
+        [(false, false), (true, false), (false, true), (true, true)].map(|(energy, solute)| {
+            SumsLayout {
+                ncells,
+                energy,
+                solute,
+            }
+        })
+    }
+
     pub fn words(&self) -> u64 {
         let n = self.ncells as u64;
         n * CELL_WORDS as u64
@@ -77,6 +92,38 @@ impl SumsLayout {
     /// First word of cell c's block.
     pub fn cell(&self, c: usize) -> usize {
         c * CELL_WORDS as usize
+    }
+
+    /// Cell c's block (count and sum v) of cell sums in any layout: the blocks come first.
+    pub fn block(sums: &[f64], c: usize) -> &[f64] {
+        &sums[c * CELL_WORDS as usize..(c + 1) * CELL_WORDS as usize]
+    }
+
+    /// Cell c's sums read from `sums` words (this layout's energy sums where it has them).
+    pub fn read(&self, sums: &[f64], c: usize) -> CellSums {
+        let b = Self::block(sums, c);
+        let mut e = [value_of(b[0], b[1]), 0, 0, 0, 0];
+        for j in 0..3 {
+            e[1 + j] = value_of(b[SUM_V + 2 * j], b[SUM_V + 1 + 2 * j]);
+        }
+        if self.energy {
+            let k = self.energy_word(c);
+            e[4] = value_of(sums[k], sums[k + 1]);
+        }
+        e
+    }
+
+    /// Writes cell c's sums into `out` (the energy sums where this layout has them).
+    pub fn write(&self, out: &mut [f64], c: usize, cs: &CellSums) {
+        let b = self.cell(c);
+        out[b..b + 2].copy_from_slice(&words_of(cs[0]));
+        for j in 0..3 {
+            out[b + SUM_V + 2 * j..b + SUM_V + 2 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
+        }
+        if self.energy {
+            let k = self.energy_word(c);
+            out[k..k + 2].copy_from_slice(&words_of(cs[4]));
+        }
     }
 
     /// The low word of cell c's sum |v|^2 (with `energy`).
@@ -91,32 +138,14 @@ impl SumsLayout {
 
     /// The layout a buffer of `words` words has for `ncells` cells, if any.
     pub fn of_words(ncells: u32, words: u64) -> Option<SumsLayout> {
-        [(false, false), (true, false), (false, true), (true, true)]
-            .into_iter()
-            .map(|(energy, solute)| SumsLayout {
-                ncells,
-                energy,
-                solute,
-            })
-            .find(|l| l.words() == words)
+        Self::all(ncells).into_iter().find(|l| l.words() == words)
     }
 
     /// The word counts of the four layouts, for error messages.
     pub fn describe(ncells: u32) -> String {
-        let w = |energy, solute| {
-            SumsLayout {
-                ncells,
-                energy,
-                solute,
-            }
-            .words()
-        };
+        let [plain, energy, solute, both] = Self::all(ncells).map(|l| l.words());
         format!(
-            "{} words ({ncells} cells x {CELL_WORDS}), {} with the energy sums of a thermostat, {} / {} with a solute",
-            w(false, false),
-            w(true, false),
-            w(false, true),
-            w(true, true)
+            "{plain} words ({ncells} cells x {CELL_WORDS}), {energy} with the energy sums of a thermostat, {solute} / {both} with a solute"
         )
     }
 }

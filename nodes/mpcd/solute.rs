@@ -4,10 +4,7 @@
 //! cells with the same params, rotates both species by the same rotation of each cell:
 //! v' = u + R (v - u), V' = u + R (V - u), conserving each cell's momentum and energy.
 
-use super::{
-    Geometry, SUM_V, SumsLayout, geometry_params, grid_shift, key_into, key_of, thermal_params,
-    value_of, words_of,
-};
+use super::{Geometry, SumsLayout, geometry_params, grid_shift, key_into, key_of, thermal_params};
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
@@ -129,18 +126,8 @@ impl Node for MpcdBinSolute {
                 "sums",
                 format!(
                     "expected mpcd_bin's sums for {ncells} cells ({} or {} words), got {}; do mpcd_bin and mpcd_bin_solute have the same box, cell and walls?",
-                    SumsLayout {
-                        ncells,
-                        energy: false,
-                        solute: false
-                    }
-                    .words(),
-                    SumsLayout {
-                        ncells,
-                        energy: true,
-                        solute: false
-                    }
-                    .words(),
+                    SumsLayout::all(ncells)[0].words(),
+                    SumsLayout::all(ncells)[1].words(),
                     inputs[0].map_or("nothing".to_string(), |t| t.to_string())
                 ),
             ));
@@ -191,20 +178,7 @@ impl Node for MpcdBinSolute {
         let nc = self.geo.ncells() as usize;
         let layout = SumsLayout::of_words(nc as u32, solvent.len() as u64 + nc as u64 + 1)
             .expect("checked in infer");
-        let mut sums: Vec<[i64; 5]> = (0..nc)
-            .map(|c| {
-                let w = &solvent[layout.cell(c)..];
-                let mut e = [w[0] as i64, 0, 0, 0, 0];
-                for j in 0..3 {
-                    e[1 + j] = value_of(w[SUM_V + 2 * j], w[SUM_V + 1 + 2 * j]);
-                }
-                if layout.energy {
-                    let k = layout.energy_word(c);
-                    e[4] = value_of(solvent[k], solvent[k + 1]);
-                }
-                e
-            })
-            .collect();
+        let mut sums: Vec<_> = (0..nc).map(|c| layout.read(solvent, c)).collect();
         let mut counts = vec![0u32; nc];
         let ratio = self.u.ratio as f64;
         let (cells, rest) = outputs.split_at_mut(1);
@@ -226,15 +200,7 @@ impl Node for MpcdBinSolute {
         let o = &mut rest[0].data;
         o.fill(0.0);
         for (c, cs) in sums.iter().enumerate() {
-            let b = layout.cell(c);
-            o[b..b + 2].copy_from_slice(&words_of(cs[0]));
-            for j in 0..3 {
-                o[b + SUM_V + 2 * j..b + SUM_V + 2 + 2 * j].copy_from_slice(&words_of(cs[1 + j]));
-            }
-            if layout.energy {
-                let k = layout.energy_word(c);
-                o[k..k + 2].copy_from_slice(&words_of(cs[4]));
-            }
+            layout.write(o, c, cs);
             o[layout.solute_word(c)] = counts[c] as f64;
         }
         o[layout.solute_word(nc)] = self.u.ratio.to_bits() as f64;

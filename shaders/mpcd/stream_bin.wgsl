@@ -1,4 +1,4 @@
-// template: composed after mpcd/sums_int64.wgsl or mpcd/sums_int32.wgsl (nodes/mpcd/stream.rs).
+// template: composed after mpcd/sums_int64.wgsl or mpcd/sums_int32.wgsl (nodes/mpcd/stream_bin.rs).
 //
 // MPCD streaming and binning in one kernel, one thread per particle: the particle streams
 // (mpcd/stream_common.wgsl), is written out, and is binned from the values in registers
