@@ -347,22 +347,16 @@ fn chunks(count: u32) -> u32 {
     (count / 4).clamp(1, 65536)
 }
 
-/// Dispatch shape for `count` particles: see shaders/spread/stencil.wgsl. Particles are
-/// served in `chunks(count)` interleaved runs, by 64-thread workgroups holding 64 / SEG particles
-/// (SEG = support^2 rounded up to a power of two, at most 64).
-fn per_particle(cx: &CompileCtx, count: u32, chunks: u32, support: u32, wg: u32) -> [u32; 3] {
-    let seg = (support as u64 * support as u64)
-        .next_power_of_two()
-        .min(64);
-    let per_workgroup = wg as u64 / seg;
-    let c = chunks as u64;
-    let slots = c * (count as u64).div_ceil(c);
-    cx.grid_1d(slots.div_ceil(per_workgroup), 1)
+/// Threads per particle of the workgroup-table kernels (shaders/spread/stencil.wgsl):
+/// support^2 rounded up to a power of two, at most 64.
+fn table_segment(support: u32) -> u32 {
+    (support * support).next_power_of_two().min(64)
 }
 
-/// Dispatch shape of the lane kernels (interpgen.rs): `wg / seg` particles per workgroup,
-/// served in `chunks` interleaved runs like the per-particle kernels.
-fn lane_groups(cx: &CompileCtx, count: u32, chunks: u32, seg: u32, wg: u32) -> [u32; 3] {
+/// Dispatch shape of the per-particle kernels (the workgroup-table kernels and the lane
+/// kernels of interpgen.rs) for `count` particles served in `chunks` interleaved runs
+/// (shaders/spread/slots.wgsl) by workgroups of `wg` threads, `seg` threads a particle.
+fn slot_groups(cx: &CompileCtx, count: u32, chunks: u32, seg: u32, wg: u32) -> [u32; 3] {
     let c = chunks as u64;
     let slots = c * (count as u64).div_ceil(c);
     cx.grid_1d(slots.div_ceil((wg / seg) as u64), 1)
@@ -521,7 +515,12 @@ impl GpuKernels for Spread {
         let boxed = self.uses_boxes(n);
         let lanes = self.gw.lane_segment(cx);
         let prefix = format!("{}{}", cx.shader(self.gw.window.shader())?, cx.shader(add)?);
-        let plain = format!("{prefix}{}", cx.shader("spread/spread.wgsl")?);
+        // The workgroup-table kernel's source, where neither generated kernel serves.
+        let plain = if boxed || lanes.is_some() {
+            String::new()
+        } else {
+            format!("{prefix}{}", cx.shader("spread/spread.wgsl")?)
+        };
         let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
@@ -559,7 +558,7 @@ impl GpuKernels for Spread {
                 );
                 let spec = KernelSpec::new(name(", lanes"), generated(text)?, &bindings)
                     .constant("CHUNKS", chunks as f64);
-                (spec, lane_groups(cx, n, chunks, seg, self.gw.workgroup))
+                (spec, slot_groups(cx, n, chunks, seg, self.gw.workgroup))
             } else {
                 (
                     KernelSpec::new(name(""), plain.clone(), &bindings)
@@ -569,7 +568,7 @@ impl GpuKernels for Spread {
                         .constant("COMPS", chunk as f64)
                         .constant("CHUNKS", chunks as f64)
                         .constant("WG", self.gw.workgroup as f64),
-                    per_particle(cx, n, chunks, ns, self.gw.workgroup),
+                    slot_groups(cx, n, chunks, table_segment(ns), self.gw.workgroup),
                 )
             };
             let kernel = cx.kernel(&spec)?;
@@ -750,13 +749,19 @@ impl GpuKernels for Interpolate {
         let portable = self.params.get("variant") == Some(&ParamValue::Text("portable".into()));
         let ns = self.gw.window.support();
         let lanes = self.gw.lane_segment(cx).filter(|_| !portable);
-        let file = if cx.caps().subgroups.is_some() && !portable {
-            "spread/interpolate_subgroup.wgsl"
-        } else {
-            "spread/interpolate.wgsl"
-        };
         let window = cx.shader(self.gw.window.shader())?;
-        let source = format!("{window}{}", cx.shader(file)?);
+        // The workgroup-table kernel's source, where the lane kernel does not serve.
+        let source = match lanes {
+            Some(_) => String::new(),
+            None => {
+                let file = if cx.caps().subgroups.is_some() && !portable {
+                    "spread/interpolate_subgroup.wgsl"
+                } else {
+                    "spread/interpolate.wgsl"
+                };
+                format!("{window}{}", cx.shader(file)?)
+            }
+        };
         // Without weights the binding still needs a buffer; the kernel never reads it.
         let quadrature = weights.map(|w| w.buffer).unwrap_or(grid.buffer);
         let mut dispatches = Vec::new();
@@ -790,7 +795,7 @@ impl GpuKernels for Interpolate {
                     &bindings,
                 )
                 .constant("CHUNKS", chunks as f64);
-                (spec, lane_groups(cx, n, chunks, seg, self.gw.workgroup))
+                (spec, slot_groups(cx, n, chunks, seg, self.gw.workgroup))
             } else {
                 let spec = KernelSpec::new(
                     format!("interpolate ({})", self.gw.window.shader()),
@@ -804,7 +809,10 @@ impl GpuKernels for Interpolate {
                 .constant("HAS_WEIGHTS", f64::from(u8::from(weights.is_some())))
                 .constant("CHUNKS", chunks as f64)
                 .constant("WG", self.gw.workgroup as f64);
-                (spec, per_particle(cx, n, chunks, ns, self.gw.workgroup))
+                (
+                    spec,
+                    slot_groups(cx, n, chunks, table_segment(ns), self.gw.workgroup),
+                )
             };
             let kernel = cx.kernel(&spec)?;
             let geo = cx.uniform(

@@ -29,7 +29,7 @@ pub fn raw(path: &str) -> Option<&'static str> {
 }
 
 /// The folder of shader overrides, if `MESOFLOW_SHADER_DIR` names one.
-pub fn override_dir() -> Option<&'static std::path::Path> {
+fn override_dir() -> Option<&'static std::path::Path> {
     static DIR: std::sync::OnceLock<Option<std::path::PathBuf>> = std::sync::OnceLock::new();
     DIR.get_or_init(|| std::env::var_os("MESOFLOW_SHADER_DIR").map(Into::into))
         .as_deref()
