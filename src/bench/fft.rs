@@ -5,10 +5,9 @@
 
 use std::collections::BTreeMap;
 
-use super::{runtime, time_graph};
+use super::{node_reference, runtime, time_graph};
 use crate::cli::CliError;
 use crate::gpu::GpuContext;
-use crate::node::{RefCtx, Registry, check_params};
 use crate::value::{HostArray, RefArray, ValueType, half_dims};
 
 /// The graph: rfft -> (spectral_filter, folded into the rfft's last pass) -> irfft.
@@ -62,20 +61,11 @@ fn forward_error(x: &[f32], spectrum: &HostArray, n: u32) -> Result<f64, CliErro
     let cells = (n as usize).pow(3);
     let half = half_dims(dims);
     let half_words = 2 * (half[0] * half[1] * half[2]) as usize;
-    let kind = Registry::standard()
-        .get("rfft")
-        .cloned()
-        .ok_or_else(|| runtime("no rfft kind"))?;
-    let params = check_params(&kind.params(), &BTreeMap::new())
-        .map_err(|e| runtime(format!("rfft params: {e:?}")))?;
-    let node = kind.build(&params).map_err(runtime)?;
     let input = RefArray::new(
         ValueType::RealGrid { dims, comps: 1 },
         x[..cells].iter().map(|&v| v as f64).collect(),
     );
-    let ty = ValueType::HalfComplexGrid { dims, comps: 1 };
-    let mut out = vec![RefArray::new(ty, vec![0.0; half_words])];
-    node.cpu_reference(&[Some(input)], &mut out, RefCtx::default());
+    let out = node_reference("rfft", &BTreeMap::new(), &[Some(input)])?;
     let gpu = spectrum.data.to_f64();
     Ok(rel_l2(
         gpu[..half_words].iter().copied(),

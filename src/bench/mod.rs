@@ -463,6 +463,33 @@ fn runtime(e: impl std::fmt::Display) -> CliError {
     CliError::Runtime(e.to_string())
 }
 
+/// A node's f64 reference outputs (`cpu_reference`) for `params` and `inputs`: what the
+/// benches check their GPU outputs against.
+pub(crate) fn node_reference(
+    kind: &str,
+    params: &BTreeMap<String, crate::expr::ParamValue>,
+    inputs: &[Option<crate::value::RefArray>],
+) -> Result<Vec<crate::value::RefArray>, CliError> {
+    let registry = Registry::standard();
+    let kind = registry
+        .get(kind)
+        .ok_or_else(|| runtime(format!("no node kind `{kind}`")))?;
+    let params = crate::node::check_params(&kind.params(), params)
+        .map_err(|e| runtime(format!("{} params: {e:?}", kind.name())))?;
+    let node = kind.build(&params).map_err(runtime)?;
+    let types: Vec<Option<ValueType>> = inputs.iter().map(|r| r.as_ref().map(|r| r.ty)).collect();
+    let sig = node
+        .infer(&types)
+        .map_err(|e| runtime(format!("{}: {e:?}", kind.name())))?;
+    let mut out: Vec<_> = sig
+        .outputs
+        .iter()
+        .map(|t| crate::value::RefArray::new(*t, vec![0.0; t.words() as usize]))
+        .collect();
+    node.cpu_reference(inputs, &mut out, crate::node::RefCtx::default());
+    Ok(out)
+}
+
 /// A graph file with a chain of `n` scale nodes.
 pub fn chain_graph(n: usize) -> String {
     let mut nodes = Vec::new();

@@ -5,10 +5,10 @@
 
 use std::collections::BTreeMap;
 
-use super::time_graph;
+use super::{node_reference, time_graph};
 use crate::cli::CliError;
 use crate::gpu::GpuContext;
-use crate::value::{HostArray, ValueType};
+use crate::value::{HostArray, RefArray, ValueType};
 
 fn runtime(e: impl std::fmt::Display) -> CliError {
     CliError::Runtime(e.to_string())
@@ -157,6 +157,8 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
                 false,
             ));
         }
+        // The interpolation check's inputs, the same for every kernel of this row.
+        let check = InterpolationCheck::new(&inputs);
         for (wg, extra, spread_only, sort_first) in runs {
             let interp_params = format!(
                 r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, {extra}}}"#
@@ -219,7 +221,7 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
                 ""
             };
             // Interpolation check: the first particles against the node's f64 reference.
-            let err = interpolation_error(&interp_params, &inputs, &run.outputs["u"])?;
+            let err = check.error(&interp_params, &run.outputs["u"])?;
             if err > 1e-4 {
                 mass = "  INTERPOLATION MISMATCH";
             }
@@ -238,62 +240,53 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
     Ok(())
 }
 
-/// Largest error of the first `CHECKED` interpolated values against the interpolate
-/// node's f64 reference, relative to the largest reference value.
-fn interpolation_error(
-    params: &str,
-    inputs: &BTreeMap<String, HostArray>,
-    got: &HostArray,
-) -> Result<f64, CliError> {
-    use crate::node::{RefCtx, Registry, check_params};
-    use crate::value::RefArray;
+/// The interpolation check of a row: the first `CHECKED` particles and the field as f64
+/// reference inputs.
+struct InterpolationCheck {
+    inputs: [Option<RefArray>; 3],
+    values: usize,
+}
+
+impl InterpolationCheck {
     const CHECKED: u32 = 256;
-    let pos = &inputs["positions"];
-    let field = &inputs["field"];
-    let ValueType::Particles { n, k } = pos.ty else {
-        unreachable!("positions are particles")
-    };
-    let ValueType::RealGrid { comps, .. } = field.ty else {
-        unreachable!("the field is a grid")
-    };
-    let m = n.min(CHECKED);
-    let some = HostArray::f32(
-        ValueType::Particles { n: m, k },
-        pos.data.to_f64()[..(m * k) as usize]
+
+    fn new(inputs: &BTreeMap<String, HostArray>) -> Self {
+        let pos = &inputs["positions"];
+        let field = inputs["field"].to_ref();
+        let (ValueType::Particles { n, k }, ValueType::RealGrid { comps, .. }) = (pos.ty, field.ty)
+        else {
+            unreachable!("the bench's own inputs")
+        };
+        let m = n.min(Self::CHECKED);
+        let mut first = pos.to_ref();
+        first.data.truncate((m * k) as usize);
+        first.ty = ValueType::Particles { n: m, k };
+        InterpolationCheck {
+            inputs: [Some(field), Some(first), None],
+            values: (m * comps) as usize,
+        }
+    }
+
+    /// Largest error of the interpolated values `got` (their first rows) against the
+    /// interpolate node's f64 reference for `params`, relative to the largest reference
+    /// value.
+    fn error(&self, params: &str, got: &HostArray) -> Result<f64, CliError> {
+        let raw: BTreeMap<String, serde_json::Value> =
+            serde_json::from_str(params).map_err(runtime)?;
+        let params = raw
+            .into_iter()
+            .map(|(n, v)| crate::expr::ParamValue::from_json(&v).map(|v| (n, v)))
+            .collect::<Result<_, _>>()
+            .map_err(runtime)?;
+        let want = node_reference("interpolate", &params, &self.inputs)?
+            .remove(0)
+            .data;
+        let got = got.data.to_f64();
+        let scale = want.iter().fold(f64::MIN_POSITIVE, |a, x| a.max(x.abs()));
+        Ok(want
             .iter()
-            .map(|&x| x as f32)
-            .collect(),
-    );
-    let registry = Registry::standard();
-    let kind = registry
-        .get("interpolate")
-        .ok_or_else(|| runtime("no interpolate node"))?;
-    let raw: BTreeMap<String, serde_json::Value> = serde_json::from_str(params).map_err(runtime)?;
-    let raw = raw
-        .into_iter()
-        .map(|(n, v)| crate::expr::ParamValue::from_json(&v).map(|v| (n, v)))
-        .collect::<Result<_, _>>()
-        .map_err(runtime)?;
-    let p = check_params(&kind.params(), &raw).map_err(|e| runtime(format!("{e:?}")))?;
-    let node = kind.build(&p).map_err(runtime)?;
-    let sig = node
-        .infer(&[Some(field.ty), Some(some.ty), None])
-        .map_err(|e| runtime(format!("{e:?}")))?;
-    let mut out = vec![RefArray::new(
-        sig.outputs[0],
-        vec![0.0; sig.outputs[0].words() as usize],
-    )];
-    node.cpu_reference(
-        &[Some(field.to_ref()), Some(some.to_ref()), None],
-        &mut out,
-        RefCtx::default(),
-    );
-    let want = &out[0].data;
-    let got = got.data.to_f64();
-    let scale = want.iter().fold(f64::MIN_POSITIVE, |a, x| a.max(x.abs()));
-    Ok(want
-        .iter()
-        .zip(&got[..(m * comps) as usize])
-        .map(|(w, g)| (w - g).abs() / scale)
-        .fold(0.0, f64::max))
+            .zip(&got[..self.values])
+            .map(|(w, g)| (w - g).abs() / scale)
+            .fold(0.0, f64::max))
+    }
 }
