@@ -44,6 +44,15 @@ fn params(window: &str, extra: &str, lengths: &[f64], cells: &[u32], variant: &s
     )
 }
 
+/// Window params `extra` (possibly empty) with `more` params appended.
+fn with(extra: &str, more: &str) -> String {
+    if extra.is_empty() {
+        more.to_string()
+    } else {
+        format!("{extra}, {more}")
+    }
+}
+
 /// f32 window weights and accumulation against f64: relative to the largest value.
 const TOL: f64 = 2e-6;
 
@@ -99,11 +108,7 @@ fn many_particles_spread_and_interpolate_like_the_reference() {
         // where the support fits the subgroup) and the workgroup-table kernels.
         for (w, extra) in WINDOWS {
             for lanes in ["auto", "off"] {
-                let extra = if extra.is_empty() {
-                    format!(r#""lanes": "{lanes}""#)
-                } else {
-                    format!(r#"{extra}, "lanes": "{lanes}""#)
-                };
+                let extra = with(extra, &format!(r#""lanes": "{lanes}""#));
                 for variant in ["atomic", "portable"] {
                     let p = params(w, &extra, &lengths, &cells, variant);
                     let (g, r) = run_node(
@@ -468,11 +473,7 @@ fn every_workgroup_size_gives_the_same_grid() {
     );
     for (w, extra) in WINDOWS {
         for wg in ["64", "128"] {
-            let extra = if extra.is_empty() {
-                format!(r#""workgroup": "{wg}""#)
-            } else {
-                format!(r#"{extra}, "workgroup": "{wg}""#)
-            };
+            let extra = with(extra, &format!(r#""workgroup": "{wg}""#));
             let p = params(w, &extra, &lengths, &cells, "auto");
             let (g, r) = run_node(
                 "spread",
@@ -542,11 +543,7 @@ fn sorted_input_spreading_matches_the_reference() {
                 1.0,
             );
             for (w, extra) in WINDOWS {
-                let extra = if extra.is_empty() {
-                    r#""sorted_input": true"#.to_string()
-                } else {
-                    format!(r#"{extra}, "sorted_input": true"#)
-                };
+                let extra = with(extra, r#""sorted_input": true"#);
                 for variant in ["atomic", "portable"] {
                     let p = params(w, &extra, &lengths, &cells, variant);
                     // Interpolation takes no sorted_input: it serves sorted input with
@@ -609,11 +606,7 @@ fn boxes_wrap_across_the_periodic_faces() {
         ("peskin6", ""),
         ("gaussian", r#""width": 0.4, "tolerance": 1e-4"#),
     ] {
-        let extra = if extra.is_empty() {
-            r#""sorted_input": true"#.to_string()
-        } else {
-            format!(r#"{extra}, "sorted_input": true"#)
-        };
+        let extra = with(extra, r#""sorted_input": true"#);
         let p = params(w, &extra, &lengths, &cells, "auto");
         let (g, r) = run_node(
             "spread",
@@ -656,11 +649,10 @@ fn interpolation_reductions_agree_on_every_segment_width() {
     for (w, extra) in windows {
         for (variant, lanes) in [("auto", "auto"), ("auto", "off"), ("portable", "auto")] {
             for wg in ["64", "256"] {
-                let extra = if extra.is_empty() {
-                    format!(r#""workgroup": "{wg}", "lanes": "{lanes}""#)
-                } else {
-                    format!(r#"{extra}, "workgroup": "{wg}", "lanes": "{lanes}""#)
-                };
+                let extra = with(
+                    extra,
+                    &format!(r#""workgroup": "{wg}", "lanes": "{lanes}""#),
+                );
                 let p = params(w, &extra, &lengths, &cells, variant);
                 let (g, r) = run_node(
                     "interpolate",
