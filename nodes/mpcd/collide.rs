@@ -589,21 +589,7 @@ impl Node for MpcdCollide {
                 ));
             }
         }
-        let ncells = self.geo.ncells();
-        let layout = match inputs[2] {
-            Some(ValueType::Indices { n: ns }) => SumsLayout::of_words(ncells, ns as u64),
-            _ => None,
-        };
-        let Some(layout) = layout else {
-            return Err(PortError::new(
-                "sums",
-                format!(
-                    "expected the cell sums of mpcd_bin for {ncells} cells: {}; got {:?}; do mpcd_bin and mpcd_collide have the same box, cell and walls?",
-                    SumsLayout::describe(ncells),
-                    inputs[2]
-                ),
-            ));
-        };
+        let layout = SumsLayout::of_port(self.geo.ncells(), inputs[2], "mpcd_collide")?;
         if self.u.thermostat != 0 && !layout.energy {
             return Err(PortError::new(
                 "sums",

@@ -122,21 +122,7 @@ impl Node for MpcdMeasure {
                 format!("has {nv} rows but positions has {n}"),
             ));
         }
-        let ncells = self.geo.ncells();
-        let layout = match inputs[2] {
-            Some(ValueType::Indices { n }) => SumsLayout::of_words(ncells, n as u64),
-            _ => None,
-        };
-        if layout.is_none() {
-            return Err(PortError::new(
-                "sums",
-                format!(
-                    "expected the cell sums of mpcd_bin for {ncells} cells: {}; got {:?}",
-                    SumsLayout::describe(ncells),
-                    inputs[2]
-                ),
-            ));
-        }
+        SumsLayout::of_port(self.geo.ncells(), inputs[2], "mpcd_measure")?;
         if inputs[3] != Some(ValueType::Indices { n }) {
             return Err(PortError::new(
                 "cell",

@@ -141,6 +141,28 @@ impl SumsLayout {
         Self::all(ncells).into_iter().find(|l| l.words() == words)
     }
 
+    /// The layout of the cell sums at port `sums` of `node` for `ncells` cells, or the
+    /// error naming the layouts it could have had.
+    pub fn of_port(
+        ncells: u32,
+        sums: Option<ValueType>,
+        node: &str,
+    ) -> Result<SumsLayout, PortError> {
+        let layout = match sums {
+            Some(ValueType::Indices { n }) => Self::of_words(ncells, n as u64),
+            _ => None,
+        };
+        layout.ok_or_else(|| {
+            PortError::new(
+                "sums",
+                format!(
+                    "expected the cell sums of mpcd_bin for {ncells} cells: {}; got {sums:?}; do mpcd_bin and {node} have the same box, cell and walls?",
+                    Self::describe(ncells)
+                ),
+            )
+        })
+    }
+
     /// The word counts of the four layouts, for error messages.
     pub fn describe(ncells: u32) -> String {
         let [plain, energy, solute, both] = Self::all(ncells).map(|l| l.words());
