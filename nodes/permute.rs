@@ -188,6 +188,11 @@ impl NodeKind for ScatterKind {
                 "rows of the output (0: as many as `values`); indices past it are skipped",
             ),
             enabled_param(),
+            ParamSpec::flag(
+                "permutation",
+                false,
+                "the index is a permutation of the rows (a sort's perm): every output row is written, so the output is not cleared first (one dispatch less; rows the index misses would hold stale data)",
+            ),
         ]
     }
 
@@ -195,6 +200,7 @@ impl NodeKind for ScatterKind {
         Ok(Box::new(Scatter {
             rows: p.number("rows") as u32,
             enabled: p.flag("enabled"),
+            permutation: p.flag("permutation"),
         }))
     }
 }
@@ -202,6 +208,7 @@ impl NodeKind for ScatterKind {
 struct Scatter {
     rows: u32,
     enabled: bool,
+    permutation: bool,
 }
 
 impl Node for Scatter {
@@ -222,6 +229,14 @@ impl Node for Scatter {
             ));
         }
         let out_rows = if self.rows == 0 { rows } else { self.rows };
+        if self.permutation && out_rows != rows {
+            return Err(PortError::new(
+                "values",
+                format!(
+                    "has {rows} rows but `rows` asks for {out_rows}: with `permutation` the index must place every row of the output"
+                ),
+            ));
+        }
         if !self.enabled && out_rows != rows {
             return Err(PortError::new(
                 "values",
@@ -284,14 +299,16 @@ impl GpuKernels for Scatter {
             bytemuck::cast_slice(&[in_rows, out_rows, k]),
         );
         let groups = cx.grid_1d(in_rows as u64 * k as u64, WG_1D);
-        Ok(vec![
-            cx.fill(out.buffer, out.ty.words(), 0)?,
-            cx.dispatch(
-                &kernel,
-                &[values.buffer, index.buffer, out.buffer, &shape],
-                groups,
-            ),
-        ])
+        let mut out_dispatches = Vec::new();
+        if !self.permutation {
+            out_dispatches.push(cx.fill(out.buffer, out.ty.words(), 0)?);
+        }
+        out_dispatches.push(cx.dispatch(
+            &kernel,
+            &[values.buffer, index.buffer, out.buffer, &shape],
+            groups,
+        ));
+        Ok(out_dispatches)
     }
 }
 

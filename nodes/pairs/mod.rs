@@ -20,7 +20,9 @@ pub mod rpy;
 use std::f64::consts::PI;
 
 use crate::expr::ParamValue;
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::gpu::{
+    Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo, WG_1D,
+};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
     RefCtx, Registry, Signature,
@@ -436,12 +438,23 @@ impl NodeKind for NeighbourSumKind {
                 f64::MAX,
                 "pairs with |r| <= cutoff are summed",
             ),
+            ParamSpec::choice(
+                "lanes",
+                "auto",
+                &["auto", "off", "4", "8", "16", "32"],
+                "subgroup lanes per particle walking its candidates together (auto: 8 where the adapter's subgroups hold at least 8 lanes, else one thread per particle; off: one thread per particle; a number: that many, refused where subgroups are narrower)",
+            ),
         ];
         v.extend(kernel_params());
         v
     }
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+        let lanes = match p.text("lanes") {
+            "auto" => Lanes::Auto,
+            "off" => Lanes::Off,
+            t => Lanes::Fixed(t.parse().expect("one of the choices")),
+        };
         let lengths = p.numbers("box").to_vec();
         let cells: Vec<u32> = p.numbers("cells").iter().map(|&c| c as u32).collect();
         if p.numbers("cells").iter().any(|c| c.fract() != 0.0) {
@@ -459,6 +472,7 @@ impl NodeKind for NeighbourSumKind {
             cells,
             periodic,
             cutoff,
+            lanes,
         }))
     }
 }
@@ -499,17 +513,45 @@ fn check_geometry(
     }
 }
 
+/// How many subgroup lanes walk one particle's candidates (the `lanes` param).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Lanes {
+    Auto,
+    Off,
+    Fixed(u32),
+}
+
 pub struct NeighbourSum {
     pub kernel: PairKernel,
     lengths: Vec<f64>,
     cells: Vec<u32>,
     periodic: Vec<bool>,
     cutoff: f64,
+    lanes: Lanes,
 }
 
 impl NeighbourSum {
     fn cell_count(&self) -> u32 {
         self.cells.iter().product()
+    }
+
+    /// Lanes per particle on this device (None: one thread per particle). Segments must
+    /// lie inside one subgroup, so at most its smallest size.
+    fn segment(&self, caps: &DeviceCaps) -> Result<Option<u32>, CompileError> {
+        let min = caps.subgroups.map(|(min, _)| min).filter(|m| m.is_power_of_two());
+        match (self.lanes, min) {
+            (Lanes::Off, _) => Ok(None),
+            (Lanes::Auto, Some(min)) if min >= 8 => Ok(Some(8)),
+            (Lanes::Auto, _) => Ok(None),
+            (Lanes::Fixed(seg), Some(min)) if seg <= min => Ok(Some(seg)),
+            (Lanes::Fixed(seg), _) => Err(CompileError::Unsupported(format!(
+                "lanes = {seg} needs subgroups of at least {seg} lanes; this adapter has {}",
+                match caps.subgroups {
+                    Some((a, b)) => format!("{a} to {b}"),
+                    None => "no subgroup operations".into(),
+                }
+            ))),
+        }
     }
 }
 
@@ -646,10 +688,15 @@ impl GpuKernels for NeighbourSum {
             unreachable!()
         };
         let values = io.inputs[1].map(|v| v.buffer);
+        let seg = self.segment(cx.caps())?;
         let source = format!(
             "{}{}",
             cx.shader(&self.kernel.shader())?,
-            cx.shader("pairs/neighbour_sum.wgsl")?
+            cx.shader(if seg.is_some() {
+                "pairs/neighbour_sum_lanes.wgsl"
+            } else {
+                "pairs/neighbour_sum.wgsl"
+            })?
         );
         let mut b = vec![Binding::StorageRead; 5];
         b.extend([
@@ -664,19 +711,22 @@ impl GpuKernels for NeighbourSum {
             Some(l) if n > 0 => (l.ty.words() / n as u64) as u32,
             _ => 0,
         };
-        let kernel = cx.kernel(
-            &KernelSpec::new(
-                format!(
-                    "neighbour_sum ({}{})",
-                    self.kernel.name(),
-                    if list.is_some() { ", list" } else { "" }
-                ),
-                source,
-                &b,
-            )
-            .constant("HAS_VALUES", f64::from(u8::from(values.is_some())))
-            .constant("LIST_WIDTH", width as f64),
-        )?;
+        let mut spec = KernelSpec::new(
+            format!(
+                "neighbour_sum ({}{}{})",
+                self.kernel.name(),
+                if list.is_some() { ", list" } else { "" },
+                seg.map(|s| format!(", {s} lanes")).unwrap_or_default()
+            ),
+            source,
+            &b,
+        )
+        .constant("HAS_VALUES", f64::from(u8::from(values.is_some())))
+        .constant("LIST_WIDTH", width as f64);
+        if let Some(s) = seg {
+            spec = spec.constant("SEG", s as f64);
+        }
+        let kernel = cx.kernel(&spec)?;
         let g = NeighbourGeometry::new(&self.lengths, &self.cells, &self.periodic, n, self.cutoff);
         let geo = cx.uniform("neighbour geometry", bytemuck::bytes_of(&g));
         let (params, table) = pair_buffers(cx, &self.kernel);
@@ -693,10 +743,11 @@ impl GpuKernels for NeighbourSum {
             list.map(|l| l.buffer).unwrap_or(pos.buffer),
             io.inputs[6].map(|l| l.buffer).unwrap_or(pos.buffer),
         ];
+        let threads = n as u64 * seg.unwrap_or(1) as u64;
         Ok(vec![cx.dispatch(
             &kernel,
             &buffers,
-            cx.grid_1d(n as u64, WG_1D),
+            cx.grid_1d(threads, WG_1D),
         )])
     }
 }

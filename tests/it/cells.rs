@@ -46,6 +46,12 @@ fn gather_and_scatter_follow_an_index() {
                 &[("values", v.clone()), ("index", perm.clone())],
             );
             assert_eq!(g, r, "scatter {n}");
+            let (g, r) = run_node(
+                "scatter",
+                r#"{"permutation": true}"#,
+                &[("values", v.clone()), ("index", perm.clone())],
+            );
+            assert_eq!(g, r, "scatter by a permutation {n}");
         }
     }
     // Out-of-range indices: gather gives zeros, scatter skips; scatter into more rows.
@@ -216,4 +222,26 @@ fn cell_hash_params_are_checked() {
         let e = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
         assert!(e.contains(want), "{params}: {e}");
     }
+}
+
+#[test]
+fn scatter_by_a_permutation_must_fill_its_output() {
+    let dir = tmpdir("scatter-params");
+    let path = write_graph(
+        &dir,
+        "g.json",
+        &single_node_graph(
+            "scatter",
+            r#"{"rows": 12, "permutation": true}"#,
+            &[
+                ("values", ValueType::Particles { n: 4, k: 2 }),
+                ("index", ValueType::Indices { n: 4 }),
+            ],
+        ),
+    );
+    let e = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
+    assert!(
+        e.contains("with `permutation` the index must place every row"),
+        "{e}"
+    );
 }

@@ -168,6 +168,46 @@ fn check_neighbours(
     list: Option<u32>,
 ) -> Vec<f64> {
     let gpu = gpu().expect("checked by the caller");
+    // Every traversal: one thread per particle, the default, and 4-lane segments where
+    // the subgroups hold 4 lanes (lavapipe's hold 8, so auto takes 8 there).
+    let mut lanes = vec!["off", "auto"];
+    if gpu.caps.subgroups.is_some_and(|(min, _)| min >= 4) {
+        lanes.push("4");
+    }
+    let mut got = Vec::new();
+    for lane in lanes {
+        got = check_traversal(
+            &format!("{what}, lanes {lane}"),
+            &gpu,
+            pos,
+            vals,
+            lengths,
+            cells,
+            periodic,
+            &format!(r#"{kernel_params}, "lanes": "{lane}""#),
+            pair,
+            cutoff,
+            list,
+        );
+    }
+    got
+}
+
+/// check_neighbours for one setting of the traversal.
+#[allow(clippy::too_many_arguments)]
+fn check_traversal(
+    what: &str,
+    gpu: &mesoflow::gpu::GpuContext,
+    pos: &[f64],
+    vals: Option<&[f64]>,
+    lengths: [f64; 3],
+    cells: [u32; 3],
+    periodic: [u32; 3],
+    kernel_params: &str,
+    pair: &Pair,
+    cutoff: f64,
+    list: Option<u32>,
+) -> Vec<f64> {
     let dir = util::tmpdir("pairs");
     let json = neighbour_graph(
         lengths,
@@ -192,7 +232,7 @@ fn check_neighbours(
         }
         None => zeros,
     };
-    let out = util::run_graph(&gpu, &g, &inputs, None, 1, true);
+    let out = util::run_graph(gpu, &g, &inputs, None, 1, true);
     let _ = std::fs::remove_dir_all(&dir);
     let got = out["out"].data.to_f64();
     let want = brute_force(

@@ -1,0 +1,121 @@
+// template: composed after a pair kernel (pair_term, self_term; shaders/pairs/*.wgsl).
+//
+// neighbour_sum.wgsl with a segment of SEG subgroup lanes per particle (SEG a power of
+// two, at most the subgroup): the lanes of a segment walk the same candidates, lane l
+// taking every SEG-th, and add their sums by shuffles. One thread per particle left the
+// GPU mostly idle at 10^4 particles (about 80 warps per SM-equivalent of latency, each
+// thread walking 27 cells in its own loop); a segment keeps SEG times more threads in
+// flight and walks each run of candidates in step.
+//
+// Candidates come in runs: the three cells along x of one (y, z) neighbour row are
+// consecutive keys of the linear cell order, so their particles are one contiguous run of
+// the sorted positions unless the row wraps across the periodic x face (then cell by
+// cell). With a neighbour list (LIST_WIDTH > 0) a particle whose neighbours all fit it
+// reads them from there instead.
+#import common/index.wgsl
+#import pairs/cells.wgsl
+
+override HAS_VALUES: bool = true;
+override LIST_WIDTH: u32 = 0u;   // neighbour list entries per particle (0: no list)
+override SEG: u32 = 8u;          // lanes per particle
+
+@group(0) @binding(0) var<storage, read> pos: array<f32>;
+@group(0) @binding(1) var<storage, read> vals: array<f32>;
+@group(0) @binding(2) var<storage, read> keys: array<u32>;
+@group(0) @binding(3) var<storage, read> cell_start: array<u32>;
+@group(0) @binding(4) var<storage, read> cell_count: array<u32>;
+@group(0) @binding(5) var<storage, read_write> out: array<f32>;
+@group(0) @binding(6) var<uniform> geo: Geometry;
+@group(0) @binding(7) var<storage, read> pair_params: array<f32>;
+@group(0) @binding(8) var<storage, read> pair_table: array<f32>;
+@group(0) @binding(9) var<storage, read> list: array<u32>;
+@group(0) @binding(10) var<storage, read> list_count: array<u32>;
+
+fn value3(a: u32) -> vec3<f32> {
+    if (HAS_VALUES) {
+        return vec3<f32>(vals[3u * a], vals[3u * a + 1u], vals[3u * a + 2u]);
+    }
+    return vec3<f32>(0.0);
+}
+
+// This lane's share of the candidates first..last (sorted slots) of particle i at xi.
+fn run_sum(xi: vec3<f32>, i: u32, first: u32, last: u32, lane: u32) -> vec3<f32> {
+    var acc = vec3<f32>(0.0);
+    for (var j = first + lane; j < last; j += SEG) {
+        let r = displacement(xi, j);
+        let r2 = dot(r, r);
+        if (j != i && r2 <= geo.cutoff2) {
+            acc += pair_term(r, r2, value3(j));
+        }
+    }
+    return acc;
+}
+
+// Particles of cells a..=b of one row (consecutive linear keys).
+fn cells_run(xi: vec3<f32>, i: u32, a: u32, b: u32, lane: u32) -> vec3<f32> {
+    return run_sum(xi, i, cell_start[a], cell_start[b] + cell_count[b], lane);
+}
+
+fn own_sum(i: u32, lane: u32) -> vec3<f32> {
+    let xi = load3(i);
+    var acc = vec3<f32>(0.0);
+    if (LIST_WIDTH > 0u) {
+        let m = list_count[i];
+        if (m <= LIST_WIDTH) {
+            for (var k = lane; k < m; k += SEG) {
+                let j = list[k * geo.n + i];
+                let r = displacement(xi, j);
+                acc += pair_term(r, dot(r, r), value3(j));
+            }
+            return acc;
+        }
+    }
+    let per = geo.periodic.xyz == vec3<u32>(1u);
+    let n = vec3<i32>(geo.cells.xyz);
+    let c = cell_coords(keys[i]);
+    let ox = offsets(c.x, n.x, per.x);
+    let oy = offsets(c.y, n.y, per.y);
+    let oz = offsets(c.z, n.z, per.z);
+    let lo = c.x + ox.x;
+    let hi = c.x + ox.y;
+    let contiguous = lo >= 0 && hi < n.x;
+    for (var dz = oz.x; dz <= oz.y; dz++) {
+        let cz = (c.z + dz + n.z) % n.z;
+        for (var dy = oy.x; dy <= oy.y; dy++) {
+            let cy = (c.y + dy + n.y) % n.y;
+            let row = n.x * (cy + n.y * cz);
+            if (contiguous) {
+                acc += cells_run(xi, i, u32(row + lo), u32(row + hi), lane);
+            } else {
+                for (var dx = ox.x; dx <= ox.y; dx++) {
+                    let cell = u32((c.x + dx + n.x) % n.x + row);
+                    acc += cells_run(xi, i, cell, cell, lane);
+                }
+            }
+        }
+    }
+    return acc;
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32,
+        @builtin(subgroup_invocation_id) sub_lane: u32) {
+    let lane = sub_lane % SEG;
+    let i = flat_index(wid, nwg, lid, 256u) / SEG;
+    let live = i < geo.n;
+    var acc = vec3<f32>(0.0);
+    if (live) {
+        acc = own_sum(i, lane);
+    }
+    // Every lane reaches the shuffles (none returned): the segment's sum in each lane.
+    for (var m = SEG / 2u; m > 0u; m >>= 1u) {
+        acc += subgroupShuffleXor(acc, m);
+    }
+    if (live && lane == 0u) {
+        let total = acc + self_term(value3(i));
+        out[3u * i] = total.x;
+        out[3u * i + 1u] = total.y;
+        out[3u * i + 2u] = total.z;
+    }
+}
