@@ -526,18 +526,69 @@ pub trait GpuKernels {
     }
 
     /// `compile` with `spectral` applied to the results before they are stored;
-    /// `io.outputs[0]` is then the spectral node's output.
+    /// `io.outputs[0]` is then the spectral node's output. With `inverse_after`, the
+    /// results are then put through the first pass of the inverse transform that reads
+    /// them ([`GpuKernels::folds_inverse`]), which skips it
+    /// ([`GpuKernels::compile_after_folded_first_pass`]).
     fn compile_spectral(
         &self,
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
         spectral: &SpectralBody,
+        inverse_after: bool,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        let _ = (cx, io, spectral);
+        let _ = (cx, io, spectral, inverse_after);
         Err(CompileError::Unsupported(
             "this node cannot fold a spectral node".into(),
         ))
     }
+
+    /// For an inverse transform: its first pass, which a forward transform with a
+    /// spectral node folded in may run in its last pass instead (None: it cannot be
+    /// split off).
+    fn first_pass(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Option<LinePass> {
+        let _ = (inputs, caps);
+        None
+    }
+
+    /// For a forward transform: whether its last pass, with a spectral node folded in,
+    /// can also run `first` (an inverse transform's [`GpuKernels::first_pass`]).
+    fn folds_inverse(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+        first: &LinePass,
+    ) -> bool {
+        let _ = (inputs, caps, first);
+        false
+    }
+
+    /// `compile` without the first pass, which the forward transform that wrote the
+    /// input ran (see [`GpuKernels::compile_spectral`]).
+    fn compile_after_folded_first_pass(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let _ = (cx, io);
+        Err(CompileError::Unsupported(
+            "this node has no first pass to leave to another".into(),
+        ))
+    }
+}
+
+/// A transform's pass over the lines along one axis of a grid, as the planner matches a
+/// forward transform's last pass with the first pass of the inverse transform after it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LinePass {
+    pub axis: usize,
+    /// Real-space dims and components of the grid.
+    pub dims: [u32; 3],
+    pub comps: u32,
+    /// The transformed axes.
+    pub axes: [bool; 3],
+    /// On a half spectrum (real transforms).
+    pub half: bool,
 }
 
 /// Context given to CPU references.

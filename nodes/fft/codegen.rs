@@ -199,7 +199,6 @@ pub fn source(p: &Pass, fold: Option<&Fold>) -> String {
         // A 1-point line: one stage that moves values without a butterfly.
         stages.push((1, 1));
     }
-    let last = stages.len() - 1;
     let via_shared_out = p.store_via_shared();
     let via_shared_in = p.load == Load::HalfPacked;
     let scale = if p.scale == 1.0 {
@@ -271,7 +270,7 @@ pub fn source(p: &Pass, fold: Option<&Fold>) -> String {
         .unwrap();
     }
     if let (Some(f), true) = (fold, p.spectral) {
-        w.push_str(&f.body.function(p.tile_comps));
+        w.push_str(&f.body.function(p.comps_per_line()));
     }
 
     writeln!(
@@ -301,7 +300,7 @@ pub fn source(p: &Pass, fold: Option<&Fold>) -> String {
         .unwrap();
     }
     writeln!(w, "    let ib = {};", line_base("ln", p.in_len, p.in_inner)).unwrap();
-    if !via_shared_out {
+    if !via_shared_out && !p.spectral_in_registers() {
         writeln!(
             w,
             "    let ob = {};",
@@ -332,128 +331,23 @@ pub fn source(p: &Pass, fold: Option<&Fold>) -> String {
         writeln!(w, "    workgroupBarrier();").unwrap();
     }
 
-    for (si, &(r, ns)) in stages.iter().enumerate() {
-        let nb = n / r;
-        let per = nb.div_ceil(t);
-        let read_shared = si > 0 || via_shared_in;
-        let write_shared = si < last || via_shared_out;
-        writeln!(w, "    // stage {si}: radix {r} after {ns} points").unwrap();
-        let guard = |m: u32, global: bool| -> String {
-            let mut c = Vec::new();
-            if global {
-                c.push("valid".to_string());
-            }
-            if (m + 1) * t > nb {
-                c.push(format!("j < {nb}u"));
-            }
-            c.join(" && ")
-        };
-        let open = |w: &mut String, m: u32, cond: &str| {
-            write!(w, "    {{ let j = {};", plus("t", m * t)).unwrap();
-            if cond.is_empty() {
-                writeln!(w).unwrap();
-            } else {
-                writeln!(w, " if ({cond}) {{").unwrap();
+    if p.spectral_in_registers() {
+        let fold = fold.expect("a spectral pass is generated with its fold");
+        spectral_in_registers(&mut w, p, fold, &stages, &offsets, post, src);
+    } else {
+        let to = if via_shared_out {
+            To::Shared
+        } else {
+            To::Global {
+                ob: "ob".into(),
+                scale: scale.clone(),
             }
         };
-        let close = |w: &mut String, cond: &str| {
-            if cond.is_empty() {
-                writeln!(w, "    }}").unwrap();
-            } else {
-                writeln!(w, "    }} }}").unwrap();
-            }
+        let from = From::Global {
+            src,
+            ib: "ib".into(),
         };
-        // Reads.
-        for m in 0..per {
-            let cond = guard(m, !read_shared);
-            open(&mut w, m, &cond);
-            for rr in 0..r {
-                let reg = format!("r{}", m * r + rr);
-                let pos = plus("j", rr * nb);
-                let load = if si > 0 {
-                    format!("{reg} = sh[sidx(ll, {pos})];")
-                } else {
-                    match p.load {
-                        Load::Complex => {
-                            format!("{reg} = {src}[{}];", at("ib", &pos, p.in_inner))
-                        }
-                        Load::Real => format!("{reg} = vec2<f32>({src}[ib + {pos}], 0.0);"),
-                        Load::HalfMirror => format!(
-                            "{{ let p = {pos}; let mirror = p > {h}u; let x = {src}[ib + select(p, {n}u - p, mirror)]; {reg} = select(x, vec2<f32>(x.x, -x.y), mirror); }}",
-                            h = n / 2
-                        ),
-                        // Z[p] = (X[p] + X*[n-p]) + i w^p (X[p] - X*[n-p]), w = e^(i pi/n):
-                        // the spectrum of x[2m] + i x[2m+1] (times 2). The imaginary
-                        // parts of X[0] and X[n] are dropped, as numpy's irfft does.
-                        Load::HalfPacked => format!(
-                            "{{ let p = {pos}; let x0 = sh[sidx(ll, p)]; let y0 = sh[sidx(ll, {n}u - p)];\n          let a = select(x0, vec2<f32>(x0.x, 0.0), p == 0u); let c = select(vec2<f32>(y0.x, -y0.y), vec2<f32>(y0.x, 0.0), p == 0u);\n          {reg} = a + c + mul_i(cmul(tw[{post}u + p], a - c)); }}"
-                        ),
-                    }
-                };
-                writeln!(w, "        {load}").unwrap();
-            }
-            close(&mut w, &cond);
-        }
-        if read_shared && write_shared {
-            writeln!(w, "    workgroupBarrier();").unwrap();
-        }
-        // Twiddles, butterflies, writes.
-        for m in 0..per {
-            let cond = guard(m, !write_shared);
-            open(&mut w, m, &cond);
-            let v: Vec<String> = (0..r).map(|rr| format!("r{}", m * r + rr)).collect();
-            if ns > 1 {
-                writeln!(
-                    w,
-                    "        let k = j % {ns}u; let tb = {}u + k * {}u;",
-                    offsets[si],
-                    r - 1
-                )
-                .unwrap();
-                for (rr, reg) in v.iter().enumerate().skip(1) {
-                    writeln!(
-                        w,
-                        "        {reg} = cmul({reg}, tw[{}]);",
-                        plus("tb", rr as u32 - 1)
-                    )
-                    .unwrap();
-                }
-            }
-            butterfly(&mut w, &v, sign, "        ");
-            let dest = if si == last {
-                // Ns R = n: the output index is j + r Ns.
-                "j".to_string()
-            } else if ns == 1 {
-                format!("j * {r}u")
-            } else {
-                format!("(j / {ns}u) * {}u + k", ns * r)
-            };
-            for (rr, reg) in v.iter().enumerate() {
-                let pos = plus(&dest, rr as u32 * ns);
-                let store = if write_shared {
-                    format!("sh[sidx(ll, {pos})] = {reg};")
-                } else {
-                    match p.store {
-                        Store::Complex => {
-                            format!("dst[{}] = {reg}{scale};", at("ob", &pos, p.out_inner))
-                        }
-                        Store::Half => format!(
-                            "{{ let p = {pos}; if (p <= {}u) {{ dst[ob + p] = {reg}; }} }}",
-                            n / 2
-                        ),
-                        Store::Real => format!("dst[ob + {pos}] = {reg}.x{scale};"),
-                        Store::HalfPacked => {
-                            unreachable!("packed stores go through workgroup memory")
-                        }
-                    }
-                };
-                writeln!(w, "        {store}").unwrap();
-            }
-            close(&mut w, &cond);
-        }
-        if write_shared {
-            writeln!(w, "    workgroupBarrier();").unwrap();
-        }
+        emit_stages(&mut w, p, &stages, &offsets, post, sign, false, &from, &to);
     }
 
     if via_shared_out {
@@ -511,30 +405,8 @@ fn output_phase(w: &mut String, p: &Pass, fold: Option<&Fold>, scale: &str, post
             }
         }
         if let (Some(f), true) = (fold, p.spectral) {
-            let [sx, sy, _] = f.stored;
-            let [nx, ny, nz] = f.dims;
-            writeln!(
-                w,
-                "          let cell = {};",
-                at(&line_base("s2", p.out_len, p.out_inner), "q", p.out_inner)
-            )
-            .unwrap();
-            writeln!(
-                w,
-                "          let ix = cell % {sx}u; let iy = (cell / {sx}u) % {sy}u; let iz = cell / {}u;",
-                sx * sy
-            )
-            .unwrap();
-            let kx = if f.half {
-                "i32(ix)".to_string()
-            } else {
-                format!("wave_number(ix, {nx}u)")
-            };
-            writeln!(
-                w,
-                "          v = spectral(vec3<i32>({kx}, wave_number(iy, {ny}u), wave_number(iz, {nz}u)), vec3<u32>({nx}u, {ny}u, {nz}u), v);"
-            )
-            .unwrap();
+            let cell = at(&line_base("s2", p.out_len, p.out_inner), "q", p.out_inner);
+            apply_spectral(w, f, &cell, "          ");
         }
         for c in 0..comps {
             let ln = if comps > 1 {
@@ -551,5 +423,310 @@ fn output_phase(w: &mut String, p: &Pass, fold: Option<&Fold>, scale: &str, post
             .unwrap();
         }
         writeln!(w, "        }}\n      }}\n    }}").unwrap();
+    }
+}
+
+/// `v = spectral(k, n, v)` for the wave vector of spectrum cell `cell` (a WGSL
+/// expression), as lines indented by `ind`.
+fn apply_spectral(w: &mut String, f: &Fold, cell: &str, ind: &str) {
+    let [sx, sy, _] = f.stored;
+    let [nx, ny, nz] = f.dims;
+    writeln!(w, "{ind}let cell = {cell};").unwrap();
+    writeln!(
+        w,
+        "{ind}let ix = cell % {sx}u; let iy = (cell / {sx}u) % {sy}u; let iz = cell / {}u;",
+        sx * sy
+    )
+    .unwrap();
+    let kx = if f.half {
+        "i32(ix)".to_string()
+    } else {
+        format!("wave_number(ix, {nx}u)")
+    };
+    writeln!(
+        w,
+        "{ind}v = spectral(vec3<i32>({kx}, wave_number(iy, {ny}u), wave_number(iz, {nz}u)), vec3<u32>({nx}u, {ny}u, {nz}u), v);"
+    )
+    .unwrap();
+}
+
+/// Where a pass's first stage reads its lines.
+enum From<'a> {
+    /// Global memory through the pass's [`Load`]: binding `src`, line base `ib`.
+    Global { src: &'a str, ib: String },
+    /// Workgroup memory, as every later stage reads.
+    Shared,
+}
+
+/// Where a pass's last stage writes its results.
+enum To {
+    /// Global memory through the pass's [`Store`] at line base `ob`, times `scale`.
+    Global { ob: String, scale: String },
+    /// Workgroup memory.
+    Shared,
+    /// Registers `{prefix}{i}`, i = m R + r for point r of the thread's m-th butterfly:
+    /// point j + r Ns of the line, j = t + m T (T threads per line).
+    Registers(String),
+}
+
+/// The radix stages of one line transform of direction `sign`; `conj`: the twiddle
+/// table holds the other direction's twiddles (conjugated on use).
+#[allow(clippy::too_many_arguments)]
+fn emit_stages(
+    w: &mut String,
+    p: &Pass,
+    stages: &[(u32, u32)],
+    offsets: &[u32],
+    post: u32,
+    sign: f64,
+    conj: bool,
+    from: &From,
+    to: &To,
+) {
+    let n = p.n;
+    let t = p.threads_per_line;
+    let last = stages.len() - 1;
+    for (si, &(r, ns)) in stages.iter().enumerate() {
+        let nb = n / r;
+        let per = nb.div_ceil(t);
+        let global_src = match from {
+            From::Global { src, ib } if si == 0 => Some((*src, ib.as_str())),
+            _ => None,
+        };
+        // The packed inverse reads its half spectrum from workgroup memory (put there
+        // before the stages).
+        let read_shared = global_src.is_none() || p.load == Load::HalfPacked;
+        let write_shared = si < last || matches!(to, To::Shared);
+        let global_dst = match to {
+            To::Global { ob, scale } if si == last => Some((ob.as_str(), scale.as_str())),
+            _ => None,
+        };
+        writeln!(w, "    // stage {si}: radix {r} after {ns} points").unwrap();
+        let guard = |m: u32, global: bool| -> String {
+            let mut c = Vec::new();
+            if global {
+                c.push("valid".to_string());
+            }
+            if (m + 1) * t > nb {
+                c.push(format!("j < {nb}u"));
+            }
+            c.join(" && ")
+        };
+        let open = |w: &mut String, m: u32, cond: &str| {
+            write!(w, "    {{ let j = {};", plus("t", m * t)).unwrap();
+            if cond.is_empty() {
+                writeln!(w).unwrap();
+            } else {
+                writeln!(w, " if ({cond}) {{").unwrap();
+            }
+        };
+        let close = |w: &mut String, cond: &str| {
+            if cond.is_empty() {
+                writeln!(w, "    }}").unwrap();
+            } else {
+                writeln!(w, "    }} }}").unwrap();
+            }
+        };
+        // Reads.
+        for m in 0..per {
+            let cond = guard(m, !read_shared);
+            open(w, m, &cond);
+            for rr in 0..r {
+                let reg = format!("r{}", m * r + rr);
+                let pos = plus("j", rr * nb);
+                let load = match global_src {
+                    None => format!("{reg} = sh[sidx(ll, {pos})];"),
+                    Some((src, ib)) => match p.load {
+                        Load::Complex => {
+                            format!("{reg} = {src}[{}];", at(ib, &pos, p.in_inner))
+                        }
+                        Load::Real => format!("{reg} = vec2<f32>({src}[{ib} + {pos}], 0.0);"),
+                        Load::HalfMirror => format!(
+                            "{{ let p = {pos}; let mirror = p > {h}u; let x = {src}[{ib} + select(p, {n}u - p, mirror)]; {reg} = select(x, vec2<f32>(x.x, -x.y), mirror); }}",
+                            h = n / 2
+                        ),
+                        // Z[p] = (X[p] + X*[n-p]) + i w^p (X[p] - X*[n-p]), w = e^(i pi/n):
+                        // the spectrum of x[2m] + i x[2m+1] (times 2). The imaginary
+                        // parts of X[0] and X[n] are dropped, as numpy's irfft does.
+                        Load::HalfPacked => format!(
+                            "{{ let p = {pos}; let x0 = sh[sidx(ll, p)]; let y0 = sh[sidx(ll, {n}u - p)];\n          let a = select(x0, vec2<f32>(x0.x, 0.0), p == 0u); let c = select(vec2<f32>(y0.x, -y0.y), vec2<f32>(y0.x, 0.0), p == 0u);\n          {reg} = a + c + mul_i(cmul(tw[{post}u + p], a - c)); }}"
+                        ),
+                    },
+                };
+                writeln!(w, "        {load}").unwrap();
+            }
+            close(w, &cond);
+        }
+        if read_shared && write_shared {
+            writeln!(w, "    workgroupBarrier();").unwrap();
+        }
+        // Twiddles, butterflies, writes.
+        for m in 0..per {
+            let cond = guard(m, global_dst.is_some());
+            open(w, m, &cond);
+            let v: Vec<String> = (0..r).map(|rr| format!("r{}", m * r + rr)).collect();
+            if ns > 1 {
+                writeln!(
+                    w,
+                    "        let k = j % {ns}u; let tb = {}u + k * {}u;",
+                    offsets[si],
+                    r - 1
+                )
+                .unwrap();
+                for (rr, reg) in v.iter().enumerate().skip(1) {
+                    let tw = format!("tw[{}]", plus("tb", rr as u32 - 1));
+                    if conj {
+                        writeln!(
+                            w,
+                            "        {{ let q = {tw}; {reg} = cmul({reg}, vec2<f32>(q.x, -q.y)); }}"
+                        )
+                    } else {
+                        writeln!(w, "        {reg} = cmul({reg}, {tw});")
+                    }
+                    .unwrap();
+                }
+            }
+            butterfly(w, &v, sign, "        ");
+            let dest = if si == last {
+                // Ns R = n: the output index is j + r Ns.
+                "j".to_string()
+            } else if ns == 1 {
+                format!("j * {r}u")
+            } else {
+                format!("(j / {ns}u) * {}u + k", ns * r)
+            };
+            for (rr, reg) in v.iter().enumerate() {
+                let pos = plus(&dest, rr as u32 * ns);
+                let store = match (global_dst, to) {
+                    _ if write_shared => format!("sh[sidx(ll, {pos})] = {reg};"),
+                    (Some((ob, scale)), _) => match p.store {
+                        Store::Complex => {
+                            format!("dst[{}] = {reg}{scale};", at(ob, &pos, p.out_inner))
+                        }
+                        Store::Half => format!(
+                            "{{ let p = {pos}; if (p <= {}u) {{ dst[{ob} + p] = {reg}; }} }}",
+                            n / 2
+                        ),
+                        Store::Real => format!("dst[{ob} + {pos}] = {reg}.x{scale};"),
+                        Store::HalfPacked => {
+                            unreachable!("packed stores go through workgroup memory")
+                        }
+                    },
+                    (None, To::Registers(prefix)) => {
+                        format!("{prefix}{} = {reg};", m * r + rr as u32)
+                    }
+                    (None, _) => unreachable!("the last stage writes to its destination"),
+                };
+                writeln!(w, "        {store}").unwrap();
+            }
+            close(w, &cond);
+        }
+        if write_shared {
+            writeln!(w, "    workgroupBarrier();").unwrap();
+        }
+    }
+}
+
+/// A folded spectral node on a pass along y or z: each component's lines in turn
+/// through workgroup memory, their results left in registers where the last butterflies
+/// put them (a thread then holds every component of its points), the spectral node
+/// applied there, and the results written, or with `inverse_after` transformed back
+/// first, component by component (the inverse transform's first pass).
+fn spectral_in_registers(
+    w: &mut String,
+    p: &Pass,
+    fold: &Fold,
+    stages: &[(u32, u32)],
+    offsets: &[u32],
+    post: u32,
+    src: &str,
+) {
+    let comps = p.seq_comps;
+    let t = p.threads_per_line;
+    let &(r, ns) = stages.last().expect("at least one stage");
+    let nb = p.n / r;
+    let per = nb.div_ceil(t);
+    for c in 0..comps {
+        let ln = format!("({}u + s)", c * p.lines);
+        writeln!(w, "    let ib{c} = {};", line_base(&ln, p.in_len, p.in_inner)).unwrap();
+        writeln!(w, "    let ob{c} = {};", line_base(&ln, p.out_len, p.out_inner)).unwrap();
+        for i in 0..per * r {
+            writeln!(w, "    var o{c}_{i}: vec2<f32>;").unwrap();
+        }
+    }
+    for c in 0..comps {
+        writeln!(w, "    // component {c}").unwrap();
+        if c > 0 && p.shared > 0 {
+            // The previous component's last stage has read workgroup memory.
+            writeln!(w, "    workgroupBarrier();").unwrap();
+        }
+        let from = From::Global {
+            src,
+            ib: format!("ib{c}"),
+        };
+        let to = To::Registers(format!("o{c}_"));
+        emit_stages(w, p, stages, offsets, post, -1.0, false, &from, &to);
+    }
+    // This thread's points: j + r Ns for its butterflies j.
+    let points = |w: &mut String, body: &dyn Fn(&mut String, u32, &str)| {
+        for m in 0..per {
+            let partial = (m + 1) * t > nb;
+            writeln!(
+                w,
+                "    {{ let j = {};{}",
+                plus("t", m * t),
+                if partial {
+                    format!(" if (j < {nb}u) {{")
+                } else {
+                    String::new()
+                }
+            )
+            .unwrap();
+            for rr in 0..r {
+                body(w, m * r + rr, &plus("j", rr * ns));
+            }
+            writeln!(w, "    }}{}", if partial { " }" } else { "" }).unwrap();
+        }
+    };
+    writeln!(w, "    // the folded spectral node at this thread's points").unwrap();
+    points(w, &|w, i, pos| {
+        writeln!(w, "      {{ let q = {pos};").unwrap();
+        writeln!(w, "        var v: array<vec2<f32>, SPECTRAL_COMPS>;").unwrap();
+        for c in 0..comps {
+            writeln!(w, "        v[{c}] = o{c}_{i};").unwrap();
+        }
+        let cell = at(&line_base("s", p.out_len, p.out_inner), "q", p.out_inner);
+        apply_spectral(w, fold, &cell, "        ");
+        for c in 0..comps {
+            if p.inverse_after {
+                writeln!(w, "        o{c}_{i} = v[{c}];").unwrap();
+            } else {
+                writeln!(
+                    w,
+                    "        if (valid) {{ dst[{}] = v[{c}]; }}",
+                    at(&format!("ob{c}"), "q", p.out_inner)
+                )
+                .unwrap();
+            }
+        }
+        writeln!(w, "      }}").unwrap();
+    });
+    if !p.inverse_after {
+        return;
+    }
+    for c in 0..comps {
+        writeln!(w, "    // component {c} back").unwrap();
+        // The forward stages (or the previous component's inverse) have read workgroup
+        // memory before this component's points go in.
+        writeln!(w, "    workgroupBarrier();").unwrap();
+        points(w, &|w, i, pos| {
+            writeln!(w, "      sh[sidx(ll, {pos})] = o{c}_{i};").unwrap();
+        });
+        writeln!(w, "    workgroupBarrier();").unwrap();
+        let to = To::Global {
+            ob: format!("ob{c}"),
+            scale: String::new(),
+        };
+        emit_stages(w, p, stages, offsets, post, 1.0, true, &From::Shared, &to);
     }
 }

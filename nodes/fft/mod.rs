@@ -25,8 +25,8 @@ pub use plan::{is_friendly, next_friendly};
 
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
-    Signature, SpectralBody,
+    GpuKernels, LinePass, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec,
+    RefCtx, Registry, Signature, SpectralBody,
 };
 use crate::value::{PortType, RefArray, ValueType};
 use plan::{Buf, Key, Kind, Limits, MAX_LENGTH};
@@ -119,37 +119,60 @@ impl FftNode {
         }
     }
 
-    fn key(&self, dims: [u32; 3], comps: u32, spectral: bool, caps: &DeviceCaps) -> Key {
-        Key {
+    /// The recipe; `fold`: with a spectral node folded into the last pass, and whether
+    /// that pass also runs the inverse transform's first.
+    fn recipe(
+        &self,
+        inputs: &[Option<ValueType>],
+        fold: Option<bool>,
+        caps: &DeviceCaps,
+    ) -> Result<std::sync::Arc<plan::Recipe>, String> {
+        let (dims, comps) = self.grid(inputs).map_err(|e| e.message)?;
+        plan::recipe(&Key {
             kind: self.kind,
             dims,
             comps,
             axes: self.axes,
-            spectral,
+            spectral: fold.is_some(),
+            inverse_after: fold == Some(true),
             limits: Limits::of(caps),
+        })
+    }
+
+    fn line_pass(&self, dims: [u32; 3], comps: u32, axis: usize) -> LinePass {
+        LinePass {
+            axis,
+            dims,
+            comps,
+            axes: self.axes,
+            half: matches!(self.kind, Kind::RealForward | Kind::RealInverse),
         }
     }
 
-    fn recipe(
-        &self,
-        inputs: &[Option<ValueType>],
-        spectral: bool,
-        caps: &DeviceCaps,
-    ) -> Result<std::sync::Arc<plan::Recipe>, String> {
-        let (dims, comps) = self.grid(inputs).map_err(|e| e.message)?;
-        plan::recipe(&self.key(dims, comps, spectral, caps))
-    }
-
+    /// `fold`: as in [`FftNode::recipe`]; `skip_first`: the first pass ran in the
+    /// forward transform that wrote the input (so the second reads the input).
     fn dispatches(
         &self,
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
-        spectral: Option<&SpectralBody>,
+        spectral: Option<(&SpectralBody, bool)>,
+        skip_first: bool,
     ) -> Result<Vec<Dispatch>, CompileError> {
         let types: Vec<Option<ValueType>> = io.inputs.iter().map(|s| s.map(|s| s.ty)).collect();
         let recipe = self
-            .recipe(&types, spectral.is_some(), cx.caps())
+            .recipe(&types, spectral.map(|(_, inv)| inv), cx.caps())
             .map_err(CompileError::Unsupported)?;
+        let spectral = spectral.map(|(body, _)| body);
+        let mut passes = recipe.passes.clone();
+        if skip_first {
+            if passes.len() < 2 {
+                return Err(CompileError::Unsupported(
+                    "a transform of one pass has no pass left after its first".into(),
+                ));
+            }
+            passes.remove(0);
+            passes[0].src = Buf::Input;
+        }
         let input = io.inputs[0]
             .ok_or_else(|| CompileError::Unsupported("the transform needs an input".into()))?;
         let params =
@@ -161,11 +184,17 @@ impl FftNode {
             half: matches!(self.kind, Kind::RealForward | Kind::RealInverse),
         });
         let mut out = Vec::new();
-        for (i, pass) in recipe.passes.iter().enumerate() {
+        let first = usize::from(skip_first) + 1;
+        for (i, pass) in passes.iter().enumerate() {
             let label = format!(
-                "{} pass {} ({}, {}-point)",
+                "{} pass {}{} ({}, {}-point)",
                 self.kind.name(),
-                i + 1,
+                i + first,
+                if pass.inverse_after {
+                    " + inverse's first"
+                } else {
+                    ""
+                },
                 AXIS[pass.axis],
                 pass.n
             );
@@ -323,7 +352,7 @@ impl GpuKernels for FftNode {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        self.dispatches(cx, io, None)
+        self.dispatches(cx, io, None, false)
     }
 
     fn device_notes(
@@ -332,14 +361,38 @@ impl GpuKernels for FftNode {
         caps: &DeviceCaps,
         folded: bool,
     ) -> Vec<String> {
-        match self.recipe(inputs, folded, caps) {
+        match self.recipe(inputs, folded.then_some(false), caps) {
             Ok(r) => r.describe(),
             Err(e) => vec![format!("cannot run on this device: {e}")],
         }
     }
 
     fn folds_spectral(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> bool {
-        !self.kind.inverse() && self.recipe(inputs, true, caps).is_ok()
+        !self.kind.inverse() && self.recipe(inputs, Some(false), caps).is_ok()
+    }
+
+    fn first_pass(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Option<LinePass> {
+        let (dims, comps) = self.grid(inputs).ok()?;
+        let recipe = self.recipe(inputs, None, caps).ok()?;
+        let first = recipe.passes.first()?;
+        let later_reads_input =
+            recipe.passes.len() > 1 && first.load == plan::Load::Complex && first.axis > 0;
+        (self.kind.inverse() && later_reads_input).then(|| self.line_pass(dims, comps, first.axis))
+    }
+
+    fn folds_inverse(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+        first: &LinePass,
+    ) -> bool {
+        let (Ok((dims, comps)), Ok(recipe)) =
+            (self.grid(inputs), self.recipe(inputs, Some(true), caps))
+        else {
+            return false;
+        };
+        let last = recipe.passes.last().expect("a recipe has passes");
+        !self.kind.inverse() && self.line_pass(dims, comps, last.axis) == *first
     }
 
     fn compile_spectral(
@@ -347,8 +400,17 @@ impl GpuKernels for FftNode {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
         spectral: &SpectralBody,
+        inverse_after: bool,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        self.dispatches(cx, io, Some(spectral))
+        self.dispatches(cx, io, Some((spectral, inverse_after)), false)
+    }
+
+    fn compile_after_folded_first_pass(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        self.dispatches(cx, io, None, true)
     }
 }
 

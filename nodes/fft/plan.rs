@@ -187,8 +187,14 @@ pub struct Pass {
     /// Lines the tiles enumerate: every line of every component, or with a folded
     /// spectral node the lines of one component (a tile then holds all components).
     pub lines: u32,
-    /// Components per tile: 1, or all of them with a folded spectral node.
+    /// Components per tile at once: 1, or all of them with a folded spectral node on a
+    /// pass along x (its results are unfolded through workgroup memory).
     pub tile_comps: u32,
+    /// Components a tile transforms one after another, keeping each one's results in
+    /// registers: all of them with a folded spectral node on a pass along y or z (a
+    /// thread then holds every component of its points), else 1. One component's lines
+    /// in workgroup memory at a time, so the tile keeps 16 neighbouring lines.
+    pub seq_comps: u32,
     /// Lines (per component) per workgroup.
     pub tile_lines: u32,
     pub threads_per_line: u32,
@@ -206,6 +212,9 @@ pub struct Pass {
     /// A spectral node's function is applied to the results (the forward transform's
     /// last pass).
     pub spectral: bool,
+    /// After the spectral node, the lines are transformed back (the first pass of the
+    /// inverse transform that reads the spectral node's output, run here instead).
+    pub inverse_after: bool,
 }
 
 impl Pass {
@@ -225,7 +234,19 @@ impl Pass {
     /// Whether the results go through workgroup memory before the global write (to
     /// combine values of other threads or components).
     pub fn store_via_shared(&self) -> bool {
-        self.store == Store::HalfPacked || self.spectral
+        self.store == Store::HalfPacked || self.spectral && !self.spectral_in_registers()
+    }
+
+    /// The folded spectral node is applied where the last butterflies leave the results,
+    /// in registers (complex lines along y or z, components in turn), rather than after
+    /// gathering them in workgroup memory (along x, where real spectra are unfolded).
+    pub fn spectral_in_registers(&self) -> bool {
+        self.spectral && in_registers(self.layout, self.store)
+    }
+
+    /// Components of the grid the pass transforms per line position.
+    pub fn comps_per_line(&self) -> u32 {
+        self.tile_comps * self.seq_comps
     }
 
     /// Output values per line.
@@ -350,6 +371,8 @@ impl Recipe {
                 if p.tile_lines == 1 { "" } else { "s" },
                 if p.tile_comps > 1 {
                     format!(" x {} comps", p.tile_comps)
+                } else if p.seq_comps > 1 {
+                    format!(" x {} comps in turn", p.seq_comps)
                 } else {
                     String::new()
                 },
@@ -376,6 +399,11 @@ impl Recipe {
             }
             if p.spectral {
                 line.push_str(", applies the folded spectral node");
+            }
+            if p.inverse_after {
+                line.push_str(
+                    ", then transforms the lines back (the inverse transform's first pass)",
+                );
             }
             out.push(line);
         }
@@ -414,6 +442,8 @@ pub struct Key {
     pub axes: [bool; 3],
     /// A spectral node is folded into the forward transform's last pass.
     pub spectral: bool,
+    /// ... and that pass also runs the first pass of the inverse transform after it.
+    pub inverse_after: bool,
     pub limits: Limits,
 }
 
@@ -502,7 +532,17 @@ fn build(key: &Key) -> Result<Recipe, String> {
             1.0
         };
         let spectral = key.spectral && i == last && !inverse;
-        passes.push(tile(key, shape, src, dst, inverse, scale, spectral)?);
+        let mut pass = tile(key, shape, src, dst, inverse, scale, spectral)?;
+        if spectral && key.inverse_after {
+            if !pass.spectral_in_registers() {
+                return Err(
+                    "the inverse transform's first pass folds only into a last pass along y or z"
+                        .into(),
+                );
+            }
+            pass.inverse_after = true;
+        }
+        passes.push(pass);
     }
     Ok(Recipe {
         kind: key.kind,
@@ -550,6 +590,12 @@ fn real_x(d: [u32; 3], inverse: bool) -> PassShape {
         out_inner: 1,
         lines_per_comp: d[1] * d[2],
     }
+}
+
+/// Whether a spectral node folded into a pass of this shape is applied in registers
+/// (see [`Pass::spectral_in_registers`]).
+fn in_registers(layout: Layout, store: Store) -> bool {
+    layout == Layout::Strided && store == Store::Complex
 }
 
 /// Largest power of two <= x (x >= 1).
@@ -605,13 +651,20 @@ fn tile(
 ) -> Result<Pass, String> {
     let lim = key.limits;
     let radices = radices(s.n);
-    let tile_comps = if spectral { key.comps.max(1) } else { 1 };
-    let (threads, registers) = threads_per_line(s.n, &radices, (lim.threads / tile_comps).max(1));
     let layout = if s.in_inner == 1 && s.out_inner == 1 {
         Layout::Contiguous
     } else {
         Layout::Strided
     };
+    // Components in turn where results stay where the butterflies leave them (complex
+    // lines along y, z); all at once where they are unfolded in workgroup memory.
+    let in_turn = spectral && in_registers(layout, s.store);
+    let (tile_comps, seq_comps) = match (spectral, in_turn) {
+        (true, true) => (1, key.comps.max(1)),
+        (true, false) => (key.comps.max(1), 1),
+        _ => (1, 1),
+    };
+    let (threads, registers) = threads_per_line(s.n, &radices, (lim.threads / tile_comps).max(1));
     let lines = if spectral {
         s.lines_per_comp
     } else {
@@ -632,6 +685,7 @@ fn tile(
         out_inner: s.out_inner,
         lines,
         tile_comps,
+        seq_comps,
         tile_lines: 1,
         threads_per_line: threads,
         registers,
@@ -641,9 +695,14 @@ fn tile(
         scale,
         groups: 0,
         spectral,
+        inverse_after: false,
     };
-    let needs_shared =
-        pass.radices.len() > 1 || pass.store_via_shared() || pass.load == Load::HalfPacked;
+    // (A pass that transforms its lines back needs workgroup memory even for one stage:
+    // `tile` is then called with `spectral` and decides its shape before that is known.)
+    let needs_shared = pass.radices.len() > 1
+        || pass.store_via_shared()
+        || pass.load == Load::HalfPacked
+        || in_turn && key.inverse_after;
     // Strided tiles want 16+ neighbouring lines (128-byte rows); contiguous ones about
     // 256 threads.
     let per_line = tile_comps * threads;

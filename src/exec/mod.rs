@@ -279,6 +279,7 @@ impl<'a> Program<'a> {
                 outputs,
                 scratch,
                 spectral,
+                first_pass_folded,
                 ..
             } => {
                 let inst = &g.nodes[*node];
@@ -314,7 +315,11 @@ impl<'a> Program<'a> {
                     (Lowering::Kernels(k), None) => Ok(Compiled::plain(
                         inst.id.clone(),
                         inst.kind.to_string(),
-                        k.compile(cx, &io).map_err(err)?,
+                        if *first_pass_folded {
+                            k.compile_after_folded_first_pass(cx, &io).map_err(err)?
+                        } else {
+                            k.compile(cx, &io).map_err(err)?
+                        },
                     )),
                     (Lowering::Kernels(k), Some(f)) => {
                         let s = &g.nodes[f.node];
@@ -324,7 +329,8 @@ impl<'a> Program<'a> {
                         Ok(Compiled::plain(
                             format!("{} + {}", inst.id, s.id),
                             format!("{}+{}", inst.kind, s.kind),
-                            k.compile_spectral(cx, &io, &body).map_err(err)?,
+                            k.compile_spectral(cx, &io, &body, f.inverse.is_some())
+                                .map_err(err)?,
                         ))
                     }
                     (Lowering::Spectral(body), None) => Ok(Compiled::plain(

@@ -37,11 +37,15 @@ pub enum Unit {
     Single(usize),
     /// Pointwise members in order, each with whether its output must be stored.
     Group(Vec<(usize, bool)>),
-    /// A transform that applies a spectral node in its last pass (see `spectral.rs`).
+    /// A transform that applies a spectral node in its last pass (see `spectral.rs`),
+    /// and with `inverse` also the first pass of the inverse transform after it.
     Folded {
         transform: usize,
         spectral: usize,
+        inverse: Option<usize>,
     },
+    /// An inverse transform whose first pass a [`Unit::Folded`] ran.
+    AfterFold(usize),
 }
 
 /// A generated element-wise kernel.

@@ -91,6 +91,9 @@ pub struct FoldedSpectral {
     pub node: usize,
     /// Its output, written by the transform's last pass.
     pub output: ValueId,
+    /// The inverse transform (reading `output`) whose first pass the transform's last
+    /// pass runs too: `output` then holds the spectrum transformed back along one axis.
+    pub inverse: Option<usize>,
 }
 
 /// One unit of GPU work.
@@ -106,6 +109,9 @@ pub enum Launch {
         /// The node's own decisions for these inputs (see `Node::notes`).
         notes: Vec<String>,
         spectral: Option<FoldedSpectral>,
+        /// An inverse transform whose first pass the launch that folds the spectral
+        /// node it reads ran (see `spectral.rs`).
+        first_pass_folded: bool,
     },
     /// One generated kernel for a chain of element-wise nodes.
     Fused(FusedKernel),
@@ -988,12 +994,17 @@ impl Builder {
                 Storage::Register
             }
         };
-        let folded = match unit {
-            fuse::Unit::Folded { spectral, .. } => Some(spectral),
-            _ => None,
+        let (folded, inverse) = match unit {
+            fuse::Unit::Folded {
+                spectral, inverse, ..
+            } => (Some(spectral), inverse),
+            _ => (None, None),
         };
+        let first_pass_folded = matches!(unit, fuse::Unit::AfterFold(_));
         match unit {
-            fuse::Unit::Single(n) | fuse::Unit::Folded { transform: n, .. } => {
+            fuse::Unit::Single(n)
+            | fuse::Unit::AfterFold(n)
+            | fuse::Unit::Folded { transform: n, .. } => {
                 let inst = &g.nodes[n];
                 let types = p.node_types[n].clone().flatten().expect("present node");
                 let inputs = inst
@@ -1020,6 +1031,7 @@ impl Builder {
                     FoldedSpectral {
                         node: b,
                         output: self.add(src, phase, g.source_name(src), t, st),
+                        inverse,
                     }
                 });
                 let scratch = p.scratch[n]
@@ -1049,6 +1061,18 @@ impl Builder {
                         g.nodes[b].id, g.nodes[b].kind
                     ));
                 }
+                if let Some(c) = inverse {
+                    notes.push(format!(
+                        "and after it the first pass of `{}` ({}): the lines go back before they are stored",
+                        g.nodes[c].id, g.nodes[c].kind
+                    ));
+                }
+                if first_pass_folded {
+                    notes.push(
+                        "starts at its second pass: its first ran in the forward transform's last"
+                            .into(),
+                    );
+                }
                 Launch::Node {
                     node: n,
                     inputs,
@@ -1056,6 +1080,7 @@ impl Builder {
                     scratch,
                     notes,
                     spectral,
+                    first_pass_folded,
                 }
             }
             fuse::Unit::Group(members) => {

@@ -93,12 +93,20 @@ fn launch_text(out: &mut String, g: &Graph, plan: &Plan, i: usize, l: &Launch) {
                 scratch,
                 notes,
                 spectral,
+                first_pass_folded,
             } => {
                 let n = &g.nodes[*node];
                 write!(out, "  {:>3}. {} ({})", i + 1, n.id, n.kind).unwrap();
                 if let Some(f) = spectral {
                     let s = &g.nodes[f.node];
                     write!(out, " + {} ({}), folded", s.id, s.kind).unwrap();
+                    if let Some(c) = f.inverse {
+                        let c = &g.nodes[c];
+                        write!(out, " + first pass of {} ({})", c.id, c.kind).unwrap();
+                    }
+                }
+                if *first_pass_folded {
+                    write!(out, ", from its second pass").unwrap();
                 }
                 writeln!(out).unwrap();
                 for note in notes {

@@ -6,6 +6,15 @@
 //! else reads that output and it is not needed after the phase. The transform then writes
 //! the spectral node's output and its own output is never stored, so rfft -> Green
 //! function -> irfft makes no pass over the grid beyond the transforms' own.
+//!
+//! When the spectral node's output in turn has one reader, an inverse transform whose
+//! first pass runs along the axis of the forward transform's last
+//! ([`crate::node::GpuKernels::first_pass`], [`crate::node::GpuKernels::folds_inverse`]),
+//! that pass runs in the forward transform's last too (lines transformed, multiplied,
+//! transformed back while in the workgroup), and the inverse transform starts from its
+//! second pass ([`Unit::AfterFold`]): one pass over the grid less. What the forward
+//! launch stores in the spectral node's output is then that half-way result, which only
+//! the inverse reads.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write;
@@ -39,7 +48,7 @@ pub fn fold(
             .iter()
             .any(|u| matches!(u, Unit::Single(m) if *m == n))
     };
-    let mut folds: BTreeMap<usize, usize> = BTreeMap::new();
+    let mut folds: BTreeMap<usize, (usize, Option<usize>)> = BTreeMap::new();
     for &b in ctx.order {
         let inst = &ctx.g.nodes[b];
         if !matches!(inst.node.lowering(), Lowering::Spectral(_)) || !single(b) {
@@ -58,17 +67,41 @@ pub fn fold(
             && !(ctx.escapes)(src)
             && k.folds_spectral(&input_types(a), caps)
         {
-            folds.insert(a, b);
+            // The inverse transform that alone reads the spectral node's output may
+            // leave its first pass to this launch.
+            let out = Source::Node { node: b, port: 0 };
+            let reader = ctx
+                .order
+                .iter()
+                .copied()
+                .find(|&c| ctx.g.nodes[c].inputs.contains(&out));
+            let inverse = reader.filter(|&c| {
+                readers.get(&out) == Some(&1)
+                    && !(ctx.escapes)(out)
+                    && single(c)
+                    && ctx.g.nodes[c].inputs.len() == 1
+                    && match ctx.g.nodes[c].node.lowering() {
+                        Lowering::Kernels(kc) => kc
+                            .first_pass(&input_types(c), caps)
+                            .is_some_and(|f| k.folds_inverse(&input_types(a), caps, &f)),
+                        _ => false,
+                    }
+            });
+            folds.insert(a, (b, inverse));
         }
     }
+    let folded = |n: usize| folds.values().any(|&(b, _)| b == n);
+    let after = |n: usize| folds.values().any(|&(_, c)| c == Some(n));
     units
         .into_iter()
         .filter_map(|u| match u {
-            Unit::Single(n) if folds.values().any(|&b| b == n) => None,
+            Unit::Single(n) if folded(n) => None,
+            Unit::Single(n) if after(n) => Some(Unit::AfterFold(n)),
             Unit::Single(n) => Some(match folds.get(&n) {
-                Some(&b) => Unit::Folded {
+                Some(&(b, inverse)) => Unit::Folded {
                     transform: n,
                     spectral: b,
+                    inverse,
                 },
                 None => Unit::Single(n),
             }),

@@ -30,13 +30,24 @@ fn run(
     inputs: &BTreeMap<String, HostArray>,
     fuse: bool,
 ) -> (BTreeMap<String, HostArray>, mesoflow::plan::Plan) {
+    run_outputs(gpu, g, inputs, fuse, None)
+}
+
+/// `run` for the named outputs only (None: all).
+fn run_outputs(
+    gpu: &GpuContext,
+    g: &Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    fuse: bool,
+    outputs: Option<&[&str]>,
+) -> (BTreeMap<String, HostArray>, mesoflow::plan::Plan) {
     static CACHE: OnceLock<Mutex<KernelCache>> = OnceLock::new();
     let mut cache = CACHE
         .get_or_init(Default::default)
         .lock()
         .unwrap_or_else(|p| p.into_inner());
     let opts = PlanOptions {
-        outputs: None,
+        outputs: outputs.map(|o| o.iter().map(|s| s.to_string()).collect()),
         inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse,
     };
@@ -330,6 +341,7 @@ fn recipe(kind: plan::Kind, dims: [u32; 3], spectral: bool, c: &DeviceCaps) -> p
         comps: 3,
         axes: [true; 3],
         spectral,
+        inverse_after: false,
         limits: plan::Limits::of(c),
     };
     (*plan::recipe(&key).unwrap()).clone()
@@ -355,7 +367,7 @@ fn recipes_fit_the_device_and_read_and_write_each_line_once_per_axis() {
         // Folding a 3-component spectral node keeps the last pass on chip.
         let r = recipe(plan::Kind::RealForward, [n, n, n], true, &nvidia);
         let last = r.passes.last().unwrap();
-        assert!(last.spectral && last.tile_comps == 3, "{n}: {last:?}");
+        assert!(last.spectral && last.comps_per_line() == 3, "{n}: {last:?}");
     }
     // Lines longer than the device's workgroup memory are a clear error.
     let key = plan::Key {
@@ -364,6 +376,7 @@ fn recipes_fit_the_device_and_read_and_write_each_line_once_per_axis() {
         comps: 1,
         axes: [true; 3],
         spectral: false,
+        inverse_after: false,
         limits: plan::Limits::of(&DeviceCaps::baseline()),
     };
     let e = plan::recipe(&key).unwrap_err();
@@ -416,7 +429,38 @@ fn generated_passes_validate_with_naga() {
             }
         }
     }
-    assert!(n > 15);
+    // Last passes that transform their lines back (the inverse's first pass folded in).
+    for dims in [[96, 7, 375], [81, 10, 4], [16, 12, 1]] {
+        let key = plan::Key {
+            kind: plan::Kind::RealForward,
+            dims,
+            comps: 3,
+            axes: [true; 3],
+            spectral: true,
+            inverse_after: true,
+            limits: plan::Limits::of(&nvidia),
+        };
+        let r = plan::recipe(&key).unwrap();
+        let last = r.passes.last().unwrap();
+        assert!(last.inverse_after && last.seq_comps == 3, "{dims:?}: {last:?}");
+        let fold = codegen::Fold {
+            body: &body,
+            dims,
+            stored: r.spectrum_dims(),
+            half: true,
+        };
+        let src = codegen::source(last, Some(&fold));
+        let module = naga::front::wgsl::parse_str(&src)
+            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::empty(),
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        n += 1;
+    }
+    assert!(n > 18);
 }
 
 #[test]
@@ -589,6 +633,39 @@ fn spectral_nodes_fold_into_the_forward_transform() {
         assert!(e <= 2e-6, "{spectral} spectrum vs reference: {e:e}");
         let e = rel_l2(&fused["y"].data.to_f64(), &y.data);
         assert!(e <= 4e-6, "{spectral} y vs reference: {e:e}");
+        // With the spectrum not asked for, a real transform over y or z also runs the
+        // inverse's first pass in the forward's last (the complex inverse starts along
+        // x, the forward ends along z: not folded; 1-D: one pass each).
+        let (conv, conv_plan) = run_outputs(&gpu, &g, &data, true, Some(&["y"]));
+        let inverse_folded = conv_plan.step.iter().any(|l| {
+            matches!(
+                l,
+                Launch::Node {
+                    spectral: Some(mesoflow::plan::FoldedSpectral {
+                        inverse: Some(_),
+                        ..
+                    }),
+                    ..
+                }
+            )
+        });
+        let after = conv_plan.step.iter().any(|l| {
+            matches!(
+                l,
+                Launch::Node {
+                    first_pass_folded: true,
+                    ..
+                }
+            )
+        });
+        let dims = match ty {
+            ValueType::RealGrid { dims, .. } | ValueType::ComplexGrid { dims, .. } => dims,
+            _ => unreachable!("grid cases"),
+        };
+        let expect = fwd == "rfft" && dims[1..].iter().any(|&d| d > 1);
+        assert_eq!((inverse_folded, after), (expect, expect), "{spectral} {ty}");
+        let e = rel_l2(&conv["y"].data.to_f64(), &plain["y"].data.to_f64());
+        assert!(e <= 1e-6, "{spectral}: y with the inverse's first pass folded {e:e}");
     }
 }
 
