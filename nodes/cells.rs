@@ -1,6 +1,8 @@
 //! Cells of a box: particle positions to cell indices (linear or Morton order), and
-//! histograms of indices. With a sort and a scan these make cell lists: hash -> sort
-//! (keys, perm) -> histogram -> exclusive scan = first particle of every cell.
+//! histograms of indices. With `bin_sort` (nodes/bin_sort.rs: perm, sorted keys, count
+//! and first particle of every cell in one node) these make cell lists:
+//! graphs/lib/cell_list.json; `sort` -> histogram -> exclusive scan does the same with
+//! a stable order inside each cell.
 
 use crate::expr::ParamValue;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
@@ -125,6 +127,14 @@ fn spread(v: u32, dims: usize) -> u64 {
         .sum()
 }
 
+/// The Morton key `cell_hash` gives the cell of integer coordinates `i` (2 or 3 axes):
+/// their bits interleaved, x lowest. Increasing in each coordinate, so the last cell of a
+/// grid has the largest key: `morton(&[cx - 1, cy - 1, cz - 1]) + 1` bins hold them all.
+pub fn morton(i: &[u32]) -> u64 {
+    let dims = i.len();
+    (0..dims).map(|a| spread(i[a], dims) << a).sum()
+}
+
 impl CellHash {
     /// Reference cell along one axis, in f64.
     fn axis_cell(&self, x: f64, a: usize) -> u32 {
@@ -142,7 +152,7 @@ impl CellHash {
         let dims = self.cells.len();
         let i: Vec<u32> = (0..dims).map(|a| self.axis_cell(pos[a], a)).collect();
         if self.morton {
-            (0..dims).map(|a| spread(i[a], dims) << a).sum::<u64>() as u32
+            morton(&i) as u32
         } else {
             let mut k = 0u64;
             for a in (0..dims).rev() {

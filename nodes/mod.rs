@@ -1,5 +1,6 @@
 //! Node implementations, each beside its f64 CPU reference. Kernels live in `shaders/`.
 
+pub mod bin_sort;
 pub mod cells;
 pub mod fcm;
 pub mod fft;
@@ -22,6 +23,7 @@ use crate::node::Registry;
 
 /// Adds every shipped node kind to the registry.
 pub fn register_all(r: &mut Registry) {
+    bin_sort::register(r);
     fft::register(r);
     pointwise::register(r);
     cells::register(r);

@@ -244,6 +244,26 @@ pub static FUNCTIONS: &[HostFunction] = &[
         },
     },
     HostFunction {
+        name: "fcm_sort_bins",
+        doc: "fcm_sort_bins(grid): bins of that Morton order (its largest key + 1: every key cell_hash makes for fcm_sort_cells(grid) in morton order), for bin_sort",
+        call: |a| {
+            arity(a, 1)?;
+            let last: Vec<u32> = numbers(a, 0, "grid")?
+                .iter()
+                .map(|&g| plan::sort_cells(g) as u32 - 1)
+                .collect();
+            if !(2..=3).contains(&last.len()) {
+                return Err(format!(
+                    "argument 1 (grid) needs 2 or 3 axes, got {}",
+                    last.len()
+                ));
+            }
+            Ok(ParamValue::Number(
+                crate::nodes::cells::morton(&last) as f64 + 1.0,
+            ))
+        },
+    },
+    HostFunction {
         name: "fcm_radius",
         doc: "fcm_radius(box, grid, radius, tolerance, kernel): the hydrodynamic radius the window has on that grid",
         call: |a| {
@@ -359,4 +379,61 @@ pub static FUNCTIONS: &[HostFunction] = &[
 /// The host function of a name.
 pub fn lookup(name: &str) -> Option<&'static HostFunction> {
     FUNCTIONS.iter().find(|f| f.name == name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn call(name: &str, args: &[ParamValue]) -> Result<ParamValue, String> {
+        (lookup(name).expect("registered").call)(args)
+    }
+
+    /// fcm_sort_bins covers every Morton key of fcm_sort_cells(grid), and no more than
+    /// the largest one needs.
+    #[test]
+    fn sort_bins_cover_every_morton_key_of_the_sort_cells() {
+        for grid in [
+            vec![1.0, 1.0, 1.0],
+            vec![18.0, 18.0, 18.0],
+            vec![64.0, 24.0, 40.0],
+            vec![200.0, 8.0, 9.0],
+            vec![96.0, 30.0],
+        ] {
+            let grid_value = ParamValue::Numbers(grid.clone());
+            let Ok(ParamValue::Numbers(cells)) =
+                call("fcm_sort_cells", std::slice::from_ref(&grid_value))
+            else {
+                panic!("fcm_sort_cells({grid:?})");
+            };
+            let Ok(ParamValue::Number(bins)) = call("fcm_sort_bins", &[grid_value]) else {
+                panic!("fcm_sort_bins({grid:?})");
+            };
+            let c: Vec<u32> = cells.iter().map(|&c| c as u32).collect();
+            let mut largest = 0;
+            for z in 0..c.get(2).copied().unwrap_or(1) {
+                for y in 0..c[1] {
+                    for x in 0..c[0] {
+                        let i = if c.len() == 3 {
+                            vec![x, y, z]
+                        } else {
+                            vec![x, y]
+                        };
+                        largest = largest.max(crate::nodes::cells::morton(&i));
+                    }
+                }
+            }
+            assert_eq!(bins, largest as f64 + 1.0, "{grid:?}");
+        }
+        // 256^3 grid cells: 32^3 sort cells, 2^15 bins (a power of two per axis fills it).
+        assert_eq!(
+            call("fcm_sort_bins", &[ParamValue::Numbers(vec![256.0; 3])]),
+            Ok(ParamValue::Number(32768.0))
+        );
+        assert!(
+            call("fcm_sort_bins", &[ParamValue::Numbers(vec![8.0])])
+                .unwrap_err()
+                .contains("2 or 3 axes")
+        );
+    }
 }

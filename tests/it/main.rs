@@ -3,6 +3,7 @@
 //! MESOFLOW_REQUIRE_GPU=1 (set by .ci/run) a missing adapter fails them instead of
 //! skipping them.
 
+mod bin_sort;
 mod cells;
 mod cli;
 mod fcm;

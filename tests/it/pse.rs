@@ -371,6 +371,48 @@ fn noise_covariance_is_the_mobility() {
     }
 }
 
+/// The near field's W is drawn per particle in input order and gathered into the cell
+/// list's order, which is not fixed (bin_sort ranks by atomics): a cell list of other
+/// cells, which orders the particles differently, gives each particle the same draw,
+/// so the same noise up to the Lanczos tolerance and rounding; another seed other noise.
+#[test]
+fn noise_follows_the_particles_not_the_cell_order() {
+    let Some(gpu) = gpu() else { return };
+    let (l, n) = (16.0, 150usize);
+    let mut rng = Rng::new(23);
+    let x = random_positions(&mut rng, n, l);
+    let f = vec![[0.0; 3]; n];
+    let run = |cells: &str, seed: u64| {
+        let mut sets = vec![("box", "[16, 16, 16]"), ("lanczos_tolerance", "1e-5")];
+        if !cells.is_empty() {
+            sets.push(("cells", cells));
+        }
+        let g = load_with("pse.json", &sets, seed);
+        let plan = pse_plan(&gpu, &g, n as u32, &["noise"]);
+        let mut program = compile(&gpu, &g, &plan);
+        eval(&mut program, &x, &f, None)["noise"].clone()
+    };
+    // The default cells (2 per axis here: the cutoff is about 5.8) and one cell.
+    let (a, b, c) = (run("", 3), run("[1, 1, 1]", 3), run("", 4));
+    let biggest = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(biggest > 0.0);
+    let worst = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+    eprintln!(
+        "noise with other cells: largest difference {:.2e} of {biggest:.2e}",
+        worst
+    );
+    assert!(
+        worst <= 1e-3 * biggest,
+        "the noise depends on the cell order: {worst:e} of {biggest:e}"
+    );
+    let differs = (0..n).filter(|&i| a[i] != c[i]).count();
+    assert_eq!(differs, n, "seed 4 repeated seed 3's noise");
+}
+
 #[test]
 fn open_boundary_rpy_matches_the_closed_form() {
     let Some(gpu) = gpu() else { return };
