@@ -648,8 +648,18 @@ fn spectral_in_registers(
     let per = nb.div_ceil(t);
     for c in 0..comps {
         let ln = format!("({}u + s)", c * p.lines);
-        writeln!(w, "    let ib{c} = {};", line_base(&ln, p.in_len, p.in_inner)).unwrap();
-        writeln!(w, "    let ob{c} = {};", line_base(&ln, p.out_len, p.out_inner)).unwrap();
+        writeln!(
+            w,
+            "    let ib{c} = {};",
+            line_base(&ln, p.in_len, p.in_inner)
+        )
+        .unwrap();
+        writeln!(
+            w,
+            "    let ob{c} = {};",
+            line_base(&ln, p.out_len, p.out_inner)
+        )
+        .unwrap();
         for i in 0..per * r {
             writeln!(w, "    var o{c}_{i}: vec2<f32>;").unwrap();
         }

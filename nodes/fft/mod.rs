@@ -25,8 +25,8 @@ pub use plan::{is_friendly, next_friendly};
 
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
-    GpuKernels, LinePass, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec,
-    RefCtx, Registry, Signature, SpectralBody,
+    GpuKernels, LinePass, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx,
+    Registry, Signature, SpectralBody,
 };
 use crate::value::{PortType, RefArray, ValueType};
 use plan::{Buf, Key, Kind, Limits, MAX_LENGTH};

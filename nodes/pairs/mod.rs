@@ -12,8 +12,8 @@
 //! matrix-vector product M v, and can be a Lanczos loop body.
 //!
 //! The cell list is made of primitives (see `graphs/lib/cell_list.json`): cell_hash in
-//! linear order, sort, gather of the rows, histogram and scan of the keys. The sum runs in
-//! the sorted order it is given.
+//! linear order, bin_sort (the order, the count and the first slot of each cell) and a
+//! gather of the rows. The sum runs in the sorted order it is given.
 
 pub mod rpy;
 
@@ -386,7 +386,7 @@ impl NodeKind for NeighbourSumKind {
             PortSpec::new(
                 "cell_count",
                 PortType::Indices,
-                "particles in each cell (histogram of the keys)",
+                "particles in each cell",
             ),
             PortSpec::new(
                 "list",
@@ -538,7 +538,10 @@ impl NeighbourSum {
     /// Lanes per particle on this device (None: one thread per particle). Segments must
     /// lie inside one subgroup, so at most its smallest size.
     fn segment(&self, caps: &DeviceCaps) -> Result<Option<u32>, CompileError> {
-        let min = caps.subgroups.map(|(min, _)| min).filter(|m| m.is_power_of_two());
+        let min = caps
+            .subgroups
+            .map(|(min, _)| min)
+            .filter(|m| m.is_power_of_two());
         match (self.lanes, min) {
             (Lanes::Off, _) => Ok(None),
             (Lanes::Auto, Some(min)) if min >= 8 => Ok(Some(8)),

@@ -121,16 +121,18 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         // Sorted input also runs the box kernels (sorted_input), shown as wg "box";
         // random input runs them after sorting in the graph (Morton order of 4-cell
         // blocks, whole blocks of about 64 particles at 1 per cell: one box run), shown
-        // as "sort+box", the sort, the gathers and the scatter back included in the times.
-        // (label, params of both nodes, params of spreading only, sort in the graph first)
-        let mut runs: Vec<(String, String, &str, bool)> = workgroups
+        // as "sort+box" (the radix sort) and "bin+box" (the counting sort, bin_sort), the
+        // sort, the gathers and the scatter back included in the times.
+        // (label, params of both nodes, params of spreading only, sort node in the graph
+        // first)
+        let mut runs: Vec<(String, String, &str, Option<&str>)> = workgroups
             .iter()
             .map(|wg| {
                 (
                     format!("lanes {wg}"),
                     format!(r#""workgroup": "{wg}""#),
                     "",
-                    false,
+                    None,
                 )
             })
             .collect();
@@ -139,23 +141,25 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
             "tables".into(),
             r#""workgroup": "256", "lanes": "off""#.into(),
             "",
-            false,
+            None,
         ));
-        runs.push((
-            if sorted { "box" } else { "sort+box" }.into(),
-            r#""order": "contiguous""#.into(),
-            r#", "sorted_input": true"#,
-            !sorted,
-        ));
+        let sorts: &[(&str, Option<&str>)] = if sorted {
+            &[("box", None)]
+        } else {
+            &[("sort+box", Some("sort")), ("bin+box", Some("bin_sort"))]
+        };
+        for &(label, sort) in sorts {
+            runs.push((
+                label.into(),
+                r#""order": "contiguous""#.into(),
+                r#", "sorted_input": true"#,
+                sort,
+            ));
+        }
         if sorted {
             // The per-particle kernels serving sorted input in its own order (cache
             // reuse between neighbouring particles, which interleaved runs give up).
-            runs.push((
-                "contig".into(),
-                r#""order": "contiguous""#.into(),
-                "",
-                false,
-            ));
+            runs.push(("contig".into(), r#""order": "contiguous""#.into(), "", None));
         }
         // The interpolation check's inputs, the same for every kernel of this row.
         let check = InterpolationCheck::new(&inputs);
@@ -168,14 +172,19 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
             );
             let blocks = n_cells.div_ceil(4);
             let bits = 3 * (blocks as f64).log2().ceil().max(1.0) as u32;
-            let (sorting, spread_in, interp_in, u) = if sort_first {
+            let (sorting, spread_in, interp_in, u) = if let Some(sort) = sort_first {
+                let sort_params = if sort == "sort" {
+                    format!(r#""bits": {bits}"#)
+                } else {
+                    format!(r#""bins": {}"#, 1u64 << bits)
+                };
                 (
                     format!(
                         r#"{{"id": "hash", "kind": "cell_hash", "params": {{"box": [{l}, {l}, {l}], "cells": [{blocks}, {blocks}, {blocks}], "order": "morton"}}, "inputs": {{"positions": "inputs.positions"}}}},
-                    {{"id": "order", "kind": "sort", "params": {{"bits": {bits}}}, "inputs": {{"keys": "hash.out"}}}},
+                    {{"id": "order", "kind": "{sort}", "params": {{{sort_params}}}, "inputs": {{"keys": "hash.out"}}}},
                     {{"id": "sorted_positions", "kind": "gather", "inputs": {{"values": "inputs.positions", "index": "order.perm"}}}},
                     {{"id": "sorted_values", "kind": "gather", "inputs": {{"values": "inputs.values", "index": "order.perm"}}}},
-                    {{"id": "back", "kind": "scatter", "inputs": {{"values": "interpolate.out", "index": "order.perm"}}}},"#
+                    {{"id": "back", "kind": "scatter", "params": {{"permutation": true}}, "inputs": {{"values": "interpolate.out", "index": "order.perm"}}}},"#
                     ),
                     r#""positions": "sorted_positions.out", "values": "sorted_values.out""#,
                     r#""positions": "sorted_positions.out""#,
@@ -209,7 +218,7 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
                     .unwrap_or(f64::NAN)
             };
             let (mut ts, mut ti) = (t("spread"), t("interpolate"));
-            if sort_first {
+            if sort_first.is_some() {
                 ts += t("hash") + t("order") + t("sorted_positions") + t("sorted_values");
                 ti += t("back");
             }

@@ -442,7 +442,10 @@ fn generated_passes_validate_with_naga() {
         };
         let r = plan::recipe(&key).unwrap();
         let last = r.passes.last().unwrap();
-        assert!(last.inverse_after && last.seq_comps == 3, "{dims:?}: {last:?}");
+        assert!(
+            last.inverse_after && last.seq_comps == 3,
+            "{dims:?}: {last:?}"
+        );
         let fold = codegen::Fold {
             body: &body,
             dims,
@@ -665,7 +668,10 @@ fn spectral_nodes_fold_into_the_forward_transform() {
         let expect = fwd == "rfft" && dims[1..].iter().any(|&d| d > 1);
         assert_eq!((inverse_folded, after), (expect, expect), "{spectral} {ty}");
         let e = rel_l2(&conv["y"].data.to_f64(), &plain["y"].data.to_f64());
-        assert!(e <= 1e-6, "{spectral}: y with the inverse's first pass folded {e:e}");
+        assert!(
+            e <= 1e-6,
+            "{spectral}: y with the inverse's first pass folded {e:e}"
+        );
     }
 }
 
