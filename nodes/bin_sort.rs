@@ -302,19 +302,22 @@ impl GpuKernels for BinSort {
                     Path::Subgroup => "bin_sort/scan_subgroup.wgsl",
                     Path::Portable => "bin_sort/scan_portable.wgsl",
                 };
-                let kernel = cx.kernel(
-                    &KernelSpec::new(
-                        format!("bin_sort scan ({threads} threads, {path:?})"),
-                        cx.shader(file)?,
-                        &[
-                            Binding::StorageRead,
-                            Binding::StorageReadWrite,
-                            Binding::StorageReadWrite,
-                            Binding::Uniform,
-                        ],
-                    )
-                    .constant("WG", threads as f64),
-                )?;
+                let mut spec = KernelSpec::new(
+                    format!("bin_sort scan ({threads} threads, {path:?})"),
+                    cx.shader(file)?,
+                    &[
+                        Binding::StorageRead,
+                        Binding::StorageReadWrite,
+                        Binding::StorageReadWrite,
+                        Binding::Uniform,
+                    ],
+                )
+                .constant("WG", threads as f64);
+                if path == Path::Subgroup {
+                    // Its loops over a thread's quads have a constant trip count.
+                    spec = spec.constant("QUADS", quads as f64);
+                }
+                let kernel = cx.kernel(&spec)?;
                 let params = cx.uniform("bin_sort scan", bytemuck::cast_slice(&[self.bins, quads]));
                 out.push(cx.dispatch(
                     &kernel,

@@ -321,14 +321,28 @@ pub static FUNCTIONS: &[HostFunction] = &[
         },
     },
     HostFunction {
-        name: "pse_support",
-        doc: "pse_support(tolerance, grid): support in cells of the far-field Gaussian (Lindbo-Tornberg, odd)",
+        name: "pse_shape",
+        doc: "pse_shape(tolerance, grid): the Lindbo-Tornberg support (odd) whose shape sets the far-field Gaussian's width",
         call: |a| {
             arity(a, 2)?;
             let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
             Ok(ParamValue::Number(
-                pse::support(number(a, 0, "tolerance")?, &cells) as f64,
+                pse::shape_support(number(a, 0, "tolerance")?, &cells) as f64,
             ))
+        },
+    },
+    HostFunction {
+        name: "pse_support",
+        doc: "pse_support(tolerance, box, grid, width): support in cells of the far-field Gaussian of that width, cut where the tolerance allows (erfc(m / sqrt 2) <= tol / 10)",
+        call: |a| {
+            arity(a, 4)?;
+            let cells: Vec<u32> = numbers(a, 2, "grid")?.iter().map(|&n| n as u32).collect();
+            Ok(ParamValue::Number(pse::support(
+                number(a, 0, "tolerance")?,
+                numbers(a, 1, "box")?,
+                &cells,
+                positive(a, 3, "width")?,
+            ) as f64))
         },
     },
     HostFunction {

@@ -72,9 +72,10 @@ fn deviations(tolerance: f64) -> f64 {
     std::f64::consts::SQRT_2 * erfc_inverse(0.1 * tolerance)
 }
 
-/// Far-field support in cells: P with m = 0.976 sqrt(pi P) (Lindbo and Tornberg), odd,
-/// at most the smallest grid side.
-pub fn support(tolerance: f64, cells: &[u32]) -> u32 {
+/// The Lindbo-Tornberg support P that shapes the far-field Gaussian: P with m = 0.976
+/// sqrt(pi P) (Lindbo and Tornberg), odd, at most the smallest grid side. [`width`] of
+/// it sets the Gaussian; [`support`] then cuts that Gaussian where the tolerance allows.
+pub fn shape_support(tolerance: f64, cells: &[u32]) -> u32 {
     let m = deviations(tolerance);
     let mut p = ((m / 0.976).powi(2) / std::f64::consts::PI).ceil() as u32;
     if p.is_multiple_of(2) {
@@ -82,6 +83,26 @@ pub fn support(tolerance: f64, cells: &[u32]) -> u32 {
     }
     let smallest = cells.iter().copied().min().unwrap_or(p);
     p.min(smallest).max(3)
+}
+
+/// Far-field support in cells: the Gaussian of standard deviation `width` cut at the m
+/// deviations the tolerance needs (erfc(m / sqrt 2) at most tol / 10), 2 m width / h
+/// cells rounded up (even or odd), 3 at least and at most the smallest grid side. The
+/// Lindbo-Tornberg support the width comes from rounds P up to an odd count: at tol
+/// 1e-3, 7 cells where 5.95 suffice (3.92 deviations each side against the 3.89 needed),
+/// so the spreading and interpolation of 6^3 points instead of 7^3.
+pub fn support(tolerance: f64, lengths: &[f64], cells: &[u32], width: f64) -> u32 {
+    let h = lengths
+        .iter()
+        .zip(cells)
+        .map(|(l, &n)| l / n as f64)
+        .fold(f64::INFINITY, f64::min);
+    // The finest cell needs the most cells to cover the cut.
+    let p = (2.0 * deviations(tolerance) * width / h - 1e-9)
+        .ceil()
+        .max(3.0) as u32;
+    let smallest = cells.iter().copied().min().unwrap_or(p);
+    p.min(smallest.max(3))
 }
 
 /// Standard deviation of the far-field Gaussian for a support of P cells: the half width
@@ -181,7 +202,14 @@ mod tests {
         let rc = cutoff(1.0, 0.5, 1e-3);
         assert!(rc > 5.2565 && rc < 6.5, "{rc}");
         assert_eq!(neighbour_cells(&[128.0; 3], 5.3), vec![24; 3]);
-        assert_eq!(support(1e-3, &g), 7);
+        assert_eq!(shape_support(1e-3, &g), 7);
+        let sigma = width(&[128.0; 3], &g, 7);
+        assert_eq!(support(1e-3, &[128.0; 3], &g, sigma), 6);
+        // At 1e-2 and 1e-4 the odd Lindbo-Tornberg count is what the cut needs.
+        for (tol, p) in [(1e-2, 5), (1e-4, 7)] {
+            let sigma = width(&[128.0; 3], &g, shape_support(tol, &g));
+            assert_eq!(support(tol, &[128.0; 3], &g, sigma), p, "{tol}");
+        }
     }
 
     #[test]

@@ -456,6 +456,9 @@ enum From<'a> {
     Global { src: &'a str, ib: String },
     /// Workgroup memory, as every later stage reads.
     Shared,
+    /// Registers `{prefix}{i}` loaded before (see [`prefetch`]), i = m R + r for point
+    /// j + r n/R of the thread's m-th butterfly j.
+    Registers(String),
 }
 
 /// Where a pass's last stage writes its results.
@@ -493,9 +496,13 @@ fn emit_stages(
             From::Global { src, ib } if si == 0 => Some((*src, ib.as_str())),
             _ => None,
         };
+        let registers = match from {
+            From::Registers(prefix) if si == 0 => Some(prefix.as_str()),
+            _ => None,
+        };
         // The packed inverse reads its half spectrum from workgroup memory (put there
         // before the stages).
-        let read_shared = global_src.is_none() || p.load == Load::HalfPacked;
+        let read_shared = global_src.is_none() && registers.is_none() || p.load == Load::HalfPacked;
         let write_shared = si < last || matches!(to, To::Shared);
         let global_dst = match to {
             To::Global { ob, scale } if si == last => Some((ob.as_str(), scale.as_str())),
@@ -534,9 +541,10 @@ fn emit_stages(
             for rr in 0..r {
                 let reg = format!("r{}", m * r + rr);
                 let pos = plus("j", rr * nb);
-                let load = match global_src {
-                    None => format!("{reg} = sh[sidx(ll, {pos})];"),
-                    Some((src, ib)) => match p.load {
+                let load = match (global_src, registers) {
+                    (None, Some(prefix)) => format!("{reg} = {prefix}{};", m * r + rr),
+                    (None, None) => format!("{reg} = sh[sidx(ll, {pos})];"),
+                    (Some((src, ib)), _) => match p.load {
                         Load::Complex => {
                             format!("{reg} = {src}[{}];", at(ib, &pos, p.in_inner))
                         }
@@ -664,15 +672,25 @@ fn spectral_in_registers(
             writeln!(w, "    var o{c}_{i}: vec2<f32>;").unwrap();
         }
     }
+    // The later components' first loads are issued now, with the first's: a
+    // workgroup works through the components in turn, and without them in flight it
+    // would keep a third of the bytes of a plain pass in flight.
+    for c in 1..comps {
+        prefetch(w, p, stages[0], src, &format!("ib{c}"), &format!("p{c}_"));
+    }
     for c in 0..comps {
         writeln!(w, "    // component {c}").unwrap();
         if c > 0 && p.shared > 0 {
             // The previous component's last stage has read workgroup memory.
             writeln!(w, "    workgroupBarrier();").unwrap();
         }
-        let from = From::Global {
-            src,
-            ib: format!("ib{c}"),
+        let from = if c == 0 {
+            From::Global {
+                src,
+                ib: format!("ib{c}"),
+            }
+        } else {
+            From::Registers(format!("p{c}_"))
         };
         let to = To::Registers(format!("o{c}_"));
         emit_stages(w, p, stages, offsets, post, -1.0, false, &from, &to);
@@ -738,5 +756,34 @@ fn spectral_in_registers(
             scale: String::new(),
         };
         emit_stages(w, p, stages, offsets, post, 1.0, true, &From::Shared, &to);
+    }
+}
+
+/// The first stage's loads of one component of a complex pass into registers
+/// `{prefix}{i}` ([`From::Registers`]).
+fn prefetch(w: &mut String, p: &Pass, (r, _): (u32, u32), src: &str, ib: &str, prefix: &str) {
+    assert_eq!(p.load, Load::Complex, "only complex lines are prefetched");
+    let t = p.threads_per_line;
+    let nb = p.n / r;
+    for m in 0..nb.div_ceil(t) {
+        for rr in 0..r {
+            writeln!(w, "    var {prefix}{}: vec2<f32>;", m * r + rr).unwrap();
+        }
+        let guard = if (m + 1) * t > nb {
+            format!("valid && j < {nb}u")
+        } else {
+            "valid".into()
+        };
+        writeln!(w, "    {{ let j = {}; if ({guard}) {{", plus("t", m * t)).unwrap();
+        for rr in 0..r {
+            writeln!(
+                w,
+                "        {prefix}{} = {src}[{}];",
+                m * r + rr,
+                at(ib, &plus("j", rr * nb), p.in_inner)
+            )
+            .unwrap();
+        }
+        writeln!(w, "    }} }}").unwrap();
     }
 }

@@ -614,8 +614,9 @@ fn shared_len(lines: u32, len: u32, layout: Layout, padded: bool) -> u32 {
 
 /// Threads per line: the count that wastes fewest butterfly slots over the stages, with a
 /// mild preference for 8 to 16 registers per thread (enough independent loads in flight,
-/// few enough registers for several workgroups per multiprocessor).
-fn threads_per_line(n: u32, radices: &[u32], max_threads: u32) -> (u32, u32) {
+/// few enough registers for several workgroups per multiprocessor), and at most
+/// `max_regs` where that is possible (a pass holding every component's results).
+fn threads_per_line(n: u32, radices: &[u32], max_threads: u32, max_regs: u32) -> (u32, u32) {
     if radices.is_empty() {
         return (1, 1);
     }
@@ -632,7 +633,8 @@ fn threads_per_line(n: u32, radices: &[u32], max_threads: u32) -> (u32, u32) {
         let cost = waste
             + 0.01 * regs.saturating_sub(16) as f64
             + 0.02 * 8u32.saturating_sub(regs).min(n.saturating_sub(regs)) as f64
-            + if regs > 32 { 1.0 } else { 0.0 };
+            + if regs > 32 { 1.0 } else { 0.0 }
+            + if regs > max_regs { 0.5 } else { 0.0 };
         if cost <= best.0 {
             best = (cost, t, regs);
         }
@@ -664,7 +666,14 @@ fn tile(
         (true, false) => (key.comps.max(1), 1),
         _ => (1, 1),
     };
-    let (threads, registers) = threads_per_line(s.n, &radices, (lim.threads / tile_comps).max(1));
+    // Components in turn keep every component's results in registers: fewer per thread.
+    let max_regs = if in_turn {
+        (24 / key.comps.max(1)).max(4)
+    } else {
+        32
+    };
+    let (threads, registers) =
+        threads_per_line(s.n, &radices, (lim.threads / tile_comps).max(1), max_regs);
     let lines = if spectral {
         s.lines_per_comp
     } else {

@@ -438,11 +438,12 @@ impl NodeKind for NeighbourSumKind {
                 f64::MAX,
                 "pairs with |r| <= cutoff are summed",
             ),
-            ParamSpec::choice(
+            ParamSpec::integer(
                 "lanes",
-                "auto",
-                &["auto", "off", "4", "8", "16", "32"],
-                "subgroup lanes per particle walking its candidates together (auto: 8 where the adapter's subgroups hold at least 8 lanes, else one thread per particle; off: one thread per particle; a number: that many, refused where subgroups are narrower)",
+                Some(0.0),
+                0.0,
+                32.0,
+                "subgroup lanes per particle walking its candidates together: 0 (auto): 8 where the adapter's subgroups hold at least 8 lanes, else 1; 1: one thread per particle; 2, 4, 8, 16 or 32: that many, refused where subgroups are narrower",
             ),
         ];
         v.extend(kernel_params());
@@ -450,10 +451,15 @@ impl NodeKind for NeighbourSumKind {
     }
 
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
-        let lanes = match p.text("lanes") {
-            "auto" => Lanes::Auto,
-            "off" => Lanes::Off,
-            t => Lanes::Fixed(t.parse().expect("one of the choices")),
+        let lanes = match p.number("lanes") as u32 {
+            0 => Lanes::Auto,
+            1 => Lanes::Off,
+            n if n.is_power_of_two() => Lanes::Fixed(n),
+            n => {
+                return Err(format!(
+                    "`lanes` must be 0 (auto), 1 or a power of two up to 32, got {n}"
+                ));
+            }
         };
         let lengths = p.numbers("box").to_vec();
         let cells: Vec<u32> = p.numbers("cells").iter().map(|&c| c as u32).collect();

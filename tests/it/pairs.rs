@@ -170,9 +170,9 @@ fn check_neighbours(
     let gpu = gpu().expect("checked by the caller");
     // Every traversal: one thread per particle, the default, and 4-lane segments where
     // the subgroups hold 4 lanes (lavapipe's hold 8, so auto takes 8 there).
-    let mut lanes = vec!["off", "auto"];
+    let mut lanes = vec![1, 0];
     if gpu.caps.subgroups.is_some_and(|(min, _)| min >= 4) {
-        lanes.push("4");
+        lanes.push(4);
     }
     let mut got = Vec::new();
     for lane in lanes {
@@ -184,7 +184,7 @@ fn check_neighbours(
             lengths,
             cells,
             periodic,
-            &format!(r#"{kernel_params}, "lanes": "{lane}""#),
+            &format!(r#"{kernel_params}, "lanes": {lane}"#),
             pair,
             cutoff,
             list,
