@@ -530,4 +530,51 @@ fn bad_pair_setups_are_refused_with_reasons() {
     assert!(e.contains("needs `split`"), "{e}");
     let e = try_build("all_pairs", r#"{"kernel": "rpy_near", "split": 1}"#);
     assert!(e.contains("use it in neighbour_sum"), "{e}");
+    let e = try_build(
+        "neighbour_sum",
+        r#"{"box": [8, 8, 8], "cells": [2, 2, 2], "cutoff": 3, "lanes": 3}"#,
+    );
+    assert!(
+        e.contains("`lanes` must be 0 (auto), 1 or a power of two up to 32, got 3"),
+        "{e}"
+    );
+}
+
+#[test]
+fn lanes_wider_than_the_subgroups_are_a_compile_error_naming_the_node() {
+    let Some(gpu) = gpu() else { return };
+    let Some((min, _)) = gpu.caps.subgroups else {
+        return;
+    };
+    if min >= 32 {
+        return;
+    }
+    let dir = util::tmpdir("pairs-lanes");
+    let json = neighbour_graph(
+        [8.0, 8.0, 8.0],
+        [2, 2, 2],
+        [1, 1, 1],
+        r#""cutoff": 1.0, "kernel": "lj", "sigma": 0.5, "epsilon": 1.0, "lanes": 32"#,
+        false,
+        None,
+    );
+    let g = util::load(&util::write_graph(&dir, "g.json", &json));
+    let opts = mesoflow::plan::PlanOptions {
+        outputs: None,
+        inputs: [("positions".to_string(), ValueType::Particles { n: 4, k: 3 })]
+            .into_iter()
+            .collect(),
+        fuse: true,
+    };
+    let p = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap();
+    let mut cache = mesoflow::gpu::KernelCache::default();
+    let e = match mesoflow::exec::Program::compile(&gpu, &g, &p, &mut cache) {
+        Ok(_) => panic!("lanes = 32 compiled on subgroups of {min}"),
+        Err(e) => e.to_string(),
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(
+        e.contains("sum") && e.contains("lanes = 32 needs subgroups of at least 32 lanes"),
+        "{e}"
+    );
 }
