@@ -7,28 +7,8 @@
 // particle whose neighbours all fit it reads them from there instead.
 #import common/index.wgsl
 #import pairs/cells.wgsl
+#import pairs/neighbour_sum_io.wgsl
 
-override HAS_VALUES: bool = true;
-override LIST_WIDTH: u32 = 0u;   // neighbour list entries per particle (0: no list)
-
-@group(0) @binding(0) var<storage, read> pos: array<f32>;
-@group(0) @binding(1) var<storage, read> vals: array<f32>;
-@group(0) @binding(2) var<storage, read> keys: array<u32>;
-@group(0) @binding(3) var<storage, read> cell_start: array<u32>;
-@group(0) @binding(4) var<storage, read> cell_count: array<u32>;
-@group(0) @binding(5) var<storage, read_write> out: array<f32>;
-@group(0) @binding(6) var<uniform> geo: Geometry;
-@group(0) @binding(7) var<storage, read> pair_params: array<f32>;
-@group(0) @binding(8) var<storage, read> pair_table: array<f32>;
-@group(0) @binding(9) var<storage, read> list: array<u32>;
-@group(0) @binding(10) var<storage, read> list_count: array<u32>;
-
-fn value3(a: u32) -> vec3<f32> {
-    if (HAS_VALUES) {
-        return vec3<f32>(vals[3u * a], vals[3u * a + 1u], vals[3u * a + 2u]);
-    }
-    return vec3<f32>(0.0);
-}
 
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,

@@ -392,6 +392,18 @@ fn recipes_fit_the_device_and_read_and_write_each_line_once_per_axis() {
     assert_eq!(r.passes[2].dst, plan::Buf::Output);
 }
 
+/// Parses and validates a generated pass with naga (panics with the located error).
+fn naga_validate(src: &str) {
+    let module =
+        naga::front::wgsl::parse_str(src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(src)));
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("{}", e.emit_to_string(src)));
+}
+
 #[test]
 fn generated_passes_validate_with_naga() {
     let body = mesoflow::node::SpectralBody {
@@ -417,14 +429,7 @@ fn generated_passes_validate_with_naga() {
             };
             for p in &r.passes {
                 let src = codegen::source(p, spectral.then_some(&fold));
-                let module = naga::front::wgsl::parse_str(&src)
-                    .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
-                naga::valid::Validator::new(
-                    naga::valid::ValidationFlags::all(),
-                    naga::valid::Capabilities::empty(),
-                )
-                .validate(&module)
-                .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+                naga_validate(&src);
                 n += 1;
             }
         }
@@ -453,14 +458,7 @@ fn generated_passes_validate_with_naga() {
             half: true,
         };
         let src = codegen::source(last, Some(&fold));
-        let module = naga::front::wgsl::parse_str(&src)
-            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::empty(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        naga_validate(&src);
         n += 1;
     }
     assert!(n > 18);
