@@ -92,12 +92,8 @@ pub fn shape_support(tolerance: f64, cells: &[u32]) -> u32 {
 /// 1e-3, 7 cells where 5.95 suffice (3.92 deviations each side against the 3.89 needed),
 /// so the spreading and interpolation of 6^3 points instead of 7^3.
 pub fn support(tolerance: f64, lengths: &[f64], cells: &[u32], width: f64) -> u32 {
-    let h = lengths
-        .iter()
-        .zip(cells)
-        .map(|(l, &n)| l / n as f64)
-        .fold(f64::INFINITY, f64::min);
     // The finest cell needs the most cells to cover the cut.
+    let h = finest_cell(lengths, cells);
     let p = (2.0 * deviations(tolerance) * width / h - 1e-9)
         .ceil()
         .max(3.0) as u32;
@@ -111,13 +107,18 @@ pub fn support(tolerance: f64, lengths: &[f64], cells: &[u32], width: f64) -> u3
 /// from P rather than from the tolerance means that rounding P up to an odd count cuts
 /// the Gaussian further out instead of making it narrower.
 pub fn width(lengths: &[f64], cells: &[u32], support: u32) -> f64 {
-    let h = lengths
+    let h = finest_cell(lengths, cells);
+    let p = support as f64;
+    0.5 * p * h / (0.976 * (std::f64::consts::PI * p).sqrt())
+}
+
+/// The smallest cell size of the far-field grid over the axes.
+fn finest_cell(lengths: &[f64], cells: &[u32]) -> f64 {
+    lengths
         .iter()
         .zip(cells)
         .map(|(l, &n)| l / n as f64)
-        .fold(f64::INFINITY, f64::min);
-    let p = support as f64;
-    0.5 * p * h / (0.976 * (std::f64::consts::PI * p).sqrt())
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Cells per axis of the near field's cell list: as many as keep cells at least the

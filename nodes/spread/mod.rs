@@ -362,6 +362,13 @@ fn slot_groups(cx: &CompileCtx, count: u32, chunks: u32, seg: u32, wg: u32) -> [
     cx.grid_1d(slots.div_ceil((wg / seg) as u64), 1)
 }
 
+/// A generated kernel's WGSL (its imports resolved) after `prefix`, the shader files it
+/// is composed with (the window, the add).
+fn composed(prefix: &str, generated: &str) -> Result<String, CompileError> {
+    let text = crate::gpu::shaders::resolve(generated).map_err(CompileError::Library)?;
+    Ok(format!("{prefix}{text}"))
+}
+
 fn check_positions(gw: &GridWindow, t: Option<ValueType>) -> Result<u32, PortError> {
     let Some(ValueType::Particles { n, k }) = t else {
         unreachable!("port type checked")
@@ -522,6 +529,7 @@ impl GpuKernels for Spread {
             format!("{prefix}{}", cx.shader("spread/spread.wgsl")?)
         };
         let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
+        let chunks = self.gw.chunks(n, comps);
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
             let bindings = [
@@ -530,14 +538,8 @@ impl GpuKernels for Spread {
                 Binding::StorageReadWrite,
                 Binding::Uniform,
             ];
-            let chunks = self.gw.chunks(n, comps);
             let name = |how: &str| format!("spread ({}{how})", self.gw.window.shader());
-            let generated = |text: String| -> Result<String, CompileError> {
-                Ok(format!(
-                    "{prefix}{}",
-                    crate::gpu::shaders::resolve(&text).map_err(CompileError::Library)?
-                ))
-            };
+            let generated = |text: String| composed(&prefix, &text);
             let (spec, groups) = if boxed {
                 let text = boxgen::spread_source(ns, self.gw.dims() as u32, chunk, comps);
                 (
@@ -765,6 +767,7 @@ impl GpuKernels for Interpolate {
         // Without weights the binding still needs a buffer; the kernel never reads it.
         let quadrature = weights.map(|w| w.buffer).unwrap_or(grid.buffer);
         let mut dispatches = Vec::new();
+        let chunks = self.gw.chunks(n, comps);
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
             let bindings = [
@@ -774,7 +777,6 @@ impl GpuKernels for Interpolate {
                 Binding::StorageReadWrite,
                 Binding::Uniform,
             ];
-            let chunks = self.gw.chunks(n, comps);
             let (spec, groups) = if let Some(seg) = lanes {
                 let generated = interpgen::interpolate_source(
                     ns,
@@ -785,10 +787,7 @@ impl GpuKernels for Interpolate {
                     seg,
                     self.gw.workgroup,
                 );
-                let source = format!(
-                    "{window}{}",
-                    crate::gpu::shaders::resolve(&generated).map_err(CompileError::Library)?
-                );
+                let source = composed(&window, &generated)?;
                 let spec = KernelSpec::new(
                     format!("interpolate ({}, lanes)", self.gw.window.shader()),
                     source,

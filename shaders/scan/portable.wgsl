@@ -3,26 +3,9 @@
 // the thread sums are scanned in workgroup memory (Hillis-Steele, double-buffered).
 #import common/index.wgsl
 #import scan/common.wgsl
+#import scan/wg_inclusive.wgsl
 
 var<workgroup> ping: array<Elem, 512>;
-
-// Inclusive scan of one value per thread; returns the half of `ping` (0 or WG) that holds
-// the result.
-fn wg_inclusive(t: u32, x: Elem) -> u32 {
-    ping[t] = x;
-    workgroupBarrier();
-    var half = 0u;
-    for (var d = 1u; d < WG; d <<= 1u) {
-        var y = ping[half + t];
-        if (t >= d) {
-            y = ping[half + t - d] + y;
-        }
-        ping[WG - half + t] = y;
-        half = WG - half;
-        workgroupBarrier();
-    }
-    return half;
-}
 
 fn thread_vec(tile: u32, t: u32) -> u32 {
     return tile * (TILE / 4u) + t * ROWS;

@@ -459,6 +459,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
     }
 }
 
+/// A runtime error of a bench (GPU, graph or reference), as the CLI reports it.
 fn runtime(e: impl std::fmt::Display) -> CliError {
     CliError::Runtime(e.to_string())
 }

@@ -12,16 +12,12 @@
 
 use std::collections::BTreeMap;
 
-use super::{TimedRun, time_graph};
+use super::{TimedRun, runtime, time_graph};
 use crate::cli::CliError;
 use crate::gpu::GpuContext;
 use crate::nodes::scan::Variant;
 use crate::nodes::sort::{self, SortVariant};
 use crate::value::{HostArray, HostData, ValueType};
-
-fn runtime(e: impl std::fmt::Display) -> CliError {
-    CliError::Runtime(e.to_string())
-}
 
 /// Random u32 from a fixed splitmix64 sequence.
 fn random_u32(n: u32, seed: u64) -> Vec<u32> {

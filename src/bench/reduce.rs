@@ -4,14 +4,10 @@
 
 use std::collections::BTreeMap;
 
-use super::{Timing, time_graph};
+use super::{Timing, runtime, time_graph};
 use crate::cli::CliError;
 use crate::gpu::GpuContext;
 use crate::value::{HostArray, ValueType};
-
-fn runtime(e: impl std::fmt::Display) -> CliError {
-    CliError::Runtime(e.to_string())
-}
 
 pub fn run(n: u32, reps: u64) -> Result<(), CliError> {
     let gpu = GpuContext::new().map_err(runtime)?;

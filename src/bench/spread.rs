@@ -5,14 +5,10 @@
 
 use std::collections::BTreeMap;
 
-use super::{node_reference, time_graph};
+use super::{node_reference, runtime, time_graph};
 use crate::cli::CliError;
 use crate::gpu::GpuContext;
 use crate::value::{HostArray, RefArray, ValueType};
-
-fn runtime(e: impl std::fmt::Display) -> CliError {
-    CliError::Runtime(e.to_string())
-}
 
 /// (support, particles per cell, sorted, components)
 const CASES: [(u32, f64, bool, u32); 8] = [
@@ -163,6 +159,9 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         }
         // The interpolation check's inputs, the same for every kernel of this row.
         let check = InterpolationCheck::new(&inputs);
+        // The sorts' Morton blocks of 4 cells a side, and their key bits.
+        let blocks = n_cells.div_ceil(4);
+        let bits = 3 * (blocks as f64).log2().ceil().max(1.0) as u32;
         for (wg, extra, spread_only, sort_first) in runs {
             let interp_params = format!(
                 r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, {extra}}}"#
@@ -170,8 +169,6 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
             let params = format!(
                 r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, {extra}{spread_only}}}"#
             );
-            let blocks = n_cells.div_ceil(4);
-            let bits = 3 * (blocks as f64).log2().ceil().max(1.0) as u32;
             let (sorting, spread_in, interp_in, u) = if let Some(sort) = sort_first {
                 let sort_params = if sort == "sort" {
                     format!(r#""bits": {bits}"#)

@@ -38,18 +38,22 @@ fn override_dir() -> Option<&'static std::path::Path> {
 fn overridden(path: &str) -> Option<&'static str> {
     use std::collections::HashMap;
     use std::sync::Mutex;
-    static CACHE: Mutex<Option<HashMap<String, &'static str>>> = Mutex::new(None);
-    let file = override_dir()?.join(path);
+    // Per path: the override's text, or None where the folder has no such file (looked
+    // up once per process, like the embedded files, so kernel builds read no file twice).
+    static CACHE: Mutex<Option<HashMap<String, Option<&'static str>>>> = Mutex::new(None);
+    let dir = override_dir()?;
     let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
     let cache = cache.get_or_insert_with(HashMap::new);
     if let Some(text) = cache.get(path) {
-        return Some(text);
+        return *text;
     }
-    // Read once per process and kept for its lifetime, like the embedded files.
-    let text: &'static str = Box::leak(std::fs::read_to_string(&file).ok()?.into_boxed_str());
-    eprintln!("mesoflow: shader {path} overridden by {}", file.display());
+    let file = dir.join(path);
+    let text = std::fs::read_to_string(&file).ok().map(|t| {
+        eprintln!("mesoflow: shader {path} overridden by {}", file.display());
+        &*Box::leak(t.into_boxed_str())
+    });
     cache.insert(path.to_string(), text);
-    Some(text)
+    text
 }
 
 /// A shader's text with its `#import` lines resolved.

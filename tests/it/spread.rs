@@ -56,6 +56,20 @@ fn with(extra: &str, more: &str) -> String {
 /// f32 window weights and accumulation against f64: relative to the largest value.
 const TOL: f64 = 2e-6;
 
+/// Runs node `kind` with `params` on `inputs` and asserts its output within `tol` of its
+/// f64 reference, relative to the largest reference value (`what` names the case).
+fn assert_like_reference(
+    kind: &str,
+    params: &str,
+    inputs: &[(&str, HostArray)],
+    tol: f64,
+    what: &str,
+) {
+    let (g, r) = run_node(kind, params, inputs);
+    let (err, at) = rel_max_err(&g, &r);
+    assert!(err < tol, "{what}: error {err:e} at {at}");
+}
+
 #[test]
 fn a_single_particle_spreads_the_separable_product() {
     if gpu().is_none() {
@@ -75,13 +89,13 @@ fn a_single_particle_spreads_the_separable_product() {
         let vals = HostArray::f32(ValueType::Particles { n: 1, k: 2 }, vec![1.5, -0.5]);
         for (w, extra) in WINDOWS {
             let p = params(w, extra, &lengths, &cells, "auto");
-            let (g, r) = run_node(
+            assert_like_reference(
                 "spread",
                 &p,
                 &[("positions", pos.clone()), ("values", vals.clone())],
+                TOL,
+                &format!("{w} at {q:?}"),
             );
-            let (err, at) = rel_max_err(&g, &r);
-            assert!(err < TOL, "{w} at {q:?}: error {err:e} at cell {at}");
         }
     }
 }
@@ -111,30 +125,24 @@ fn many_particles_spread_and_interpolate_like_the_reference() {
                 let extra = with(extra, &format!(r#""lanes": "{lanes}""#));
                 for variant in ["atomic", "portable"] {
                     let p = params(w, &extra, &lengths, &cells, variant);
-                    let (g, r) = run_node(
+                    // Hundreds of f32 atomic adds per cell, in any order.
+                    assert_like_reference(
                         "spread",
                         &p,
                         &[("positions", pos.clone()), ("values", vals.clone())],
-                    );
-                    let (err, at) = rel_max_err(&g, &r);
-                    // Hundreds of f32 atomic adds per cell, in any order.
-                    assert!(
-                        err < 1e-5,
-                        "spread {w} {extra} {variant} {lengths:?}: error {err:e} at {at}"
+                        1e-5,
+                        &format!("spread {w} {extra} {variant} {lengths:?}"),
                     );
                 }
                 let p = params(w, &extra, &lengths, &cells, "auto");
-                let (g, r) = run_node(
+                assert_like_reference(
                     "interpolate",
                     &p,
                     &[("grid", field.clone()), ("positions", pos.clone())],
+                    1e-5,
+                    &format!("interpolate {w} {extra} {lengths:?}"),
                 );
-                let (err, at) = rel_max_err(&g, &r);
-                assert!(
-                    err < 1e-5,
-                    "interpolate {w} {extra} {lengths:?}: error {err:e} at {at}"
-                );
-                let (g, r) = run_node(
+                assert_like_reference(
                     "interpolate",
                     &p,
                     &[
@@ -142,11 +150,8 @@ fn many_particles_spread_and_interpolate_like_the_reference() {
                         ("positions", pos.clone()),
                         ("weights", quad.clone()),
                     ],
-                );
-                let (err, at) = rel_max_err(&g, &r);
-                assert!(
-                    err < 1e-5,
-                    "interpolate {w} {extra} with weights: error {err:e} at {at}"
+                    1e-5,
+                    &format!("interpolate {w} {extra} with weights"),
                 );
             }
         }
@@ -173,20 +178,19 @@ fn more_than_four_components_go_in_chunks() {
             1.0,
         );
         let p = params("peskin4", "", &lengths, &cells, "auto");
-        let (g, r) = run_node(
+        assert_like_reference(
             "spread",
             &p,
             &[("positions", pos.clone()), ("values", vals)],
+            1e-5,
+            &format!("spread {comps} components"),
         );
-        assert!(rel_max_err(&g, &r).0 < 1e-5, "spread {comps} components");
-        let (g, r) = run_node(
+        assert_like_reference(
             "interpolate",
             &p,
             &[("grid", field), ("positions", pos.clone())],
-        );
-        assert!(
-            rel_max_err(&g, &r).0 < 1e-5,
-            "interpolate {comps} components"
+            1e-5,
+            &format!("interpolate {comps} components"),
         );
     }
 }
@@ -475,20 +479,19 @@ fn every_workgroup_size_gives_the_same_grid() {
         for wg in ["64", "128"] {
             let extra = with(extra, &format!(r#""workgroup": "{wg}""#));
             let p = params(w, &extra, &lengths, &cells, "auto");
-            let (g, r) = run_node(
+            assert_like_reference(
                 "spread",
                 &p,
                 &[("positions", pos.clone()), ("values", vals.clone())],
+                1e-5,
+                &format!("spread {w} workgroup {wg}"),
             );
-            assert!(rel_max_err(&g, &r).0 < 1e-5, "spread {w} workgroup {wg}");
-            let (g, r) = run_node(
+            assert_like_reference(
                 "interpolate",
                 &p,
                 &[("grid", field.clone()), ("positions", pos.clone())],
-            );
-            assert!(
-                rel_max_err(&g, &r).0 < 1e-5,
-                "interpolate {w} workgroup {wg}"
+                1e-5,
+                &format!("interpolate {w} workgroup {wg}"),
             );
         }
     }
@@ -553,25 +556,21 @@ fn sorted_input_spreading_matches_the_reference() {
                         .replace(r#""sorted_input": true, "#, "");
                     // Sorted (the box path) and random (mostly the direct path) input.
                     for pos in [&sorted, &random] {
-                        let (g, r) = run_node(
+                        assert_like_reference(
                             "spread",
                             &p,
                             &[("positions", pos.clone()), ("values", vals.clone())],
+                            1e-5,
+                            &format!("box spread {w} {variant} {comps} comps {lengths:?}"),
                         );
-                        let (err, at) = rel_max_err(&g, &r);
-                        assert!(
-                            err < 1e-5,
-                            "box spread {w} {variant} {comps} comps {lengths:?}: error {err:e} at {at}"
-                        );
-                        let (g, r) = run_node(
+                        assert_like_reference(
                             "interpolate",
                             &p_interp,
                             &[("grid", field.clone()), ("positions", pos.clone())],
-                        );
-                        let (err, at) = rel_max_err(&g, &r);
-                        assert!(
-                            err < 1e-5,
-                            "interpolate of sorted input {w} {variant} {comps} comps {lengths:?}: error {err:e} at {at}"
+                            1e-5,
+                            &format!(
+                                "interpolate of sorted input {w} {variant} {comps} comps {lengths:?}"
+                            ),
                         );
                     }
                 }
@@ -608,12 +607,13 @@ fn boxes_wrap_across_the_periodic_faces() {
     ] {
         let extra = with(extra, r#""sorted_input": true"#);
         let p = params(w, &extra, &lengths, &cells, "auto");
-        let (g, r) = run_node(
+        assert_like_reference(
             "spread",
             &p,
             &[("positions", pos.clone()), ("values", vals.clone())],
+            1e-5,
+            w,
         );
-        assert!(rel_max_err(&g, &r).0 < 1e-5, "{w}");
     }
 }
 
@@ -654,15 +654,12 @@ fn interpolation_reductions_agree_on_every_segment_width() {
                     &format!(r#""workgroup": "{wg}", "lanes": "{lanes}""#),
                 );
                 let p = params(w, &extra, &lengths, &cells, variant);
-                let (g, r) = run_node(
+                assert_like_reference(
                     "interpolate",
                     &p,
                     &[("grid", field.clone()), ("positions", pos.clone())],
-                );
-                let (err, at) = rel_max_err(&g, &r);
-                assert!(
-                    err < 1e-5,
-                    "interpolate {w} {extra} {variant}: error {err:e} at {at}"
+                    1e-5,
+                    &format!("interpolate {w} {extra} {variant}"),
                 );
             }
         }
