@@ -40,8 +40,8 @@ use crate::gpu::{
     Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo, WG_1D,
 };
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
-    Signature,
+    Folding, GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx,
+    Registry, Signature,
 };
 use crate::nodes::scan::{self, Path, ScanKernels, Variant};
 use crate::value::{Elem, PortType, RefArray, ValueType};
@@ -240,7 +240,7 @@ impl GpuKernels for BinSort {
         &self,
         _inputs: &[Option<ValueType>],
         caps: &DeviceCaps,
-        _folded: bool,
+        _folding: Folding,
     ) -> Vec<String> {
         vec![match scan_path(self.bins as u64, caps) {
             ScanPath::Single { threads, quads } => format!(

@@ -506,15 +506,15 @@ pub trait GpuKernels {
     ) -> Result<Vec<Dispatch>, CompileError>;
 
     /// Decisions that depend on the device (an FFT's workgroup tiling, chosen from its
-    /// limits), shown by `mesoflow inspect` after [`Node::notes`]; `folded`: with a
-    /// spectral node folded in.
+    /// limits), shown by `mesoflow inspect` after [`Node::notes`], for the passes the
+    /// launch runs (`folding`).
     fn device_notes(
         &self,
         inputs: &[Option<ValueType>],
         caps: &DeviceCaps,
-        folded: bool,
+        folding: Folding,
     ) -> Vec<String> {
-        let _ = (inputs, caps, folded);
+        let _ = (inputs, caps, folding);
         Vec::new()
     }
 
@@ -575,6 +575,21 @@ pub trait GpuKernels {
             "this node has no first pass to leave to another".into(),
         ))
     }
+}
+
+/// How a transform's launch shares passes with the nodes around it (src/plan/spectral.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Folding {
+    /// Every pass of its own, nothing folded in.
+    #[default]
+    Alone,
+    /// A spectral node applied in the last pass ([`GpuKernels::compile_spectral`]).
+    Spectral,
+    /// ... and the last pass also runs the first pass of the inverse transform after it.
+    SpectralThenInverse,
+    /// An inverse transform whose first pass ran in the forward transform's last
+    /// ([`GpuKernels::compile_after_folded_first_pass`]).
+    FirstPassFolded,
 }
 
 /// A transform's pass over the lines along one axis of a grid, as the planner matches a

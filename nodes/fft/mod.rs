@@ -25,8 +25,8 @@ pub use plan::{is_friendly, next_friendly};
 
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
-    GpuKernels, LinePass, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx,
-    Registry, Signature, SpectralBody,
+    Folding, GpuKernels, LinePass, Lowering, Node, NodeKind, ParamSpec, Params, PortError,
+    PortSpec, RefCtx, Registry, Signature, SpectralBody,
 };
 use crate::value::{PortType, RefArray, ValueType};
 use plan::{Buf, Key, Kind, Limits, MAX_LENGTH};
@@ -119,12 +119,13 @@ impl FftNode {
         }
     }
 
-    /// The recipe; `fold`: with a spectral node folded into the last pass, and whether
-    /// that pass also runs the inverse transform's first.
+    /// The recipe of the whole transform with what `folding` folds into it (an inverse
+    /// whose first pass runs elsewhere has the recipe of its own, passes left out when
+    /// it runs).
     fn recipe(
         &self,
         inputs: &[Option<ValueType>],
-        fold: Option<bool>,
+        folding: Folding,
         caps: &DeviceCaps,
     ) -> Result<std::sync::Arc<plan::Recipe>, String> {
         let (dims, comps) = self.grid(inputs).map_err(|e| e.message)?;
@@ -133,10 +134,24 @@ impl FftNode {
             dims,
             comps,
             axes: self.axes,
-            spectral: fold.is_some(),
-            inverse_after: fold == Some(true),
+            spectral: matches!(folding, Folding::Spectral | Folding::SpectralThenInverse),
+            inverse_after: folding == Folding::SpectralThenInverse,
             limits: Limits::of(caps),
         })
+    }
+
+    /// The passes the launch runs: the recipe's, less the first where it ran in the
+    /// forward transform (the second then reads the input).
+    fn passes(recipe: &plan::Recipe, folding: Folding) -> Result<Vec<plan::Pass>, String> {
+        let mut passes = recipe.passes.clone();
+        if folding == Folding::FirstPassFolded {
+            if passes.len() < 2 {
+                return Err("a transform of one pass has no pass left after its first".into());
+            }
+            passes.remove(0);
+            passes[0].src = Buf::Input;
+        }
+        Ok(passes)
     }
 
     fn line_pass(&self, dims: [u32; 3], comps: u32, axis: usize) -> LinePass {
@@ -149,30 +164,20 @@ impl FftNode {
         }
     }
 
-    /// `fold`: as in [`FftNode::recipe`]; `skip_first`: the first pass ran in the
-    /// forward transform that wrote the input (so the second reads the input).
+    /// The launch's dispatches; `spectral`: the body of the node folded in, where
+    /// `folding` folds one.
     fn dispatches(
         &self,
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
-        spectral: Option<(&SpectralBody, bool)>,
-        skip_first: bool,
+        folding: Folding,
+        spectral: Option<&SpectralBody>,
     ) -> Result<Vec<Dispatch>, CompileError> {
         let types: Vec<Option<ValueType>> = io.inputs.iter().map(|s| s.map(|s| s.ty)).collect();
         let recipe = self
-            .recipe(&types, spectral.map(|(_, inv)| inv), cx.caps())
+            .recipe(&types, folding, cx.caps())
             .map_err(CompileError::Unsupported)?;
-        let spectral = spectral.map(|(body, _)| body);
-        let mut passes = recipe.passes.clone();
-        if skip_first {
-            if passes.len() < 2 {
-                return Err(CompileError::Unsupported(
-                    "a transform of one pass has no pass left after its first".into(),
-                ));
-            }
-            passes.remove(0);
-            passes[0].src = Buf::Input;
-        }
+        let passes = Self::passes(&recipe, folding).map_err(CompileError::Unsupported)?;
         let input = io.inputs[0]
             .ok_or_else(|| CompileError::Unsupported("the transform needs an input".into()))?;
         let params =
@@ -184,7 +189,7 @@ impl FftNode {
             half: matches!(self.kind, Kind::RealForward | Kind::RealInverse),
         });
         let mut out = Vec::new();
-        let first = usize::from(skip_first) + 1;
+        let first = usize::from(folding == Folding::FirstPassFolded) + 1;
         for (i, pass) in passes.iter().enumerate() {
             let label = format!(
                 "{} pass {}{} ({}, {}-point)",
@@ -352,28 +357,34 @@ impl GpuKernels for FftNode {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        self.dispatches(cx, io, None, false)
+        self.dispatches(cx, io, Folding::Alone, None)
     }
 
     fn device_notes(
         &self,
         inputs: &[Option<ValueType>],
         caps: &DeviceCaps,
-        folded: bool,
+        folding: Folding,
     ) -> Vec<String> {
-        match self.recipe(inputs, folded.then_some(false), caps) {
-            Ok(r) => r.describe(),
+        match self.recipe(inputs, folding, caps) {
+            Ok(r) => {
+                let mut lines = r.describe();
+                if folding == Folding::FirstPassFolded {
+                    lines.remove(0);
+                }
+                lines
+            }
             Err(e) => vec![format!("cannot run on this device: {e}")],
         }
     }
 
     fn folds_spectral(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> bool {
-        !self.kind.inverse() && self.recipe(inputs, Some(false), caps).is_ok()
+        !self.kind.inverse() && self.recipe(inputs, Folding::Spectral, caps).is_ok()
     }
 
     fn first_pass(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Option<LinePass> {
         let (dims, comps) = self.grid(inputs).ok()?;
-        let recipe = self.recipe(inputs, None, caps).ok()?;
+        let recipe = self.recipe(inputs, Folding::Alone, caps).ok()?;
         let first = recipe.passes.first()?;
         let later_reads_input =
             recipe.passes.len() > 1 && first.load == plan::Load::Complex && first.axis > 0;
@@ -386,9 +397,10 @@ impl GpuKernels for FftNode {
         caps: &DeviceCaps,
         first: &LinePass,
     ) -> bool {
-        let (Ok((dims, comps)), Ok(recipe)) =
-            (self.grid(inputs), self.recipe(inputs, Some(true), caps))
-        else {
+        let (Ok((dims, comps)), Ok(recipe)) = (
+            self.grid(inputs),
+            self.recipe(inputs, Folding::SpectralThenInverse, caps),
+        ) else {
             return false;
         };
         let last = recipe.passes.last().expect("a recipe has passes");
@@ -402,7 +414,12 @@ impl GpuKernels for FftNode {
         spectral: &SpectralBody,
         inverse_after: bool,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        self.dispatches(cx, io, Some((spectral, inverse_after)), false)
+        let folding = if inverse_after {
+            Folding::SpectralThenInverse
+        } else {
+            Folding::Spectral
+        };
+        self.dispatches(cx, io, folding, Some(spectral))
     }
 
     fn compile_after_folded_first_pass(
@@ -410,7 +427,7 @@ impl GpuKernels for FftNode {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        self.dispatches(cx, io, None, true)
+        self.dispatches(cx, io, Folding::FirstPassFolded, None)
     }
 }
 

@@ -185,7 +185,8 @@ pub struct Pass {
     pub out_len: u32,
     pub out_inner: u32,
     /// Lines the tiles enumerate: every line of every component, or with a folded
-    /// spectral node the lines of one component (a tile then holds all components).
+    /// spectral node the lines of one component (a tile then handles all components, at
+    /// once or in turn).
     pub lines: u32,
     /// Components per tile at once: 1, or all of them with a folded spectral node on a
     /// pass along x (its results are unfolded through workgroup memory).
@@ -532,15 +533,12 @@ fn build(key: &Key) -> Result<Recipe, String> {
             1.0
         };
         let spectral = key.spectral && i == last && !inverse;
-        let mut pass = tile(key, shape, src, dst, inverse, scale, spectral)?;
-        if spectral && key.inverse_after {
-            if !pass.spectral_in_registers() {
-                return Err(
-                    "the inverse transform's first pass folds only into a last pass along y or z"
-                        .into(),
-                );
-            }
-            pass.inverse_after = true;
+        let pass = tile(key, shape, src, dst, inverse, scale, spectral)?;
+        if spectral && key.inverse_after && !pass.inverse_after {
+            return Err(
+                "the inverse transform's first pass folds only into a last pass along y or z"
+                    .into(),
+            );
         }
         passes.push(pass);
     }
@@ -704,14 +702,13 @@ fn tile(
         scale,
         groups: 0,
         spectral,
-        inverse_after: false,
+        inverse_after: in_turn && key.inverse_after,
     };
-    // (A pass that transforms its lines back needs workgroup memory even for one stage:
-    // `tile` is then called with `spectral` and decides its shape before that is known.)
+    // A pass that transforms its lines back needs workgroup memory even for one stage.
     let needs_shared = pass.radices.len() > 1
         || pass.store_via_shared()
         || pass.load == Load::HalfPacked
-        || in_turn && key.inverse_after;
+        || pass.inverse_after;
     // Strided tiles want 16+ neighbouring lines (128-byte rows); contiguous ones about
     // 256 threads.
     let per_line = tile_comps * threads;

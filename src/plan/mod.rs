@@ -18,7 +18,7 @@ pub use show::{human_bytes, to_dot, to_text};
 
 use crate::gpu::DeviceCaps;
 use crate::graph::{Graph, Problem, Problems, Source};
-use crate::node::Lowering;
+use crate::node::{Folding, Lowering};
 use crate::value::ValueType;
 
 /// What the caller asks of the planner.
@@ -1053,7 +1053,13 @@ impl Builder {
                     inst.inputs.iter().map(|s| p.source_type(*s)).collect();
                 let mut notes = inst.node.notes(&input_types);
                 if let Lowering::Kernels(k) = inst.node.lowering() {
-                    notes.extend(k.device_notes(&input_types, p.caps, folded.is_some()));
+                    let folding = match (folded, inverse) {
+                        (Some(_), Some(_)) => Folding::SpectralThenInverse,
+                        (Some(_), None) => Folding::Spectral,
+                        _ if first_pass_folded => Folding::FirstPassFolded,
+                        _ => Folding::Alone,
+                    };
+                    notes.extend(k.device_notes(&input_types, p.caps, folding));
                 }
                 if let Some(b) = folded {
                     notes.push(format!(
