@@ -13,6 +13,7 @@ pub const BMAX: u32 = 16;
 
 const HEADER: &str = "#import common/index.wgsl
 #import spread/geometry.wgsl
+#import spread/first_cell.wgsl
 #import spread/box.wgsl
 ";
 

@@ -9,6 +9,7 @@
 
 pub mod boxgen;
 pub mod interpgen;
+pub mod tilegen;
 pub mod window;
 
 use crate::expr::ParamValue;
@@ -424,6 +425,12 @@ impl NodeKind for SpreadKind {
             default: Some(ParamValue::Bool(false)),
             doc: "spreading: particles come sorted in space (Morton order of cells best); where they are dense (at least 0.5 per cell) and the support is 6 to 16 cells, spread box by box: runs of up to 64 particles summed in registers over the block of cells their supports cover, one grid atomic per box cell (runs whose box exceeds 16 cells per axis go direct). Interpolation ignores it",
         });
+        p.push(ParamSpec::choice(
+            "tiles",
+            "auto",
+            &["auto", "on", "off"],
+            "spreading (3D): tile by tile in workgroup memory (cuFINUFFT's shared-memory method): a counting sort files each particle under the 8^3-cell tile of its first support cell, one workgroup per tile sums its particles into the padded tile as fixed-point integers (scaled per tile so no sum overflows: each add exact to 2^-30 of the tile's sum of |value| x the window's peak) and adds each padded cell to the grid once. Any input order; 16 bytes of scratch per particle. auto: where it pays (particles per cell x support^3 at least 32, and not where sorted_input spreads box by box) and the adapter has subgroups and the workgroup memory; on: always (an error where the adapter cannot); off: never",
+        ));
         p
     }
 
@@ -441,6 +448,61 @@ struct Spread {
 }
 
 impl Spread {
+    /// Whether spreading `n` particles may go tile by tile (tilegen.rs), as far as the
+    /// params and sizes tell; the adapter may still rule it out (`tile_comps`).
+    fn wants_tiles(&self, n: u32) -> bool {
+        n > 0
+            && self.gw.dims() == 3
+            && match self.params.text("tiles") {
+                "on" => true,
+                "off" => false,
+                _ => {
+                    let overlap = n as f64 * (self.gw.window.support() as f64).powi(3)
+                        / self.gw.cell_count() as f64;
+                    overlap >= TILE_MIN_OVERLAP && !self.uses_boxes(n)
+                }
+            }
+    }
+
+    /// Components one tile dispatch carries on this adapter (as many as its workgroup
+    /// memory holds, up to CHUNK_COMPS) and the lanes per particle, or why tiles cannot
+    /// run here: no subgroups as wide as the support, or not even one component's padded
+    /// tile fits.
+    fn tile_comps(&self, cx: &CompileCtx) -> Result<(u32, u32), String> {
+        let ns = self.gw.window.support();
+        let seg = self.gw.lane_segment(cx).ok_or_else(|| {
+            format!(
+                "needs subgroups at least as wide as the support ({ns} cells; this adapter's: {})",
+                match cx.caps().subgroups {
+                    Some((min, _)) => format!("{min} lanes"),
+                    None => "none".into(),
+                }
+            )
+        })?;
+        let memory = cx.caps().max_workgroup_storage;
+        let fits = (1..=CHUNK_COMPS)
+            .take_while(|&c| tilegen::workgroup_bytes(ns, c) <= memory)
+            .last()
+            .ok_or_else(|| {
+                format!(
+                    "needs {} bytes of workgroup memory for support {ns}; this adapter has {memory}",
+                    tilegen::workgroup_bytes(ns, 1)
+                )
+            })?;
+        Ok((fits, seg))
+    }
+
+    /// Scratch of tiled spreading, by role: tile counts, tile starts, and per particle its
+    /// tile, its rank in the tile, its anchor inside the tile and its list slot.
+    fn tile_scratch(&self, n: u32) -> Vec<u64> {
+        let tiles: u64 = tilegen::tiles_per_axis(&self.gw.cells)
+            .iter()
+            .map(|&t| t as u64)
+            .product();
+        let n = n as u64;
+        vec![4 * tiles, 4 * tiles, 4 * n, 4 * n, 4 * n, 4 * n]
+    }
+
     /// Whether spreading `n` particles goes box by box (shaders/spread/box.wgsl): sorted
     /// input, dense enough, and a support wide enough to pay and narrow enough to fit.
     fn uses_boxes(&self, n: u32) -> bool {
@@ -463,7 +525,11 @@ impl Node for Spread {
             ));
         }
         self.gw.check_resolution("values")?;
-        Ok(Signature::outputs(vec![self.gw.grid_type(comps)]))
+        let mut sig = Signature::outputs(vec![self.gw.grid_type(comps)]);
+        if self.wants_tiles(n) {
+            sig.scratch = self.tile_scratch(n);
+        }
+        Ok(sig)
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -519,6 +585,19 @@ impl GpuKernels for Spread {
             "spread/add_cas.wgsl"
         };
         let ns = self.gw.window.support();
+        if self.wants_tiles(n) {
+            match self.tile_comps(cx) {
+                Ok((per_dispatch, seg)) => {
+                    return self.compile_tiles(cx, io, add, per_dispatch, seg);
+                }
+                Err(why) if self.params.text("tiles") == "on" => {
+                    return Err(CompileError::Unsupported(format!(
+                        "spread: tiles \"on\" {why}; use tiles \"auto\" or \"off\""
+                    )));
+                }
+                Err(_) => {}
+            }
+        }
         let boxed = self.uses_boxes(n);
         let lanes = self.gw.lane_segment(cx);
         let prefix = format!("{}{}", cx.shader(self.gw.window.shader())?, cx.shader(add)?);
@@ -585,6 +664,129 @@ impl GpuKernels for Spread {
                 &kernel,
                 &[pos.buffer, vals.buffer, out.buffer, &geo],
                 groups,
+            ));
+        }
+        Ok(dispatches)
+    }
+}
+
+/// Supports covering a cell, on average (particles per cell x support^3), from which
+/// `tiles: auto` spreads tile by tile: the tile kernel's cost per tile (a few rounds of
+/// dependent loads, barriers, the flush of the padded tile) pays off where every cell
+/// takes many adds. Measured on an H200 (BENCHMARKS.md): 51 (support 8 at 0.1 per cell)
+/// 0.85 against 1.35 ns per particle; 17 (PSE's far field, support 6 at 0.08 per cell,
+/// 3 components) 0.233 against about 0.2 ms; 3 (FCM at 1e-2) 0.69 against 0.60 ms.
+const TILE_MIN_OVERLAP: f64 = 32.0;
+
+/// Layout of `Tiles` in shaders/spread/tiles.wgsl and the tile kernel.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct TilesUniform {
+    nt: [u32; 4],
+}
+
+impl Spread {
+    /// Tiled spreading: the counting sort by tile (fill, rank, scan, place), then the
+    /// tile kernel for `per_dispatch` components at a time.
+    fn compile_tiles(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+        add: &str,
+        per_dispatch: u32,
+        seg: u32,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let pos = io.inputs[0].expect("required");
+        let vals = io.inputs[1].expect("required");
+        let ValueType::Particles { n, k: comps } = vals.ty else {
+            unreachable!()
+        };
+        let out = io.outputs[0];
+        let [count, start, ptile, rank, local, order] = io.scratch[..] else {
+            unreachable!("scratch from infer")
+        };
+        let ns = self.gw.window.support();
+        let per_axis = tilegen::tiles_per_axis(&self.gw.cells);
+        let mut nt = [1u32; 4];
+        nt[..3].copy_from_slice(&per_axis);
+        nt[3] = per_axis.iter().product();
+        let tiles = cx.uniform("spread tiles", bytemuck::bytes_of(&TilesUniform { nt }));
+        let geo = cx.uniform(
+            "spread geometry",
+            bytemuck::bytes_of(&geometry(&self.gw, n)),
+        );
+        let window = cx.shader(self.gw.window.shader())?;
+        let setup = format!("{window}{}", cx.shader("spread/tiles.wgsl")?);
+        let mut setup_bindings = vec![Binding::StorageRead, Binding::Uniform, Binding::Uniform];
+        setup_bindings.extend([Binding::StorageReadWrite; 6]);
+        let setup_buffers = [
+            pos.buffer, &geo, &tiles, count, start, ptile, rank, local, order,
+        ];
+        let mut dispatches = vec![
+            cx.fill(out.buffer, out.ty.words(), 0)?,
+            cx.fill(count, nt[3] as u64, 0)?,
+        ];
+        for (entry, groups) in [
+            ("tiles_rank", cx.grid_1d(n as u64, 256)),
+            ("tiles_scan", [1, 1, 1]),
+            ("tiles_place", cx.grid_1d(n as u64, 256)),
+        ] {
+            let spec = KernelSpec::new(
+                format!("spread tiles: {entry}"),
+                setup.clone(),
+                &setup_bindings,
+            )
+            .entry(entry)
+            .constant("NS", ns as f64)
+            .constant("TILE", tilegen::TILE as f64);
+            let kernel = cx.kernel(&spec)?;
+            dispatches.push(cx.dispatch(&kernel, &setup_buffers, groups));
+        }
+        let prefix = format!("{window}{}", cx.shader(add)?);
+        let peak: f64 = (0..3)
+            .map(|a| tilegen::peak_weight(&self.gw.window, self.gw.h(a)))
+            .product();
+        for first in (0..comps).step_by(per_dispatch as usize) {
+            let chunk = per_dispatch.min(comps - first);
+            let text = tilegen::spread_source(ns, chunk, comps, seg);
+            let spec = KernelSpec::new(
+                format!("spread ({}, tiles)", self.gw.window.shader()),
+                composed(&prefix, &text)?,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                    Binding::Uniform,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                ],
+            )
+            .constant("PEAK", peak);
+            let kernel = cx.kernel(&spec)?;
+            let geo = cx.uniform(
+                "spread geometry",
+                bytemuck::bytes_of(&GeometryUniform {
+                    comp_offset: first,
+                    ..geometry(&self.gw, n)
+                }),
+            );
+            dispatches.push(cx.dispatch(
+                &kernel,
+                &[
+                    pos.buffer,
+                    vals.buffer,
+                    out.buffer,
+                    &geo,
+                    &tiles,
+                    count,
+                    start,
+                    order,
+                    local,
+                ],
+                cx.grid_1d(nt[3] as u64, 1),
             ));
         }
         Ok(dispatches)

@@ -30,11 +30,6 @@ struct Box {
     origin: vec3<i32>,   // unwrapped cell of box cell 0 per axis
 }
 
-// The first support cell of a coordinate t (cell-centre units).
-fn first_cell(t: f32) -> i32 {
-    return i32(floor(t - 0.5 * f32(NS))) + 1;
-}
-
 // Sets up the box of particles p0 .. p0 + count and, when it fits, its weight table.
 // Every thread of the workgroup must call it (it holds barriers).
 fn box_setup(p0: u32, count: u32, lid: u32) -> Box {

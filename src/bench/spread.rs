@@ -127,7 +127,7 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
                 (
                     format!("lanes {wg}"),
                     format!(r#""workgroup": "{wg}""#),
-                    "",
+                    r#", "tiles": "off""#,
                     None,
                 )
             })
@@ -136,7 +136,14 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         runs.push((
             "tables".into(),
             r#""workgroup": "256", "lanes": "off""#.into(),
-            "",
+            r#", "tiles": "off""#,
+            None,
+        ));
+        // Tiled spreading (tilegen.rs: its counting sort by tile included), any order.
+        runs.push((
+            "tiles".into(),
+            r#""workgroup": "256""#.into(),
+            r#", "tiles": "on""#,
             None,
         ));
         let sorts: &[(&str, Option<&str>)] = if sorted {
@@ -148,14 +155,19 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
             runs.push((
                 label.into(),
                 r#""order": "contiguous""#.into(),
-                r#", "sorted_input": true"#,
+                r#", "sorted_input": true, "tiles": "off""#,
                 sort,
             ));
         }
         if sorted {
             // The per-particle kernels serving sorted input in its own order (cache
             // reuse between neighbouring particles, which interleaved runs give up).
-            runs.push(("contig".into(), r#""order": "contiguous""#.into(), "", None));
+            runs.push((
+                "contig".into(),
+                r#""order": "contiguous""#.into(),
+                r#", "tiles": "off""#,
+                None,
+            ));
         }
         // The interpolation check's inputs, the same for every kernel of this row.
         let check = InterpolationCheck::new(&inputs);
