@@ -88,9 +88,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
 }
 
 /// Opens column block `col` (lanes k + col * seg): the (x, y) weight `wxy` (zero past
-/// the support) and offset `oxy`. Every lane runs every block, so the shuffles stay in
-/// uniform control flow.
-fn open_column(w: &mut String, col: u32, seg: u32) {
+/// the support) and offset `oxy`, from the lanes' entries e0 and e1 (tilegen.rs uses
+/// it too). Every lane runs every block, so the shuffles stay in uniform control flow.
+pub(super) fn open_column(w: &mut String, col: u32, seg: u32) {
     let _ = write!(
         w,
         "    {{

@@ -341,6 +341,24 @@ fn geometry(gw: &GridWindow, count: u32) -> GeometryUniform {
     u
 }
 
+/// The geometry uniform of one dispatch over `count` particles, for the components from
+/// `comp_offset` on.
+fn geometry_buffer(
+    cx: &CompileCtx,
+    label: &str,
+    gw: &GridWindow,
+    count: u32,
+    comp_offset: u32,
+) -> wgpu::Buffer {
+    cx.uniform(
+        label,
+        bytemuck::bytes_of(&GeometryUniform {
+            comp_offset,
+            ..geometry(gw, count)
+        }),
+    )
+}
+
 /// Interleaved runs the particles are served in (see shaders/spread/stencil.wgsl): up to
 /// 65536, more than the slots a large GPU runs at once, so concurrent workgroups work far
 /// apart; at least 4 particles a run, so small problems launch no empty workgroups.
@@ -480,13 +498,15 @@ impl Spread {
             )
         })?;
         let memory = cx.caps().max_workgroup_storage;
+        let min_subgroup = cx.caps().subgroups.map_or(1, |(min, _)| min);
+        let bytes = |c| tilegen::workgroup_bytes(ns, c, min_subgroup);
         let fits = (1..=CHUNK_COMPS)
-            .take_while(|&c| tilegen::workgroup_bytes(ns, c) <= memory)
+            .take_while(|&c| bytes(c) <= memory)
             .last()
             .ok_or_else(|| {
                 format!(
                     "needs {} bytes of workgroup memory for support {ns}; this adapter has {memory}",
-                    tilegen::workgroup_bytes(ns, 1)
+                    bytes(1)
                 )
             })?;
         Ok((fits, seg))
@@ -526,6 +546,8 @@ impl Node for Spread {
         }
         self.gw.check_resolution("values")?;
         let mut sig = Signature::outputs(vec![self.gw.grid_type(comps)]);
+        // Planned without the adapter: where it turns out unable to run tiles under
+        // `auto`, the node spreads otherwise and this scratch goes unused.
         if self.wants_tiles(n) {
             sig.scratch = self.tile_scratch(n);
         }
@@ -653,13 +675,7 @@ impl GpuKernels for Spread {
                 )
             };
             let kernel = cx.kernel(&spec)?;
-            let geo = cx.uniform(
-                "spread geometry",
-                bytemuck::bytes_of(&GeometryUniform {
-                    comp_offset: first,
-                    ..geometry(&self.gw, n)
-                }),
-            );
+            let geo = geometry_buffer(cx, "spread geometry", &self.gw, n, first);
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[pos.buffer, vals.buffer, out.buffer, &geo],
@@ -711,10 +727,7 @@ impl Spread {
         nt[..3].copy_from_slice(&per_axis);
         nt[3] = per_axis.iter().product();
         let tiles = cx.uniform("spread tiles", bytemuck::bytes_of(&TilesUniform { nt }));
-        let geo = cx.uniform(
-            "spread geometry",
-            bytemuck::bytes_of(&geometry(&self.gw, n)),
-        );
+        let geo = geometry_buffer(cx, "spread geometry", &self.gw, n, 0);
         let window = cx.shader(self.gw.window.shader())?;
         let setup = format!("{window}{}", cx.shader("spread/tiles.wgsl")?);
         let mut setup_bindings = vec![Binding::StorageRead, Binding::Uniform, Binding::Uniform];
@@ -748,7 +761,8 @@ impl Spread {
             .product();
         for first in (0..comps).step_by(per_dispatch as usize) {
             let chunk = per_dispatch.min(comps - first);
-            let text = tilegen::spread_source(ns, chunk, comps, seg);
+            let min_subgroup = cx.caps().subgroups.map_or(1, |(min, _)| min);
+            let text = tilegen::spread_source(ns, chunk, comps, seg, min_subgroup);
             let spec = KernelSpec::new(
                 format!("spread ({}, tiles)", self.gw.window.shader()),
                 composed(&prefix, &text)?,
@@ -766,13 +780,7 @@ impl Spread {
             )
             .constant("PEAK", peak);
             let kernel = cx.kernel(&spec)?;
-            let geo = cx.uniform(
-                "spread geometry",
-                bytemuck::bytes_of(&GeometryUniform {
-                    comp_offset: first,
-                    ..geometry(&self.gw, n)
-                }),
-            );
+            let geo = geometry_buffer(cx, "spread geometry", &self.gw, n, first);
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[
@@ -1016,13 +1024,7 @@ impl GpuKernels for Interpolate {
                 )
             };
             let kernel = cx.kernel(&spec)?;
-            let geo = cx.uniform(
-                "interpolate geometry",
-                bytemuck::bytes_of(&GeometryUniform {
-                    comp_offset: first,
-                    ..geometry(&self.gw, n)
-                }),
-            );
+            let geo = geometry_buffer(cx, "interpolate geometry", &self.gw, n, first);
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[

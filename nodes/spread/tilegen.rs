@@ -31,9 +31,6 @@ pub const TILE: u32 = 8;
 /// Threads per workgroup of the tile kernel.
 const WG: u32 = 256;
 
-/// Most subgroups a workgroup holds (subgroups of at least 8 lanes).
-const MAX_SUBGROUPS: u32 = WG / 8;
-
 /// Padded tile cells per axis for support `ns`.
 pub fn padded(ns: u32) -> u32 {
     TILE + ns - 1
@@ -44,18 +41,26 @@ pub fn tiles_per_axis(cells: &[u32]) -> Vec<u32> {
     cells.iter().map(|&n| n.div_ceil(TILE)).collect()
 }
 
-/// Bytes of workgroup memory the kernel takes for support `ns` and `comps` components.
-pub fn workgroup_bytes(ns: u32, comps: u32) -> u32 {
+/// Most subgroups a workgroup holds on an adapter whose subgroups have at least
+/// `min_subgroup` lanes.
+fn max_subgroups(min_subgroup: u32) -> u32 {
+    WG / min_subgroup.clamp(1, WG)
+}
+
+/// Bytes of workgroup memory the kernel takes for support `ns`, `comps` components and
+/// subgroups of at least `min_subgroup` lanes.
+pub fn workgroup_bytes(ns: u32, comps: u32, min_subgroup: u32) -> u32 {
     let p = padded(ns);
-    4 * (comps * p * p * p + 3 * p + comps * MAX_SUBGROUPS + 4)
+    4 * (comps * p * p * p + 3 * p + comps * max_subgroups(min_subgroup) + 4)
 }
 
 /// The tile kernel, composed after a window file (window_phi) and an add file
 /// (grid_add, binding 2). Bindings: pos (0), vals (1), grid (2), geo (3), tiles (4),
 /// count (5), start (6), order (7), local_anchor (8). `comps` components of the `total`
-/// per particle, from geo.comp_offset.
-pub fn spread_source(ns: u32, comps: u32, total: u32, seg: u32) -> String {
+/// per particle, from geo.comp_offset; subgroups of at least `min_subgroup` lanes.
+pub fn spread_source(ns: u32, comps: u32, total: u32, seg: u32, min_subgroup: u32) -> String {
     let p = padded(ns);
+    let subgroups = max_subgroups(min_subgroup);
     let ppp = p * p * p;
     let mut w = String::new();
     let _ = write!(
@@ -71,7 +76,7 @@ const COMPS: u32 = {comps}u;
 const TOTAL: u32 = {total}u;
 const SEG: u32 = {seg}u;
 const WG: u32 = {WG}u;
-const MAX_SUBGROUPS: u32 = {MAX_SUBGROUPS}u;
+const MAX_SUBGROUPS: u32 = {subgroups}u;
 // The largest weight one support cell can get (the window's peak, per axis, multiplied).
 override PEAK: f32 = 1.0;
 
@@ -163,7 +168,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
 ",
         acc_len = comps * ppp,
         wrap_len = 3 * p,
-        partial_len = comps * MAX_SUBGROUPS,
+        partial_len = comps * subgroups,
     );
     // Sum of |v| per component over the tile's particles.
     for c in 0..comps {
@@ -259,19 +264,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         let _ = writeln!(w, "        let ez{z} = subgroupShuffle(e2, base + {z}u);");
     }
     for col in 0..(ns * ns).div_ceil(seg) {
-        let _ = write!(
-            w,
-            "        {{
-            let pair = k + {off}u;
-            let q = min(pair, NS * NS - 1u);
-            let ex = subgroupShuffle(e0, base + q % NS);
-            let ey = subgroupShuffle(e1, base + q / NS);
-            let wxy = select(0.0, bitcast<f32>(ex.x) * bitcast<f32>(ey.x), pair < NS * NS);
-            let oxy = ex.y + ey.y;
-            if (live && wxy != 0.0) {{
-",
-            off = col * seg
-        );
+        super::interpgen::open_column(&mut w, col, seg);
+        w.push_str("            if (live && wxy != 0.0) {\n");
         for z in 0..ns {
             let _ = writeln!(
                 w,
@@ -339,19 +333,19 @@ mod tests {
     #[test]
     fn every_support_cell_is_added_once() {
         // Support 5 over 32 lanes: one column block of 25 columns, 5 z cells each.
-        let src = spread_source(5, 2, 3, 32);
+        let src = spread_source(5, 2, 3, 32, 32);
         assert_eq!(src.matches("let pair = k + ").count(), 1);
         assert_eq!(src.matches("atomicAdd(&acc[1u * PPP").count(), 5);
         assert_eq!(src.matches("grid_add(b0 + 1u * cells").count(), 1);
         // Support 8 over 32 lanes: two column blocks of 32 columns.
-        let src = spread_source(8, 1, 1, 32);
+        let src = spread_source(8, 1, 1, 32, 32);
         assert_eq!(src.matches("let pair = k + ").count(), 2);
         assert_eq!(src.matches("atomicAdd(&acc[0u * PPP").count(), 16);
     }
 
     #[test]
     fn workgroup_memory_fits_three_components_of_support_8() {
-        assert!(workgroup_bytes(8, 3) <= 48 << 10);
-        assert!(workgroup_bytes(8, 2) <= 32 << 10);
+        assert!(workgroup_bytes(8, 3, 32) <= 48 << 10);
+        assert!(workgroup_bytes(8, 2, 8) <= 32 << 10);
     }
 }
