@@ -13,7 +13,7 @@ pub mod tilegen;
 pub mod window;
 
 use crate::expr::ParamValue;
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo};
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Slot};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
     RefCtx, Registry, Signature,
@@ -467,7 +467,7 @@ struct Spread {
 
 impl Spread {
     /// Whether spreading `n` particles may go tile by tile (tilegen.rs), as far as the
-    /// params and sizes tell; the adapter may still rule it out (`tile_comps`).
+    /// params and sizes tell; the adapter may still rule it out (`tile_launch`).
     fn wants_tiles(&self, n: u32) -> bool {
         n > 0
             && self.gw.dims() == 3
@@ -482,11 +482,9 @@ impl Spread {
             }
     }
 
-    /// Components one tile dispatch carries on this adapter (as many as its workgroup
-    /// memory holds, up to CHUNK_COMPS) and the lanes per particle, or why tiles cannot
-    /// run here: no subgroups as wide as the support, or not even one component's padded
-    /// tile fits.
-    fn tile_comps(&self, cx: &CompileCtx) -> Result<(u32, u32), String> {
+    /// How the tile kernel runs on this adapter, or why it cannot: no subgroups as wide as
+    /// the support, or not even one component's padded tile fits in workgroup memory.
+    fn tile_launch(&self, cx: &CompileCtx) -> Result<TileLaunch, String> {
         let ns = self.gw.window.support();
         let seg = self.gw.lane_segment(cx).ok_or_else(|| {
             format!(
@@ -500,7 +498,7 @@ impl Spread {
         let memory = cx.caps().max_workgroup_storage;
         let min_subgroup = cx.caps().subgroups.map_or(1, |(min, _)| min);
         let bytes = |c| tilegen::workgroup_bytes(ns, c, min_subgroup);
-        let fits = (1..=CHUNK_COMPS)
+        let per_dispatch = (1..=CHUNK_COMPS)
             .take_while(|&c| bytes(c) <= memory)
             .last()
             .ok_or_else(|| {
@@ -509,7 +507,11 @@ impl Spread {
                     bytes(1)
                 )
             })?;
-        Ok((fits, seg))
+        Ok(TileLaunch {
+            per_dispatch,
+            seg,
+            min_subgroup,
+        })
     }
 
     /// Scratch of tiled spreading, by role: tile counts, tile starts, and per particle its
@@ -594,12 +596,7 @@ impl GpuKernels for Spread {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        let pos = io.inputs[0].expect("required");
-        let vals = io.inputs[1].expect("required");
-        let ValueType::Particles { n, k: comps } = vals.ty else {
-            unreachable!()
-        };
-        let out = io.outputs[0];
+        let (pos, vals, out, n, comps) = spread_ports(io);
         let atomics = use_atomics(&self.params, cx.caps().f32_atomics)?;
         let add = if atomics {
             "spread/add_atomic.wgsl"
@@ -608,10 +605,8 @@ impl GpuKernels for Spread {
         };
         let ns = self.gw.window.support();
         if self.wants_tiles(n) {
-            match self.tile_comps(cx) {
-                Ok((per_dispatch, seg)) => {
-                    return self.compile_tiles(cx, io, add, per_dispatch, seg);
-                }
+            match self.tile_launch(cx) {
+                Ok(launch) => return self.compile_tiles(cx, io, add, launch),
                 Err(why) if self.params.text("tiles") == "on" => {
                     return Err(CompileError::Unsupported(format!(
                         "spread: tiles \"on\" {why}; use tiles \"auto\" or \"off\""
@@ -694,6 +689,26 @@ impl GpuKernels for Spread {
 /// 3 components) 0.233 against about 0.2 ms; 3 (FCM at 1e-2) 0.69 against 0.60 ms.
 const TILE_MIN_OVERLAP: f64 = 32.0;
 
+/// How the tile kernel runs on an adapter: components per dispatch (as many as workgroup
+/// memory holds, up to CHUNK_COMPS), lanes per particle, and the smallest subgroup it
+/// must size its per-subgroup sums for.
+struct TileLaunch {
+    per_dispatch: u32,
+    seg: u32,
+    min_subgroup: u32,
+}
+
+/// The spread node's ports: positions, values, the grid, and the particle count and
+/// components per particle.
+fn spread_ports<'a>(io: &NodeIo<'a>) -> (Slot<'a>, Slot<'a>, Slot<'a>, u32, u32) {
+    let pos = io.inputs[0].expect("required");
+    let vals = io.inputs[1].expect("required");
+    let ValueType::Particles { n, k: comps } = vals.ty else {
+        unreachable!("port type checked")
+    };
+    (pos, vals, io.outputs[0], n, comps)
+}
+
 /// Layout of `Tiles` in shaders/spread/tiles.wgsl and the tile kernel.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -703,21 +718,15 @@ struct TilesUniform {
 
 impl Spread {
     /// Tiled spreading: the counting sort by tile (fill, rank, scan, place), then the
-    /// tile kernel for `per_dispatch` components at a time.
+    /// tile kernel for `launch.per_dispatch` components at a time.
     fn compile_tiles(
         &self,
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
         add: &str,
-        per_dispatch: u32,
-        seg: u32,
+        launch: TileLaunch,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        let pos = io.inputs[0].expect("required");
-        let vals = io.inputs[1].expect("required");
-        let ValueType::Particles { n, k: comps } = vals.ty else {
-            unreachable!()
-        };
-        let out = io.outputs[0];
+        let (pos, vals, out, n, comps) = spread_ports(io);
         let [count, start, ptile, rank, local, order] = io.scratch[..] else {
             unreachable!("scratch from infer")
         };
@@ -759,10 +768,9 @@ impl Spread {
         let peak: f64 = (0..3)
             .map(|a| tilegen::peak_weight(&self.gw.window, self.gw.h(a)))
             .product();
-        for first in (0..comps).step_by(per_dispatch as usize) {
-            let chunk = per_dispatch.min(comps - first);
-            let min_subgroup = cx.caps().subgroups.map_or(1, |(min, _)| min);
-            let text = tilegen::spread_source(ns, chunk, comps, seg, min_subgroup);
+        for first in (0..comps).step_by(launch.per_dispatch as usize) {
+            let chunk = launch.per_dispatch.min(comps - first);
+            let text = tilegen::spread_source(ns, chunk, comps, launch.seg, launch.min_subgroup);
             let spec = KernelSpec::new(
                 format!("spread ({}, tiles)", self.gw.window.shader()),
                 composed(&prefix, &text)?,
