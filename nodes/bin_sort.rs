@@ -92,7 +92,7 @@ pub fn scan_path(bins: u64, caps: &DeviceCaps) -> ScanPath {
 /// word per key), then the general scan's own scratch where it may run (the scratch is
 /// fixed before the device is known, so for every bin count past the smallest device's
 /// one-workgroup capacity).
-fn scratch_bytes(n: u64, bins: u64) -> Vec<u64> {
+pub fn scratch_bytes(n: u64, bins: u64) -> Vec<u64> {
     let mut s = vec![16 * (bins + 1).div_ceil(4), 4 * n.max(1)];
     if bins > NARROW_WG as u64 * MAX_PER_THREAD {
         s.extend(scan::scratch_bytes(bins));
@@ -267,109 +267,138 @@ impl GpuKernels for BinSort {
         let [counter, rank, scan_scratch @ ..] = io.scratch.as_slice() else {
             return Err(missing());
         };
-        let n = keys.ty.words();
-        let n32 = u32::try_from(n).map_err(|_| {
-            CompileError::Unsupported(format!("bin_sort of {n} keys: at most 2^32 - 1"))
-        })?;
-        let bins = self.bins as u64;
-        let path = self
-            .variant
-            .choose(cx.caps(), "bin_sort", scan::subgroup_scan_fits)?;
-        let mut out = vec![cx.fill(counter, bins + 1, 0)?];
-        if n > 0 {
-            let shape = cx.uniform("bin_sort count", bytemuck::cast_slice(&[n32, self.bins]));
-            let kernel = shader_kernel(
-                cx,
-                "bin_sort count",
-                "bin_sort/count.wgsl",
-                &[
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                    Binding::Uniform,
-                ],
-            )?;
-            out.push(cx.dispatch(
-                &kernel,
-                &[keys.buffer, counter, rank, &shape],
-                cx.grid_1d(n, WG_1D),
-            ));
-        }
-        // Counters the place kernel copies to `count` (the one-workgroup scan writes them).
-        let copy = match scan_path(bins, cx.caps()) {
-            ScanPath::Single { threads, quads } => {
-                let file = match path {
-                    Path::Subgroup => "bin_sort/scan_subgroup.wgsl",
-                    Path::Portable => "bin_sort/scan_portable.wgsl",
-                };
-                let mut spec = KernelSpec::new(
-                    format!("bin_sort scan ({threads} threads, {path:?})"),
-                    cx.shader(file)?,
-                    &[
-                        Binding::StorageRead,
-                        Binding::StorageReadWrite,
-                        Binding::StorageReadWrite,
-                        Binding::Uniform,
-                    ],
-                )
-                .constant("WG", threads as f64);
-                if path == Path::Subgroup {
-                    // Its loops over a thread's quads have a constant trip count.
-                    spec = spec.constant("QUADS", quads as f64);
-                }
-                let kernel = cx.kernel(&spec)?;
-                let params = cx.uniform("bin_sort scan", bytemuck::cast_slice(&[self.bins, quads]));
-                out.push(cx.dispatch(
-                    &kernel,
-                    &[counter, count.buffer, start.buffer, &params],
-                    [1, 1, 1],
-                ));
-                0
-            }
-            ScanPath::General => {
-                let kernels = ScanKernels::new(cx, path, Elem::U32)?;
-                kernels.record(cx, counter, start.buffer, bins, scan_scratch, &mut out)?;
-                self.bins
-            }
-        };
-        let threads = n.max(copy as u64);
-        if threads > 0 {
-            let kernel = shader_kernel(
-                cx,
-                "bin_sort place",
-                "bin_sort/place.wgsl",
-                &[
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                    Binding::Uniform,
-                ],
-            )?;
-            let shape = cx.uniform(
-                "bin_sort place",
-                bytemuck::cast_slice(&[n32, self.bins, copy]),
-            );
-            out.push(cx.dispatch(
-                &kernel,
-                &[
-                    keys.buffer,
-                    rank,
-                    counter,
-                    start.buffer,
-                    perm.buffer,
-                    keys_out.buffer,
-                    count.buffer,
-                    &shape,
-                ],
-                cx.grid_1d(threads, WG_1D),
-            ));
-        }
-        Ok(out)
+        record(
+            cx,
+            self.variant,
+            self.bins,
+            keys.ty.words(),
+            &BinSortBuffers {
+                keys: keys.buffer,
+                perm: perm.buffer,
+                keys_out: keys_out.buffer,
+                count: count.buffer,
+                start: start.buffer,
+                counter,
+                rank,
+                scan_scratch,
+            },
+        )
     }
+}
+
+/// The buffers of one counting sort: the keys, the node's four outputs and its scratch
+/// (`scratch_bytes`: the counters, the ranks, the general scan's own).
+pub struct BinSortBuffers<'a> {
+    pub keys: &'a wgpu::Buffer,
+    pub perm: &'a wgpu::Buffer,
+    pub keys_out: &'a wgpu::Buffer,
+    pub count: &'a wgpu::Buffer,
+    pub start: &'a wgpu::Buffer,
+    pub counter: &'a wgpu::Buffer,
+    pub rank: &'a wgpu::Buffer,
+    pub scan_scratch: &'a [&'a wgpu::Buffer],
+}
+
+/// The dispatches of a counting sort of `n` keys into `bins` bins (clear the counters,
+/// rank, scan, place), for the node and for nodes that sort inside (tiled spreading).
+pub fn record(
+    cx: &mut CompileCtx<'_>,
+    variant: Variant,
+    bins: u32,
+    n: u64,
+    b: &BinSortBuffers<'_>,
+) -> Result<Vec<Dispatch>, CompileError> {
+    let n32 = u32::try_from(n).map_err(|_| {
+        CompileError::Unsupported(format!("bin_sort of {n} keys: at most 2^32 - 1"))
+    })?;
+    let path = variant.choose(cx.caps(), "bin_sort", scan::subgroup_scan_fits)?;
+    let mut out = vec![cx.fill(b.counter, bins as u64 + 1, 0)?];
+    if n > 0 {
+        let shape = cx.uniform("bin_sort count", bytemuck::cast_slice(&[n32, bins]));
+        let kernel = shader_kernel(
+            cx,
+            "bin_sort count",
+            "bin_sort/count.wgsl",
+            &[
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
+        )?;
+        out.push(cx.dispatch(
+            &kernel,
+            &[b.keys, b.counter, b.rank, &shape],
+            cx.grid_1d(n, WG_1D),
+        ));
+    }
+    // Counters the place kernel copies to `count` (the one-workgroup scan writes them).
+    let copy = match scan_path(bins as u64, cx.caps()) {
+        ScanPath::Single { threads, quads } => {
+            let file = match path {
+                Path::Subgroup => "bin_sort/scan_subgroup.wgsl",
+                Path::Portable => "bin_sort/scan_portable.wgsl",
+            };
+            let mut spec = KernelSpec::new(
+                format!("bin_sort scan ({threads} threads, {path:?})"),
+                cx.shader(file)?,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                ],
+            )
+            .constant("WG", threads as f64);
+            if path == Path::Subgroup {
+                // Its loops over a thread's quads have a constant trip count.
+                spec = spec.constant("QUADS", quads as f64);
+            }
+            let kernel = cx.kernel(&spec)?;
+            let params = cx.uniform("bin_sort scan", bytemuck::cast_slice(&[bins, quads]));
+            out.push(cx.dispatch(&kernel, &[b.counter, b.count, b.start, &params], [1, 1, 1]));
+            0
+        }
+        ScanPath::General => {
+            let kernels = ScanKernels::new(cx, path, Elem::U32)?;
+            kernels.record(
+                cx,
+                b.counter,
+                b.start,
+                bins as u64,
+                b.scan_scratch,
+                &mut out,
+            )?;
+            bins
+        }
+    };
+    let threads = n.max(copy as u64);
+    if threads > 0 {
+        let kernel = shader_kernel(
+            cx,
+            "bin_sort place",
+            "bin_sort/place.wgsl",
+            &[
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
+        )?;
+        let shape = cx.uniform("bin_sort place", bytemuck::cast_slice(&[n32, bins, copy]));
+        out.push(cx.dispatch(
+            &kernel,
+            &[
+                b.keys, b.rank, b.counter, b.start, b.perm, b.keys_out, b.count, &shape,
+            ],
+            cx.grid_1d(threads, WG_1D),
+        ));
+    }
+    Ok(out)
 }
 
 pub fn register(r: &mut Registry) {

@@ -514,15 +514,20 @@ impl Spread {
         })
     }
 
-    /// Scratch of tiled spreading, by role: tile counts, tile starts, and per particle its
-    /// tile, its rank in the tile, its anchor inside the tile and its list slot.
+    /// Scratch of tiled spreading, by role: per particle its tile (the sort key) and its
+    /// anchor inside the tile, then bin_sort's outputs (the particles tile by tile, the
+    /// sorted keys, each tile's count and first slot) and bin_sort's own scratch.
     fn tile_scratch(&self, n: u32) -> Vec<u64> {
-        let tiles: u64 = tilegen::tiles_per_axis(&self.gw.cells)
-            .iter()
-            .map(|&t| t as u64)
-            .product();
+        let tiles = self.tile_count() as u64;
         let n = n as u64;
-        vec![4 * tiles, 4 * tiles, 4 * n, 4 * n, 4 * n, 4 * n]
+        let mut s = vec![4 * n, 4 * n, 4 * n, 4 * n, 4 * tiles, 4 * tiles];
+        s.extend(crate::nodes::bin_sort::scratch_bytes(n, tiles));
+        s
+    }
+
+    /// Tiles of the grid.
+    fn tile_count(&self) -> u32 {
+        tilegen::tiles_per_axis(&self.gw.cells).iter().product()
     }
 
     /// Whether spreading `n` particles goes box by box (shaders/spread/box.wgsl): sorted
@@ -727,43 +732,65 @@ impl Spread {
         launch: TileLaunch,
     ) -> Result<Vec<Dispatch>, CompileError> {
         let (pos, vals, out, n, comps) = spread_ports(io);
-        let [count, start, ptile, rank, local, order] = io.scratch[..] else {
+        let [
+            keys,
+            local,
+            order,
+            keys_out,
+            count,
+            start,
+            counter,
+            rank,
+            scan_scratch @ ..,
+        ] = &io.scratch[..]
+        else {
             unreachable!("scratch from infer")
         };
         let ns = self.gw.window.support();
         let per_axis = tilegen::tiles_per_axis(&self.gw.cells);
         let mut nt = [1u32; 4];
         nt[..3].copy_from_slice(&per_axis);
-        nt[3] = per_axis.iter().product();
+        nt[3] = self.tile_count();
         let tiles = cx.uniform("spread tiles", bytemuck::bytes_of(&TilesUniform { nt }));
         let geo = geometry_buffer(cx, "spread geometry", &self.gw, n, 0);
         let window = cx.shader(self.gw.window.shader())?;
-        let setup = format!("{window}{}", cx.shader("spread/tiles.wgsl")?);
-        let mut setup_bindings = vec![Binding::StorageRead, Binding::Uniform, Binding::Uniform];
-        setup_bindings.extend([Binding::StorageReadWrite; 6]);
-        let setup_buffers = [
-            pos.buffer, &geo, &tiles, count, start, ptile, rank, local, order,
-        ];
-        let mut dispatches = vec![
-            cx.fill(out.buffer, out.ty.words(), 0)?,
-            cx.fill(count, nt[3] as u64, 0)?,
-        ];
-        for (entry, groups) in [
-            ("tiles_rank", cx.grid_1d(n as u64, 256)),
-            ("tiles_scan", [1, 1, 1]),
-            ("tiles_place", cx.grid_1d(n as u64, 256)),
-        ] {
-            let spec = KernelSpec::new(
-                format!("spread tiles: {entry}"),
-                setup.clone(),
-                &setup_bindings,
-            )
-            .entry(entry)
-            .constant("NS", ns as f64)
-            .constant("TILE", tilegen::TILE as f64);
-            let kernel = cx.kernel(&spec)?;
-            dispatches.push(cx.dispatch(&kernel, &setup_buffers, groups));
-        }
+        let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
+        let spec = KernelSpec::new(
+            "spread tiles: keys",
+            cx.shader("spread/tiles.wgsl")?,
+            &[
+                Binding::StorageRead,
+                Binding::Uniform,
+                Binding::Uniform,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
+            ],
+        )
+        .constant("NS", ns as f64)
+        .constant("TILE", tilegen::TILE as f64);
+        let kernel = cx.kernel(&spec)?;
+        dispatches.push(cx.dispatch(
+            &kernel,
+            &[pos.buffer, &geo, &tiles, keys, local],
+            cx.grid_1d(n as u64, 256),
+        ));
+        // The particles listed tile by tile: the counting sort of bin_sort.
+        dispatches.extend(crate::nodes::bin_sort::record(
+            cx,
+            crate::nodes::scan::Variant::Auto,
+            nt[3],
+            n as u64,
+            &crate::nodes::bin_sort::BinSortBuffers {
+                keys,
+                perm: order,
+                keys_out,
+                count,
+                start,
+                counter,
+                rank,
+                scan_scratch,
+            },
+        )?);
         let prefix = format!("{window}{}", cx.shader(add)?);
         let peak: f64 = (0..3)
             .map(|a| tilegen::peak_weight(&self.gw.window, self.gw.h(a)))
