@@ -447,7 +447,7 @@ impl NodeKind for SpreadKind {
             "tiles",
             "auto",
             &["auto", "on", "off"],
-            "spreading (3D): tile by tile in workgroup memory (cuFINUFFT's shared-memory method): a counting sort files each particle under the 8^3-cell tile of its first support cell, one workgroup per tile sums its particles into the padded tile as fixed-point integers (scaled per tile so no sum overflows: each add exact to 2^-30 of the tile's sum of |value| x the window's peak) and adds each padded cell to the grid once. Any input order; 16 bytes of scratch per particle. auto: where it pays (particles per cell x support^3 at least 32, and not where sorted_input spreads box by box) and the adapter has subgroups and the workgroup memory; on: always (an error where the adapter cannot); off: never",
+            "spreading (3D): tile by tile in workgroup memory (cuFINUFFT's shared-memory method): bin_sort's counting sort files each particle under the 8^3-cell tile of its first support cell, one workgroup per tile sums its particles into the padded tile as fixed-point integers (scaled per tile so no sum overflows: each add exact to 2^-30 of the tile's sum of |value| x the window's peak) and adds each padded cell to the grid once. Any input order; 20 bytes of scratch per particle. auto: where it pays (particles per cell x support^3 at least 32, and not where sorted_input spreads box by box) and the adapter has subgroups and the workgroup memory; on: always (an error where the adapter cannot); off: never",
         ));
         p
     }

@@ -1,5 +1,5 @@
-//! WGSL of the tile spreading kernel (the shared-memory method of cuFINUFFT; set-up
-//! kernels and layout in shaders/spread/tiles.wgsl), generated for one support,
+//! WGSL of the tile spreading kernel (the shared-memory method of cuFINUFFT; the tile
+//! keys in shaders/spread/tiles.wgsl, sorted by bin_sort), generated for one support,
 //! component count and segment width with every loop over the support written out.
 //!
 //! One workgroup serves one tile of TILE^3 cells: the particles filed under it (by their
