@@ -40,8 +40,8 @@ use crate::gpu::{
     Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo, WG_1D,
 };
 use crate::node::{
-    Folding, GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx,
-    Registry, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
+    Signature,
 };
 use crate::nodes::scan::{self, Path, ScanKernels, Variant};
 use crate::value::{Elem, PortType, RefArray, ValueType};
@@ -236,12 +236,7 @@ fn shader_kernel(
 }
 
 impl GpuKernels for BinSort {
-    fn device_notes(
-        &self,
-        _inputs: &[Option<ValueType>],
-        caps: &DeviceCaps,
-        _folding: Folding,
-    ) -> Vec<String> {
+    fn device_notes(&self, _inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Vec<String> {
         vec![match scan_path(self.bins as u64, caps) {
             ScanPath::Single { threads, quads } => format!(
                 "bins scanned by one workgroup of {threads} threads ({} counters each)",

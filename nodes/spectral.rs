@@ -12,8 +12,9 @@ use std::f64::consts::PI;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
-    RefCtx, Registry, Signature, SpectralBody,
+    RefCtx, Registry, Signature,
 };
+use crate::transform::SpectralBody;
 use crate::value::{PortType, RefArray, ValueType, half_dims};
 
 /// The signed wave number of index `i` on an axis of `n` points (see the module doc).
@@ -720,7 +721,7 @@ impl GpuKernels for StokesNoiseNode {
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
         let ty = self.ty();
-        let source = crate::plan::spectral::standalone_source(&self.body, &ty, false);
+        let source = crate::transform::standalone_source(&self.body, &ty, false);
         let mut bindings = vec![Binding::StorageRead, Binding::StorageReadWrite];
         if self.body.uses_step {
             bindings.push(Binding::StorageRead);

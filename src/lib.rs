@@ -14,6 +14,7 @@ pub mod graph;
 pub mod node;
 pub mod npy;
 pub mod plan;
+pub mod transform;
 pub mod value;
 
 #[path = "../nodes/mod.rs"]

@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use crate::expr::ParamValue;
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, NodeIo};
+use crate::transform::{SpectralBody, Transform};
 use crate::value::{PortType, RefArray, ValueType};
 
 /// One input or output port of a node kind.
@@ -389,58 +390,6 @@ pub struct PointwiseBody {
     pub uses_step: bool,
 }
 
-/// An operation on all components of a spectrum at one wave vector (a Green function
-/// that mixes components, a filter, a projection). The planner folds it into the last
-/// pass of the forward transform that produces its input when it can (see
-/// [`GpuKernels::folds_spectral`]), so it costs no pass over the grid of its own;
-/// otherwise it runs as a kernel of its own through the same function.
-///
-/// The body is the WGSL body of `fn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>,
-/// SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS>`: `k` holds the signed wave
-/// numbers (index i on an axis of n points is i for i <= n/2, else i - n), `n` the dims of
-/// the real-space grid, `v` the components at k as (re, im). Params are read as
-/// `spectral_params[i]` (f32); a body with `uses_step` reads the time step as `step`.
-#[derive(Clone, Debug, PartialEq, Default)]
-pub struct SpectralBody {
-    pub body: String,
-    pub params: Vec<f32>,
-    /// Shader files whose functions the body calls (`common/philox.wgsl`).
-    pub imports: Vec<String>,
-    /// The body reads `step`: the kernel hosting it binds the engine clock as `clock`.
-    pub uses_step: bool,
-}
-
-impl SpectralBody {
-    /// The params as the `spectral_params` binding holds them: at least one word, since
-    /// a binding cannot be empty.
-    pub fn param_words(&self) -> Vec<f32> {
-        let mut p = self.params.clone();
-        p.resize(p.len().max(1), 0.0);
-        p
-    }
-
-    /// The WGSL function for `comps` components, preceded by its imports. A kernel using
-    /// it declares `spectral_params: array<f32>` as a read-only storage binding holding
-    /// [`SpectralBody::param_words`], `clock: array<u32>` (the engine clock) when
-    /// `uses_step`, and imports `common/wave.wgsl` for `wave_number`.
-    pub fn function(&self, comps: u32) -> String {
-        let mut w = String::new();
-        for i in &self.imports {
-            w.push_str(&format!("#import {i}\n"));
-        }
-        let step = if self.uses_step {
-            "let step = clock[0];\n    "
-        } else {
-            ""
-        };
-        w.push_str(&format!(
-            "const SPECTRAL_COMPS: u32 = {comps}u;\nfn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>, SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS> {{\n    {step}{}\n}}\n",
-            self.body.trim()
-        ));
-        w
-    }
-}
-
 /// How a node turns into GPU work.
 pub enum Lowering<'a> {
     /// An element-wise body the planner compiles, fused or alone.
@@ -449,6 +398,9 @@ pub enum Lowering<'a> {
     Kernels(&'a dyn GpuKernels),
     /// A spectral operation the planner folds into a transform or runs alone.
     Spectral(SpectralBody),
+    /// A transform over grid lines whose passes may host a spectral node
+    /// (see [`crate::transform`]).
+    Transform(&'a dyn Transform),
     /// The node drives an iteration of its loop body, deciding on the host when to stop.
     Iterative(&'a dyn GpuIterative),
 }
@@ -505,105 +457,12 @@ pub trait GpuKernels {
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError>;
 
-    /// Decisions that depend on the device (an FFT's workgroup tiling, chosen from its
-    /// limits), shown by `mesoflow inspect` after [`Node::notes`], for the passes the
-    /// launch runs (`folding`).
-    fn device_notes(
-        &self,
-        inputs: &[Option<ValueType>],
-        caps: &DeviceCaps,
-        folding: Folding,
-    ) -> Vec<String> {
-        let _ = (inputs, caps, folding);
+    /// Decisions that depend on the device (a scan's workgroup shape, chosen from its
+    /// limits), shown by `mesoflow inspect` after [`Node::notes`].
+    fn device_notes(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Vec<String> {
+        let _ = (inputs, caps);
         Vec::new()
     }
-
-    /// Whether [`GpuKernels::compile_spectral`] can apply a spectral node to this node's
-    /// only output, for these input types on this device.
-    fn folds_spectral(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> bool {
-        let _ = (inputs, caps);
-        false
-    }
-
-    /// `compile` with `spectral` applied to the results before they are stored;
-    /// `io.outputs[0]` is then the spectral node's output. With `inverse_after`, the
-    /// results are then put through the first pass of the inverse transform that reads
-    /// them ([`GpuKernels::folds_inverse`]), which skips it
-    /// ([`GpuKernels::compile_after_folded_first_pass`]).
-    fn compile_spectral(
-        &self,
-        cx: &mut CompileCtx<'_>,
-        io: &NodeIo<'_>,
-        spectral: &SpectralBody,
-        inverse_after: bool,
-    ) -> Result<Vec<Dispatch>, CompileError> {
-        let _ = (cx, io, spectral, inverse_after);
-        Err(CompileError::Unsupported(
-            "this node cannot fold a spectral node".into(),
-        ))
-    }
-
-    /// For an inverse transform: its first pass, which a forward transform with a
-    /// spectral node folded in may run in its last pass instead (None: it cannot be
-    /// split off).
-    fn first_pass(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Option<LinePass> {
-        let _ = (inputs, caps);
-        None
-    }
-
-    /// For a forward transform: whether its last pass, with a spectral node folded in,
-    /// can also run `first` (an inverse transform's [`GpuKernels::first_pass`]).
-    fn folds_inverse(
-        &self,
-        inputs: &[Option<ValueType>],
-        caps: &DeviceCaps,
-        first: &LinePass,
-    ) -> bool {
-        let _ = (inputs, caps, first);
-        false
-    }
-
-    /// `compile` without the first pass, which the forward transform that wrote the
-    /// input ran (see [`GpuKernels::compile_spectral`]).
-    fn compile_after_folded_first_pass(
-        &self,
-        cx: &mut CompileCtx<'_>,
-        io: &NodeIo<'_>,
-    ) -> Result<Vec<Dispatch>, CompileError> {
-        let _ = (cx, io);
-        Err(CompileError::Unsupported(
-            "this node has no first pass to leave to another".into(),
-        ))
-    }
-}
-
-/// How a transform's launch shares passes with the nodes around it (src/plan/spectral.rs).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Folding {
-    /// Every pass of its own, nothing folded in.
-    #[default]
-    Alone,
-    /// A spectral node applied in the last pass ([`GpuKernels::compile_spectral`]).
-    Spectral,
-    /// ... and the last pass also runs the first pass of the inverse transform after it.
-    SpectralThenInverse,
-    /// An inverse transform whose first pass ran in the forward transform's last
-    /// ([`GpuKernels::compile_after_folded_first_pass`]).
-    FirstPassFolded,
-}
-
-/// A transform's pass over the lines along one axis of a grid, as the planner matches a
-/// forward transform's last pass with the first pass of the inverse transform after it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct LinePass {
-    pub axis: usize,
-    /// Real-space dims and components of the grid.
-    pub dims: [u32; 3],
-    pub comps: u32,
-    /// The transformed axes.
-    pub axes: [bool; 3],
-    /// On a half spectrum (real transforms).
-    pub half: bool,
 }
 
 /// Context given to CPU references.

@@ -16,7 +16,7 @@ use std::fmt::Write;
 
 use super::plan::{Layout, Load, Pass, Store};
 use crate::gpu::Binding;
-use crate::node::SpectralBody;
+use crate::transform::SpectralBody;
 
 /// A spectral node folded into a forward transform's last pass.
 pub struct Fold<'a> {

@@ -25,9 +25,9 @@ pub use plan::{is_friendly, next_friendly};
 
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
-    Folding, GpuKernels, LinePass, Lowering, Node, NodeKind, ParamSpec, Params, PortError,
-    PortSpec, RefCtx, Registry, Signature, SpectralBody,
+    Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry, Signature,
 };
+use crate::transform::{Folding, LinePass, SpectralBody, Transform};
 use crate::value::{PortType, RefArray, ValueType};
 use plan::{Buf, Key, Kind, Limits, MAX_LENGTH};
 
@@ -296,7 +296,7 @@ impl Node for FftNode {
     }
 
     fn lowering(&self) -> Lowering<'_> {
-        Lowering::Kernels(self)
+        Lowering::Transform(self)
     }
 
     fn notes(&self, inputs: &[Option<ValueType>]) -> Vec<String> {
@@ -351,13 +351,22 @@ impl Node for FftNode {
     }
 }
 
-impl GpuKernels for FftNode {
+impl Transform for FftNode {
     fn compile(
         &self,
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
+        folding: Folding,
+        spectral: Option<&SpectralBody>,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        self.dispatches(cx, io, Folding::Alone, None)
+        let hosts = matches!(folding, Folding::Spectral | Folding::SpectralThenInverse);
+        if hosts != spectral.is_some() {
+            return Err(CompileError::Unsupported(format!(
+                "a transform launch {folding:?} needs {} spectral body",
+                if hosts { "a" } else { "no" }
+            )));
+        }
+        self.dispatches(cx, io, folding, spectral)
     }
 
     fn device_notes(
@@ -378,7 +387,7 @@ impl GpuKernels for FftNode {
         }
     }
 
-    fn folds_spectral(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> bool {
+    fn hosts_spectral(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> bool {
         !self.kind.inverse() && self.recipe(inputs, Folding::Spectral, caps).is_ok()
     }
 
@@ -391,7 +400,7 @@ impl GpuKernels for FftNode {
         (self.kind.inverse() && later_reads_input).then(|| self.line_pass(dims, comps, first.axis))
     }
 
-    fn folds_inverse(
+    fn hosts_inverse(
         &self,
         inputs: &[Option<ValueType>],
         caps: &DeviceCaps,
@@ -405,29 +414,6 @@ impl GpuKernels for FftNode {
         };
         let last = recipe.passes.last().expect("a recipe has passes");
         !self.kind.inverse() && self.line_pass(dims, comps, last.axis) == *first
-    }
-
-    fn compile_spectral(
-        &self,
-        cx: &mut CompileCtx<'_>,
-        io: &NodeIo<'_>,
-        spectral: &SpectralBody,
-        inverse_after: bool,
-    ) -> Result<Vec<Dispatch>, CompileError> {
-        let folding = if inverse_after {
-            Folding::SpectralThenInverse
-        } else {
-            Folding::Spectral
-        };
-        self.dispatches(cx, io, folding, Some(spectral))
-    }
-
-    fn compile_after_folded_first_pass(
-        &self,
-        cx: &mut CompileCtx<'_>,
-        io: &NodeIo<'_>,
-    ) -> Result<Vec<Dispatch>, CompileError> {
-        self.dispatches(cx, io, Folding::FirstPassFolded, None)
     }
 }
 

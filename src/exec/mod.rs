@@ -17,9 +17,10 @@ use crate::gpu::{
     NodeIo, Slot, WG_1D,
 };
 use crate::graph::Graph;
-use crate::node::{Decision, IterativeKernels, Lowering, SpectralBody};
-use crate::plan::{Launch, Phase, Plan, Storage, ValueId};
-use crate::value::{HostArray, ValueType};
+use crate::node::{Decision, IterativeKernels, Lowering};
+use crate::plan::{Launch, Phase, Plan, Storage, TransformFold, ValueId};
+use crate::transform;
+use crate::value::HostArray;
 
 #[derive(Debug, Error)]
 #[non_exhaustive]
@@ -265,6 +266,25 @@ impl<'a> Program<'a> {
         }
     }
 
+    /// The buffers a node's launch binds, for a step of the given parity.
+    fn node_io(
+        &self,
+        inputs: &[Option<ValueId>],
+        outputs: &[ValueId],
+        scratch: &[ValueId],
+        parity: usize,
+    ) -> NodeIo<'_> {
+        let slot = |v: ValueId| Slot {
+            buffer: self.buffer(v, parity),
+            ty: self.plan.values[v].ty,
+        };
+        NodeIo {
+            inputs: inputs.iter().map(|v| v.map(slot)).collect(),
+            outputs: outputs.iter().map(|&v| slot(v)).collect(),
+            scratch: scratch.iter().map(|&v| self.buffer(v, parity)).collect(),
+        }
+    }
+
     fn compile_launch(
         &self,
         cx: &mut CompileCtx,
@@ -278,71 +298,69 @@ impl<'a> Program<'a> {
                 inputs,
                 outputs,
                 scratch,
-                spectral,
-                first_pass_folded,
                 ..
             } => {
                 let inst = &g.nodes[*node];
-                // A transform that folds a spectral node writes the latter's output.
-                let outputs = match spectral {
-                    Some(f) => std::slice::from_ref(&f.output),
-                    None => outputs.as_slice(),
+                let io = self.node_io(inputs, outputs, scratch, parity);
+                let err = |source| ExecError::Compile {
+                    node: inst.id.clone(),
+                    source,
                 };
-                let io = NodeIo {
-                    inputs: inputs
-                        .iter()
-                        .map(|v| {
-                            v.map(|v| Slot {
-                                buffer: self.buffer(v, parity),
-                                ty: self.plan.values[v].ty,
-                            })
-                        })
-                        .collect(),
-                    outputs: outputs
-                        .iter()
-                        .map(|&v| Slot {
-                            buffer: self.buffer(v, parity),
-                            ty: self.plan.values[v].ty,
-                        })
-                        .collect(),
-                    scratch: scratch.iter().map(|&v| self.buffer(v, parity)).collect(),
+                let dispatches = match inst.node.lowering() {
+                    Lowering::Kernels(k) => k.compile(cx, &io).map_err(err)?,
+                    Lowering::Spectral(body) => {
+                        vec![transform::standalone_dispatch(cx, &body, &io).map_err(err)?]
+                    }
+                    _ => panic!(
+                        "node `{}` scheduled as a single launch cannot run as one",
+                        inst.id
+                    ),
+                };
+                Ok(Compiled::plain(
+                    inst.id.clone(),
+                    inst.kind.to_string(),
+                    dispatches,
+                ))
+            }
+            Launch::Transform {
+                node,
+                inputs,
+                outputs,
+                scratch,
+                fold,
+                ..
+            } => {
+                let inst = &g.nodes[*node];
+                let Lowering::Transform(t) = inst.node.lowering() else {
+                    panic!("node `{}` scheduled as a transform is not one", inst.id)
                 };
                 let err = |source| ExecError::Compile {
                     node: inst.id.clone(),
                     source,
                 };
-                match (inst.node.lowering(), spectral) {
-                    (Lowering::Kernels(k), None) => Ok(Compiled::plain(
+                // A transform that hosts a spectral node writes the latter's output.
+                let (outputs, hosted) = match fold {
+                    TransformFold::Hosts(f) => (std::slice::from_ref(&f.output), Some(f.node)),
+                    _ => (outputs.as_slice(), None),
+                };
+                let io = self.node_io(inputs, outputs, scratch, parity);
+                let Some(s) = hosted.map(|b| &g.nodes[b]) else {
+                    let dispatches = t.compile(cx, &io, fold.folding(), None).map_err(err)?;
+                    return Ok(Compiled::plain(
                         inst.id.clone(),
                         inst.kind.to_string(),
-                        if *first_pass_folded {
-                            k.compile_after_folded_first_pass(cx, &io).map_err(err)?
-                        } else {
-                            k.compile(cx, &io).map_err(err)?
-                        },
-                    )),
-                    (Lowering::Kernels(k), Some(f)) => {
-                        let s = &g.nodes[f.node];
-                        let Lowering::Spectral(body) = s.node.lowering() else {
-                            panic!("folded node `{}` is not spectral", s.id)
-                        };
-                        Ok(Compiled::plain(
-                            format!("{} + {}", inst.id, s.id),
-                            format!("{}+{}", inst.kind, s.kind),
-                            k.compile_spectral(cx, &io, &body, f.inverse.is_some())
-                                .map_err(err)?,
-                        ))
-                    }
-                    (Lowering::Spectral(body), None) => Ok(Compiled::plain(
-                        inst.id.clone(),
-                        inst.kind.to_string(),
-                        vec![spectral_dispatch(cx, &body, &io).map_err(err)?],
-                    )),
-                    _ => panic!(
-                        "node `{}` scheduled as a single launch cannot run as one",
-                        inst.id
-                    ),
-                }
+                        dispatches,
+                    ));
+                };
+                let Lowering::Spectral(body) = s.node.lowering() else {
+                    panic!("folded node `{}` is not spectral", s.id)
+                };
+                Ok(Compiled::plain(
+                    format!("{} + {}", inst.id, s.id),
+                    format!("{}+{}", inst.kind, s.kind),
+                    t.compile(cx, &io, fold.folding(), Some(&body))
+                        .map_err(err)?,
+                ))
             }
             Launch::Fused(k) => {
                 let ids: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].id.as_str()).collect();
@@ -411,15 +429,7 @@ impl<'a> Program<'a> {
                 let Lowering::Iterative(it) = inst.node.lowering() else {
                     panic!("node `{}` scheduled as a loop does not iterate", inst.id)
                 };
-                let slot = |v: ValueId| Slot {
-                    buffer: self.buffer(v, parity),
-                    ty: self.plan.values[v].ty,
-                };
-                let io = NodeIo {
-                    inputs: inputs.iter().map(|v| v.map(slot)).collect(),
-                    outputs: outputs.iter().map(|&v| slot(v)).collect(),
-                    scratch: scratch.iter().map(|&v| self.buffer(v, parity)).collect(),
-                };
+                let io = self.node_io(inputs, outputs, scratch, parity);
                 let kernels = it.compile(cx, &io).map_err(|source| ExecError::Compile {
                     node: inst.id.clone(),
                     source,
@@ -946,40 +956,6 @@ impl<'a> Program<'a> {
             .chain(self.step[0].iter().map(|c| (Phase::Step, c.label.clone())))
             .collect()
     }
-}
-
-/// A spectral node that is not folded into a transform: its function over every wave
-/// vector of its input.
-fn spectral_dispatch(
-    cx: &mut CompileCtx,
-    body: &SpectralBody,
-    io: &NodeIo,
-) -> Result<Dispatch, CompileError> {
-    let input = io.inputs[0]
-        .ok_or_else(|| CompileError::Unsupported("a spectral node needs its input".into()))?;
-    let out = io.outputs[0];
-    let source = crate::plan::spectral::standalone_source(body, &out.ty, true);
-    let mut bindings = vec![
-        Binding::StorageRead,
-        Binding::StorageRead,
-        Binding::StorageReadWrite,
-    ];
-    if body.uses_step {
-        bindings.push(Binding::StorageRead);
-    }
-    let kernel = cx.kernel(&KernelSpec::new("spectral", source, &bindings))?;
-    let params = cx.table("spectral params", bytemuck::cast_slice(&body.param_words()));
-    let cells = match out.ty {
-        ValueType::ComplexGrid { comps, .. } | ValueType::HalfComplexGrid { comps, .. } => {
-            out.ty.words() / 2 / comps.max(1) as u64
-        }
-        _ => 0,
-    };
-    let mut buffers = vec![&params, input.buffer, out.buffer];
-    if body.uses_step {
-        buffers.push(cx.clock);
-    }
-    Ok(cx.dispatch(&kernel, &buffers, cx.grid_1d(cells, WG_1D)))
 }
 
 fn engine_err(source: CompileError) -> ExecError {

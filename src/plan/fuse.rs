@@ -37,7 +37,7 @@ pub enum Unit {
     Single(usize),
     /// Pointwise members in order, each with whether its output must be stored.
     Group(Vec<(usize, bool)>),
-    /// A transform that applies a spectral node in its last pass (see `spectral.rs`),
+    /// A transform that applies a spectral node in its last pass (see `fold.rs`),
     /// and with `inverse` also the first pass of the inverse transform after it.
     Folded {
         transform: usize,

@@ -5,10 +5,10 @@
 //! and assigns buffers with reuse. A plan needs no GPU: `mesoflow inspect` prints it and
 //! tests check it on machines without one. The executor compiles it afterwards.
 
+mod fold;
 mod fuse;
 mod memory;
 mod show;
-pub mod spectral;
 
 use std::cmp::Reverse;
 use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
@@ -18,7 +18,8 @@ pub use show::{human_bytes, to_dot, to_text};
 
 use crate::gpu::DeviceCaps;
 use crate::graph::{Graph, Problem, Problems, Source};
-use crate::node::{Folding, Lowering};
+use crate::node::Lowering;
+use crate::transform::Folding;
 use crate::value::ValueType;
 
 /// What the caller asks of the planner.
@@ -96,22 +97,54 @@ pub struct FoldedSpectral {
     pub inverse: Option<usize>,
 }
 
+/// How a transform's launch shares passes with its neighbours (see `fold.rs`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TransformFold {
+    /// Every pass of its own.
+    Alone,
+    /// Applies a spectral node in its last pass (its own output is never stored).
+    Hosts(FoldedSpectral),
+    /// An inverse transform whose first pass ran in the last pass of the forward
+    /// transform that hosts the spectral node it reads.
+    FirstPassElsewhere,
+}
+
+impl TransformFold {
+    /// What the transform's recipe, dispatches and notes follow.
+    pub fn folding(&self) -> Folding {
+        match self {
+            TransformFold::Alone => Folding::Alone,
+            TransformFold::Hosts(FoldedSpectral { inverse: None, .. }) => Folding::Spectral,
+            TransformFold::Hosts(FoldedSpectral {
+                inverse: Some(_), ..
+            }) => Folding::SpectralThenInverse,
+            TransformFold::FirstPassElsewhere => Folding::FirstPassFolded,
+        }
+    }
+}
+
 /// One unit of GPU work.
 #[derive(Clone, Debug)]
 pub enum Launch {
-    /// A node that records its own dispatches (or a spectral node's kernel).
+    /// A node that records its own dispatches, or a spectral node's kernel.
     Node {
         node: usize,
         inputs: Vec<Option<ValueId>>,
-        /// With `spectral`, the node's own output is never stored (a register value).
         outputs: Vec<ValueId>,
         scratch: Vec<ValueId>,
         /// The node's own decisions for these inputs (see `Node::notes`).
         notes: Vec<String>,
-        spectral: Option<FoldedSpectral>,
-        /// An inverse transform whose first pass the launch that folds the spectral
-        /// node it reads ran (see `spectral.rs`).
-        first_pass_folded: bool,
+    },
+    /// A transform (see `crate::transform`), with what it folds in.
+    Transform {
+        node: usize,
+        inputs: Vec<Option<ValueId>>,
+        /// When it hosts a spectral node, its own output is never stored (a register
+        /// value): the launch writes the spectral node's output instead.
+        outputs: Vec<ValueId>,
+        scratch: Vec<ValueId>,
+        notes: Vec<String>,
+        fold: TransformFold,
     },
     /// One generated kernel for a chain of element-wise nodes.
     Fused(FusedKernel),
@@ -765,7 +798,7 @@ impl<'g> Planner<'g> {
                 escapes: &escapes,
             };
             let units = fuse::group(&ctx);
-            let units = spectral::fold(&ctx, units, self.caps, &input_types);
+            let units = fold::fold(&ctx, units, self.caps, &input_types);
             let mut launches = Vec::new();
             for unit in units {
                 let launch = b.lower(
@@ -791,7 +824,7 @@ impl<'g> Planner<'g> {
                     escapes: &escapes,
                 };
                 let units = fuse::group(&body_ctx);
-                let units = spectral::fold(&body_ctx, units, self.caps, &input_types);
+                let units = fold::fold(&body_ctx, units, self.caps, &input_types);
                 let body_launches: Vec<Launch> = units
                     .into_iter()
                     .map(|u| b.lower(g, &self, phase, u, &next_claimed, &output_sources))
@@ -915,6 +948,29 @@ impl<'g> Planner<'g> {
     }
 }
 
+/// What `inspect` says of a transform's share in a fold.
+fn fold_notes(g: &Graph, fold: &TransformFold) -> Vec<String> {
+    match fold {
+        TransformFold::Alone => Vec::new(),
+        TransformFold::Hosts(f) => {
+            let mut notes = vec![format!(
+                "folds spectral node `{}` ({}) into its last pass",
+                g.nodes[f.node].id, g.nodes[f.node].kind
+            )];
+            if let Some(c) = f.inverse {
+                notes.push(format!(
+                    "and after it the first pass of `{}` ({}): the lines go back before they are stored",
+                    g.nodes[c].id, g.nodes[c].kind
+                ));
+            }
+            notes
+        }
+        TransformFold::FirstPassElsewhere => {
+            vec!["starts at its second pass: its first ran in the forward transform's last".into()]
+        }
+    }
+}
+
 fn unit_node(u: &fuse::Unit) -> usize {
     match u {
         fuse::Unit::Single(n) => *n,
@@ -994,18 +1050,12 @@ impl Builder {
                 Storage::Register
             }
         };
-        let (folded, inverse) = match unit {
-            fuse::Unit::Folded {
-                spectral, inverse, ..
-            } => (Some(spectral), inverse),
-            _ => (None, None),
-        };
-        let first_pass_folded = matches!(unit, fuse::Unit::AfterFold(_));
         match unit {
             fuse::Unit::Single(n)
             | fuse::Unit::AfterFold(n)
             | fuse::Unit::Folded { transform: n, .. } => {
                 let inst = &g.nodes[n];
+                let hosts = matches!(unit, fuse::Unit::Folded { .. });
                 let types = p.node_types[n].clone().flatten().expect("present node");
                 let inputs = inst
                     .inputs
@@ -1015,8 +1065,8 @@ impl Builder {
                 let mut outputs = Vec::new();
                 for (port, t) in types.iter().enumerate() {
                     let src = Source::Node { node: n, port };
-                    // A transform that folds a spectral node stores only the latter.
-                    let st = if folded.is_some() {
+                    // A transform that hosts a spectral node stores only the latter's output.
+                    let st = if hosts {
                         Storage::Register
                     } else {
                         storage_for(src, true)
@@ -1024,16 +1074,24 @@ impl Builder {
                     let name = g.source_name(src);
                     outputs.push(self.add(src, phase, name, *t, st));
                 }
-                let spectral = folded.map(|b| {
-                    let src = Source::Node { node: b, port: 0 };
-                    let t = p.node_types[b].clone().flatten().expect("present node")[0];
-                    let st = storage_for(src, true);
-                    FoldedSpectral {
-                        node: b,
-                        output: self.add(src, phase, g.source_name(src), t, st),
+                let fold = match unit {
+                    fuse::Unit::Folded {
+                        spectral: b,
                         inverse,
+                        ..
+                    } => {
+                        let src = Source::Node { node: b, port: 0 };
+                        let t = p.node_types[b].clone().flatten().expect("present node")[0];
+                        let st = storage_for(src, true);
+                        TransformFold::Hosts(FoldedSpectral {
+                            node: b,
+                            output: self.add(src, phase, g.source_name(src), t, st),
+                            inverse,
+                        })
                     }
-                });
+                    fuse::Unit::AfterFold(_) => TransformFold::FirstPassElsewhere,
+                    _ => TransformFold::Alone,
+                };
                 let scratch = p.scratch[n]
                     .iter()
                     .enumerate()
@@ -1052,41 +1110,31 @@ impl Builder {
                 let input_types: Vec<Option<ValueType>> =
                     inst.inputs.iter().map(|s| p.source_type(*s)).collect();
                 let mut notes = inst.node.notes(&input_types);
-                if let Lowering::Kernels(k) = inst.node.lowering() {
-                    let folding = match (folded, inverse) {
-                        (Some(_), Some(_)) => Folding::SpectralThenInverse,
-                        (Some(_), None) => Folding::Spectral,
-                        _ if first_pass_folded => Folding::FirstPassFolded,
-                        _ => Folding::Alone,
-                    };
-                    notes.extend(k.device_notes(&input_types, p.caps, folding));
-                }
-                if let Some(b) = folded {
-                    notes.push(format!(
-                        "folds spectral node `{}` ({}) into its last pass",
-                        g.nodes[b].id, g.nodes[b].kind
-                    ));
-                }
-                if let Some(c) = inverse {
-                    notes.push(format!(
-                        "and after it the first pass of `{}` ({}): the lines go back before they are stored",
-                        g.nodes[c].id, g.nodes[c].kind
-                    ));
-                }
-                if first_pass_folded {
-                    notes.push(
-                        "starts at its second pass: its first ran in the forward transform's last"
-                            .into(),
-                    );
-                }
-                Launch::Node {
-                    node: n,
-                    inputs,
-                    outputs,
-                    scratch,
-                    notes,
-                    spectral,
-                    first_pass_folded,
+                match inst.node.lowering() {
+                    Lowering::Transform(t) => {
+                        notes.extend(t.device_notes(&input_types, p.caps, fold.folding()));
+                        notes.extend(fold_notes(g, &fold));
+                        Launch::Transform {
+                            node: n,
+                            inputs,
+                            outputs,
+                            scratch,
+                            notes,
+                            fold,
+                        }
+                    }
+                    lowering => {
+                        if let Lowering::Kernels(k) = lowering {
+                            notes.extend(k.device_notes(&input_types, p.caps));
+                        }
+                        Launch::Node {
+                            node: n,
+                            inputs,
+                            outputs,
+                            scratch,
+                            notes,
+                        }
+                    }
                 }
             }
             fuse::Unit::Group(members) => {
@@ -1109,7 +1157,9 @@ impl Launch {
     /// Values the launch reads.
     pub fn reads(&self) -> Vec<ValueId> {
         match self {
-            Launch::Node { inputs, .. } => inputs.iter().flatten().copied().collect(),
+            Launch::Node { inputs, .. } | Launch::Transform { inputs, .. } => {
+                inputs.iter().flatten().copied().collect()
+            }
             Launch::Fused(k) => k.inputs.clone(),
             Launch::Copy { src, .. } => vec![*src],
             Launch::Loop { inputs, body, .. } => {
@@ -1129,16 +1179,25 @@ impl Launch {
     pub fn writes(&self) -> Vec<ValueId> {
         match self {
             Launch::Node {
+                outputs, scratch, ..
+            } => outputs.iter().chain(scratch).copied().collect(),
+            Launch::Transform {
                 outputs,
                 scratch,
-                spectral,
+                fold,
                 ..
-            } => outputs
-                .iter()
-                .chain(scratch)
-                .copied()
-                .chain(spectral.map(|f| f.output))
-                .collect(),
+            } => {
+                let hosted = match fold {
+                    TransformFold::Hosts(f) => Some(f.output),
+                    _ => None,
+                };
+                outputs
+                    .iter()
+                    .chain(scratch)
+                    .copied()
+                    .chain(hosted)
+                    .collect()
+            }
             Launch::Fused(k) => k.outputs.clone(),
             Launch::Copy { dst, .. } => vec![*dst],
             Launch::Loop {
@@ -1158,9 +1217,14 @@ impl Launch {
     /// The graph nodes it runs.
     pub fn nodes(&self) -> Vec<usize> {
         match self {
-            Launch::Node { node, spectral, .. } => std::iter::once(*node)
-                .chain(spectral.map(|f| f.node))
-                .collect(),
+            Launch::Node { node, .. } => vec![*node],
+            Launch::Transform { node, fold, .. } => {
+                let hosted = match fold {
+                    TransformFold::Hosts(f) => Some(f.node),
+                    _ => None,
+                };
+                std::iter::once(*node).chain(hosted).collect()
+            }
             Launch::Fused(k) => k.nodes.clone(),
             Launch::Copy { .. } => vec![],
             Launch::Loop { node, body, .. } => std::iter::once(*node)

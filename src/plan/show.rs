@@ -2,7 +2,7 @@
 
 use std::fmt::Write;
 
-use super::{BufferRole, Launch, Plan, Storage, ValueId};
+use super::{BufferRole, Launch, Plan, Storage, TransformFold, ValueId};
 use crate::graph::{Graph, Source};
 
 /// Bytes for people.
@@ -61,6 +61,34 @@ fn launch_lines_indented(
     }
 }
 
+/// A node's or a transform's launch: its heading (with `head` after the node), notes,
+/// reads and writes.
+#[allow(clippy::too_many_arguments)]
+fn node_text(
+    out: &mut String,
+    g: &Graph,
+    plan: &Plan,
+    i: usize,
+    node: usize,
+    head: &str,
+    inputs: &[Option<ValueId>],
+    outputs: &[ValueId],
+    scratch: &[ValueId],
+    notes: &[String],
+) {
+    let n = &g.nodes[node];
+    writeln!(out, "  {:>3}. {} ({}){head}", i + 1, n.id, n.kind).unwrap();
+    for note in notes {
+        writeln!(out, "         note   {note}").unwrap();
+    }
+    for v in inputs.iter().flatten() {
+        writeln!(out, "         reads  {}", value(plan, *v)).unwrap();
+    }
+    for v in outputs.iter().chain(scratch) {
+        writeln!(out, "         writes {}", value(plan, *v)).unwrap();
+    }
+}
+
 fn launch_text(out: &mut String, g: &Graph, plan: &Plan, i: usize, l: &Launch) {
     {
         match l {
@@ -92,33 +120,32 @@ fn launch_text(out: &mut String, g: &Graph, plan: &Plan, i: usize, l: &Launch) {
                 outputs,
                 scratch,
                 notes,
-                spectral,
-                first_pass_folded,
+            } => node_text(out, g, plan, i, *node, "", inputs, outputs, scratch, notes),
+            Launch::Transform {
+                node,
+                inputs,
+                outputs,
+                scratch,
+                notes,
+                fold,
             } => {
-                let n = &g.nodes[*node];
-                write!(out, "  {:>3}. {} ({})", i + 1, n.id, n.kind).unwrap();
-                if let Some(f) = spectral {
-                    let s = &g.nodes[f.node];
-                    write!(out, " + {} ({}), folded", s.id, s.kind).unwrap();
-                    if let Some(c) = f.inverse {
-                        let c = &g.nodes[c];
-                        write!(out, " + first pass of {} ({})", c.id, c.kind).unwrap();
+                let mut head = String::new();
+                match fold {
+                    TransformFold::Hosts(f) => {
+                        let s = &g.nodes[f.node];
+                        write!(head, " + {} ({}), folded", s.id, s.kind).unwrap();
+                        if let Some(c) = f.inverse {
+                            let c = &g.nodes[c];
+                            write!(head, " + first pass of {} ({})", c.id, c.kind).unwrap();
+                        }
                     }
+                    TransformFold::FirstPassElsewhere => head.push_str(", from its second pass"),
+                    TransformFold::Alone => {}
                 }
-                if *first_pass_folded {
-                    write!(out, ", from its second pass").unwrap();
-                }
-                writeln!(out).unwrap();
-                for note in notes {
-                    writeln!(out, "         note   {note}").unwrap();
-                }
-                for v in inputs.iter().flatten() {
-                    writeln!(out, "         reads  {}", value(plan, *v)).unwrap();
-                }
-                for v in outputs.iter().chain(scratch) {
-                    writeln!(out, "         writes {}", value(plan, *v)).unwrap();
-                }
-                if let Some(f) = spectral {
+                node_text(
+                    out, g, plan, i, *node, &head, inputs, outputs, scratch, notes,
+                );
+                if let TransformFold::Hosts(f) = fold {
                     writeln!(out, "         writes {}", value(plan, f.output)).unwrap();
                 }
             }

@@ -1051,8 +1051,8 @@ fn bad_settings_get_clear_errors() {
     assert!(!ran.iter().any(|id| id.contains("torque")), "{ran:?}");
     assert!(p.step.iter().any(|l| matches!(
         l,
-        mesoflow::plan::Launch::Node {
-            spectral: Some(_),
+        mesoflow::plan::Launch::Transform {
+            fold: mesoflow::plan::TransformFold::Hosts(_),
             ..
         }
     )));

@@ -9,7 +9,7 @@ use mesoflow::exec::{Profile, Program, RunOptions};
 use mesoflow::gpu::{DeviceCaps, GpuContext, KernelCache};
 use mesoflow::graph::Graph;
 use mesoflow::nodes::fft::{codegen, next_friendly, plan};
-use mesoflow::plan::{Launch, PlanOptions};
+use mesoflow::plan::{Launch, PlanOptions, TransformFold};
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::{Rng, gpu, load, reference, single_node_graph, tmpdir, write_graph};
@@ -406,7 +406,7 @@ fn naga_validate(src: &str) {
 
 #[test]
 fn generated_passes_validate_with_naga() {
-    let body = mesoflow::node::SpectralBody {
+    let body = mesoflow::transform::SpectralBody {
         body: "return v;".into(),
         ..Default::default()
     };
@@ -613,8 +613,8 @@ fn spectral_nodes_fold_into_the_forward_transform() {
         assert!(
             matches!(
                 &fused_plan.step[0],
-                Launch::Node {
-                    spectral: Some(_),
+                Launch::Transform {
+                    fold: TransformFold::Hosts(_),
                     ..
                 }
             ),
@@ -641,8 +641,8 @@ fn spectral_nodes_fold_into_the_forward_transform() {
         let inverse_folded = conv_plan.step.iter().any(|l| {
             matches!(
                 l,
-                Launch::Node {
-                    spectral: Some(mesoflow::plan::FoldedSpectral {
+                Launch::Transform {
+                    fold: TransformFold::Hosts(mesoflow::plan::FoldedSpectral {
                         inverse: Some(_),
                         ..
                     }),
@@ -653,8 +653,8 @@ fn spectral_nodes_fold_into_the_forward_transform() {
         let after = conv_plan.step.iter().any(|l| {
             matches!(
                 l,
-                Launch::Node {
-                    first_pass_folded: true,
+                Launch::Transform {
+                    fold: TransformFold::FirstPassElsewhere,
                     ..
                 }
             )
@@ -692,8 +692,8 @@ fn a_spectrum_with_other_readers_is_not_folded() {
     assert_eq!(p.step.len(), 3);
     assert!(p.step.iter().all(|l| !matches!(
         l,
-        Launch::Node {
-            spectral: Some(_),
+        Launch::Transform {
+            fold: TransformFold::Hosts(_),
             ..
         }
     )));
