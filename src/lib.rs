@@ -11,6 +11,7 @@ pub mod exec;
 pub mod expr;
 pub mod gpu;
 pub mod graph;
+pub mod ids;
 pub mod node;
 pub mod npy;
 pub mod plan;

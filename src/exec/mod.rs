@@ -17,8 +17,9 @@ use crate::gpu::{
     NodeIo, Slot, WG_1D,
 };
 use crate::graph::Graph;
+use crate::ids::IdVec;
 use crate::node::{Decision, IterativeKernels, Lowering};
-use crate::plan::{Launch, Phase, Plan, Storage, TransformFold, ValueId};
+use crate::plan::{BufferId, Launch, Phase, Plan, Storage, TransformFold, ValueId};
 use crate::transform;
 use crate::value::HostArray;
 
@@ -125,7 +126,7 @@ pub struct Program<'a> {
     plan: &'a Plan,
     input_buffers: BTreeMap<usize, wgpu::Buffer>,
     state_buffers: Vec<[wgpu::Buffer; 2]>,
-    buffers: Vec<wgpu::Buffer>,
+    buffers: IdVec<BufferId, wgpu::Buffer>,
     clock: wgpu::Buffer,
     prologue: Vec<Compiled>,
     /// Step launches for even and odd steps (they differ only in state buffers).

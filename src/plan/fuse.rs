@@ -13,9 +13,11 @@ use std::cmp::Reverse;
 use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
 use std::fmt::Write;
 
+use super::infer::Inferred;
 use super::{PlanValue, ValueId};
 use crate::gpu::WG_1D;
 use crate::graph::{Graph, Source};
+use crate::ids::IdVec;
 use crate::node::Lowering;
 use crate::value::ValueType;
 
@@ -24,7 +26,7 @@ const MAX_BINDINGS: usize = 8;
 
 pub struct FuseCtx<'a> {
     pub g: &'a Graph,
-    pub types: &'a [Option<Option<Vec<ValueType>>>],
+    pub types: &'a [Inferred],
     pub order: &'a [usize],
     pub fuse: bool,
     /// Whether a node output is needed after the phase (an output, a state's next value).
@@ -65,7 +67,7 @@ pub struct FusedKernel {
 }
 
 fn out_type(ctx: &FuseCtx, n: usize) -> Option<ValueType> {
-    ctx.types[n].as_ref()?.as_ref()?.first().copied()
+    ctx.types[n].outputs()?.first().copied()
 }
 
 /// Values element-wise kernels run over as flat f32 words: spectra too (only real-linear
@@ -312,7 +314,7 @@ pub fn generate(
     members: &[(usize, bool)],
     member_outputs: &[ValueId],
     get: &dyn Fn(Source) -> Option<ValueId>,
-    values: &[PlanValue],
+    values: &IdVec<ValueId, PlanValue>,
 ) -> FusedKernel {
     let len = values[member_outputs[0]].ty.words();
     let local: HashMap<Source, usize> = members

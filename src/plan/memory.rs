@@ -9,7 +9,8 @@
 
 use std::collections::HashMap;
 
-use super::{BufferRole, Plan, PlanBuffer, Storage, ValueId};
+use super::{BufferId, BufferRole, Plan, PlanBuffer, Storage, ValueId};
+use crate::ids::IdVec;
 
 /// Smallest buffer: bindings of zero bytes are invalid, and a value may be empty (N = 0).
 const MIN_BYTES: u64 = 16;
@@ -32,22 +33,22 @@ pub fn assign(plan: &mut Plan) {
         }
     }
 
-    let mut buffers: Vec<PlanBuffer> = Vec::new();
-    let mut assigned: HashMap<ValueId, usize> = HashMap::new();
+    let mut buffers: IdVec<BufferId, PlanBuffer> = IdVec::new();
+    let mut assigned: HashMap<ValueId, BufferId> = HashMap::new();
     // Own buffers first: outputs and persistent values are never shared.
-    for (v, val) in plan.values.iter().enumerate() {
+    for (v, val) in plan.values.iter_enumerated() {
         if let Storage::Pending(role @ (BufferRole::Output | BufferRole::Persistent)) = val.storage
         {
-            buffers.push(PlanBuffer {
+            let b = buffers.push(PlanBuffer {
                 bytes: padded(val.ty.bytes()),
                 role,
                 holds: vec![val.name.clone()],
             });
-            assigned.insert(v, buffers.len() - 1);
+            assigned.insert(v, b);
         }
     }
     // Pooled values by interval.
-    let mut free: Vec<usize> = Vec::new();
+    let mut free: Vec<BufferId> = Vec::new();
     let mut pool_without_reuse = 0;
     for (i, launch) in launches.iter().enumerate() {
         for v in launch.writes() {
@@ -79,14 +80,11 @@ pub fn assign(plan: &mut Plan) {
                     buffers[b].bytes = buffers[b].bytes.max(need);
                     b
                 }
-                None => {
-                    buffers.push(PlanBuffer {
-                        bytes: need,
-                        role: BufferRole::Pool,
-                        holds: Vec::new(),
-                    });
-                    buffers.len() - 1
-                }
+                None => buffers.push(PlanBuffer {
+                    bytes: need,
+                    role: BufferRole::Pool,
+                    holds: Vec::new(),
+                }),
             };
             buffers[b].holds.push(val.name.clone());
             assigned.insert(v, b);

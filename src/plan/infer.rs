@@ -1,0 +1,280 @@
+//! Pass 3, type inference: every demanded node's output types from its inputs', in
+//! dependency order (prologue first, then the states, then the step), with the checks
+//! that need types (ports, states, outputs that an absent input makes impossible).
+//! An absent optional input makes the nodes that require it absent, and so on downstream.
+
+use super::demand::Demand;
+use crate::gpu::DeviceCaps;
+use crate::graph::{Graph, Problem, Problems, Source};
+use crate::value::ValueType;
+
+/// What inference found for one node.
+#[derive(Clone, Debug, Default)]
+pub(super) enum Inferred {
+    /// Not demanded (or not reached yet).
+    #[default]
+    Unknown,
+    /// It needs a value that is absent: it drops out, with what depends on it.
+    Absent,
+    Present {
+        outputs: Vec<ValueType>,
+        /// Scratch buffers in bytes.
+        scratch: Vec<u64>,
+    },
+}
+
+impl Inferred {
+    pub fn outputs(&self) -> Option<&[ValueType]> {
+        match self {
+            Inferred::Present { outputs, .. } => Some(outputs),
+            _ => None,
+        }
+    }
+
+    pub fn is_present(&self) -> bool {
+        matches!(self, Inferred::Present { .. })
+    }
+}
+
+/// The types of everything demanded.
+pub(super) struct Types {
+    pub nodes: Vec<Inferred>,
+    pub inputs: Vec<Option<ValueType>>,
+    pub states: Vec<Option<ValueType>>,
+}
+
+impl Types {
+    pub fn of(&self, s: Source) -> Option<ValueType> {
+        match s {
+            Source::Input(i) => self.inputs[i],
+            Source::State(i) => self.states[i],
+            Source::Node { node, port } => self.nodes[node].outputs()?.get(port).copied(),
+            Source::Absent => None,
+        }
+    }
+
+    /// The types a node's inputs have (`None`: absent).
+    pub fn inputs_of(&self, g: &Graph, n: usize) -> Vec<Option<ValueType>> {
+        g.nodes[n].inputs.iter().map(|s| self.of(*s)).collect()
+    }
+
+    pub fn scratch(&self, n: usize) -> &[u64] {
+        match &self.nodes[n] {
+            Inferred::Present { scratch, .. } => scratch,
+            _ => &[],
+        }
+    }
+}
+
+pub(super) fn infer(
+    g: &Graph,
+    demand: &Demand,
+    input_types: &[Option<ValueType>],
+    outputs: &[usize],
+    caps: &DeviceCaps,
+) -> Result<Types, Problems> {
+    let mut cx = Inference {
+        g,
+        caps,
+        problems: Vec::new(),
+        types: Types {
+            nodes: vec![Inferred::Unknown; g.nodes.len()],
+            inputs: input_types.to_vec(),
+            states: vec![None; g.states.len()],
+        },
+    };
+    for &n in &demand.prologue {
+        cx.node(n);
+    }
+    for &s in &demand.states {
+        let init = g.states[s].init;
+        let t = cx.types.of(init);
+        if t.is_none() {
+            cx.fail(format!(
+                "state `{}` has no initial value: `{}` is absent (an optional input not given?)",
+                g.states[s].name,
+                g.source_name(init)
+            ));
+        }
+        cx.types.states[s] = t;
+    }
+    for &n in &demand.step {
+        cx.node(n);
+    }
+    cx.done()?;
+    cx.check_states(demand);
+    cx.check_outputs(outputs);
+    cx.done()?;
+    Ok(cx.types)
+}
+
+struct Inference<'g> {
+    g: &'g Graph,
+    caps: &'g DeviceCaps,
+    problems: Vec<Problem>,
+    types: Types,
+}
+
+impl Inference<'_> {
+    fn fail(&mut self, msg: String) {
+        self.problems.push(Problem::file(&self.g.file, msg));
+    }
+
+    fn done(&mut self) -> Result<(), Problems> {
+        if self.problems.is_empty() {
+            Ok(())
+        } else {
+            Err(Problems(std::mem::take(&mut self.problems)))
+        }
+    }
+
+    /// Infers a node's output types, its producers' first (the graph is acyclic apart
+    /// from state, whose type is known before the step is inferred).
+    fn node(&mut self, n: usize) {
+        if !matches!(self.types.nodes[n], Inferred::Unknown) {
+            return;
+        }
+        let g = self.g;
+        let inst = &g.nodes[n];
+        for (port, s) in inst.input_ports.iter().zip(&inst.inputs) {
+            if let Source::Node { node, .. } = s
+                && !port.iterate
+            {
+                self.node(*node);
+            }
+        }
+        if inst.input_ports.iter().any(|p| p.iterate) {
+            // An iterative node's loop body reads the node's own outputs: type the node
+            // without its loop input first, then the body, then the node again in full.
+            let reported = self.problems.len();
+            self.signature(n, true);
+            self.problems.truncate(reported);
+            if self.types.nodes[n].is_present() {
+                for (port, s) in inst.input_ports.iter().zip(&inst.inputs) {
+                    if let Source::Node { node, .. } = s
+                        && port.iterate
+                    {
+                        self.node(*node);
+                    }
+                }
+            }
+        }
+        self.signature(n, false);
+    }
+
+    /// A node's output types from its inputs' (already inferred); with
+    /// `without_loop_input`, the input closing an iterative node's loop counts as absent.
+    fn signature(&mut self, n: usize, without_loop_input: bool) {
+        let g = self.g;
+        let inst = &g.nodes[n];
+        let mut types = Vec::new();
+        let mut absent = false;
+        let mut ok = true;
+        for (port, src) in inst.input_ports.iter().zip(&inst.inputs) {
+            if without_loop_input && port.iterate {
+                types.push(None);
+                continue;
+            }
+            let t = self.types.of(*src);
+            match t {
+                None if !port.optional => absent = true,
+                Some(t) if !port.ty.accepts(&t) => {
+                    ok = false;
+                    self.problems.push(Problem::port(
+                        &inst.file,
+                        &inst.id,
+                        port.name,
+                        format!(
+                            "expects {}, got {t} from `{}`",
+                            port.ty,
+                            g.source_name(*src)
+                        ),
+                    ));
+                }
+                _ => {}
+            }
+            types.push(t);
+        }
+        if absent || !ok {
+            self.types.nodes[n] = Inferred::Absent;
+            return;
+        }
+        match inst.node.infer(&types) {
+            Ok(sig) => {
+                assert_eq!(
+                    sig.outputs.len(),
+                    inst.output_ports.len(),
+                    "node kind `{}` inferred a type per output port",
+                    inst.kind
+                );
+                for (port, t) in inst.output_ports.iter().zip(&sig.outputs) {
+                    if t.bytes() > self.caps.max_binding {
+                        self.problems.push(Problem::port(
+                            &inst.file,
+                            &inst.id,
+                            port.name,
+                            format!(
+                                "output {t} takes {} MiB; this device binds at most {} MiB per buffer",
+                                t.bytes() >> 20,
+                                self.caps.max_binding >> 20
+                            ),
+                        ));
+                    }
+                }
+                self.types.nodes[n] = Inferred::Present {
+                    outputs: sig.outputs,
+                    scratch: sig.scratch,
+                };
+            }
+            Err(e) => {
+                self.problems
+                    .push(Problem::port(&inst.file, &inst.id, &e.port, e.message));
+                self.types.nodes[n] = Inferred::Absent;
+            }
+        }
+    }
+
+    /// A state's next value has the state's type and exists.
+    fn check_states(&mut self, demand: &Demand) {
+        let g = self.g;
+        for &s in &demand.states {
+            let st = &g.states[s];
+            match (self.types.states[s], self.types.of(st.next)) {
+                (Some(a), Some(b)) if a != b => self.fail(format!(
+                    "state `{}` is {a} but its next value `{}` is {b}",
+                    st.name,
+                    g.source_name(st.next)
+                )),
+                (Some(_), None) => self.fail(format!(
+                    "state `{}`: next value `{}` is absent",
+                    st.name,
+                    g.source_name(st.next)
+                )),
+                _ => {}
+            }
+        }
+    }
+
+    /// A requested output exists (an absent optional input may make it impossible).
+    fn check_outputs(&mut self, outputs: &[usize]) {
+        let g = self.g;
+        for &o in outputs {
+            let out = &g.outputs[o];
+            if self.types.of(out.source).is_some() {
+                continue;
+            }
+            let missing: Vec<&str> = g
+                .inputs
+                .iter()
+                .zip(&self.types.inputs)
+                .filter(|(d, t)| d.optional && t.is_none())
+                .map(|(d, _)| d.name.as_str())
+                .collect();
+            self.fail(format!(
+                "output `{}` cannot be computed: it needs an optional input that was not given ({})",
+                out.name,
+                missing.join(", ")
+            ));
+        }
+    }
+}
