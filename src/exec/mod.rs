@@ -19,7 +19,7 @@ use crate::gpu::{
 use crate::graph::Graph;
 use crate::ids::IdVec;
 use crate::node::{Decision, IterativeKernels, Lowering};
-use crate::plan::{BufferId, Launch, Phase, Plan, Storage, TransformFold, ValueId};
+use crate::plan::{BufferId, FusedKernel, Launch, Phase, Plan, Storage, TransformFold, ValueId};
 use crate::transform;
 use crate::value::HostArray;
 
@@ -71,6 +71,29 @@ pub struct ProfileRow {
 }
 
 impl ProfileRow {
+    fn of(c: &Compiled) -> Self {
+        ProfileRow {
+            label: c.label.clone(),
+            kinds: c.kinds.clone(),
+            dispatches: c.dispatches.len(),
+            calls: 0,
+            total: Duration::ZERO,
+            samples: Vec::new(),
+            dispatch_samples: c
+                .dispatches
+                .iter()
+                .map(|d| (d.kernel.label.clone(), Vec::new()))
+                .collect(),
+        }
+    }
+
+    /// One more call taking `dt`.
+    fn add(&mut self, dt: Duration) {
+        self.total += dt;
+        self.samples.push(dt);
+        self.calls += 1;
+    }
+
     /// Median time of one call.
     pub fn median(&self) -> Duration {
         let mut s = self.samples.clone();
@@ -90,6 +113,36 @@ pub struct RunStats {
     /// Per-launch GPU times when profiling; `timed_by_gpu` says whether timestamps were used.
     pub profile: Vec<ProfileRow>,
     pub timed_by_gpu: bool,
+}
+
+/// Timestamp queries for the timed units of a profiled step, two per unit.
+struct StepTimer {
+    units: Vec<(usize, Option<usize>)>,
+    queries: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    /// Nanoseconds per tick.
+    period: f64,
+}
+
+impl StepTimer {
+    fn new(gpu: &GpuContext, units: Vec<(usize, Option<usize>)>) -> Self {
+        let count = (2 * units.len()).max(2) as u32;
+        StepTimer {
+            queries: gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("profile"),
+                ty: wgpu::QueryType::Timestamp,
+                count,
+            }),
+            resolve: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("profile resolve"),
+                size: 8 * count as u64,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            }),
+            period: gpu.queue.get_timestamp_period() as f64,
+            units,
+        }
+    }
 }
 
 struct Compiled {
@@ -286,13 +339,13 @@ impl<'a> Program<'a> {
         }
     }
 
+    /// Compiles one launch for a step of the given parity, by its kind.
     fn compile_launch(
         &self,
         cx: &mut CompileCtx,
         l: &Launch,
         parity: usize,
     ) -> Result<Compiled, ExecError> {
-        let g = self.graph;
         match l {
             Launch::Node {
                 node,
@@ -300,29 +353,7 @@ impl<'a> Program<'a> {
                 outputs,
                 scratch,
                 ..
-            } => {
-                let inst = &g.nodes[*node];
-                let io = self.node_io(inputs, outputs, scratch, parity);
-                let err = |source| ExecError::Compile {
-                    node: inst.id.clone(),
-                    source,
-                };
-                let dispatches = match inst.node.lowering() {
-                    Lowering::Kernels(k) => k.compile(cx, &io).map_err(err)?,
-                    Lowering::Spectral(body) => {
-                        vec![transform::standalone_dispatch(cx, &body, &io).map_err(err)?]
-                    }
-                    _ => panic!(
-                        "node `{}` scheduled as a single launch cannot run as one",
-                        inst.id
-                    ),
-                };
-                Ok(Compiled::plain(
-                    inst.id.clone(),
-                    inst.kind.to_string(),
-                    dispatches,
-                ))
-            }
+            } => self.compile_node(cx, *node, &self.node_io(inputs, outputs, scratch, parity)),
             Launch::Transform {
                 node,
                 inputs,
@@ -331,93 +362,16 @@ impl<'a> Program<'a> {
                 fold,
                 ..
             } => {
-                let inst = &g.nodes[*node];
-                let Lowering::Transform(t) = inst.node.lowering() else {
-                    panic!("node `{}` scheduled as a transform is not one", inst.id)
-                };
-                let err = |source| ExecError::Compile {
-                    node: inst.id.clone(),
-                    source,
-                };
                 // A transform that hosts a spectral node writes the latter's output.
-                let (outputs, hosted) = match fold {
-                    TransformFold::Hosts(f) => (std::slice::from_ref(&f.output), Some(f.node)),
-                    _ => (outputs.as_slice(), None),
+                let outputs = match fold {
+                    TransformFold::Hosts(f) => std::slice::from_ref(&f.output),
+                    _ => outputs.as_slice(),
                 };
                 let io = self.node_io(inputs, outputs, scratch, parity);
-                let Some(s) = hosted.map(|b| &g.nodes[b]) else {
-                    let dispatches = t.compile(cx, &io, fold.folding(), None).map_err(err)?;
-                    return Ok(Compiled::plain(
-                        inst.id.clone(),
-                        inst.kind.to_string(),
-                        dispatches,
-                    ));
-                };
-                let Lowering::Spectral(body) = s.node.lowering() else {
-                    panic!("folded node `{}` is not spectral", s.id)
-                };
-                Ok(Compiled::plain(
-                    format!("{} + {}", inst.id, s.id),
-                    format!("{}+{}", inst.kind, s.kind),
-                    t.compile(cx, &io, fold.folding(), Some(&body))
-                        .map_err(err)?,
-                ))
+                self.compile_transform(cx, *node, fold, &io)
             }
-            Launch::Fused(k) => {
-                let ids: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].id.as_str()).collect();
-                let kinds: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].kind).collect();
-                let label = if ids.len() == 1 {
-                    ids[0].to_string()
-                } else {
-                    format!("fused[{}]", ids.join(", "))
-                };
-                let mut bindings = vec![Binding::StorageRead];
-                if k.uses_clock {
-                    bindings.push(Binding::StorageRead);
-                }
-                bindings.extend(k.inputs.iter().map(|_| Binding::StorageRead));
-                bindings.extend(k.outputs.iter().map(|_| Binding::StorageReadWrite));
-                let spec = KernelSpec::new(
-                    format!("pointwise {}", kinds.join("+")),
-                    k.source.clone(),
-                    &bindings,
-                );
-                let kernel = cx.kernel(&spec).map_err(|source| ExecError::Compile {
-                    node: label.clone(),
-                    source,
-                })?;
-                let params = cx.table("pointwise params", bytemuck::cast_slice(&k.params));
-                let mut bufs: Vec<&wgpu::Buffer> = vec![&params];
-                if k.uses_clock {
-                    bufs.push(cx.clock);
-                }
-                bufs.extend(k.inputs.iter().map(|&v| self.buffer(v, parity)));
-                bufs.extend(k.outputs.iter().map(|&v| self.buffer(v, parity)));
-                let d = cx.dispatch(&kernel, &bufs, cx.grid_1d(k.len, WG_1D));
-                Ok(Compiled::plain(label, kinds.join("+"), vec![d]))
-            }
-            Launch::Copy { src, dst } => {
-                let words = self.plan.values[*src].ty.words();
-                let kernel = cx
-                    .kernel(&KernelSpec::new(
-                        "copy",
-                        cx.shader("engine/copy.wgsl").map_err(engine_err)?,
-                        &[
-                            Binding::StorageRead,
-                            Binding::StorageReadWrite,
-                            Binding::Uniform,
-                        ],
-                    ))
-                    .map_err(engine_err)?;
-                let shape = cx.uniform("copy shape", bytemuck::bytes_of(&(words as u32)));
-                let d = cx.dispatch(
-                    &kernel,
-                    &[self.buffer(*src, parity), self.buffer(*dst, parity), &shape],
-                    cx.grid_1d(words, WG_1D),
-                );
-                let label = format!("copy -> {}", self.plan.values[*dst].name);
-                Ok(Compiled::plain(label, "copy".into(), vec![d]))
-            }
+            Launch::Fused(k) => self.compile_fused(cx, k, parity),
+            Launch::Copy { src, dst } => self.compile_copy(cx, *src, *dst, parity),
             Launch::Loop {
                 node,
                 inputs,
@@ -426,40 +380,189 @@ impl<'a> Program<'a> {
                 body,
                 ..
             } => {
-                let inst = &g.nodes[*node];
-                let Lowering::Iterative(it) = inst.node.lowering() else {
-                    panic!("node `{}` scheduled as a loop does not iterate", inst.id)
-                };
                 let io = self.node_io(inputs, outputs, scratch, parity);
-                let kernels = it.compile(cx, &io).map_err(|source| ExecError::Compile {
-                    node: inst.id.clone(),
-                    source,
-                })?;
-                let body = body
-                    .iter()
-                    .map(|l| self.compile_launch(cx, l, parity))
-                    .collect::<Result<Vec<_>, _>>()?;
-                let staging = [0, 1].map(|i| {
-                    self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                        label: Some(&format!("{} status {i}", inst.id)),
-                        size: kernels.status_bytes.max(4).next_multiple_of(4),
-                        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                        mapped_at_creation: false,
-                    })
-                });
-                Ok(Compiled {
-                    label: inst.id.clone(),
-                    kinds: format!("{} (loop of {})", inst.kind, body.len()),
-                    dispatches: Vec::new(),
-                    looped: Some(std::sync::Arc::new(CompiledLoop {
-                        node: *node,
-                        kernels,
-                        body,
-                        staging,
-                    })),
-                })
+                self.compile_loop(cx, *node, body, &io, parity)
             }
         }
+    }
+
+    /// A node that records its own dispatches, or a spectral node run alone.
+    fn compile_node(
+        &self,
+        cx: &mut CompileCtx,
+        node: usize,
+        io: &NodeIo,
+    ) -> Result<Compiled, ExecError> {
+        let inst = &self.graph.nodes[node];
+        let err = |source| ExecError::Compile {
+            node: inst.id.clone(),
+            source,
+        };
+        let dispatches = match inst.node.lowering() {
+            Lowering::Kernels(k) => k.compile(cx, io).map_err(err)?,
+            Lowering::Spectral(body) => {
+                vec![transform::standalone_dispatch(cx, &body, io).map_err(err)?]
+            }
+            _ => panic!(
+                "node `{}` scheduled as a single launch cannot run as one",
+                inst.id
+            ),
+        };
+        Ok(Compiled::plain(
+            inst.id.clone(),
+            inst.kind.to_string(),
+            dispatches,
+        ))
+    }
+
+    /// A transform with what it folds in.
+    fn compile_transform(
+        &self,
+        cx: &mut CompileCtx,
+        node: usize,
+        fold: &TransformFold,
+        io: &NodeIo,
+    ) -> Result<Compiled, ExecError> {
+        let g = self.graph;
+        let inst = &g.nodes[node];
+        let Lowering::Transform(t) = inst.node.lowering() else {
+            panic!("node `{}` scheduled as a transform is not one", inst.id)
+        };
+        let err = |source| ExecError::Compile {
+            node: inst.id.clone(),
+            source,
+        };
+        let TransformFold::Hosts(f) = fold else {
+            let dispatches = t.compile(cx, io, fold.folding(), None).map_err(err)?;
+            return Ok(Compiled::plain(
+                inst.id.clone(),
+                inst.kind.to_string(),
+                dispatches,
+            ));
+        };
+        let s = &g.nodes[f.node];
+        let Lowering::Spectral(body) = s.node.lowering() else {
+            panic!("folded node `{}` is not spectral", s.id)
+        };
+        Ok(Compiled::plain(
+            format!("{} + {}", inst.id, s.id),
+            format!("{}+{}", inst.kind, s.kind),
+            t.compile(cx, io, fold.folding(), Some(&body))
+                .map_err(err)?,
+        ))
+    }
+
+    /// A chain of element-wise nodes as its generated kernel.
+    fn compile_fused(
+        &self,
+        cx: &mut CompileCtx,
+        k: &FusedKernel,
+        parity: usize,
+    ) -> Result<Compiled, ExecError> {
+        let g = self.graph;
+        let ids: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].id.as_str()).collect();
+        let kinds: Vec<&str> = k.nodes.iter().map(|&n| g.nodes[n].kind).collect();
+        let label = if ids.len() == 1 {
+            ids[0].to_string()
+        } else {
+            format!("fused[{}]", ids.join(", "))
+        };
+        let mut bindings = vec![Binding::StorageRead];
+        if k.uses_clock {
+            bindings.push(Binding::StorageRead);
+        }
+        bindings.extend(k.inputs.iter().map(|_| Binding::StorageRead));
+        bindings.extend(k.outputs.iter().map(|_| Binding::StorageReadWrite));
+        let spec = KernelSpec::new(
+            format!("pointwise {}", kinds.join("+")),
+            k.source.clone(),
+            &bindings,
+        );
+        let kernel = cx.kernel(&spec).map_err(|source| ExecError::Compile {
+            node: label.clone(),
+            source,
+        })?;
+        let params = cx.table("pointwise params", bytemuck::cast_slice(&k.params));
+        let mut bufs: Vec<&wgpu::Buffer> = vec![&params];
+        if k.uses_clock {
+            bufs.push(cx.clock);
+        }
+        bufs.extend(k.inputs.iter().map(|&v| self.buffer(v, parity)));
+        bufs.extend(k.outputs.iter().map(|&v| self.buffer(v, parity)));
+        let d = cx.dispatch(&kernel, &bufs, cx.grid_1d(k.len, WG_1D));
+        Ok(Compiled::plain(label, kinds.join("+"), vec![d]))
+    }
+
+    /// The engine's copy of a value into a state buffer.
+    fn compile_copy(
+        &self,
+        cx: &mut CompileCtx,
+        src: ValueId,
+        dst: ValueId,
+        parity: usize,
+    ) -> Result<Compiled, ExecError> {
+        let words = self.plan.values[src].ty.words();
+        let kernel = cx
+            .kernel(&KernelSpec::new(
+                "copy",
+                cx.shader("engine/copy.wgsl").map_err(engine_err)?,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                ],
+            ))
+            .map_err(engine_err)?;
+        let shape = cx.uniform("copy shape", bytemuck::bytes_of(&(words as u32)));
+        let d = cx.dispatch(
+            &kernel,
+            &[self.buffer(src, parity), self.buffer(dst, parity), &shape],
+            cx.grid_1d(words, WG_1D),
+        );
+        let label = format!("copy -> {}", self.plan.values[dst].name);
+        Ok(Compiled::plain(label, "copy".into(), vec![d]))
+    }
+
+    /// An iterative node with its loop body and the staging buffers its decisions read.
+    fn compile_loop(
+        &self,
+        cx: &mut CompileCtx,
+        node: usize,
+        body: &[Launch],
+        io: &NodeIo,
+        parity: usize,
+    ) -> Result<Compiled, ExecError> {
+        let inst = &self.graph.nodes[node];
+        let Lowering::Iterative(it) = inst.node.lowering() else {
+            panic!("node `{}` scheduled as a loop does not iterate", inst.id)
+        };
+        let kernels = it.compile(cx, io).map_err(|source| ExecError::Compile {
+            node: inst.id.clone(),
+            source,
+        })?;
+        let body = body
+            .iter()
+            .map(|l| self.compile_launch(cx, l, parity))
+            .collect::<Result<Vec<_>, _>>()?;
+        let staging = [0, 1].map(|i| {
+            self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(&format!("{} status {i}", inst.id)),
+                size: kernels.status_bytes.max(4).next_multiple_of(4),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        Ok(Compiled {
+            label: inst.id.clone(),
+            kinds: format!("{} (loop of {})", inst.kind, body.len()),
+            dispatches: Vec::new(),
+            looped: Some(std::sync::Arc::new(CompiledLoop {
+                node,
+                kernels,
+                body,
+                staging,
+            })),
+        })
     }
 
     /// Uploads the given graph inputs; their types must be the planned ones.
@@ -761,160 +864,19 @@ impl<'a> Program<'a> {
         })
     }
 
-    /// Runs steps one launch per compute pass with timestamps around each pass (or with a
-    /// wait after each launch where the device has no timestamp queries).
+    /// Runs steps one launch (or dispatch) per compute pass with timestamps around each
+    /// pass, or with a wait after each launch where the device has no timestamp queries.
     fn run_profiled(&mut self, steps: u64, per_dispatch: bool) -> Result<RunStats, ExecError> {
-        let launches = self.step[0].len();
-        let mut rows: Vec<ProfileRow> = self.step[0]
-            .iter()
-            .map(|c| ProfileRow {
-                label: c.label.clone(),
-                kinds: c.kinds.clone(),
-                dispatches: c.dispatches.len(),
-                calls: 0,
-                total: Duration::ZERO,
-                samples: Vec::new(),
-                dispatch_samples: c
-                    .dispatches
-                    .iter()
-                    .map(|d| (d.kernel.label.clone(), Vec::new()))
-                    .collect(),
-            })
-            .collect();
+        let mut rows: Vec<ProfileRow> = self.step[0].iter().map(ProfileRow::of).collect();
         let use_gpu = self.gpu.caps.timestamps;
-        // Timed units: launches, or every dispatch of every launch.
-        // A loop is one unit, timed on the host (its decisions are host round trips).
-        let units: Vec<(usize, Option<usize>)> = if per_dispatch {
-            self.step[0]
-                .iter()
-                .enumerate()
-                .flat_map(|(i, c)| {
-                    let whole = c.looped.is_some();
-                    let parts = if whole { 1 } else { c.dispatches.len() };
-                    (0..parts).map(move |d| (i, (!whole).then_some(d)))
-                })
-                .collect()
-        } else {
-            (0..launches).map(|i| (i, None)).collect()
-        };
-        let timed = units.len();
-        let count = (2 * timed).max(2) as u32;
-        let queries = use_gpu.then(|| {
-            self.gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("profile"),
-                ty: wgpu::QueryType::Timestamp,
-                count,
-            })
-        });
-        let resolve = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("profile resolve"),
-            size: 8 * count as u64,
-            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let period = self.gpu.queue.get_timestamp_period() as f64;
+        let timer = use_gpu.then(|| StepTimer::new(self.gpu, self.timed_units(per_dispatch)));
         for s in 0..steps {
-            let parity = ((self.steps_done + s) % 2) as usize;
-            if let Some(qs) = &queries {
-                let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-                let mut host_timed: Vec<(usize, Duration)> = Vec::new();
-                let mut counts = Vec::new();
-                for (u, &(i, d)) in units.iter().enumerate() {
-                    let c = &self.step[parity][i];
-                    if let Some(lp) = &c.looped {
-                        let before = std::mem::replace(
-                            &mut enc,
-                            self.gpu.device.create_command_encoder(&Default::default()),
-                        );
-                        let idx = self.gpu.queue.submit([before.finish()]);
-                        self.gpu.wait(idx)?;
-                        let (dt, k) = self.time_loop(lp, self.steps_done + s)?;
-                        host_timed.push((u, dt));
-                        counts.push(k);
-                        continue;
-                    }
-                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some(&c.label),
-                        timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
-                            query_set: qs,
-                            beginning_of_pass_write_index: Some(2 * u as u32),
-                            end_of_pass_write_index: Some(2 * u as u32 + 1),
-                        }),
-                    });
-                    let step = self.steps_done + s;
-                    match d {
-                        Some(d) => {
-                            Self::record(&mut pass, std::slice::from_ref(&c.dispatches[d]), step)
-                        }
-                        None => Self::record(&mut pass, &c.dispatches, step),
-                    }
-                }
-                {
-                    let mut pass = enc.begin_compute_pass(&Default::default());
-                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), 0);
-                }
-                if timed > 0 {
-                    enc.resolve_query_set(qs, 0..2 * timed as u32, &resolve, 0);
-                }
-                let idx = self.gpu.queue.submit([enc.finish()]);
-                self.gpu.wait(idx)?;
-                if timed > 0 {
-                    let bytes = self.gpu.read_buffer(&resolve, 16 * timed as u64)?;
-                    let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
-                    let mut per_launch = vec![Duration::ZERO; launches];
-                    for (u, &(i, d)) in units.iter().enumerate() {
-                        let dt = match host_timed.iter().find(|(h, _)| *h == u) {
-                            Some((_, dt)) => *dt,
-                            None => Duration::from_nanos(
-                                (ticks[2 * u + 1].saturating_sub(ticks[2 * u]) as f64 * period)
-                                    as u64,
-                            ),
-                        };
-                        per_launch[i] += dt;
-                        if let Some(d) = d {
-                            rows[i].dispatch_samples[d].1.push(dt);
-                        }
-                    }
-                    for (row, dt) in rows.iter_mut().zip(per_launch) {
-                        row.total += dt;
-                        row.samples.push(dt);
-                        row.calls += 1;
-                    }
-                }
-                self.note_iterations(counts);
-            } else {
-                let mut counts = Vec::new();
-                for (i, c) in self.step[parity].iter().enumerate() {
-                    if let Some(lp) = &c.looped {
-                        let (dt, k) = self.time_loop(lp, self.steps_done + s)?;
-                        counts.push(k);
-                        rows[i].total += dt;
-                        rows[i].samples.push(dt);
-                        rows[i].calls += 1;
-                        continue;
-                    }
-                    let t = Instant::now();
-                    let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-                    {
-                        let mut pass = enc.begin_compute_pass(&Default::default());
-                        Self::record(&mut pass, &c.dispatches, self.steps_done + s);
-                    }
-                    let idx = self.gpu.queue.submit([enc.finish()]);
-                    self.gpu.wait(idx)?;
-                    let dt = t.elapsed();
-                    rows[i].total += dt;
-                    rows[i].samples.push(dt);
-                    rows[i].calls += 1;
-                }
-                let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-                {
-                    let mut pass = enc.begin_compute_pass(&Default::default());
-                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), 0);
-                }
-                let idx = self.gpu.queue.submit([enc.finish()]);
-                self.gpu.wait(idx)?;
-                self.note_iterations(counts);
-            }
+            let step = self.steps_done + s;
+            let counts = match &timer {
+                Some(timer) => self.profile_step_by_timestamps(timer, step, &mut rows)?,
+                None => self.profile_step_on_host(step, &mut rows)?,
+            };
+            self.note_iterations(counts);
         }
         self.steps_done += steps;
         Ok(RunStats {
@@ -923,6 +885,120 @@ impl<'a> Program<'a> {
             profile: rows,
             timed_by_gpu: use_gpu,
         })
+    }
+
+    /// The timed units of a step: each launch, or each dispatch of each launch. A loop is
+    /// one unit, timed on the host (its decisions are host round trips).
+    fn timed_units(&self, per_dispatch: bool) -> Vec<(usize, Option<usize>)> {
+        if !per_dispatch {
+            return (0..self.step[0].len()).map(|i| (i, None)).collect();
+        }
+        self.step[0]
+            .iter()
+            .enumerate()
+            .flat_map(|(i, c)| {
+                let whole = c.looped.is_some();
+                let parts = if whole { 1 } else { c.dispatches.len() };
+                (0..parts).map(move |d| (i, (!whole).then_some(d)))
+            })
+            .collect()
+    }
+
+    /// One step, each unit in a compute pass of its own between two timestamps.
+    fn profile_step_by_timestamps(
+        &self,
+        timer: &StepTimer,
+        step: u64,
+        rows: &mut [ProfileRow],
+    ) -> Result<Vec<u32>, ExecError> {
+        let parity = (step % 2) as usize;
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        let mut host_timed: Vec<(usize, Duration)> = Vec::new();
+        let mut counts = Vec::new();
+        for (u, &(i, d)) in timer.units.iter().enumerate() {
+            let c = &self.step[parity][i];
+            if let Some(lp) = &c.looped {
+                let before = std::mem::replace(
+                    &mut enc,
+                    self.gpu.device.create_command_encoder(&Default::default()),
+                );
+                let idx = self.gpu.queue.submit([before.finish()]);
+                self.gpu.wait(idx)?;
+                let (dt, k) = self.time_loop(lp, step)?;
+                host_timed.push((u, dt));
+                counts.push(k);
+                continue;
+            }
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(&c.label),
+                timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
+                    query_set: &timer.queries,
+                    beginning_of_pass_write_index: Some(2 * u as u32),
+                    end_of_pass_write_index: Some(2 * u as u32 + 1),
+                }),
+            });
+            match d {
+                Some(d) => Self::record(&mut pass, std::slice::from_ref(&c.dispatches[d]), step),
+                None => Self::record(&mut pass, &c.dispatches, step),
+            }
+        }
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), 0);
+        }
+        let timed = timer.units.len();
+        if timed > 0 {
+            enc.resolve_query_set(&timer.queries, 0..2 * timed as u32, &timer.resolve, 0);
+        }
+        let idx = self.gpu.queue.submit([enc.finish()]);
+        self.gpu.wait(idx)?;
+        if timed == 0 {
+            return Ok(counts);
+        }
+        let bytes = self.gpu.read_buffer(&timer.resolve, 16 * timed as u64)?;
+        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
+        let mut per_launch = vec![Duration::ZERO; rows.len()];
+        for (u, &(i, d)) in timer.units.iter().enumerate() {
+            let dt = match host_timed.iter().find(|(h, _)| *h == u) {
+                Some((_, dt)) => *dt,
+                None => Duration::from_nanos(
+                    (ticks[2 * u + 1].saturating_sub(ticks[2 * u]) as f64 * timer.period) as u64,
+                ),
+            };
+            per_launch[i] += dt;
+            if let Some(d) = d {
+                rows[i].dispatch_samples[d].1.push(dt);
+            }
+        }
+        for (row, dt) in rows.iter_mut().zip(per_launch) {
+            row.add(dt);
+        }
+        Ok(counts)
+    }
+
+    /// One step, each launch submitted alone and timed on the host.
+    fn profile_step_on_host(
+        &self,
+        step: u64,
+        rows: &mut [ProfileRow],
+    ) -> Result<Vec<u32>, ExecError> {
+        let parity = (step % 2) as usize;
+        let mut counts = Vec::new();
+        for (i, c) in self.step[parity].iter().enumerate() {
+            if let Some(lp) = &c.looped {
+                let (dt, k) = self.time_loop(lp, step)?;
+                counts.push(k);
+                rows[i].add(dt);
+                continue;
+            }
+            let t = Instant::now();
+            let idx = self.submit(&c.dispatches.iter().collect::<Vec<_>>(), step);
+            self.gpu.wait(idx)?;
+            rows[i].add(t.elapsed());
+        }
+        let idx = self.submit(&[&self.clock_tick], 0);
+        self.gpu.wait(idx)?;
+        Ok(counts)
     }
 
     /// Reads back the requested outputs (their values after the last step run).
