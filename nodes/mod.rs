@@ -21,8 +21,16 @@ pub mod spread;
 
 use crate::node::Registry;
 
-/// Adds every shipped node kind to the registry.
+/// Every shipped node kind and host function.
+pub fn registry() -> Registry {
+    let mut r = Registry::default();
+    register_all(&mut r);
+    r
+}
+
+/// Adds every shipped node kind and host function to the registry.
 pub fn register_all(r: &mut Registry) {
+    planners::register(r);
     bin_sort::register(r);
     fft::register(r);
     pointwise::register(r);

@@ -3,6 +3,7 @@
 //! periodic correction. Each is a thin wrapper over its node family's planner.
 
 use crate::expr::{HostFunction, ParamValue};
+use crate::node::Registry;
 use crate::nodes::fcm::plan;
 use crate::nodes::pse;
 
@@ -76,7 +77,7 @@ fn arity(args: &[ParamValue], n: usize) -> Result<(), String> {
 }
 
 /// Every host function.
-pub static FUNCTIONS: &[HostFunction] = &[
+static FUNCTIONS: &[HostFunction] = &[
     HostFunction {
         name: "next_fft",
         doc: "next_fft(n): the smallest size >= n whose prime factors are 2, 3, 5 and 7",
@@ -390,9 +391,11 @@ pub static FUNCTIONS: &[HostFunction] = &[
     },
 ];
 
-/// The host function of a name.
-pub fn lookup(name: &str) -> Option<&'static HostFunction> {
-    FUNCTIONS.iter().find(|f| f.name == name)
+/// Adds the planners to the registry.
+pub fn register(r: &mut Registry) {
+    for f in FUNCTIONS {
+        r.add_function(*f);
+    }
 }
 
 #[cfg(test)]
@@ -400,7 +403,24 @@ mod tests {
     use super::*;
 
     fn call(name: &str, args: &[ParamValue]) -> Result<ParamValue, String> {
-        (lookup(name).expect("registered").call)(args)
+        let f = FUNCTIONS
+            .iter()
+            .find(|f| f.name == name)
+            .expect("a planner");
+        (f.call)(args)
+    }
+
+    /// Planners are called from expressions with their errors named.
+    #[test]
+    fn planners_in_expressions() {
+        let r = crate::nodes::registry();
+        let s = crate::expr::Scope::new(r.functions());
+        assert_eq!(crate::expr::eval("next_fft(97)", &s).unwrap(), 98.0);
+        assert!(
+            crate::expr::eval("next_fft('x')", &s)
+                .unwrap_err()
+                .contains("next_fft")
+        );
     }
 
     /// fcm_sort_bins covers every Morton key of fcm_sort_cells(grid), and no more than

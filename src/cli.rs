@@ -154,7 +154,7 @@ pub fn main() -> ExitCode {
 }
 
 pub fn execute(cmd: Command) -> Result<(), CliError> {
-    let registry = Registry::standard();
+    let registry = crate::nodes::registry();
     match cmd {
         Command::Run {
             graph,
@@ -684,7 +684,7 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
     }
     if only.is_none() {
         println!("Host functions for param expressions (planning in f64 on the host):");
-        for f in crate::nodes::planners::FUNCTIONS {
+        for f in registry.functions().iter() {
             println!("  {}", f.doc);
         }
     }

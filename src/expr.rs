@@ -109,8 +109,34 @@ impl fmt::Display for ParamValue {
     }
 }
 
-/// Names visible to expressions.
-pub type Scope = BTreeMap<String, ParamValue>;
+/// Names visible to expressions, with the host functions they may call.
+#[derive(Clone)]
+pub struct Scope<'f> {
+    values: BTreeMap<String, ParamValue>,
+    functions: &'f HostFunctions,
+}
+
+impl<'f> Scope<'f> {
+    /// An empty scope whose expressions may call `functions`.
+    pub fn new(functions: &'f HostFunctions) -> Self {
+        Scope {
+            values: BTreeMap::new(),
+            functions,
+        }
+    }
+
+    pub fn insert(&mut self, name: String, value: ParamValue) {
+        self.values.insert(name, value);
+    }
+
+    pub fn get(&self, name: &str) -> Option<&ParamValue> {
+        self.values.get(name)
+    }
+
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.values.keys().map(|s| s.as_str())
+    }
+}
 
 /// Resolves a param as written in a graph file: a literal, a `$name` reference, or an
 /// `= expression` (a number or an array of numbers).
@@ -131,7 +157,7 @@ pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, Strin
 }
 
 fn unknown_name(name: &str, scope: &Scope) -> String {
-    let known: Vec<&str> = scope.keys().map(|s| s.as_str()).collect();
+    let known: Vec<&str> = scope.names().collect();
     format!(
         "unknown param `{name}` (graph params: {})",
         known.join(", ")
@@ -140,11 +166,37 @@ fn unknown_name(name: &str, scope: &Scope) -> String {
 
 /// A function graph expressions may call besides the arithmetic ones: the host-side f64
 /// planners of node families (an FFT-friendly size, an FCM grid from a radius).
+#[derive(Clone, Copy)]
 pub struct HostFunction {
     pub name: &'static str,
     /// Shown in docs: the arguments and what comes back.
     pub doc: &'static str,
     pub call: fn(&[ParamValue]) -> Result<ParamValue, String>,
+}
+
+/// The host functions expressions may call, by name. The node families fill it
+/// (`nodes::registry`); loading finds it in the registry it is given.
+#[derive(Clone, Default)]
+pub struct HostFunctions {
+    /// In the order added (the order `mesoflow nodes` lists them).
+    by_name: indexmap::IndexMap<&'static str, HostFunction>,
+}
+
+impl HostFunctions {
+    /// Adds a function. Two functions with one name are a programming error.
+    pub fn add(&mut self, f: HostFunction) {
+        let previous = self.by_name.insert(f.name, f);
+        assert!(previous.is_none(), "host function `{}` added twice", f.name);
+    }
+
+    pub fn get(&self, name: &str) -> Option<&HostFunction> {
+        self.by_name.get(name)
+    }
+
+    /// Every function, in the order added.
+    pub fn iter(&self) -> impl Iterator<Item = &HostFunction> {
+        self.by_name.values()
+    }
 }
 
 /// Evaluates an expression to a number.
@@ -154,7 +206,7 @@ pub struct HostFunction {
 /// (`[a, b, c]`), strings in single quotes, the constant `pi`, the functions sqrt, cbrt,
 /// exp, log (natural), log10, sin, cos, tan, atan, abs, floor, ceil, round, pow(x, y),
 /// min(...), max(...), sum(...), prod(...) (the last four also take arrays), and the host
-/// planners of `crate::nodes::planners`.
+/// functions of the scope.
 pub fn eval(text: &str, scope: &Scope) -> Result<f64, String> {
     match evaluate(text, scope)? {
         ParamValue::Number(x) => Ok(x),
@@ -322,7 +374,7 @@ struct Parser<'a> {
     src: &'a str,
     toks: Vec<Tok>,
     pos: usize,
-    scope: &'a Scope,
+    scope: &'a Scope<'a>,
 }
 
 impl Parser<'_> {
@@ -555,7 +607,7 @@ impl Parser<'_> {
                     _ => v.iter().product(),
                 }))
             }
-            _ => match crate::nodes::planners::lookup(name) {
+            _ => match self.scope.functions.get(name) {
                 Some(f) => {
                     let params: Vec<ParamValue> = args.into_iter().map(V::param).collect();
                     let out = (f.call)(&params)
@@ -577,8 +629,26 @@ impl Parser<'_> {
 mod tests {
     use super::*;
 
-    fn scope() -> Scope {
-        let mut s = Scope::new();
+    /// A host function that answers with a boolean, as planners such as
+    /// `fcm_sort_particles` do.
+    fn functions() -> &'static HostFunctions {
+        static F: std::sync::OnceLock<HostFunctions> = std::sync::OnceLock::new();
+        F.get_or_init(|| {
+            let mut f = HostFunctions::default();
+            f.add(HostFunction {
+                name: "larger_than_256",
+                doc: "larger_than_256(x): whether x > 256",
+                call: |a| match a.first() {
+                    Some(ParamValue::Number(x)) => Ok(ParamValue::Bool(*x > 256.0)),
+                    _ => Err("one number".into()),
+                },
+            });
+            f
+        })
+    }
+
+    fn scope() -> Scope<'static> {
+        let mut s = Scope::new(functions());
         s.insert("dt".into(), ParamValue::Number(0.01));
         s.insert("temperature".into(), ParamValue::Number(2.0));
         s.insert("box".into(), ParamValue::Numbers(vec![64.0, 32.0, 16.0]));
@@ -596,12 +666,12 @@ mod tests {
             ParamValue::Number(2.0)
         );
         assert_eq!(
-            evaluate("fcm_sort_particles([512, 512, 512])", &s).unwrap(),
+            evaluate("larger_than_256(512)", &s).unwrap(),
             ParamValue::Bool(true)
         );
         assert_eq!(
-            evaluate("fcm_sort_particles([48, 48, 48])", &s).unwrap(),
-            ParamValue::Bool(false)
+            evaluate("larger_than_256(48) + 1", &s).unwrap(),
+            ParamValue::Number(1.0)
         );
     }
 
@@ -687,8 +757,11 @@ mod tests {
                 .contains("gives a string")
         );
         assert!(evaluate("['a']", &s).unwrap_err().contains("arithmetic"));
-        assert_eq!(eval("next_fft(97)", &s).unwrap(), 98.0);
-        assert!(eval("next_fft('x')", &s).unwrap_err().contains("next_fft"));
+        assert!(
+            eval("larger_than_256('x')", &s)
+                .unwrap_err()
+                .contains("larger_than_256: one number")
+        );
     }
 
     #[test]

@@ -9,7 +9,7 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use crate::expr::ParamValue;
+use crate::expr::{HostFunction, HostFunctions, ParamValue};
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, NodeIo};
 use crate::transform::{SpectralBody, Transform};
 use crate::value::{PortType, RefArray, ValueType};
@@ -512,18 +512,23 @@ pub trait NodeKind: Send + Sync {
     fn build(&self, params: &Params) -> Result<Box<dyn Node>, String>;
 }
 
-/// Kind names to factories.
+/// What graph files may name: node kinds by name, and the host functions param
+/// expressions may call. The node families fill it (`nodes::registry` for the shipped
+/// ones); loading and planning are handed it and know no family.
 #[derive(Clone, Default)]
 pub struct Registry {
     kinds: BTreeMap<&'static str, Arc<dyn NodeKind>>,
+    functions: HostFunctions,
 }
 
 impl Registry {
-    /// Every node kind mesoflow ships.
-    pub fn standard() -> Self {
-        let mut r = Registry::default();
-        crate::nodes::register_all(&mut r);
-        r
+    /// Adds a host function for param expressions.
+    pub fn add_function(&mut self, f: HostFunction) {
+        self.functions.add(f);
+    }
+
+    pub fn functions(&self) -> &HostFunctions {
+        &self.functions
     }
 
     /// Adds a kind. Two kinds with one name are a programming error.

@@ -292,7 +292,7 @@ pub fn run(bench: &FcmBench) -> Result<(), CliError> {
         ));
     }
     let gpu = GpuContext::new().map_err(runtime)?;
-    let registry = Registry::standard();
+    let registry = crate::nodes::registry();
     println!("adapter: {}", gpu.caps.summary());
     println!(
         "graph {}; a = 1, eta = 1; time: median GPU time of one evaluation over {} runs (sum of its launches); errors measured in a box of side {} at {} random positions (self) and 4 pairs at 2a and 4a (pair, Gaussian only, relative to the self-mobility)",

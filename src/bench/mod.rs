@@ -23,7 +23,6 @@ use crate::cli::CliError;
 use crate::exec::{Profile, Program, RunOptions};
 use crate::gpu::{Binding, CompileCtx, GpuContext, KernelCache, KernelSpec, WG_1D};
 use crate::graph::{self, LoadOptions};
-use crate::node::Registry;
 use crate::plan::{self, PlanOptions};
 use crate::value::{HostArray, ValueType};
 
@@ -118,7 +117,7 @@ pub fn time_graph(
     std::fs::create_dir_all(&dir).map_err(runtime)?;
     let file = dir.join("timed.json");
     std::fs::write(&file, graph_json).map_err(runtime)?;
-    let registry = Registry::standard();
+    let registry = crate::nodes::registry();
     let g = graph::load(&file, &registry, &LoadOptions::default())
         .map_err(|p| CliError::Input(p.to_string()))?;
     let run = time_loaded(gpu, &g, inputs, None, reps, fuse);
@@ -471,7 +470,7 @@ pub(crate) fn node_reference(
     params: &BTreeMap<String, crate::expr::ParamValue>,
     inputs: &[Option<crate::value::RefArray>],
 ) -> Result<Vec<crate::value::RefArray>, CliError> {
-    let registry = Registry::standard();
+    let registry = crate::nodes::registry();
     let kind = registry
         .get(kind)
         .ok_or_else(|| runtime(format!("no node kind `{kind}`")))?;
@@ -525,7 +524,7 @@ fn overhead(nodes: usize, elements: u32, reps: u64) -> Result<(), CliError> {
     std::fs::create_dir_all(&dir).map_err(runtime)?;
     let file = dir.join("chain.json");
     std::fs::write(&file, chain_graph(nodes)).map_err(runtime)?;
-    let registry = Registry::standard();
+    let registry = crate::nodes::registry();
     let g = graph::load(&file, &registry, &LoadOptions::default())
         .map_err(|p| CliError::Input(p.to_string()))?;
     let ty = ValueType::Particles { n: elements, k: 1 };

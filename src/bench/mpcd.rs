@@ -12,7 +12,6 @@ use super::{runtime, time_loaded};
 use crate::cli::CliError;
 use crate::expr::ParamValue;
 use crate::gpu::GpuContext;
-use crate::node::Registry;
 
 pub struct MpcdBench {
     pub graph: PathBuf,
@@ -31,7 +30,7 @@ pub fn run(bench: &MpcdBench) -> Result<(), CliError> {
         ));
     }
     let gpu = GpuContext::new().map_err(runtime)?;
-    let registry = Registry::standard();
+    let registry = crate::nodes::registry();
     println!("adapter: {}", gpu.caps.summary());
     println!(
         "graph {}; 3D SRD, periodic cubic box, cell 1, {} particles per cell, angle 130, dt 0.1; time: GPU time of one step over {} steps (sum of its launches' medians and means)",

@@ -102,7 +102,7 @@ pub fn run(bench: &PseBench) -> Result<(), CliError> {
         return Err(CliError::Input("--reps must be positive".into()));
     }
     let gpu = GpuContext::new().map_err(runtime)?;
-    let registry = Registry::standard();
+    let registry = crate::nodes::registry();
     println!("adapter: {}", gpu.caps.summary());
     println!(
         "graph {}; a = 1, eta = 1, tolerance {:e}; time: median GPU time of one evaluation over {} runs (with noise: kT = 1, Lanczos loop timed on the host, round trips included); errors in a box of side {}: self-mobility against Hasimoto at 4 positions, pairs at 1.2a, 2a, 3a, 5a against an f64 Ewald sum, relative to the self-mobility",

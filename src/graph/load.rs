@@ -40,7 +40,7 @@ impl Default for LoadOptions {
 
 /// Loads a graph file and everything it uses, reporting all problems together.
 pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Graph, Problems> {
-    let mut builtins = Scope::new();
+    let mut builtins = Scope::new(registry.functions());
     builtins.insert("steps".into(), ParamValue::Number(opts.steps as f64));
     builtins.insert("seed".into(), ParamValue::Number(opts.seed as f64));
     let mut l = Loader {
@@ -121,7 +121,7 @@ struct Binding<'a> {
 
 struct Loader<'r> {
     registry: &'r Registry,
-    builtins: Scope,
+    builtins: Scope<'r>,
     problems: Vec<Problem>,
     pending_nodes: Vec<PendingNode>,
     node_ids: HashMap<(String, String), NodeEntry>,
@@ -137,7 +137,7 @@ fn valid_id(id: &str) -> bool {
         && c.all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
 }
 
-impl Loader<'_> {
+impl<'r> Loader<'r> {
     /// Loads one file into the scope `scope` ("" for the top level, "a/b/" inside
     /// subgraphs). `overrides` are param values from the command line or the parent.
     /// Returns false when the file could not be read or parsed at all.
@@ -259,7 +259,7 @@ impl Loader<'_> {
         decls: &IndexMap<String, ParamDecl>,
         overrides: &IndexMap<String, ParamValue>,
         parent: &Option<Binding>,
-    ) -> Scope {
+    ) -> Scope<'r> {
         let mut scope = self.builtins.clone();
         let is_root = parent.is_none();
         for name in overrides.keys() {

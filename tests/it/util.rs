@@ -34,7 +34,7 @@ pub fn gpu() -> Option<MutexGuard<'static, GpuContext>> {
 
 pub fn registry() -> &'static Registry {
     static R: OnceLock<Registry> = OnceLock::new();
-    R.get_or_init(Registry::standard)
+    R.get_or_init(mesoflow::nodes::registry)
 }
 
 /// The repository root.
