@@ -16,7 +16,7 @@ use crate::gpu::{
     Binding, CompileCtx, CompileError, Dispatch, GpuContext, GpuError, KernelCache, KernelSpec,
     NodeIo, Slot, WG_1D,
 };
-use crate::graph::Graph;
+use crate::graph::{Graph, NodeId};
 use crate::ids::IdVec;
 use crate::node::{Decision, IterativeKernels, Lowering};
 use crate::plan::{BufferId, FusedKernel, Launch, Phase, Plan, Storage, TransformFold, ValueId};
@@ -154,7 +154,7 @@ struct Compiled {
 }
 
 struct CompiledLoop {
-    node: usize,
+    node: NodeId,
     kernels: IterativeKernels,
     body: Vec<Compiled>,
     /// Two readback buffers for the status: iteration k copies into `staging[k % 2]`.
@@ -390,7 +390,7 @@ impl<'a> Program<'a> {
     fn compile_node(
         &self,
         cx: &mut CompileCtx,
-        node: usize,
+        node: NodeId,
         io: &NodeIo,
     ) -> Result<Compiled, ExecError> {
         let inst = &self.graph.nodes[node];
@@ -419,7 +419,7 @@ impl<'a> Program<'a> {
     fn compile_transform(
         &self,
         cx: &mut CompileCtx,
-        node: usize,
+        node: NodeId,
         fold: &TransformFold,
         io: &NodeIo,
     ) -> Result<Compiled, ExecError> {
@@ -527,7 +527,7 @@ impl<'a> Program<'a> {
     fn compile_loop(
         &self,
         cx: &mut CompileCtx,
-        node: usize,
+        node: NodeId,
         body: &[Launch],
         io: &NodeIo,
         parity: usize,

@@ -7,10 +7,11 @@ use indexmap::IndexMap;
 
 use super::schema::{GraphFile, InputDecl, NodeDecl, ParamDecl, SCHEMA_VERSION};
 use super::{
-    Dim, Graph, GraphParam, InputDef, InputShape, NodeInst, OutputDef, Problem, Problems, SizeDef,
-    Source, StateDef,
+    Dim, Graph, GraphParam, InputDef, InputShape, NodeId, NodeInst, OutputDef, Problem, Problems,
+    SizeDef, Source, StateDef,
 };
 use crate::expr::{self, ParamValue, Scope};
+use crate::ids::Id;
 use crate::node::{Registry, check_params, edit_distance};
 use crate::value::ValueType;
 
@@ -678,7 +679,10 @@ impl<'r> Loader<'r> {
                 Some(NodeEntry::Kind(n)) => {
                     let ports = &self.pending_nodes[*n].inst.output_ports;
                     match ports.iter().position(|p| p.name == port) {
-                        Some(i) => Ok(Source::Node { node: *n, port: i }),
+                        Some(i) => Ok(Source::Node {
+                            node: NodeId::from_index(*n),
+                            port: i,
+                        }),
                         None => {
                             let known: Vec<&str> = ports.iter().map(|p| p.name).collect();
                             Err(r.problem(format!(
@@ -778,7 +782,7 @@ impl<'r> Loader<'r> {
             sizes: root.sizes,
             inputs: root.inputs,
             states,
-            nodes,
+            nodes: nodes.into(),
             outputs,
         };
         self.check_loops(&graph);
@@ -792,7 +796,7 @@ impl<'r> Loader<'r> {
     /// be read only by itself, through its `iterate` input, and by the body: anything else
     /// would see a value that changes every iteration. Loops do not nest.
     fn check_loops(&mut self, g: &Graph) {
-        for (l, inst) in g.nodes.iter().enumerate() {
+        for (l, inst) in g.nodes.iter_enumerated() {
             if !inst.output_ports.iter().any(|p| p.iterate) {
                 continue;
             }
@@ -823,7 +827,7 @@ impl<'r> Loader<'r> {
                 }
             }
             // Every body node must lead to the loop's result.
-            let mut feeds: BTreeSet<usize> = BTreeSet::new();
+            let mut feeds: BTreeSet<NodeId> = BTreeSet::new();
             let mut stack: Vec<Source> = inst
                 .input_ports
                 .iter()
@@ -850,7 +854,7 @@ impl<'r> Loader<'r> {
                     ),
                 ));
             }
-            for (n, reader) in g.nodes.iter().enumerate() {
+            for (n, reader) in g.nodes.iter_enumerated() {
                 if body.contains(&n) {
                     if reader
                         .output_ports
@@ -922,7 +926,7 @@ impl<'r> Loader<'r> {
                 if let Source::Node { node, .. } = s
                     && !port.iterate
                 {
-                    g.add_edge(idx[*node], idx[i], ());
+                    g.add_edge(idx[node.index()], idx[i], ());
                 }
             }
         }

@@ -18,8 +18,14 @@ pub use load::{LoadOptions, load};
 pub use schema::SCHEMA_VERSION;
 
 use crate::expr::ParamValue;
+use crate::ids::IdVec;
 use crate::node::{Node, Params, PortSpec};
 use crate::value::ValueType;
+
+crate::typed_id!(
+    /// A node of a flattened graph: index into [`Graph::nodes`].
+    NodeId
+);
 
 /// Where a value comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -28,8 +34,8 @@ pub enum Source {
     Input(usize),
     /// The current value of a state (index into [`Graph::states`]).
     State(usize),
-    /// Output `port` of node `node` (index into [`Graph::nodes`]).
-    Node { node: usize, port: usize },
+    /// Output `port` of node `node`.
+    Node { node: NodeId, port: usize },
     /// Nothing: an optional input left unconnected.
     Absent,
 }
@@ -248,7 +254,7 @@ pub struct Graph {
     pub sizes: Vec<SizeDef>,
     pub inputs: Vec<InputDef>,
     pub states: Vec<StateDef>,
-    pub nodes: Vec<NodeInst>,
+    pub nodes: IdVec<NodeId, NodeInst>,
     pub outputs: Vec<OutputDef>,
 }
 
@@ -276,12 +282,12 @@ impl Graph {
 
     /// The loop body of an iterative node: every node that depends, directly or through
     /// others, on one of its `iterate` outputs (the node itself excluded), ascending.
-    pub fn loop_body(&self, node: usize) -> BTreeSet<usize> {
+    pub fn loop_body(&self, node: NodeId) -> BTreeSet<NodeId> {
         let mut body = BTreeSet::new();
         let mut changed = true;
         while changed {
             changed = false;
-            for (n, inst) in self.nodes.iter().enumerate() {
+            for (n, inst) in self.nodes.iter_enumerated() {
                 if n == node || body.contains(&n) {
                     continue;
                 }
@@ -304,7 +310,7 @@ impl Graph {
     /// The graph with every read of a forwarded node's output replaced by what it
     /// forwards (`forwards[node]`: the source its output equals), through chains of them.
     /// The forwarded nodes stay, unread, so node indices keep their meaning.
-    pub fn forwarding(&self, forwards: &HashMap<usize, Source>) -> Graph {
+    pub fn forwarding(&self, forwards: &HashMap<NodeId, Source>) -> Graph {
         let resolve = |mut s: Source| {
             while let Source::Node { node, port: 0 } = s {
                 match forwards.get(&node) {

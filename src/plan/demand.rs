@@ -3,14 +3,14 @@
 
 use std::collections::BTreeSet;
 
-use crate::graph::{Graph, Problem, Problems, Source};
+use crate::graph::{Graph, NodeId, Problem, Problems, Source};
 
 /// What the requested outputs need.
 pub(super) struct Demand {
     /// Nodes run every step.
-    pub step: BTreeSet<usize>,
+    pub step: BTreeSet<NodeId>,
     /// Nodes run once before the first step: the initial values of the needed states.
-    pub prologue: BTreeSet<usize>,
+    pub prologue: BTreeSet<NodeId>,
     /// States read by the step (indices into `Graph::states`).
     pub states: BTreeSet<usize>,
 }

@@ -20,7 +20,7 @@ use std::collections::{BTreeMap, HashMap};
 
 use super::fuse::{FuseCtx, Unit};
 use crate::gpu::DeviceCaps;
-use crate::graph::Source;
+use crate::graph::{NodeId, Source};
 use crate::node::Lowering;
 use crate::value::ValueType;
 
@@ -31,7 +31,7 @@ pub fn fold(
     ctx: &FuseCtx,
     units: Vec<Unit>,
     caps: &DeviceCaps,
-    input_types: &dyn Fn(usize) -> Vec<Option<ValueType>>,
+    input_types: &dyn Fn(NodeId) -> Vec<Option<ValueType>>,
 ) -> Vec<Unit> {
     if !ctx.fuse {
         return units;
@@ -42,12 +42,12 @@ pub fn fold(
             *readers.entry(*s).or_default() += 1;
         }
     }
-    let single = |n: usize| {
+    let single = |n: NodeId| {
         units
             .iter()
             .any(|u| matches!(u, Unit::Single(m) if *m == n))
     };
-    let mut folds: BTreeMap<usize, (usize, Option<usize>)> = BTreeMap::new();
+    let mut folds: BTreeMap<NodeId, (NodeId, Option<NodeId>)> = BTreeMap::new();
     for &b in ctx.order {
         let inst = &ctx.g.nodes[b];
         if !matches!(inst.node.lowering(), Lowering::Spectral(_)) || !single(b) {
@@ -89,8 +89,8 @@ pub fn fold(
             folds.insert(a, (b, inverse));
         }
     }
-    let folded = |n: usize| folds.values().any(|&(b, _)| b == n);
-    let after = |n: usize| folds.values().any(|&(_, c)| c == Some(n));
+    let folded = |n: NodeId| folds.values().any(|&(b, _)| b == n);
+    let after = |n: NodeId| folds.values().any(|&(_, c)| c == Some(n));
     units
         .into_iter()
         .filter_map(|u| match u {

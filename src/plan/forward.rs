@@ -10,15 +10,15 @@ use std::collections::HashMap;
 
 use super::demand::Demand;
 use super::infer::Types;
-use crate::graph::{Graph, Source};
+use crate::graph::{Graph, NodeId, Source};
 
 /// The graph with forwarded nodes read through, and those nodes (ascending).
 pub(super) fn read_through<'g>(
     g: &'g Graph,
     demand: &Demand,
     types: &Types,
-) -> (Cow<'g, Graph>, Vec<usize>) {
-    let forwards: HashMap<usize, Source> = demand
+) -> (Cow<'g, Graph>, Vec<NodeId>) {
+    let forwards: HashMap<NodeId, Source> = demand
         .step
         .iter()
         .chain(&demand.prologue)
@@ -40,7 +40,7 @@ pub(super) fn read_through<'g>(
     if forwards.is_empty() {
         return (Cow::Borrowed(g), Vec::new());
     }
-    let mut forwarded: Vec<usize> = forwards.keys().copied().collect();
+    let mut forwarded: Vec<NodeId> = forwards.keys().copied().collect();
     forwarded.sort_unstable();
     (Cow::Owned(g.forwarding(&forwards)), forwarded)
 }

@@ -16,7 +16,7 @@ use std::fmt::Write;
 use super::infer::Inferred;
 use super::{PlanValue, ValueId};
 use crate::gpu::WG_1D;
-use crate::graph::{Graph, Source};
+use crate::graph::{Graph, NodeId, Source};
 use crate::ids::IdVec;
 use crate::node::Lowering;
 use crate::value::ValueType;
@@ -26,8 +26,8 @@ const MAX_BINDINGS: usize = 8;
 
 pub struct FuseCtx<'a> {
     pub g: &'a Graph,
-    pub types: &'a [Inferred],
-    pub order: &'a [usize],
+    pub types: &'a IdVec<NodeId, Inferred>,
+    pub order: &'a [NodeId],
     pub fuse: bool,
     /// Whether a node output is needed after the phase (an output, a state's next value).
     pub escapes: &'a dyn Fn(Source) -> bool,
@@ -36,24 +36,24 @@ pub struct FuseCtx<'a> {
 /// A unit of the schedule.
 #[derive(Clone, Debug)]
 pub enum Unit {
-    Single(usize),
+    Single(NodeId),
     /// Pointwise members in order, each with whether its output must be stored.
-    Group(Vec<(usize, bool)>),
+    Group(Vec<(NodeId, bool)>),
     /// A transform that applies a spectral node in its last pass (see `fold.rs`),
     /// and with `inverse` also the first pass of the inverse transform after it.
     Folded {
-        transform: usize,
-        spectral: usize,
-        inverse: Option<usize>,
+        transform: NodeId,
+        spectral: NodeId,
+        inverse: Option<NodeId>,
     },
     /// An inverse transform whose first pass a [`Unit::Folded`] ran.
-    AfterFold(usize),
+    AfterFold(NodeId),
 }
 
 /// A generated element-wise kernel.
 #[derive(Clone, Debug)]
 pub struct FusedKernel {
-    pub nodes: Vec<usize>,
+    pub nodes: Vec<NodeId>,
     /// Complete WGSL. Params are not in it, so equal structures share one pipeline.
     pub source: String,
     /// Bindings in order: params, the clock when `uses_clock`, `inputs`, `outputs`.
@@ -66,7 +66,7 @@ pub struct FusedKernel {
     pub uses_clock: bool,
 }
 
-fn out_type(ctx: &FuseCtx, n: usize) -> Option<ValueType> {
+fn out_type(ctx: &FuseCtx, n: NodeId) -> Option<ValueType> {
     ctx.types[n].outputs()?.first().copied()
 }
 
@@ -83,7 +83,7 @@ fn real_array(t: &ValueType) -> bool {
     )
 }
 
-fn is_pointwise(ctx: &FuseCtx, n: usize) -> bool {
+fn is_pointwise(ctx: &FuseCtx, n: NodeId) -> bool {
     let inst = &ctx.g.nodes[n];
     matches!(inst.node.lowering(), Lowering::Pointwise(_))
         && inst.output_ports.len() == 1
@@ -92,16 +92,16 @@ fn is_pointwise(ctx: &FuseCtx, n: usize) -> bool {
 
 /// Groups the phase's nodes and orders the units.
 pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
-    let in_phase: BTreeSet<usize> = ctx.order.iter().copied().collect();
-    let pos: HashMap<usize, usize> = ctx.order.iter().enumerate().map(|(i, &n)| (n, i)).collect();
-    let mut group_of: HashMap<usize, usize> = HashMap::new();
-    let mut groups: Vec<Vec<usize>> = Vec::new();
+    let in_phase: BTreeSet<NodeId> = ctx.order.iter().copied().collect();
+    let pos: HashMap<NodeId, usize> = ctx.order.iter().enumerate().map(|(i, &n)| (n, i)).collect();
+    let mut group_of: HashMap<NodeId, usize> = HashMap::new();
+    let mut groups: Vec<Vec<NodeId>> = Vec::new();
     // deps[n]: groups n depends on, transitively.
-    let mut deps: HashMap<usize, BTreeSet<usize>> = HashMap::new();
+    let mut deps: HashMap<NodeId, BTreeSet<usize>> = HashMap::new();
 
     for &n in ctx.order {
         let inst = &ctx.g.nodes[n];
-        let producers: Vec<usize> = inst
+        let producers: Vec<NodeId> = inst
             .inputs
             .iter()
             .filter_map(|s| match s {
@@ -154,7 +154,7 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
     }
 
     // Escaping outputs: used outside the group or after the phase.
-    let mut consumers: HashMap<usize, Vec<usize>> = HashMap::new();
+    let mut consumers: HashMap<NodeId, Vec<NodeId>> = HashMap::new();
     for &n in ctx.order {
         for s in &ctx.g.nodes[n].inputs {
             if let Source::Node { node, .. } = s {
@@ -163,13 +163,13 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
         }
     }
     let groups = split_for_bindings(ctx, groups, &consumers);
-    let mut group_of: HashMap<usize, usize> = HashMap::new();
+    let mut group_of: HashMap<NodeId, usize> = HashMap::new();
     for (gid, members) in groups.iter().enumerate() {
         for &m in members {
             group_of.insert(m, gid);
         }
     }
-    let escapes = |n: usize, gid: usize| -> bool {
+    let escapes = |n: NodeId, gid: usize| -> bool {
         (ctx.escapes)(Source::Node { node: n, port: 0 })
             || consumers
                 .get(&n)
@@ -179,7 +179,7 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
     };
 
     // Units, ordered topologically on the quotient graph (first-declared first).
-    let mut unit_of: HashMap<usize, usize> = HashMap::new();
+    let mut unit_of: HashMap<NodeId, usize> = HashMap::new();
     let mut units: Vec<Unit> = Vec::new();
     let mut unit_pos: Vec<usize> = Vec::new();
     let mut group_unit: HashMap<usize, usize> = HashMap::new();
@@ -246,11 +246,11 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
 /// between two members), so the cut needs no further checks.
 fn split_for_bindings(
     ctx: &FuseCtx,
-    groups: Vec<Vec<usize>>,
-    consumers: &HashMap<usize, Vec<usize>>,
-) -> Vec<Vec<usize>> {
-    let bindings = |chunk: &[usize]| -> usize {
-        let inside: BTreeSet<usize> = chunk.iter().copied().collect();
+    groups: Vec<Vec<NodeId>>,
+    consumers: &HashMap<NodeId, Vec<NodeId>>,
+) -> Vec<Vec<NodeId>> {
+    let bindings = |chunk: &[NodeId]| -> usize {
+        let inside: BTreeSet<NodeId> = chunk.iter().copied().collect();
         let mut ext = BTreeSet::new();
         let mut outs = 0;
         for &m in chunk {
@@ -280,7 +280,7 @@ fn split_for_bindings(
     };
     let mut out = Vec::new();
     for members in groups {
-        let mut run: Vec<usize> = Vec::new();
+        let mut run: Vec<NodeId> = Vec::new();
         for m in members {
             run.push(m);
             if run.len() > 1 && bindings(&run) > MAX_BINDINGS {
@@ -311,7 +311,7 @@ fn comp_expr(t: &ValueType) -> String {
 /// (`None`: absent).
 pub fn generate(
     g: &Graph,
-    members: &[(usize, bool)],
+    members: &[(NodeId, bool)],
     member_outputs: &[ValueId],
     get: &dyn Fn(Source) -> Option<ValueId>,
     values: &IdVec<ValueId, PlanValue>,

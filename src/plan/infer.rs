@@ -5,7 +5,8 @@
 
 use super::demand::Demand;
 use crate::gpu::DeviceCaps;
-use crate::graph::{Graph, Problem, Problems, Source};
+use crate::graph::{Graph, NodeId, Problem, Problems, Source};
+use crate::ids::IdVec;
 use crate::value::ValueType;
 
 /// What inference found for one node.
@@ -38,7 +39,7 @@ impl Inferred {
 
 /// The types of everything demanded.
 pub(super) struct Types {
-    pub nodes: Vec<Inferred>,
+    pub nodes: IdVec<NodeId, Inferred>,
     pub inputs: Vec<Option<ValueType>>,
     pub states: Vec<Option<ValueType>>,
 }
@@ -54,11 +55,11 @@ impl Types {
     }
 
     /// The types a node's inputs have (`None`: absent).
-    pub fn inputs_of(&self, g: &Graph, n: usize) -> Vec<Option<ValueType>> {
+    pub fn inputs_of(&self, g: &Graph, n: NodeId) -> Vec<Option<ValueType>> {
         g.nodes[n].inputs.iter().map(|s| self.of(*s)).collect()
     }
 
-    pub fn scratch(&self, n: usize) -> &[u64] {
+    pub fn scratch(&self, n: NodeId) -> &[u64] {
         match &self.nodes[n] {
             Inferred::Present { scratch, .. } => scratch,
             _ => &[],
@@ -78,7 +79,7 @@ pub(super) fn infer(
         caps,
         problems: Vec::new(),
         types: Types {
-            nodes: vec![Inferred::Unknown; g.nodes.len()],
+            nodes: g.nodes.iter().map(|_| Inferred::Unknown).collect(),
             inputs: input_types.to_vec(),
             states: vec![None; g.states.len()],
         },
@@ -130,7 +131,7 @@ impl Inference<'_> {
 
     /// Infers a node's output types, its producers' first (the graph is acyclic apart
     /// from state, whose type is known before the step is inferred).
-    fn node(&mut self, n: usize) {
+    fn node(&mut self, n: NodeId) {
         if !matches!(self.types.nodes[n], Inferred::Unknown) {
             return;
         }
@@ -164,7 +165,7 @@ impl Inference<'_> {
 
     /// A node's output types from its inputs' (already inferred); with
     /// `without_loop_input`, the input closing an iterative node's loop counts as absent.
-    fn signature(&mut self, n: usize, without_loop_input: bool) {
+    fn signature(&mut self, n: NodeId, without_loop_input: bool) {
         let g = self.g;
         let inst = &g.nodes[n];
         let mut types = Vec::new();

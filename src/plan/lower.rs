@@ -18,7 +18,7 @@ use super::{
     StatePlan, Storage, TransformFold, ValueId,
 };
 use crate::gpu::DeviceCaps;
-use crate::graph::{Graph, Source};
+use crate::graph::{Graph, NodeId, Source};
 use crate::ids::IdVec;
 use crate::node::Lowering;
 use crate::value::ValueType;
@@ -86,7 +86,7 @@ pub(super) fn lower(
 
 /// What loop bodies read from outside them, and the results loops read back: both must
 /// be stored, whatever fusion would otherwise keep in registers.
-fn loop_reads(g: &Graph, loops: &BTreeMap<usize, Vec<usize>>) -> BTreeSet<Source> {
+fn loop_reads(g: &Graph, loops: &BTreeMap<NodeId, Vec<NodeId>>) -> BTreeSet<Source> {
     loops
         .iter()
         .flat_map(|(l, body)| body.iter().chain(std::iter::once(l)))
@@ -136,7 +136,7 @@ impl Lowerer<'_> {
         self.by_source.get(&(src, phase)).copied()
     }
 
-    fn output_type(&self, n: usize, port: usize) -> ValueType {
+    fn output_type(&self, n: NodeId, port: usize) -> ValueType {
         self.types.nodes[n].outputs().expect("present node")[port]
     }
 
@@ -214,7 +214,7 @@ impl Lowerer<'_> {
     }
 
     /// The units of a node order (fused groups, folded transforms, single nodes).
-    fn units(&self, phase: Phase, order: &[usize]) -> Vec<Unit> {
+    fn units(&self, phase: Phase, order: &[NodeId]) -> Vec<Unit> {
         let escapes = |src: Source| self.escapes(phase, src);
         let ctx = FuseCtx {
             g: self.g,
@@ -224,7 +224,7 @@ impl Lowerer<'_> {
             escapes: &escapes,
         };
         let units = fuse::group(&ctx);
-        let input_types = |n: usize| self.types.inputs_of(self.g, n);
+        let input_types = |n: NodeId| self.types.inputs_of(self.g, n);
         super::fold::fold(&ctx, units, self.caps, &input_types)
     }
 
@@ -232,8 +232,8 @@ impl Lowerer<'_> {
     fn phase(
         &mut self,
         phase: Phase,
-        order: &[usize],
-        loops: &BTreeMap<usize, Vec<usize>>,
+        order: &[NodeId],
+        loops: &BTreeMap<NodeId, Vec<NodeId>>,
     ) -> Vec<Launch> {
         let mut launches = Vec::new();
         for unit in self.units(phase, order) {
@@ -249,7 +249,7 @@ impl Lowerer<'_> {
 
     /// The output values of a node's launch; a transform that hosts a spectral node
     /// stores only the latter's output, so its own stay in registers.
-    fn node_outputs(&mut self, phase: Phase, n: usize, stored: bool) -> Vec<ValueId> {
+    fn node_outputs(&mut self, phase: Phase, n: NodeId, stored: bool) -> Vec<ValueId> {
         let ports = self.types.nodes[n].outputs().expect("present node").len();
         (0..ports)
             .map(|port| {
@@ -264,7 +264,7 @@ impl Lowerer<'_> {
             .collect()
     }
 
-    fn scratch(&mut self, phase: Phase, n: usize) -> Vec<ValueId> {
+    fn scratch(&mut self, phase: Phase, n: NodeId) -> Vec<ValueId> {
         let id = self.g.nodes[n].id.clone();
         self.types
             .scratch(n)
@@ -285,7 +285,7 @@ impl Lowerer<'_> {
             .collect()
     }
 
-    fn node_inputs(&self, phase: Phase, n: usize) -> Vec<Option<ValueId>> {
+    fn node_inputs(&self, phase: Phase, n: NodeId) -> Vec<Option<ValueId>> {
         self.g.nodes[n]
             .inputs
             .iter()
@@ -354,7 +354,7 @@ impl Lowerer<'_> {
     }
 
     /// A group of element-wise nodes as one generated kernel.
-    fn fused(&mut self, phase: Phase, members: &[(usize, bool)]) -> Launch {
+    fn fused(&mut self, phase: Phase, members: &[(NodeId, bool)]) -> Launch {
         let member_outputs: Vec<ValueId> = members
             .iter()
             .map(|&(n, escapes)| {
@@ -374,7 +374,7 @@ impl Lowerer<'_> {
     }
 
     /// An iterative node and its loop body, planned and fused on its own.
-    fn loop_launch(&mut self, phase: Phase, n: usize, body: &[usize]) -> Launch {
+    fn loop_launch(&mut self, phase: Phase, n: NodeId, body: &[NodeId]) -> Launch {
         // The node's outputs exist first; its body reads them, and the node then reads
         // the body's result.
         let Launch::Node {

@@ -22,7 +22,7 @@ pub use fuse::FusedKernel;
 pub use show::{human_bytes, to_dot, to_text};
 
 use crate::gpu::DeviceCaps;
-use crate::graph::{Graph, Problems};
+use crate::graph::{Graph, NodeId, Problems};
 use crate::ids::IdVec;
 use crate::transform::Folding;
 use crate::value::ValueType;
@@ -100,12 +100,12 @@ pub struct PlanBuffer {
 /// A spectral node folded into the transform that produces its input.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FoldedSpectral {
-    pub node: usize,
+    pub node: NodeId,
     /// Its output, written by the transform's last pass.
     pub output: ValueId,
     /// The inverse transform (reading `output`) whose first pass the transform's last
     /// pass runs too: `output` then holds the spectrum transformed back along one axis.
-    pub inverse: Option<usize>,
+    pub inverse: Option<NodeId>,
 }
 
 /// How a transform's launch shares passes with its neighbours (see `fold.rs`).
@@ -139,7 +139,7 @@ impl TransformFold {
 pub enum Launch {
     /// A node that records its own dispatches, or a spectral node's kernel.
     Node {
-        node: usize,
+        node: NodeId,
         inputs: Vec<Option<ValueId>>,
         outputs: Vec<ValueId>,
         scratch: Vec<ValueId>,
@@ -148,7 +148,7 @@ pub enum Launch {
     },
     /// A transform (see `crate::transform`), with what it folds in.
     Transform {
-        node: usize,
+        node: NodeId,
         inputs: Vec<Option<ValueId>>,
         /// When it hosts a spectral node, its own output is never stored (a register
         /// value): the launch writes the spectral node's output instead.
@@ -164,7 +164,7 @@ pub enum Launch {
     /// An iterative node (see `GpuIterative`) with its loop body: the executor runs the
     /// node's start, then `body` and the node's iteration until the host says stop.
     Loop {
-        node: usize,
+        node: NodeId,
         inputs: Vec<Option<ValueId>>,
         outputs: Vec<ValueId>,
         scratch: Vec<ValueId>,
@@ -218,10 +218,10 @@ pub struct Plan {
     pub outputs: Vec<(String, ValueId)>,
     pub memory: MemoryReport,
     /// Nodes the graph has but this plan does not run.
-    pub pruned: Vec<usize>,
+    pub pruned: Vec<NodeId>,
     /// Nodes read through: for these inputs their output is one of their inputs
     /// unchanged (see `Node::forwards`), so they do no work.
-    pub forwarded: Vec<usize>,
+    pub forwarded: Vec<NodeId>,
 }
 
 impl Plan {
@@ -315,7 +315,7 @@ impl Launch {
     }
 
     /// The graph nodes it runs.
-    pub fn nodes(&self) -> Vec<usize> {
+    pub fn nodes(&self) -> Vec<NodeId> {
         match self {
             Launch::Node { node, .. } => vec![*node],
             Launch::Transform { node, fold, .. } => {

@@ -7,25 +7,25 @@ use std::collections::{BTreeMap, BTreeSet, BinaryHeap};
 
 use super::demand::Demand;
 use super::infer::Types;
-use crate::graph::{Graph, Problem, Problems, Source};
+use crate::graph::{Graph, NodeId, Problem, Problems, Source};
 
 pub(super) struct Schedule {
-    pub prologue: Vec<usize>,
-    pub step: Vec<usize>,
+    pub prologue: Vec<NodeId>,
+    pub step: Vec<NodeId>,
     /// Each iterative node of the step with its loop body in order.
-    pub loops: BTreeMap<usize, Vec<usize>>,
+    pub loops: BTreeMap<NodeId, Vec<NodeId>>,
     /// Nodes the graph has but the plan does not run (not demanded, or absent).
-    pub pruned: Vec<usize>,
+    pub pruned: Vec<NodeId>,
 }
 
 pub(super) fn schedule(
     g: &Graph,
     demand: &Demand,
     types: &Types,
-    forwarded: &[usize],
+    forwarded: &[NodeId],
 ) -> Result<Schedule, Problems> {
-    let present = |n: &usize| types.nodes[*n].is_present();
-    let iterative = |n: usize| g.nodes[n].input_ports.iter().any(|p| p.iterate);
+    let present = |n: &NodeId| types.nodes[*n].is_present();
+    let iterative = |n: NodeId| g.nodes[n].input_ports.iter().any(|p| p.iterate);
     let problems: Vec<Problem> = demand
         .prologue
         .iter()
@@ -47,17 +47,17 @@ pub(super) fn schedule(
         demand.prologue.iter().copied().filter(present).collect(),
         &BTreeMap::new(),
     );
-    let step_present: BTreeSet<usize> = demand.step.iter().copied().filter(present).collect();
+    let step_present: BTreeSet<NodeId> = demand.step.iter().copied().filter(present).collect();
     let mut loops = BTreeMap::new();
-    let mut after_outside_reads: BTreeMap<usize, BTreeSet<usize>> = BTreeMap::new();
+    let mut after_outside_reads: BTreeMap<NodeId, BTreeSet<NodeId>> = BTreeMap::new();
     let mut in_body = BTreeSet::new();
     for &l in step_present.iter().filter(|&&n| iterative(n)) {
-        let body: BTreeSet<usize> = g
+        let body: BTreeSet<NodeId> = g
             .loop_body(l)
             .into_iter()
             .filter(|b| step_present.contains(b))
             .collect();
-        let outside: BTreeSet<usize> = body
+        let outside: BTreeSet<NodeId> = body
             .iter()
             .flat_map(|&b| g.nodes[b].inputs.iter().copied())
             .filter_map(|s| match s {
@@ -74,7 +74,9 @@ pub(super) fn schedule(
         step_present.difference(&in_body).copied().collect(),
         &after_outside_reads,
     );
-    let pruned = (0..g.nodes.len())
+    let pruned = g
+        .nodes
+        .ids()
         .filter(|n| !(demand.step.contains(n) || demand.prologue.contains(n)) || !present(n))
         .filter(|n| !forwarded.contains(n))
         .collect();
@@ -90,12 +92,16 @@ pub(super) fn schedule(
 /// first, so plans read in file order where the data allow. `extra[n]`: nodes `n` must
 /// follow besides its inputs' producers. Loop inputs (read after each iteration) impose
 /// no order.
-fn topo(g: &Graph, set: BTreeSet<usize>, extra: &BTreeMap<usize, BTreeSet<usize>>) -> Vec<usize> {
-    let mut indeg: BTreeMap<usize, usize> = set.iter().map(|&n| (n, 0)).collect();
-    let mut users: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+fn topo(
+    g: &Graph,
+    set: BTreeSet<NodeId>,
+    extra: &BTreeMap<NodeId, BTreeSet<NodeId>>,
+) -> Vec<NodeId> {
+    let mut indeg: BTreeMap<NodeId, usize> = set.iter().map(|&n| (n, 0)).collect();
+    let mut users: BTreeMap<NodeId, Vec<NodeId>> = BTreeMap::new();
     for &n in &set {
         let inst = &g.nodes[n];
-        let mut deps: BTreeSet<usize> = inst
+        let mut deps: BTreeSet<NodeId> = inst
             .input_ports
             .iter()
             .zip(&inst.inputs)
@@ -116,7 +122,7 @@ fn topo(g: &Graph, set: BTreeSet<usize>, extra: &BTreeMap<usize, BTreeSet<usize>
             users.entry(d).or_default().push(n);
         }
     }
-    let mut ready: BinaryHeap<Reverse<usize>> = indeg
+    let mut ready: BinaryHeap<Reverse<NodeId>> = indeg
         .iter()
         .filter(|(_, d)| **d == 0)
         .map(|(n, _)| Reverse(*n))

@@ -3,7 +3,7 @@
 use std::fmt::Write;
 
 use super::{BufferRole, Launch, Plan, Storage, TransformFold, ValueId};
-use crate::graph::{Graph, Source};
+use crate::graph::{Graph, NodeId, Source};
 
 /// Bytes for people.
 pub fn human_bytes(b: u64) -> String {
@@ -69,7 +69,7 @@ fn node_text(
     g: &Graph,
     plan: &Plan,
     i: usize,
-    node: usize,
+    node: NodeId,
     head: &str,
     inputs: &[Option<ValueId>],
     outputs: &[ValueId],

@@ -22,13 +22,23 @@ fn check(kind: &str, params: &str, inputs: &[(&str, ValueType)], tol: f64) {
         .map(|(n, t)| (n.to_string(), rng.array(*t, 0.5, 2.0)))
         .collect();
     let out = run_graph(&gpu, &g, &data, None, 1, true);
-    let args: Vec<Option<&HostArray>> = g.nodes[0]
+    let args: Vec<Option<&HostArray>> = g
+        .nodes
+        .first()
+        .expect("one node")
         .input_ports
         .iter()
         .map(|p| data.get(p.name))
         .collect();
     let refs = reference(kind, params, &args);
-    for (port, r) in g.nodes[0].output_ports.iter().zip(&refs) {
+    for (port, r) in g
+        .nodes
+        .first()
+        .expect("one node")
+        .output_ports
+        .iter()
+        .zip(&refs)
+    {
         let got = &out[port.name];
         let (err, at) = rel_max_err(got, r);
         assert!(

@@ -190,7 +190,10 @@ pub fn run_node_and_reference(
     let (dir, g) = load_single_node(kind, params, &data);
     let out = run_graph(&gpu, &g, &data, None, 1, true);
     let _ = std::fs::remove_dir_all(&dir);
-    let args: Vec<Option<&HostArray>> = g.nodes[0]
+    let args: Vec<Option<&HostArray>> = g
+        .nodes
+        .first()
+        .expect("one node")
         .input_ports
         .iter()
         .map(|p| data.get(p.name))
