@@ -10,8 +10,8 @@
 
 use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo};
 use crate::node::{
-    Decision, GpuIterative, IterativeKernels, Lowering, Node, NodeKind, ParamSpec, Params,
-    PortError, PortSpec, RefCtx, Registry, Signature,
+    Decision, GpuIterative, IterativeKernels, LoopError, Lowering, Node, NodeKind, ParamSpec,
+    Params, PortError, PortSpec, RefCtx, Registry, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
@@ -272,19 +272,21 @@ impl GpuIterative for Lanczos {
         })
     }
 
-    fn decide(&self, iterations: usize, status: &[u8]) -> Result<Decision, String> {
+    fn decide(&self, iterations: usize, status: &[u8]) -> Result<Decision, LoopError> {
         let words: &[u32] = bytemuck::cast_slice(status);
         let layout = Layout::new(1, self.max_iterations);
         let f = |w: u32| f32::from_bits(w) as f64;
         let counter = words[0] as usize;
         if counter != iterations {
-            return Err(format!(
-                "internal: the GPU counted {counter} iterations, the host {iterations}"
-            ));
+            return Err(LoopError::Internal(format!(
+                "the GPU counted {counter} iterations, the host {iterations}"
+            )));
         }
         let norm = f(words[1]);
         if !norm.is_finite() {
-            return Err(format!("the input vector z is not finite (|z| = {norm})"));
+            return Err(LoopError::Input(format!(
+                "the input vector z is not finite (|z| = {norm})"
+            )));
         }
         let answer = |coefficients: &[f64]| -> Decision {
             let mut bytes = (coefficients.len() as u32).to_le_bytes().to_vec();
@@ -304,9 +306,9 @@ impl GpuIterative for Lanczos {
             .map(|i| f(words[(layout.beta() as usize) + i]))
             .collect();
         if alpha.iter().chain(&beta).any(|x| !x.is_finite()) {
-            return Err(format!(
+            return Err(LoopError::Operator(format!(
                 "the operator returned non-finite values (NaN or inf) at iteration {k}"
-            ));
+            )));
         }
         let y = self.coefficients(&alpha, &beta[..k - 1])?;
         let scale = alpha.iter().map(|a| a.abs()).fold(0.0, f64::max);
@@ -330,10 +332,10 @@ impl GpuIterative for Lanczos {
                 return done(y);
             }
             if k >= self.max_iterations as usize {
-                return Err(format!(
+                return Err(LoopError::NoConvergence(format!(
                     "no convergence after {k} iterations (max_iterations): the relative change is {change:.3e}, above the tolerance {:e}; raise max_iterations or the tolerance (is M badly conditioned?)",
                     self.tolerance
-                ));
+                )));
             }
         } else if k >= self.max_iterations as usize {
             return done(y);
@@ -344,7 +346,7 @@ impl GpuIterative for Lanczos {
 
 impl Lanczos {
     /// f(T) e1 for the tridiagonal T with diagonal `alpha` and off-diagonal `beta`.
-    fn coefficients(&self, alpha: &[f64], beta: &[f64]) -> Result<Vec<f64>, String> {
+    fn coefficients(&self, alpha: &[f64], beta: &[f64]) -> Result<Vec<f64>, LoopError> {
         let k = alpha.len();
         let mut t = vec![0.0; k * k];
         for i in 0..k {
@@ -362,15 +364,15 @@ impl Lanczos {
         let mut y = vec![0.0; k];
         for (j, &lambda) in values.iter().enumerate() {
             if lambda < floor {
-                return Err(format!(
+                return Err(LoopError::Operator(format!(
                     "the operator is not positive definite: Lanczos found the eigenvalue {lambda:.6e} (largest {largest:.6e})"
-                ));
+                )));
             }
             let f = if self.inverse {
                 if lambda <= 1e-7 * largest {
-                    return Err(format!(
+                    return Err(LoopError::Operator(format!(
                         "the operator is singular to f32 precision (eigenvalue {lambda:.3e} of largest {largest:.3e}): M^(-1/2) is not defined"
-                    ));
+                    )));
                 }
                 1.0 / lambda.sqrt()
             } else {
@@ -570,7 +572,10 @@ mod tests {
         let y = node.coefficients(&[4.0, 9.0], &[0.0]).unwrap();
         assert!((y[0] - 2.0).abs() < 1e-14 && y[1].abs() < 1e-14);
         let err = node.coefficients(&[-1.0, 9.0], &[0.0]).unwrap_err();
-        assert!(err.contains("not positive definite"), "{err}");
+        assert!(
+            matches!(&err, LoopError::Operator(m) if m.contains("not positive definite")),
+            "{err}"
+        );
     }
 
     #[test]

@@ -419,6 +419,7 @@ mod tests {
         assert!(
             crate::expr::eval("next_fft('x')", &s)
                 .unwrap_err()
+                .to_string()
                 .contains("next_fft")
         );
     }

@@ -24,6 +24,7 @@
 
 use std::sync::Arc;
 
+use crate::gpu::shaders::ShaderError;
 use crate::gpu::{
     Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo,
 };
@@ -143,9 +144,10 @@ impl ScanKernels {
         if let Some(alias) = alias {
             const WRITTEN: &str = "alias Elem = u32;";
             if source.matches(WRITTEN).count() != 1 {
-                return Err(CompileError::Library(format!(
-                    "{file}: expected one line `{WRITTEN}` to specialise"
-                )));
+                return Err(CompileError::Library(ShaderError::NoMarker {
+                    file: file.into(),
+                    line: WRITTEN.into(),
+                }));
             }
             source = source.replace(WRITTEN, alias);
         }

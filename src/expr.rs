@@ -21,35 +21,36 @@ pub enum ParamValue {
 
 impl ParamValue {
     /// Converts a JSON literal. Objects, nested arrays and nulls are not param values.
-    pub fn from_json(v: &serde_json::Value) -> Result<ParamValue, String> {
+    pub fn from_json(v: &serde_json::Value) -> Result<ParamValue, ExprError> {
         use serde_json::Value;
         match v {
             Value::Number(n) => n
                 .as_f64()
                 .map(ParamValue::Number)
-                .ok_or_else(|| format!("number {n} is out of range")),
+                .ok_or_else(|| ExprError::Literal(format!("number {n} is out of range"))),
             Value::String(s) => Ok(ParamValue::Text(s.clone())),
             Value::Bool(b) => Ok(ParamValue::Bool(*b)),
             Value::Array(items) => items
                 .iter()
                 .map(|x| {
-                    x.as_f64()
-                        .ok_or_else(|| format!("array element {x} is not a number"))
+                    x.as_f64().ok_or_else(|| {
+                        ExprError::Literal(format!("array element {x} is not a number"))
+                    })
                 })
                 .collect::<Result<Vec<_>, _>>()
                 .map(ParamValue::Numbers),
-            Value::Null => Err("null is not a param value".into()),
-            Value::Object(_) => Err("an object is not a param value".into()),
+            Value::Null => Err(ExprError::Literal("null is not a param value".into())),
+            Value::Object(_) => Err(ExprError::Literal("an object is not a param value".into())),
         }
     }
 
     /// Parses a command-line `--set` value: a JSON number or array, `true`/`false`, or else
     /// a plain string.
-    pub fn from_cli(text: &str) -> Result<ParamValue, String> {
+    pub fn from_cli(text: &str) -> Result<ParamValue, ExprError> {
         let t = text.trim();
         if t.starts_with('[') {
-            let v: serde_json::Value =
-                serde_json::from_str(t).map_err(|e| format!("`{t}` is not a JSON array: {e}"))?;
+            let v: serde_json::Value = serde_json::from_str(t)
+                .map_err(|e| ExprError::Literal(format!("`{t}` is not a JSON array: {e}")))?;
             return ParamValue::from_json(&v);
         }
         if let Ok(v @ serde_json::Value::Number(_)) = serde_json::from_str::<serde_json::Value>(t) {
@@ -109,6 +110,42 @@ impl fmt::Display for ParamValue {
     }
 }
 
+/// Why a param value or an expression could not be evaluated.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ExprError {
+    /// A literal that is not a param value (an object, a null, a nested array).
+    #[error("{0}")]
+    Literal(String),
+    /// The text does not parse.
+    #[error("{problem} in expression `{expr}`")]
+    Syntax { problem: String, expr: String },
+    /// A value used where its kind does not fit (a string in arithmetic, a wrong
+    /// argument count).
+    #[error("{problem} in expression `{expr}`")]
+    Type { problem: String, expr: String },
+    /// The expression as a whole gives no usable value.
+    #[error("expression `{expr}` {problem}")]
+    Result { problem: String, expr: String },
+    /// A name that is no graph param (nor `pi`).
+    #[error("unknown param `{name}` (graph params: {known}){}", match expr { Some(e) => format!(" in expression `{e}`"), None => String::new() })]
+    UnknownName {
+        name: String,
+        known: String,
+        /// The expression it appears in (none for a `$name` reference).
+        expr: Option<String>,
+    },
+    #[error("unknown function `{name}` in expression `{expr}`")]
+    UnknownFunction { name: String, expr: String },
+    /// A host function refused its arguments.
+    #[error("{name}: {message} (in expression `{expr}`)")]
+    Function {
+        name: String,
+        message: String,
+        expr: String,
+    },
+}
+
 /// Names visible to expressions, with the host functions they may call.
 #[derive(Clone)]
 pub struct Scope<'f> {
@@ -140,14 +177,18 @@ impl<'f> Scope<'f> {
 
 /// Resolves a param as written in a graph file: a literal, a `$name` reference, or an
 /// `= expression` (a number or an array of numbers).
-pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, String> {
+pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, ExprError> {
     if let serde_json::Value::String(s) = v {
         if let Some(name) = s.strip_prefix('$') {
             let name = name.trim();
             return scope
                 .get(name)
                 .cloned()
-                .ok_or_else(|| unknown_name(name, scope));
+                .ok_or_else(|| ExprError::UnknownName {
+                    name: name.into(),
+                    known: known_names(scope),
+                    expr: None,
+                });
         }
         if let Some(expr) = s.strip_prefix('=') {
             return evaluate(expr, scope);
@@ -156,12 +197,8 @@ pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, Strin
     ParamValue::from_json(v)
 }
 
-fn unknown_name(name: &str, scope: &Scope) -> String {
-    let known: Vec<&str> = scope.names().collect();
-    format!(
-        "unknown param `{name}` (graph params: {})",
-        known.join(", ")
-    )
+fn known_names(scope: &Scope) -> String {
+    scope.names().collect::<Vec<_>>().join(", ")
 }
 
 /// A function graph expressions may call besides the arithmetic ones: the host-side f64
@@ -171,6 +208,7 @@ pub struct HostFunction {
     pub name: &'static str,
     /// Shown in docs: the arguments and what comes back.
     pub doc: &'static str,
+    /// Its error says what is wrong with the arguments.
     pub call: fn(&[ParamValue]) -> Result<ParamValue, String>,
 }
 
@@ -207,19 +245,18 @@ impl HostFunctions {
 /// exp, log (natural), log10, sin, cos, tan, atan, abs, floor, ceil, round, pow(x, y),
 /// min(...), max(...), sum(...), prod(...) (the last four also take arrays), and the host
 /// functions of the scope.
-pub fn eval(text: &str, scope: &Scope) -> Result<f64, String> {
+pub fn eval(text: &str, scope: &Scope) -> Result<f64, ExprError> {
     match evaluate(text, scope)? {
         ParamValue::Number(x) => Ok(x),
-        other => Err(format!(
-            "expression `{}` gives {} where a number is needed",
-            text.trim(),
-            other.type_name()
-        )),
+        other => Err(ExprError::Result {
+            problem: format!("gives {} where a number is needed", other.type_name()),
+            expr: text.trim().into(),
+        }),
     }
 }
 
 /// Evaluates an expression to a number or an array of numbers.
-pub fn evaluate(text: &str, scope: &Scope) -> Result<ParamValue, String> {
+pub fn evaluate(text: &str, scope: &Scope) -> Result<ParamValue, ExprError> {
     let mut p = Parser {
         src: text,
         toks: lex(text)?,
@@ -228,17 +265,19 @@ pub fn evaluate(text: &str, scope: &Scope) -> Result<ParamValue, String> {
     };
     let v = p.expr()?;
     if p.pos != p.toks.len() {
-        return Err(format!(
-            "unexpected `{}` in expression `{}`",
-            p.toks[p.pos].text(),
-            text.trim()
-        ));
+        return Err(ExprError::Syntax {
+            problem: format!("unexpected `{}`", p.toks[p.pos].text()),
+            expr: text.trim().into(),
+        });
     }
     let finite = |x: f64| {
         if x.is_finite() {
             Ok(x)
         } else {
-            Err(format!("expression `{}` is not finite ({x})", text.trim()))
+            Err(ExprError::Result {
+                problem: format!("is not finite ({x})"),
+                expr: text.trim().into(),
+            })
         }
     };
     match v {
@@ -249,10 +288,10 @@ pub fn evaluate(text: &str, scope: &Scope) -> Result<ParamValue, String> {
             .collect::<Result<Vec<_>, _>>()
             .map(ParamValue::Numbers),
         V::Bool(b) => Ok(ParamValue::Bool(b)),
-        V::Text(_) => Err(format!(
-            "expression `{}` gives a string; write the string itself instead",
-            text.trim()
-        )),
+        V::Text(_) => Err(ExprError::Result {
+            problem: "gives a string; write the string itself instead".into(),
+            expr: text.trim().into(),
+        }),
     }
 }
 
@@ -275,7 +314,7 @@ impl Tok {
     }
 }
 
-fn lex(s: &str) -> Result<Vec<Tok>, String> {
+fn lex(s: &str) -> Result<Vec<Tok>, ExprError> {
     let b = s.as_bytes();
     let mut i = 0;
     let mut out = Vec::new();
@@ -303,8 +342,9 @@ fn lex(s: &str) -> Result<Vec<Tok>, String> {
                 }
             }
             let t = &s[start..i];
-            out.push(Tok::Num(t.parse().map_err(|_| {
-                format!("bad number `{t}` in expression `{}`", s.trim())
+            out.push(Tok::Num(t.parse().map_err(|_| ExprError::Syntax {
+                problem: format!("bad number `{t}`"),
+                expr: s.trim().into(),
             })?));
         } else if c.is_ascii_alphabetic() || c == '_' {
             let start = i;
@@ -314,20 +354,24 @@ fn lex(s: &str) -> Result<Vec<Tok>, String> {
             out.push(Tok::Name(s[start..i].to_string()));
         } else if c == '\'' {
             let start = i + 1;
-            let end = s[start..]
-                .find('\'')
-                .map(|e| start + e)
-                .ok_or_else(|| format!("unterminated string in expression `{}`", s.trim()))?;
+            let end =
+                s[start..]
+                    .find('\'')
+                    .map(|e| start + e)
+                    .ok_or_else(|| ExprError::Syntax {
+                        problem: "unterminated string".into(),
+                        expr: s.trim().into(),
+                    })?;
             out.push(Tok::Str(s[start..end].to_string()));
             i = end + 1;
         } else if "+-*/^(),[]".contains(c) {
             out.push(Tok::Op(c));
             i += 1;
         } else {
-            return Err(format!(
-                "unexpected character `{c}` in expression `{}`",
-                s.trim()
-            ));
+            return Err(ExprError::Syntax {
+                problem: format!("unexpected character `{c}`"),
+                expr: s.trim().into(),
+            });
         }
     }
     Ok(out)
@@ -345,18 +389,18 @@ enum V {
 }
 
 impl V {
-    fn number(self, src: &str) -> Result<f64, String> {
+    fn number(self, src: &str) -> Result<f64, ExprError> {
         match self {
             V::Num(x) => Ok(x),
             V::Bool(b) => Ok(if b { 1.0 } else { 0.0 }),
-            V::Arr(_) => Err(format!(
-                "expression `{}` gives an array where a number is needed",
-                src.trim()
-            )),
-            V::Text(_) => Err(format!(
-                "a string cannot be used in arithmetic in expression `{}`",
-                src.trim()
-            )),
+            V::Arr(_) => Err(ExprError::Result {
+                problem: "gives an array where a number is needed".into(),
+                expr: src.trim().into(),
+            }),
+            V::Text(_) => Err(ExprError::Type {
+                problem: "a string cannot be used in arithmetic".into(),
+                expr: src.trim().into(),
+            }),
         }
     }
 
@@ -382,24 +426,24 @@ impl Parser<'_> {
         matches!(self.toks.get(self.pos), Some(Tok::Op(o)) if *o == c)
     }
 
-    fn expect(&mut self, c: char) -> Result<(), String> {
+    fn expect(&mut self, c: char) -> Result<(), ExprError> {
         if self.peek_op(c) {
             self.pos += 1;
             Ok(())
         } else {
-            Err(format!(
-                "expected `{c}` in expression `{}`",
-                self.src.trim()
-            ))
+            Err(ExprError::Syntax {
+                problem: format!("expected `{c}`"),
+                expr: self.src.trim().into(),
+            })
         }
     }
 
-    fn num(&mut self) -> Result<f64, String> {
+    fn num(&mut self) -> Result<f64, ExprError> {
         let src = self.src;
         self.unary()?.number(src)
     }
 
-    fn expr(&mut self) -> Result<V, String> {
+    fn expr(&mut self) -> Result<V, ExprError> {
         let mut lhs = self.term()?;
         while self.peek_op('+') || self.peek_op('-') {
             let op = self.toks[self.pos].clone();
@@ -411,7 +455,7 @@ impl Parser<'_> {
         Ok(lhs)
     }
 
-    fn term(&mut self) -> Result<V, String> {
+    fn term(&mut self) -> Result<V, ExprError> {
         let mut lhs = self.unary()?;
         while self.peek_op('*') || self.peek_op('/') {
             let op = self.toks[self.pos].clone();
@@ -423,7 +467,7 @@ impl Parser<'_> {
         Ok(lhs)
     }
 
-    fn unary(&mut self) -> Result<V, String> {
+    fn unary(&mut self) -> Result<V, ExprError> {
         if self.peek_op('-') {
             self.pos += 1;
             let x = self.num()?;
@@ -436,7 +480,7 @@ impl Parser<'_> {
         self.power()
     }
 
-    fn power(&mut self) -> Result<V, String> {
+    fn power(&mut self) -> Result<V, ExprError> {
         let base = self.postfix()?;
         if self.peek_op('^') {
             self.pos += 1;
@@ -447,7 +491,7 @@ impl Parser<'_> {
         Ok(base)
     }
 
-    fn postfix(&mut self) -> Result<V, String> {
+    fn postfix(&mut self) -> Result<V, ExprError> {
         let mut v = self.atom()?;
         while self.peek_op('[') {
             self.pos += 1;
@@ -456,25 +500,27 @@ impl Parser<'_> {
             let arr = match v {
                 V::Arr(a) => a,
                 _ => {
-                    return Err(format!(
-                        "indexing something that is not an array in expression `{}`",
-                        self.src.trim()
-                    ));
+                    return Err(ExprError::Type {
+                        problem: "indexing something that is not an array".into(),
+                        expr: self.src.trim().into(),
+                    });
                 }
             };
             if idx < 0.0 || idx.fract() != 0.0 || idx as usize >= arr.len() {
-                return Err(format!(
-                    "index {idx} out of range for an array of length {} in expression `{}`",
-                    arr.len(),
-                    self.src.trim()
-                ));
+                return Err(ExprError::Type {
+                    problem: format!(
+                        "index {idx} out of range for an array of length {}",
+                        arr.len()
+                    ),
+                    expr: self.src.trim().into(),
+                });
             }
             v = V::Num(arr[idx as usize]);
         }
         Ok(v)
     }
 
-    fn list(&mut self, close: char) -> Result<Vec<V>, String> {
+    fn list(&mut self, close: char) -> Result<Vec<V>, ExprError> {
         let mut items = Vec::new();
         if !self.peek_op(close) {
             loop {
@@ -490,12 +536,15 @@ impl Parser<'_> {
         Ok(items)
     }
 
-    fn atom(&mut self) -> Result<V, String> {
+    fn atom(&mut self) -> Result<V, ExprError> {
         let tok = self
             .toks
             .get(self.pos)
             .cloned()
-            .ok_or_else(|| format!("expression `{}` ends too early", self.src.trim()))?;
+            .ok_or_else(|| ExprError::Result {
+                problem: "ends too early".into(),
+                expr: self.src.trim().into(),
+            })?;
         self.pos += 1;
         match tok {
             Tok::Num(x) => Ok(V::Num(x)),
@@ -531,22 +580,26 @@ impl Parser<'_> {
                 if name == "pi" {
                     return Ok(V::Num(std::f64::consts::PI));
                 }
-                Err(format!(
-                    "{} in expression `{}`",
-                    unknown_name(&name, self.scope),
-                    self.src.trim()
-                ))
+                Err(ExprError::UnknownName {
+                    name,
+                    known: known_names(self.scope),
+                    expr: Some(self.src.trim().into()),
+                })
             }
-            Tok::Op(c) => Err(format!(
-                "unexpected `{c}` in expression `{}`",
-                self.src.trim()
-            )),
+            Tok::Op(c) => Err(ExprError::Syntax {
+                problem: format!("unexpected `{c}`"),
+                expr: self.src.trim().into(),
+            }),
         }
     }
 
-    fn call(&self, name: &str, args: Vec<V>) -> Result<V, String> {
+    fn call(&self, name: &str, args: Vec<V>) -> Result<V, ExprError> {
         let src = self.src.trim();
-        let flat = |args: Vec<V>| -> Result<Vec<f64>, String> {
+        let misuse = |problem: String| ExprError::Type {
+            problem,
+            expr: src.into(),
+        };
+        let flat = |args: Vec<V>| -> Result<Vec<f64>, ExprError> {
             let mut out = Vec::new();
             for a in args {
                 match a {
@@ -554,15 +607,15 @@ impl Parser<'_> {
                     V::Bool(b) => out.push(if b { 1.0 } else { 0.0 }),
                     V::Arr(v) => out.extend(v),
                     V::Text(_) => {
-                        return Err(format!("`{name}` takes numbers in expression `{src}`"));
+                        return Err(misuse(format!("`{name}` takes numbers")));
                     }
                 }
             }
             Ok(out)
         };
-        let unary = |args: Vec<V>, f: fn(f64) -> f64| -> Result<V, String> {
+        let unary = |args: Vec<V>, f: fn(f64) -> f64| -> Result<V, ExprError> {
             if args.len() != 1 {
-                return Err(format!("`{name}` takes one argument in expression `{src}`"));
+                return Err(misuse(format!("`{name}` takes one argument")));
             }
             let x = args
                 .into_iter()
@@ -589,16 +642,14 @@ impl Parser<'_> {
             "pow" => {
                 let v = flat(args)?;
                 if v.len() != 2 {
-                    return Err(format!("`pow` takes two arguments in expression `{src}`"));
+                    return Err(misuse("`pow` takes two arguments".into()));
                 }
                 Ok(V::Num(v[0].powf(v[1])))
             }
             "min" | "max" | "sum" | "prod" => {
                 let v = flat(args)?;
                 if v.is_empty() {
-                    return Err(format!(
-                        "`{name}` needs at least one value in expression `{src}`"
-                    ));
+                    return Err(misuse(format!("`{name}` needs at least one value")));
                 }
                 Ok(V::Num(match name {
                     "min" => v.iter().cloned().fold(f64::INFINITY, f64::min),
@@ -610,8 +661,11 @@ impl Parser<'_> {
             _ => match self.scope.functions.get(name) {
                 Some(f) => {
                     let params: Vec<ParamValue> = args.into_iter().map(V::param).collect();
-                    let out = (f.call)(&params)
-                        .map_err(|e| format!("{name}: {e} (in expression `{src}`)"))?;
+                    let out = (f.call)(&params).map_err(|message| ExprError::Function {
+                        name: name.into(),
+                        message,
+                        expr: src.into(),
+                    })?;
                     Ok(match out {
                         ParamValue::Number(x) => V::Num(x),
                         ParamValue::Numbers(a) => V::Arr(a),
@@ -619,7 +673,10 @@ impl Parser<'_> {
                         ParamValue::Bool(b) => V::Bool(b),
                     })
                 }
-                None => Err(format!("unknown function `{name}` in expression `{src}`")),
+                None => Err(ExprError::UnknownFunction {
+                    name: name.into(),
+                    expr: src.into(),
+                }),
             },
         }
     }
@@ -701,19 +758,56 @@ mod tests {
         assert!(
             eval("viscosity * 2", &s)
                 .unwrap_err()
+                .to_string()
                 .contains("unknown param `viscosity`")
         );
-        assert!(eval("box[3]", &s).unwrap_err().contains("out of range"));
-        assert!(eval("box", &s).unwrap_err().contains("array"));
-        assert!(eval("kernel + 1", &s).unwrap_err().contains("string"));
-        assert!(eval("'a", &s).unwrap_err().contains("unterminated"));
-        assert!(eval("1 +", &s).unwrap_err().contains("ends too early"));
-        assert!(eval("(1", &s).unwrap_err().contains("expected `)`"));
-        assert!(eval("1/0", &s).unwrap_err().contains("not finite"));
-        assert!(eval("foo(1)", &s).unwrap_err().contains("unknown function"));
+        assert!(
+            eval("box[3]", &s)
+                .unwrap_err()
+                .to_string()
+                .contains("out of range")
+        );
+        assert!(eval("box", &s).unwrap_err().to_string().contains("array"));
+        assert!(
+            eval("kernel + 1", &s)
+                .unwrap_err()
+                .to_string()
+                .contains("string")
+        );
+        assert!(
+            eval("'a", &s)
+                .unwrap_err()
+                .to_string()
+                .contains("unterminated")
+        );
+        assert!(
+            eval("1 +", &s)
+                .unwrap_err()
+                .to_string()
+                .contains("ends too early")
+        );
+        assert!(
+            eval("(1", &s)
+                .unwrap_err()
+                .to_string()
+                .contains("expected `)`")
+        );
+        assert!(
+            eval("1/0", &s)
+                .unwrap_err()
+                .to_string()
+                .contains("not finite")
+        );
+        assert!(
+            eval("foo(1)", &s)
+                .unwrap_err()
+                .to_string()
+                .contains("unknown function")
+        );
         assert!(
             eval("1 # 2", &s)
                 .unwrap_err()
+                .to_string()
                 .contains("unexpected character")
         );
     }
@@ -754,12 +848,19 @@ mod tests {
         assert!(
             evaluate("kernel", &s)
                 .unwrap_err()
+                .to_string()
                 .contains("gives a string")
         );
-        assert!(evaluate("['a']", &s).unwrap_err().contains("arithmetic"));
+        assert!(
+            evaluate("['a']", &s)
+                .unwrap_err()
+                .to_string()
+                .contains("arithmetic")
+        );
         assert!(
             eval("larger_than_256('x')", &s)
                 .unwrap_err()
+                .to_string()
                 .contains("larger_than_256: one number")
         );
     }

@@ -429,6 +429,25 @@ pub enum Decision {
     Finish(Vec<u8>),
 }
 
+/// Why an iterative node stopped without an answer.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum LoopError {
+    /// What the loop was given cannot be iterated on (a vector that is not finite).
+    #[error("{0}")]
+    Input(String),
+    /// The loop body's operator is not what the node needs (not finite, not positive
+    /// definite, singular).
+    #[error("{0}")]
+    Operator(String),
+    /// The stopping rule was not met within the allowed iterations.
+    #[error("{0}")]
+    NoConvergence(String),
+    /// The GPU and the host disagree about the loop: a bug.
+    #[error("internal: {0}")]
+    Internal(String),
+}
+
 /// A node that runs its loop body repeatedly (Lanczos: one operator product per
 /// iteration) and decides on the host, from a small status buffer, when to stop. The
 /// executor runs the node's `start`, then body + `iterate` until `decide` says finish:
@@ -442,7 +461,7 @@ pub trait GpuIterative {
 
     /// After `iterations` runs of the body, from the status bytes: go on, finish, or stop
     /// with an error that says why (no convergence, an operator that is not positive).
-    fn decide(&self, iterations: usize, status: &[u8]) -> Result<Decision, String>;
+    fn decide(&self, iterations: usize, status: &[u8]) -> Result<Decision, LoopError>;
 }
 
 /// A node that records its own dispatches.

@@ -18,7 +18,7 @@ use crate::gpu::{
 };
 use crate::graph::{Graph, NodeId};
 use crate::ids::IdVec;
-use crate::node::{Decision, IterativeKernels, Lowering};
+use crate::node::{Decision, IterativeKernels, LoopError, Lowering};
 use crate::plan::{BufferId, FusedKernel, Launch, Phase, Plan, Storage, TransformFold, ValueId};
 use crate::transform;
 use crate::value::HostArray;
@@ -32,6 +32,15 @@ pub enum ExecError {
     Compile { node: String, source: CompileError },
     #[error("input `{name}`: {message}")]
     Input { name: String, message: String },
+    /// An iterative node stopped without an answer (`step` counts from 1).
+    #[error("node `{node}` ({kind}), step {step}: {source}")]
+    Loop {
+        node: String,
+        kind: &'static str,
+        step: u64,
+        #[source]
+        source: LoopError,
+    },
     #[error("{0}")]
     Run(String),
 }
@@ -707,13 +716,13 @@ impl<'a> Program<'a> {
                     pending.extend(&lp.kernels.finish);
                     return Ok(iterations as u32);
                 }
-                Err(e) => {
-                    return Err(ExecError::Run(format!(
-                        "node `{}` ({}), step {}: {e}",
-                        inst.id,
-                        inst.kind,
-                        step + 1
-                    )));
+                Err(source) => {
+                    return Err(ExecError::Loop {
+                        node: inst.id.clone(),
+                        kind: inst.kind,
+                        step: step + 1,
+                        source,
+                    });
                 }
             }
         }

@@ -19,7 +19,7 @@ pub enum CompileError {
     #[error("shader `{label}` failed to compile: {message}")]
     Shader { label: String, message: String },
     #[error("shader library: {0}")]
-    Library(String),
+    Library(#[from] crate::gpu::shaders::ShaderError),
     #[error("{0}")]
     Unsupported(String),
 }
@@ -273,7 +273,7 @@ impl CompileCtx<'_> {
 
     /// A shader file from `shaders/` with its imports resolved.
     pub fn shader(&self, path: &str) -> Result<String, CompileError> {
-        shaders::source(path).map_err(CompileError::Library)
+        Ok(shaders::source(path)?)
     }
 
     /// A uniform buffer holding `bytes` (padded to 16 bytes).

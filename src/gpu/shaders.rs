@@ -56,8 +56,28 @@ fn overridden(path: &str) -> Option<&'static str> {
     text
 }
 
+/// Why a shader's imports could not be resolved.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ShaderError {
+    #[error("no shader file `shaders/{0}`")]
+    NoFile(String),
+    #[error("import cycle: {0}")]
+    Cycle(String),
+    /// A library file lacks the line a kernel specialises.
+    #[error("{file}: expected one line `{line}` to specialise")]
+    NoMarker { file: String, line: String },
+    /// The file that imports the failing one.
+    #[error("in {file}: {source}")]
+    In {
+        file: String,
+        #[source]
+        source: Box<ShaderError>,
+    },
+}
+
 /// A shader's text with its `#import` lines resolved.
-pub fn source(path: &str) -> Result<String, String> {
+pub fn source(path: &str) -> Result<String, ShaderError> {
     let mut out = String::new();
     let mut seen = Vec::new();
     append(path, &mut out, &mut seen, &mut Vec::new())?;
@@ -65,7 +85,7 @@ pub fn source(path: &str) -> Result<String, String> {
 }
 
 /// Resolves `#import` lines in a generated source.
-pub fn resolve(text: &str) -> Result<String, String> {
+pub fn resolve(text: &str) -> Result<String, ShaderError> {
     let mut out = String::new();
     let mut seen = Vec::new();
     append_text("<generated>", text, &mut out, &mut seen, &mut Vec::new())?;
@@ -77,14 +97,17 @@ fn append(
     out: &mut String,
     seen: &mut Vec<String>,
     stack: &mut Vec<String>,
-) -> Result<(), String> {
+) -> Result<(), ShaderError> {
     if seen.iter().any(|s| s == path) {
         return Ok(());
     }
     if stack.iter().any(|s| s == path) {
-        return Err(format!("import cycle: {} -> {path}", stack.join(" -> ")));
+        return Err(ShaderError::Cycle(format!(
+            "{} -> {path}",
+            stack.join(" -> ")
+        )));
     }
-    let text = raw(path).ok_or_else(|| format!("no shader file `shaders/{path}`"))?;
+    let text = raw(path).ok_or_else(|| ShaderError::NoFile(path.into()))?;
     stack.push(path.to_string());
     append_text(path, text, out, seen, stack)?;
     stack.pop();
@@ -98,11 +121,14 @@ fn append_text(
     out: &mut String,
     seen: &mut Vec<String>,
     stack: &mut Vec<String>,
-) -> Result<(), String> {
+) -> Result<(), ShaderError> {
     for line in text.lines() {
         if let Some(rest) = line.trim_start().strip_prefix("#import") {
             let dep = rest.trim();
-            append(dep, out, seen, stack).map_err(|e| format!("in {name}: {e}"))?;
+            append(dep, out, seen, stack).map_err(|e| ShaderError::In {
+                file: name.into(),
+                source: Box::new(e),
+            })?;
         } else {
             out.push_str(line);
             out.push('\n');

@@ -1024,7 +1024,7 @@ fn input_shape(decl: &InputDecl, sizes: &[String], values: &Scope) -> Result<Inp
                     ))
                 }
             }
-            Some(v) => match expr::resolve(v, values)? {
+            Some(v) => match expr::resolve(v, values).map_err(|e| e.to_string())? {
                 ParamValue::Number(x) if x >= 0.0 && x.fract() == 0.0 && x <= u32::MAX as f64 => {
                     Ok(Dim::Fixed(x as u32))
                 }
@@ -1034,7 +1034,7 @@ fn input_shape(decl: &InputDecl, sizes: &[String], values: &Scope) -> Result<Inp
     };
     let grid = || -> Result<([u32; 3], u32), String> {
         let dims = match &decl.dims {
-            Some(v) => match expr::resolve(v, values)? {
+            Some(v) => match expr::resolve(v, values).map_err(|e| e.to_string())? {
                 ParamValue::Numbers(x) if (1..=3).contains(&x.len()) => {
                     let mut d = [1u32; 3];
                     for (i, v) in x.iter().enumerate() {

@@ -141,6 +141,15 @@ pub enum Dim {
     Free,
 }
 
+/// A value whose type is not the one an input declares.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("expected {expected}, got {got}")]
+pub struct ShapeMismatch {
+    /// The declaration, as users write it (`particles(nx3)`).
+    pub expected: String,
+    pub got: ValueType,
+}
+
 /// The declared shape of a graph input.
 #[derive(Clone, Debug, PartialEq)]
 pub enum InputShape {
@@ -157,7 +166,7 @@ pub enum InputShape {
 
 impl InputShape {
     /// Checks a concrete type against the declaration; sizes are checked by the caller.
-    pub fn check(&self, t: &ValueType) -> Result<(), String> {
+    pub fn check(&self, t: &ValueType) -> Result<(), ShapeMismatch> {
         let ok = match (self, t) {
             (InputShape::Particles { rows, cols }, ValueType::Particles { n, k }) => {
                 cols == k && !matches!(rows, Dim::Fixed(r) if r != n)
@@ -171,7 +180,10 @@ impl InputShape {
         if ok {
             Ok(())
         } else {
-            Err(format!("expected {}, got {t}", self.describe()))
+            Err(ShapeMismatch {
+                expected: self.describe(),
+                got: *t,
+            })
         }
     }
 

@@ -78,7 +78,9 @@ fn generated_pointwise_kernels_validate() {
 fn imports_resolve_once_and_report_missing_files() {
     let src = shaders::resolve("#import common/index.wgsl\n#import common/index.wgsl\n").unwrap();
     assert_eq!(src.matches("fn flat_index").count(), 1);
-    let err = shaders::resolve("#import common/nope.wgsl\n").unwrap_err();
+    let err = shaders::resolve("#import common/nope.wgsl\n")
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("no shader file `shaders/common/nope.wgsl`"),
         "{err}"
