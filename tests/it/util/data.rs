@@ -75,6 +75,23 @@ pub fn flat_particles(values: &[f64], k: u32) -> HostArray {
     )
 }
 
+/// Rows of f64 values as an f32 particle array, one row per particle (at least one row:
+/// the first gives the number of columns).
+pub fn particles<R: AsRef<[f64]>>(rows: &[R]) -> HostArray {
+    let k = rows[0].as_ref().len();
+    let values: Vec<f64> = rows.iter().flat_map(|r| r.as_ref().to_vec()).collect();
+    flat_particles(&values, k as u32)
+}
+
+/// The rows of a 3-column array as 3-vectors (positions, forces, velocities).
+pub fn vectors(a: &HostArray) -> Vec<[f64; 3]> {
+    a.data
+        .to_f64()
+        .chunks(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect()
+}
+
 /// An index array of these values.
 pub fn indices(values: &[u32]) -> HostArray {
     HostArray::u32(

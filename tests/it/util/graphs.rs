@@ -1,13 +1,15 @@
-//! Graph files for tests: writing and loading them, graphs of one node, and the errors
-//! of validating.
+//! Graph files for tests: writing and loading them, `graphs/` files with `--set` values,
+//! graphs of one node, and the errors of loading and validating.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use mesoflow::expr::ParamValue;
 use mesoflow::graph::{self, Graph, LoadOptions};
 use mesoflow::value::ValueType;
 
-use super::{registry, tmpdir};
+use super::{registry, root, tmpdir};
 
 /// Writes a graph file and returns its path.
 pub fn write_graph(dir: &Path, name: &str, json: &str) -> PathBuf {
@@ -20,6 +22,40 @@ pub fn write_graph(dir: &Path, name: &str, json: &str) -> PathBuf {
 /// loader's report.
 pub fn load(path: &Path) -> Graph {
     graph::load(path, registry(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// `--set` values given as JSON literals, as the loader takes them.
+fn overrides(sets: &[(&str, &str)]) -> BTreeMap<String, ParamValue> {
+    sets.iter()
+        .map(|(k, v)| {
+            let json: serde_json::Value = serde_json::from_str(v).unwrap();
+            (k.to_string(), ParamValue::from_json(&json).unwrap())
+        })
+        .collect()
+}
+
+/// `graphs/<name>` loaded with these `--set` values (JSON literals) for a run of `steps`
+/// steps with this seed.
+pub fn load_with(name: &str, sets: &[(&str, &str)], steps: u64, seed: u64) -> Graph {
+    let opts = LoadOptions {
+        overrides: overrides(sets),
+        steps,
+        seed,
+    };
+    graph::load(&root().join("graphs").join(name), registry(), &opts)
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The report of loading `graphs/<name>` with these `--set` values, which must fail.
+pub fn load_error(name: &str, sets: &[(&str, &str)]) -> String {
+    let opts = LoadOptions {
+        overrides: overrides(sets),
+        ..Default::default()
+    };
+    match graph::load(&root().join("graphs").join(name), registry(), &opts) {
+        Ok(_) => panic!("{name} with {sets:?} loaded"),
+        Err(e) => e.to_string(),
+    }
 }
 
 /// How a graph-file input declares a value type.

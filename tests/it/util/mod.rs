@@ -1,15 +1,20 @@
 //! Every helper the test modules share, each defined once; test modules import from here
 //! and never from each other. The general helpers are re-exported at `crate::util`:
-//! - `graphs`: writing and loading graph files, one-node graphs, validation errors;
+//! - `graphs`: writing and loading graph files, one-node graphs, load and validation errors;
 //! - `run`: planning, compiling and running graphs in-process, compile errors, altered
 //!   device capabilities;
 //! - `data`: a seeded generator, random points and keys, arrays built from rows and read
 //!   back;
 //! - `compare`: a kind's f64 CPU reference, error measures, WGSL validation.
+//!
+//! The helpers of one topic (several test files each) stay in their own module:
+//! `mobility` (FCM and PSE: f64 mobility references, one-step evaluation, noise
+//! statistics).
 
 mod compare;
 mod data;
 mod graphs;
+pub mod mobility;
 mod run;
 
 use std::path::PathBuf;

@@ -2,6 +2,7 @@
 //! capabilities.
 
 use std::collections::BTreeMap;
+use std::sync::{Mutex, MutexGuard, OnceLock};
 
 use mesoflow::exec::{Profile, Program, RunOptions};
 use mesoflow::gpu::{DeviceCaps, GpuContext, KernelCache};
@@ -10,6 +11,17 @@ use mesoflow::plan::{self, Plan, PlanOptions};
 use mesoflow::value::{HostArray, RefArray, ValueType};
 
 use super::{gpu, load_single_node, reference};
+
+/// One kernel cache for the tests that build the same pipelines many times (lavapipe
+/// compiles slowly). Not for runs under [`with_caps`]: the cache is keyed by a kernel's
+/// source before the device's capabilities specialise it.
+pub fn kernel_cache() -> MutexGuard<'static, KernelCache> {
+    static CACHE: OnceLock<Mutex<KernelCache>> = OnceLock::new();
+    CACHE
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+}
 
 /// The types of named arrays, as the planner takes them.
 pub fn types_of(inputs: &BTreeMap<String, HostArray>) -> BTreeMap<String, ValueType> {
@@ -39,6 +51,11 @@ pub fn plan_graph(
         fuse,
     };
     plan::plan(g, &opts, caps).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Compiles a plan with the shared [`kernel_cache`].
+pub fn compile_cached<'a>(gpu: &'a GpuContext, g: &'a Graph, plan: &'a Plan) -> Program<'a> {
+    Program::compile(gpu, g, plan, &mut kernel_cache()).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Uploads `inputs`, runs `steps` steps (timed as `profile` says) and reads every output
@@ -101,6 +118,18 @@ pub fn run_graph(
 ) -> BTreeMap<String, HostArray> {
     let mut cache = KernelCache::default();
     run_with_cache(gpu, g, inputs, outputs, steps, fuse, &mut cache).0
+}
+
+/// [`run_graph`] with the shared [`kernel_cache`]: the outputs, and the plan they ran.
+pub fn run_cached(
+    gpu: &GpuContext,
+    g: &Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    outputs: Option<&[&str]>,
+    steps: u64,
+    fuse: bool,
+) -> (BTreeMap<String, HostArray>, Plan) {
+    run_with_cache(gpu, g, inputs, outputs, steps, fuse, &mut kernel_cache())
 }
 
 /// The single-node graph of `kind` with these inputs (named after its input ports),
