@@ -83,6 +83,11 @@ pub fn particles<R: AsRef<[f64]>>(rows: &[R]) -> HostArray {
     flat_particles(&values, k as u32)
 }
 
+/// The rows of `a`, `k` values each, in f64.
+pub fn rows(a: &HostArray, k: usize) -> Vec<Vec<f64>> {
+    a.data.to_f64().chunks(k).map(|c| c.to_vec()).collect()
+}
+
 /// The rows of a 3-column array as 3-vectors (positions, forces, velocities).
 pub fn vectors(a: &HostArray) -> Vec<[f64; 3]> {
     a.data
@@ -116,4 +121,9 @@ pub fn f32s(a: &HostArray) -> Vec<f32> {
         HostData::F32(v) => v.clone(),
         other => panic!("expected f32 data, got {other:?}"),
     }
+}
+
+/// The value of a scalar output.
+pub fn scalar(a: &HostArray) -> f64 {
+    a.data.to_f64()[0]
 }

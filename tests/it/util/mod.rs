@@ -9,12 +9,13 @@
 //!
 //! The helpers of one topic (several test files each) stay in their own module:
 //! `mobility` (FCM and PSE: f64 mobility references, one-step evaluation, noise
-//! statistics).
+//! statistics), `mpcd`.
 
 mod compare;
 mod data;
 mod graphs;
 pub mod mobility;
+pub mod mpcd;
 mod run;
 
 use std::path::PathBuf;
