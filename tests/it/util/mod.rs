@@ -9,7 +9,7 @@
 //!
 //! The helpers of one topic (several test files each) stay in their own module:
 //! `mobility` (FCM and PSE: f64 mobility references, one-step evaluation, noise
-//! statistics), `mpcd`.
+//! statistics), `mpcd`, `spread`.
 
 mod compare;
 mod data;
@@ -17,6 +17,7 @@ mod graphs;
 pub mod mobility;
 pub mod mpcd;
 mod run;
+pub mod spread;
 
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard, OnceLock};
