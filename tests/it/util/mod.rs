@@ -9,10 +9,11 @@
 //!
 //! The helpers of one topic (several test files each) stay in their own module:
 //! `mobility` (FCM and PSE: f64 mobility references, one-step evaluation, noise
-//! statistics), `mpcd`, `spread`.
+//! statistics), `mpcd`, `spread`, `fft`.
 
 mod compare;
 mod data;
+pub mod fft;
 mod graphs;
 pub mod mobility;
 pub mod mpcd;
