@@ -6,31 +6,17 @@
 use std::collections::BTreeMap;
 
 use mesoflow::gpu::GpuContext;
-use mesoflow::value::{HostArray, HostData, ValueType};
+use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{self, Rng, compile_error, gpu, reference, run_node, with_caps};
-
-fn keys_array(keys: &[u32]) -> HostArray {
-    HostArray::u32(
-        ValueType::Indices {
-            n: keys.len() as u32,
-        },
-        keys.to_vec(),
-    )
-}
-
-fn words(a: &HostArray) -> &[u32] {
-    match &a.data {
-        HostData::U32(v) => v,
-        HostData::F32(_) => panic!("bin_sort outputs are index arrays"),
-    }
-}
+use crate::util::{
+    self, Rng, compile_error, gpu, indices, random_keys, reference, run_node, u32s, with_caps,
+};
 
 /// Checks the GPU outputs of bin_sort against the reference, forgiving only the order
 /// inside a bin (and inside the overflow bin of keys >= bins).
 fn compare(what: &str, keys: &[u32], bins: u32, got: &BTreeMap<String, HostArray>) {
     let params = format!(r#"{{"bins": {bins}}}"#);
-    let want = reference("bin_sort", &params, &[Some(&keys_array(keys))]);
+    let want = reference("bin_sort", &params, &[Some(&indices(keys))]);
     let want: Vec<Vec<u32>> = want
         .iter()
         .map(|r| r.data.iter().map(|&x| x as u32).collect())
@@ -39,14 +25,14 @@ fn compare(what: &str, keys: &[u32], bins: u32, got: &BTreeMap<String, HostArray
         panic!("bin_sort has four outputs");
     };
     for (port, w) in [("count", want_count), ("start", want_start)] {
-        let g = words(&got[port]);
+        let g = u32s(&got[port]);
         assert_eq!(g.len(), bins as usize, "{what}: {port} length");
         if let Some(i) = (0..g.len()).find(|&i| g[i] != w[i]) {
             panic!("{what}: {port}[{i}] is {}, expected {}", g[i], w[i]);
         }
     }
     let n = keys.len();
-    let (perm, sorted) = (words(&got["perm"]), words(&got["keys"]));
+    let (perm, sorted) = (u32s(&got["perm"]), u32s(&got["keys"]));
     assert_eq!((perm.len(), sorted.len()), (n, n), "{what}: lengths");
     // Keys inside the bins are their bin: equal to the reference slot by slot. Past them
     // (the overflow bin) any order.
@@ -95,7 +81,7 @@ fn compare(what: &str, keys: &[u32], bins: u32, got: &BTreeMap<String, HostArray
 
 fn check_on(gpu: &GpuContext, keys: &[u32], bins: u32, variant: &str) {
     let params = format!(r#"{{"bins": {bins}, "variant": "{variant}"}}"#);
-    let inputs = [("keys".to_string(), keys_array(keys))].into();
+    let inputs = [("keys".to_string(), indices(keys))].into();
     let got = run_node(gpu, "bin_sort", &params, &inputs);
     let what = format!(
         "bin_sort ({variant}) of {} keys into {bins} bins",
@@ -115,12 +101,6 @@ fn variants(gpu: &GpuContext) -> Vec<&'static str> {
         v.push("subgroup");
     }
     v
-}
-
-/// Keys below `range` (some past `bins` when range > bins).
-fn random(n: usize, range: u64, seed: u64) -> Vec<u32> {
-    let mut rng = Rng::new(seed);
-    (0..n).map(|_| (rng.next_u64() % range) as u32).collect()
 }
 
 #[test]
@@ -143,7 +123,7 @@ fn random_keys_in_few_and_many_bins() {
     ];
     for variant in variants(&gpu) {
         for (i, &(n, bins)) in cases.iter().enumerate() {
-            check_on(&gpu, &random(n, bins as u64, i as u64), bins, variant);
+            check_on(&gpu, &random_keys(n, bins as u64, i as u64), bins, variant);
         }
     }
 }
@@ -153,7 +133,7 @@ fn keys_past_the_last_bin_sort_after_every_bin() {
     let Some(gpu) = gpu() else { return };
     for variant in variants(&gpu) {
         // Half of the keys past the bins, and the extremes.
-        let mut keys = random(4000, 200, 1);
+        let mut keys = random_keys(4000, 200, 1);
         keys[0] = u32::MAX;
         keys[1] = 100;
         keys[2] = 0;
@@ -161,7 +141,7 @@ fn keys_past_the_last_bin_sort_after_every_bin() {
         // Every key past the bins; a single key past them; one bin.
         check_on(&gpu, &[5, 9, 5, u32::MAX], 3, variant);
         check_on(&gpu, &[3], 1, variant);
-        check_on(&gpu, &random(1000, 3, 2), 1, variant);
+        check_on(&gpu, &random_keys(1000, 3, 2), 1, variant);
     }
 }
 
@@ -172,7 +152,7 @@ fn many_keys_in_one_bin() {
         check_on(&gpu, &vec![7; 20_000], 16, variant);
         check_on(&gpu, &vec![0; 5000], 1, variant);
         // Long runs in a few bins, bins left empty between them.
-        let few: Vec<u32> = random(30_000, 5, 3).iter().map(|k| 100 * k).collect();
+        let few: Vec<u32> = random_keys(30_000, 5, 3).iter().map(|k| 100 * k).collect();
         check_on(&gpu, &few, 401, variant);
     }
 }
@@ -183,17 +163,17 @@ fn more_bins_than_one_workgroup_scans_take_the_general_scan() {
     // 40000 and 100000 bins: past the one-workgroup scan on any device (25 tiles of the
     // general scan for the latter); keys past the bins too.
     for variant in variants(&gpu) {
-        check_on(&gpu, &random(3000, 41_000, 4), 40_000, variant);
-        check_on(&gpu, &random(20_000, 100_000, 5), 100_000, variant);
+        check_on(&gpu, &random_keys(3000, 41_000, 4), 40_000, variant);
+        check_on(&gpu, &random_keys(20_000, 100_000, 5), 100_000, variant);
         check_on(&gpu, &[], 40_000, variant);
     }
     // Workgroups of 256 threads: the one-workgroup scan ends at 8192 bins.
     let threads_256 = |c: &mut mesoflow::gpu::DeviceCaps| c.max_invocations = 256;
     with_caps(&mut gpu, threads_256, |gpu| {
         for variant in variants(gpu) {
-            check_on(gpu, &random(5000, 8192, 6), 8192, variant);
-            check_on(gpu, &random(5000, 8200, 7), 8193, variant);
-            check_on(gpu, &random(100, 3, 8), 1, variant);
+            check_on(gpu, &random_keys(5000, 8192, 6), 8192, variant);
+            check_on(gpu, &random_keys(5000, 8200, 7), 8193, variant);
+            check_on(gpu, &random_keys(100, 3, 8), 1, variant);
         }
     });
 }
@@ -202,7 +182,7 @@ fn more_bins_than_one_workgroup_scans_take_the_general_scan() {
 fn sorts_fold_their_dispatches_past_the_workgroup_cap() {
     let Some(mut gpu) = gpu() else { return };
     // 2000 keys on 3 workgroups per dimension: grids of 8 groups fold over (x, y).
-    let keys = random(2000, 300, 9);
+    let keys = random_keys(2000, 300, 9);
     with_caps(
         &mut gpu,
         |c| c.max_workgroups_per_dim = 3,
@@ -216,14 +196,14 @@ fn sorts_fold_their_dispatches_past_the_workgroup_cap() {
 #[test]
 fn auto_runs_without_subgroups_and_subgroup_fails_clearly() {
     let Some(mut gpu) = gpu() else { return };
-    let keys = random(3000, 600, 10);
+    let keys = random_keys(3000, 600, 10);
     with_caps(
         &mut gpu,
         |c| c.subgroups = None,
         |gpu| {
             check_on(gpu, &keys, 500, "auto");
             check_on(gpu, &keys, 40_000, "auto");
-            let inputs = [("keys".to_string(), keys_array(&keys))].into();
+            let inputs = [("keys".to_string(), indices(&keys))].into();
             let err = compile_error(
                 gpu,
                 "bin_sort",
@@ -244,15 +224,15 @@ fn auto_runs_without_subgroups_and_subgroup_fails_clearly() {
 #[test]
 fn the_comparison_catches_wrong_results() {
     let Some(gpu) = gpu() else { return };
-    let keys = random(500, 20, 11);
+    let keys = random_keys(500, 20, 11);
     let params = r#"{"bins": 20}"#;
-    let inputs = [("keys".to_string(), keys_array(&keys))].into();
+    let inputs = [("keys".to_string(), indices(&keys))].into();
     let good = run_node(&gpu, "bin_sort", params, &inputs);
     drop(gpu);
     compare("good", &keys, 20, &good);
     let edit = |port: &str, f: &dyn Fn(&mut Vec<u32>)| {
         let mut bad = good.clone();
-        let mut v = words(&bad[port]).to_vec();
+        let mut v = u32s(&bad[port]);
         f(&mut v);
         let ty = bad[port].ty;
         bad.insert(port.into(), HostArray::u32(ty, v));
@@ -267,7 +247,6 @@ fn the_comparison_catches_wrong_results() {
 
 #[test]
 fn bad_bins_get_clear_errors() {
-    let dir = util::tmpdir("bin-sort-params");
     let t = ValueType::Indices { n: 4 };
     for (params, want) in [
         (r#"{"bins": 0}"#, "bins"),
@@ -279,12 +258,7 @@ fn bad_bins_get_clear_errors() {
             "not one of auto, subgroup, portable",
         ),
     ] {
-        let path = util::write_graph(
-            &dir,
-            "g.json",
-            &util::single_node_graph("bin_sort", params, &[("keys", t)]),
-        );
-        let e = mesoflow::cli::check_graph(util::registry(), &path).unwrap_err();
+        let e = util::validation_error("bin_sort", params, &[("keys", t)]);
         assert!(e.contains(want), "{params}: {e}");
         if params.contains("bins") && !params.contains("variant") {
             assert!(
@@ -293,7 +267,6 @@ fn bad_bins_get_clear_errors() {
             );
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The cell list of graphs/lib/cell_list.json: hash, bin_sort (fill, count, scan,
@@ -330,13 +303,8 @@ fn the_cell_list_takes_seven_dispatches() {
         ))
     };
     let inputs: BTreeMap<String, HostArray> = [("positions".to_string(), positions)].into();
-    let opts = mesoflow::plan::PlanOptions {
-        outputs: None,
-        inputs: [("positions".to_string(), inputs["positions"].ty)].into(),
-        fuse: true,
-    };
     let g = graph(false);
-    let p = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap();
+    let p = util::plan_graph(&gpu.caps, &g, util::types_of(&inputs), None, true);
     let mut cache = mesoflow::gpu::KernelCache::default();
     let program = mesoflow::exec::Program::compile(&gpu, &g, &p, &mut cache).unwrap();
     assert_eq!(program.dispatches_per_step(), 7);
@@ -344,7 +312,7 @@ fn the_cell_list_takes_seven_dispatches() {
     let out = util::run_graph(&gpu, &graph(true), &inputs, None, 1, true);
     drop(gpu);
     let _ = std::fs::remove_dir_all(&dir);
-    let keys = words(&out["hash"]).to_vec();
+    let keys = u32s(&out["hash"]);
     let renamed: BTreeMap<String, HostArray> = [
         ("perm", "order"),
         ("keys", "cells"),
@@ -359,7 +327,7 @@ fn the_cell_list_takes_seven_dispatches() {
     let (x, sorted, order) = (
         inputs["positions"].data.to_f64(),
         out["positions"].data.to_f64(),
-        words(&out["order"]),
+        u32s(&out["order"]),
     );
     for (s, &i) in order.iter().enumerate() {
         let i = i as usize;

@@ -2,17 +2,7 @@
 
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{Rng, gpu, run_node_and_reference, single_node_graph, tmpdir, write_graph};
-
-/// Runs a node and returns (GPU output, f64 reference) for output `out`.
-fn run_node(kind: &str, params: &str, inputs: &[(&str, HostArray)]) -> (Vec<f64>, Vec<f64>) {
-    let (out, mut refs) = run_node_and_reference(kind, params, inputs);
-    (out["out"].data.to_f64(), refs.remove(0).data)
-}
-
-fn idx(v: Vec<u32>) -> HostArray {
-    HostArray::u32(ValueType::Indices { n: v.len() as u32 }, v)
-}
+use crate::util::{Rng, gpu, indices, run_out, validation_error};
 
 fn permutation(rng: &mut Rng, n: u32) -> Vec<u32> {
     let mut p: Vec<u32> = (0..n).collect();
@@ -31,44 +21,49 @@ fn gather_and_scatter_follow_an_index() {
     let mut rng = Rng::new(31);
     for n in [0u32, 1, 7, 1000] {
         let values = rng.array(ValueType::Particles { n, k: 3 }, -1.0, 1.0);
-        let keys = idx((0..n).map(|_| rng.next_u64() as u32).collect());
-        let perm = idx(permutation(&mut rng, n));
+        let keys = indices(&(0..n).map(|_| rng.next_u64() as u32).collect::<Vec<_>>());
+        let perm = indices(&permutation(&mut rng, n));
         for v in [&values, &keys] {
-            let (g, r) = run_node(
+            let (g, r) = run_out(
                 "gather",
                 "{}",
                 &[("values", v.clone()), ("index", perm.clone())],
             );
+            let (g, r) = (g.data.to_f64(), r.data);
             assert_eq!(g, r, "gather {n}");
-            let (g, r) = run_node(
+            let (g, r) = run_out(
                 "scatter",
                 "{}",
                 &[("values", v.clone()), ("index", perm.clone())],
             );
+            let (g, r) = (g.data.to_f64(), r.data);
             assert_eq!(g, r, "scatter {n}");
-            let (g, r) = run_node(
+            let (g, r) = run_out(
                 "scatter",
                 r#"{"permutation": true}"#,
                 &[("values", v.clone()), ("index", perm.clone())],
             );
+            let (g, r) = (g.data.to_f64(), r.data);
             assert_eq!(g, r, "scatter by a permutation {n}");
         }
     }
     // Out-of-range indices: gather gives zeros, scatter skips; scatter into more rows.
     let values = rng.array(ValueType::Particles { n: 4, k: 2 }, 1.0, 2.0);
-    let index = idx(vec![3, 9, u32::MAX, 0]);
-    let (g, r) = run_node(
+    let index = indices(&[3, 9, u32::MAX, 0]);
+    let (g, r) = run_out(
         "gather",
         "{}",
         &[("values", values.clone()), ("index", index.clone())],
     );
+    let (g, r) = (g.data.to_f64(), r.data);
     assert_eq!(g, r);
     assert_eq!(&g[2..6], &[0.0; 4]);
-    let (g, r) = run_node(
+    let (g, r) = run_out(
         "scatter",
         r#"{"rows": 12}"#,
         &[("values", values), ("index", index)],
     );
+    let (g, r) = (g.data.to_f64(), r.data);
     assert_eq!(g, r);
     assert_eq!(g.len(), 24);
 }
@@ -88,11 +83,12 @@ fn histograms_count_keys() {
             keys[0] = u32::MAX;
             keys[1] = 0;
         }
-        let (g, r) = run_node(
+        let (g, r) = run_out(
             "histogram",
             &format!(r#"{{"bins": {bins}}}"#),
-            &[("keys", idx(keys))],
+            &[("keys", indices(&keys))],
         );
+        let (g, r) = (g.data.to_f64(), r.data);
         assert_eq!(g, r, "histogram of {n} keys in {bins} bins");
     }
 }
@@ -100,7 +96,8 @@ fn histograms_count_keys() {
 /// Compares cell keys, forgiving only particles that sit within f32 rounding of a cell
 /// face (where f32 and f64 may legitimately pick different sides).
 fn check_hash(params: &str, positions: &HostArray, box_len: &[f64], cells: &[u32]) {
-    let (g, r) = run_node("cell_hash", params, &[("positions", positions.clone())]);
+    let (g, r) = run_out("cell_hash", params, &[("positions", positions.clone())]);
+    let (g, r) = (g.data.to_f64(), r.data);
     let pos = positions.data.to_f64();
     let d = box_len.len();
     for (p, (a, b)) in g.iter().zip(&r).enumerate() {
@@ -162,7 +159,8 @@ fn cell_hashes_on_faces_edges_and_walls() {
     ];
     let positions = HostArray::f32(ValueType::Particles { n: 6, k: 3 }, pos);
     let params = r#"{"box": [8, 8, 8], "cells": [8, 8, 8]}"#;
-    let (g, r) = run_node("cell_hash", params, &[("positions", positions.clone())]);
+    let (g, r) = run_out("cell_hash", params, &[("positions", positions.clone())]);
+    let (g, r) = (g.data.to_f64(), r.data);
     assert_eq!(g, r);
     let cell = |x: u32, y: u32, z: u32| (x + 8 * (y + 8 * z)) as f64;
     assert_eq!(
@@ -178,7 +176,8 @@ fn cell_hashes_on_faces_edges_and_walls() {
     );
     // Walls along z clamp to the edge cells instead of wrapping.
     let walls = r#"{"box": [8, 8, 8], "cells": [8, 8, 8], "periodic": [1, 1, 0]}"#;
-    let (g, r) = run_node("cell_hash", walls, &[("positions", positions)]);
+    let (g, r) = run_out("cell_hash", walls, &[("positions", positions)]);
+    let (g, r) = (g.data.to_f64(), r.data);
     assert_eq!(g, r);
     assert_eq!(
         g[1],
@@ -194,7 +193,6 @@ fn cell_hashes_on_faces_edges_and_walls() {
 
 #[test]
 fn cell_hash_params_are_checked() {
-    let dir = tmpdir("hash-params");
     let t = ValueType::Particles { n: 4, k: 3 };
     for (params, want) in [
         (
@@ -214,32 +212,21 @@ fn cell_hash_params_are_checked() {
             "has 3 columns but the box has 2 axes",
         ),
     ] {
-        let path = write_graph(
-            &dir,
-            "g.json",
-            &single_node_graph("cell_hash", params, &[("positions", t)]),
-        );
-        let e = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
+        let e = validation_error("cell_hash", params, &[("positions", t)]);
         assert!(e.contains(want), "{params}: {e}");
     }
 }
 
 #[test]
 fn scatter_by_a_permutation_must_fill_its_output() {
-    let dir = tmpdir("scatter-params");
-    let path = write_graph(
-        &dir,
-        "g.json",
-        &single_node_graph(
-            "scatter",
-            r#"{"rows": 12, "permutation": true}"#,
-            &[
-                ("values", ValueType::Particles { n: 4, k: 2 }),
-                ("index", ValueType::Indices { n: 4 }),
-            ],
-        ),
+    let e = validation_error(
+        "scatter",
+        r#"{"rows": 12, "permutation": true}"#,
+        &[
+            ("values", ValueType::Particles { n: 4, k: 2 }),
+            ("index", ValueType::Indices { n: 4 }),
+        ],
     );
-    let e = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
     assert!(
         e.contains("with `permutation` the index must place every row"),
         "{e}"

@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use mesoflow::exec::{Profile, Program, RunOptions};
+use mesoflow::exec::{Profile, Program};
 use mesoflow::gpu::{GpuContext, KernelCache};
 use mesoflow::nodes::lanczos::symmetric_eigen;
 use mesoflow::plan::{self, PlanOptions};
@@ -41,26 +41,15 @@ fn run(
     let g = util::load(&path);
     let opts = PlanOptions {
         outputs: None,
-        inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
+        inputs: util::types_of(inputs),
         fuse: true,
     };
     let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| e.to_string())?;
     let mut cache = KernelCache::default();
     let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(|e| e.to_string())?;
-    program.upload(inputs).map_err(|e| e.to_string())?;
-    program
-        .run(&RunOptions {
-            steps,
-            profile,
-            progress: false,
-        })
-        .map_err(|e| e.to_string())?;
-    let out = program.read_outputs().map_err(|e| e.to_string())?;
+    let out = util::try_run_program(&mut program, inputs, steps, profile)?;
     let _ = std::fs::remove_dir_all(&dir);
-    Ok((
-        out.into_iter().collect(),
-        program.loop_iterations().to_vec(),
-    ))
+    Ok((out, program.loop_iterations().to_vec()))
 }
 
 /// f(A) z in f64 through the eigendecomposition of A.
@@ -103,28 +92,9 @@ fn spd(n: usize, eigenvalues: &[f64], rng: &mut Rng) -> Vec<f64> {
 fn dense_inputs(a: &[f64], z: &[f64]) -> BTreeMap<String, HostArray> {
     let n = z.len() as u32;
     BTreeMap::from([
-        (
-            "matrix".to_string(),
-            HostArray::f32(
-                ValueType::Particles { n, k: n },
-                a.iter().map(|&x| x as f32).collect(),
-            ),
-        ),
-        (
-            "z".to_string(),
-            HostArray::f32(
-                ValueType::Particles { n, k: 1 },
-                z.iter().map(|&x| x as f32).collect(),
-            ),
-        ),
+        ("matrix".to_string(), util::flat_particles(a, n)),
+        ("z".to_string(), util::flat_particles(z, 1)),
     ])
-}
-
-fn rel_err(got: &HostArray, want: &[f64]) -> f64 {
-    let g = got.data.to_f64();
-    let num: f64 = g.iter().zip(want).map(|(a, b)| (a - b) * (a - b)).sum();
-    let den: f64 = want.iter().map(|b| b * b).sum();
-    (num / den).sqrt()
 }
 
 #[test]
@@ -149,7 +119,7 @@ fn square_root_of_random_dense_spd_matrices() {
             )
             .unwrap();
             let want = reference(&a, &z, f);
-            let err = rel_err(&out["out"], &want);
+            let err = util::rel_l2(&out["out"].data.to_f64(), &want);
             let k = iters[0].1[0];
             eprintln!(
                 "n = {n}, eigenvalues in [{lo}, {hi}], {function}: {k} iterations, error {err:.2e}"
@@ -191,7 +161,7 @@ fn identity_and_scaled_identity_converge_at_once() {
         )]);
         let (out, iters) = run(&gpu, &json, &inputs, 1, Profile::Off).unwrap();
         let want: Vec<f64> = zz.iter().map(|&x| x as f64 * scale.sqrt()).collect();
-        assert!(rel_err(&out["out"], &want) < 1e-6);
+        assert!(util::rel_l2(&out["out"].data.to_f64(), &want) < 1e-6);
         assert_eq!(iters[0].1, vec![1], "M = {scale} I spans one vector");
     }
 }
@@ -221,7 +191,7 @@ fn diagonal_operator_from_a_pointwise_product() {
     // Two steps: the loop runs again from scratch each step.
     let (out, iters) = run(&gpu, &json, &inputs, 2, Profile::Off).unwrap();
     let want: Vec<f64> = (0..n as usize).map(|i| d[i].sqrt() * z[i]).collect();
-    let err = rel_err(&out["out"], &want);
+    let err = util::rel_l2(&out["out"].data.to_f64(), &want);
     eprintln!("diagonal: {:?} iterations, error {err:.2e}", iters[0].1);
     assert!(err < 1e-5, "error {err:.3e}");
     assert_eq!(iters[0].1.len(), 2);
@@ -251,7 +221,7 @@ fn ill_conditioned_matrix_reports_its_iterations() {
     )
     .unwrap();
     let want = reference(&a, &z, f64::sqrt);
-    let err = rel_err(&out["out"], &want);
+    let err = util::rel_l2(&out["out"].data.to_f64(), &want);
     let k = iters[0].1[0];
     eprintln!("condition 1e4: {k} iterations, error {err:.2e}");
     // f32 Lanczos without reorthogonalisation loses orthogonality on such a matrix:

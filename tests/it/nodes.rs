@@ -1,44 +1,26 @@
 //! Every node kind against its f64 CPU reference on the GPU, through single-node graph
 //! files (data-driven: one `check` call per case).
 
-use std::collections::BTreeMap;
-
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::{
-    Rng, gpu, load, reference, rel_max_err, run_graph, single_node_graph, tmpdir, write_graph,
+    Rng, gpu, load_single_node, registry, rel_max_err, run_node_and_reference, validation_error,
 };
 
 /// Runs `kind` with `params` on random inputs of the given types and compares every
 /// output with the CPU reference, relative to the output's largest magnitude.
 fn check(kind: &str, params: &str, inputs: &[(&str, ValueType)], tol: f64) {
-    let Some(gpu) = gpu() else { return };
-    let dir = tmpdir(&format!("node-{kind}"));
-    let path = write_graph(&dir, "g.json", &single_node_graph(kind, params, inputs));
-    let g = load(&path);
+    if gpu().is_none() {
+        return;
+    }
     let mut rng = Rng::new(kind.len() as u64 * 7919 + inputs.len() as u64);
-    let data: BTreeMap<String, HostArray> = inputs
+    let data: Vec<(&str, HostArray)> = inputs
         .iter()
-        .map(|(n, t)| (n.to_string(), rng.array(*t, 0.5, 2.0)))
+        .map(|(n, t)| (*n, rng.array(*t, 0.5, 2.0)))
         .collect();
-    let out = run_graph(&gpu, &g, &data, None, 1, true);
-    let args: Vec<Option<&HostArray>> = g
-        .nodes
-        .first()
-        .expect("one node")
-        .input_ports
-        .iter()
-        .map(|p| data.get(p.name))
-        .collect();
-    let refs = reference(kind, params, &args);
-    for (port, r) in g
-        .nodes
-        .first()
-        .expect("one node")
-        .output_ports
-        .iter()
-        .zip(&refs)
-    {
+    let (out, refs) = run_node_and_reference(kind, params, &data);
+    let ports = registry().get(kind).expect("a registered kind").outputs();
+    for (port, r) in ports.iter().zip(&refs) {
         let got = &out[port.name];
         let (err, at) = rel_max_err(got, r);
         assert!(
@@ -131,10 +113,7 @@ const H: ValueType = ValueType::HalfComplexGrid {
 
 #[test]
 fn spectra_take_no_scalar_broadcast() {
-    let dir = tmpdir("node-spectral-scalar");
-    let json = single_node_graph("add", "{}", &[("a", H), ("b", ValueType::Scalar)]);
-    let path = write_graph(&dir, "g.json", &json);
-    let g = load(&path);
+    let (dir, g) = load_single_node("add", "{}", &[("a", H), ("b", ValueType::Scalar)]);
     let opts = mesoflow::plan::PlanOptions {
         outputs: None,
         inputs: [("a".to_string(), H), ("b".to_string(), ValueType::Scalar)]
@@ -145,6 +124,7 @@ fn spectra_take_no_scalar_broadcast() {
     let e = mesoflow::plan::plan(&g, &opts, &mesoflow::gpu::DeviceCaps::baseline())
         .unwrap_err()
         .to_string();
+    let _ = std::fs::remove_dir_all(&dir);
     assert!(e.contains("cannot be broadcast"), "{e}");
 }
 
@@ -192,17 +172,11 @@ fn pointwise_kinds_handle_empty_and_single_element_arrays() {
 
 #[test]
 fn per_component_values_must_match_the_components() {
-    let dir = tmpdir("percomp");
-    let path = write_graph(
-        &dir,
-        "g.json",
-        &single_node_graph(
-            "scale_components",
-            r#"{"factors": [1, 2]}"#,
-            &[("x", P(4, 3))],
-        ),
+    let err = validation_error(
+        "scale_components",
+        r#"{"factors": [1, 2]}"#,
+        &[("x", P(4, 3))],
     );
-    let err = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
     assert!(
         err.contains("2 per-component values given for a value with 3 components"),
         "{err}"

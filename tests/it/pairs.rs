@@ -9,7 +9,7 @@ use std::f64::consts::PI;
 use mesoflow::nodes::pairs::rpy::{NearTable, rpy};
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{self, Rng, gpu};
+use crate::util::{self, Rng, flat_particles, gpu, random_points};
 
 /// The pair contribution f64 twin written here, independent of the node's: RPY (with
 /// overlap), the tabulated near field, or Lennard-Jones.
@@ -144,14 +144,6 @@ fn neighbour_graph(
     )
 }
 
-fn particles(data: Vec<f64>) -> HostArray {
-    let n = data.len() as u32 / 3;
-    HostArray::f32(
-        ValueType::Particles { n, k: 3 },
-        data.iter().map(|&x| x as f32).collect(),
-    )
-}
-
 /// Runs the neighbour graph (through a neighbour list of `list` entries per particle
 /// when given) and checks it against the O(N^2) sum; returns the GPU sums.
 #[allow(clippy::too_many_arguments)]
@@ -219,13 +211,13 @@ fn check_traversal(
     );
     let g = util::load(&util::write_graph(&dir, "g.json", &json));
     // Positions pass through f32 on the GPU: the reference takes the same f32 values.
-    let pos32 = particles(pos.to_vec());
+    let pos32 = flat_particles(pos, 3);
     let pos64 = pos32.data.to_f64();
     let mut inputs = BTreeMap::from([("positions".to_string(), pos32)]);
     let zeros = vec![0.0; pos.len()];
     let vals64 = match vals {
         Some(v) => {
-            let a = particles(v.to_vec());
+            let a = flat_particles(v, 3);
             let v64 = a.data.to_f64();
             inputs.insert("values".into(), a);
             v64
@@ -253,12 +245,6 @@ fn check_traversal(
     got
 }
 
-fn random_positions(rng: &mut Rng, n: usize, lengths: [f64; 3]) -> Vec<f64> {
-    (0..3 * n)
-        .map(|i| rng.uniform(-0.5, 0.5) * lengths[i % 3])
-        .collect()
-}
-
 #[test]
 fn neighbour_sums_match_every_pair() {
     if gpu().is_none() {
@@ -267,7 +253,7 @@ fn neighbour_sums_match_every_pair() {
     let mut rng = Rng::new(7);
     // Non-cubic box, overlapping pairs (r < 2a) and well-separated ones.
     let lengths = [10.0, 12.0, 14.5];
-    let pos = random_positions(&mut rng, 400, lengths);
+    let pos = random_points(&mut rng, 400, &lengths);
     let vals: Vec<f64> = (0..pos.len()).map(|_| rng.uniform(-1.0, 1.0)).collect();
     check_neighbours(
         "rpy, 3x4x4 cells",
@@ -296,7 +282,7 @@ fn neighbour_sums_match_every_pair() {
     );
     // Forces from positions alone (WCA: cutoff 2^(1/6) sigma), spaced out so forces
     // stay moderate.
-    let sparse = random_positions(&mut rng, 150, lengths);
+    let sparse = random_points(&mut rng, 150, &lengths);
     let wca = 2f64.powf(1.0 / 6.0) * 0.5;
     check_neighbours(
         "wca",
@@ -359,7 +345,7 @@ fn neighbour_lists_give_the_same_sums_and_overflow_to_the_cells() {
     }
     let mut rng = Rng::new(13);
     let lengths = [10.0, 12.0, 14.5];
-    let pos = random_positions(&mut rng, 400, lengths);
+    let pos = random_points(&mut rng, 400, &lengths);
     let vals: Vec<f64> = (0..pos.len()).map(|_| rng.uniform(-1.0, 1.0)).collect();
     // About 3 neighbours per particle within 1.5: a list of 64 holds them all, a list
     // of 2 overflows for many particles (those walk the cells), 1 for most.
@@ -386,7 +372,7 @@ fn neighbour_list_matches_its_reference_entry_by_entry() {
     }
     let mut rng = Rng::new(17);
     let lengths = [9.0, 9.0, 9.0];
-    let pos = particles(random_positions(&mut rng, 300, lengths));
+    let pos = flat_particles(&random_points(&mut rng, 300, &lengths), 3);
     // Sort by cell first (what the cell list does), then list from the node alone.
     let gpu = gpu().unwrap();
     let dir = util::tmpdir("pairs-list");
@@ -433,7 +419,7 @@ fn near_field_table_sums_like_its_reference() {
     let mut rng = Rng::new(11);
     let lengths = [16.0, 16.0, 16.0];
     let (xi, cutoff) = (0.6, 4.0);
-    let pos = random_positions(&mut rng, 300, lengths);
+    let pos = random_points(&mut rng, 300, &lengths);
     let vals: Vec<f64> = (0..pos.len()).map(|_| rng.uniform(-1.0, 1.0)).collect();
     let table = NearTable::new(1.0, 1.0, xi, cutoff, 8192);
     check_neighbours(
@@ -451,9 +437,9 @@ fn near_field_table_sums_like_its_reference() {
 }
 
 fn all_pairs(params: &str, pos: &[f64], vals: Option<&[f64]>) -> Vec<f64> {
-    let mut inputs = vec![("positions", particles(pos.to_vec()))];
+    let mut inputs = vec![("positions", flat_particles(pos, 3))];
     if let Some(v) = vals {
-        inputs.push(("values", particles(v.to_vec())));
+        inputs.push(("values", flat_particles(v, 3)));
     }
     let (out, _) = util::run_node_and_reference("all_pairs", params, &inputs);
     out["out"].data.to_f64()
@@ -467,10 +453,10 @@ fn all_pairs_match_every_pair() {
     let mut rng = Rng::new(3);
     // Sizes around the tile of 128: one particle, a partial tile, several tiles.
     for n in [1usize, 129, 300] {
-        let pos = random_positions(&mut rng, n, [12.0, 6.0, 9.0]);
+        let pos = random_points(&mut rng, n, &[12.0, 6.0, 9.0]);
         let vals: Vec<f64> = (0..3 * n).map(|_| rng.uniform(-1.0, 1.0)).collect();
-        let pos64 = particles(pos.clone()).data.to_f64();
-        let vals64 = particles(vals.clone()).data.to_f64();
+        let pos64 = flat_particles(&pos, 3).data.to_f64();
+        let vals64 = flat_particles(&vals, 3).data.to_f64();
         let got = all_pairs(r#"{"kernel": "rpy", "radius": 0.7}"#, &pos, Some(&vals));
         let want = brute_force(&Pair::Rpy(0.7), &pos64, &vals64, &[], [false; 3], f64::MAX);
         let scale = want.iter().fold(1e-30f64, |m, x| m.max(x.abs()));
@@ -559,19 +545,11 @@ fn lanes_wider_than_the_subgroups_are_a_compile_error_naming_the_node() {
         None,
     );
     let g = util::load(&util::write_graph(&dir, "g.json", &json));
-    let opts = mesoflow::plan::PlanOptions {
-        outputs: None,
-        inputs: [("positions".to_string(), ValueType::Particles { n: 4, k: 3 })]
-            .into_iter()
-            .collect(),
-        fuse: true,
-    };
-    let p = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap();
-    let mut cache = mesoflow::gpu::KernelCache::default();
-    let e = match mesoflow::exec::Program::compile(&gpu, &g, &p, &mut cache) {
-        Ok(_) => panic!("lanes = 32 compiled on subgroups of {min}"),
-        Err(e) => e.to_string(),
-    };
+    let e = util::graph_compile_error(
+        &gpu,
+        &g,
+        [("positions".to_string(), ValueType::Particles { n: 4, k: 3 })].into(),
+    );
     let _ = std::fs::remove_dir_all(&dir);
     assert!(
         e.contains("sum") && e.contains("lanes = 32 needs subgroups of at least 32 lanes"),

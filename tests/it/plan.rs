@@ -6,7 +6,7 @@ use mesoflow::gpu::DeviceCaps;
 use mesoflow::plan::{self, BufferRole, Launch, Plan, PlanOptions, Storage};
 use mesoflow::value::ValueType;
 
-use crate::util::{load, root, tmpdir, write_graph};
+use crate::util::{load, plan_graph, root, tmpdir, write_graph};
 
 fn plan_file(
     path: &std::path::Path,
@@ -14,12 +14,8 @@ fn plan_file(
     fuse: bool,
 ) -> (mesoflow::graph::Graph, Plan) {
     let g = load(path);
-    let opts = PlanOptions {
-        outputs: outputs.map(|o| o.iter().map(|s| s.to_string()).collect()),
-        inputs: mesoflow::cli::declared_input_types(&g),
-        fuse,
-    };
-    let p = plan::plan(&g, &opts, &DeviceCaps::baseline()).unwrap_or_else(|e| panic!("{e}"));
+    let inputs = mesoflow::cli::declared_input_types(&g);
+    let p = plan_graph(&DeviceCaps::baseline(), &g, inputs, outputs, fuse);
     (g, p)
 }
 

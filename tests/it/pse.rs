@@ -7,14 +7,11 @@
 
 use std::f64::consts::PI;
 
-use mesoflow::graph::{self, Graph, LoadOptions};
-use mesoflow::plan::{Plan, PlanOptions};
-use mesoflow::value::ValueType;
-
-use crate::fcm::{cholesky_min_pivot, compile, eval, hasimoto, load_with, particles, rows};
-use crate::util::{Rng, gpu, registry, root};
-
-type M3 = [[f64; 3]; 3];
+use crate::util::mobility::{
+    M3, axis_mobilities, cholesky_min_pivot, eval, hasimoto, mobility_plan, noise_statistics,
+    random_positions,
+};
+use crate::util::{Rng, compile_cached, gpu, load_error, load_with, particles, vectors};
 
 /// Free-space RPY (eta = 1) as f I + g r^ r^, written here from the closed forms.
 fn rpy_fg(r: f64, a: f64) -> (f64, f64) {
@@ -170,32 +167,13 @@ fn ewald_reference_gives_hasimoto_at_any_split() {
     }
 }
 
-/// The plan of pse.json for `n` particles and these outputs.
-fn pse_plan(gpu: &mesoflow::gpu::GpuContext, g: &Graph, n: u32, outputs: &[&str]) -> Plan {
-    let p3 = ValueType::Particles { n, k: 3 };
-    let opts = PlanOptions {
-        outputs: Some(outputs.iter().map(|s| s.to_string()).collect()),
-        inputs: [("positions".to_string(), p3), ("forces".to_string(), p3)]
-            .into_iter()
-            .collect(),
-        fuse: true,
-    };
-    mesoflow::plan::plan(g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"))
-}
-
-fn random_positions(rng: &mut Rng, n: usize, l: f64) -> Vec<[f64; 3]> {
-    (0..n)
-        .map(|_| [0, 1, 2].map(|_| rng.uniform(-0.5, 0.5) * l))
-        .collect()
-}
-
 #[test]
 fn self_mobility_is_hasimoto_whatever_the_split() {
     let Some(gpu) = gpu() else { return };
     let (l, tol) = (16.0, 1e-3);
     let want = hasimoto(1.0, l) / (6.0 * PI);
     let mut rng = Rng::new(5);
-    let spots = random_positions(&mut rng, 4, l);
+    let spots = random_positions(&mut rng, 4, [l; 3]);
     for xi in ["0.4", "0.6", "1.0", "1.6"] {
         let g = load_with(
             "pse.json",
@@ -204,10 +182,11 @@ fn self_mobility_is_hasimoto_whatever_the_split() {
                 ("split", xi),
                 ("tolerance", "1e-3"),
             ],
+            1,
             0,
         );
-        let plan = pse_plan(&gpu, &g, 1, &["velocities"]);
-        let mut program = compile(&gpu, &g, &plan);
+        let plan = mobility_plan(&gpu, &g, 1, false, &["velocities"]);
+        let mut program = compile_cached(&gpu, &g, &plan);
         let mut worst: f64 = 0.0;
         for x in &spots {
             for a in 0..3 {
@@ -257,10 +236,11 @@ fn pair_mobility_matches_the_ewald_sum_overlapping_or_not() {
                 ("split", xi),
                 ("tolerance", "1e-3"),
             ],
+            1,
             0,
         );
-        let plan = pse_plan(&gpu, &g, 2, &["velocities"]);
-        let mut program = compile(&gpu, &g, &plan);
+        let plan = mobility_plan(&gpu, &g, 2, false, &["velocities"]);
+        let mut program = compile_cached(&gpu, &g, &plan);
         let mut worst: f64 = 0.0;
         for ((x0, x1), want) in pairs.iter().zip(&references) {
             for b in 0..3 {
@@ -282,17 +262,18 @@ fn pair_mobility_matches_the_ewald_sum_overlapping_or_not() {
 fn mobility_matrix_is_symmetric_and_positive_definite() {
     let Some(gpu) = gpu() else { return };
     let mut rng = Rng::new(21);
-    let mut x = random_positions(&mut rng, 4, 12.0);
+    let mut x = random_positions(&mut rng, 4, [12.0; 3]);
     // An overlapping pair and a coincident one.
     x[1] = [x[0][0] + 0.7, x[0][1], x[0][2] - 0.4];
     x[3] = x[2];
     let g = load_with(
         "pse.json",
         &[("box", "[12, 12, 12]"), ("tolerance", "1e-3")],
+        1,
         0,
     );
-    let plan = pse_plan(&gpu, &g, 4, &["velocities"]);
-    let mut program = compile(&gpu, &g, &plan);
+    let plan = mobility_plan(&gpu, &g, 4, false, &["velocities"]);
+    let mut program = compile_cached(&gpu, &g, &plan);
     let n = x.len();
     let mut m = vec![vec![0.0; 3 * n]; 3 * n];
     for j in 0..n {
@@ -334,23 +315,13 @@ fn noise_covariance_is_the_mobility() {
     let Some(gpu) = gpu() else { return };
     let x = vec![[0.3, -1.1, 2.0], [1.4, -0.6, 2.5]];
     let sets = r#"{"box": [10, 10, 10], "tolerance": 0.001}"#;
-    let g = load_with("pse.json", &[("box", "[10, 10, 10]")], 0);
-    let plan = pse_plan(&gpu, &g, 2, &["velocities"]);
-    let mut program = compile(&gpu, &g, &plan);
-    let mut m = [[[0.0; 3]; 2]; 2];
-    for j in 0..2 {
-        for a in 0..3 {
-            let mut f = vec![[0.0; 3]; 2];
-            f[j][a] = 1.0;
-            let v = &eval(&mut program, &x, &f, None)["velocities"];
-            for i in 0..2 {
-                m[i][j][a] = v[i][a];
-            }
-        }
-    }
+    let g = load_with("pse.json", &[("box", "[10, 10, 10]")], 1, 0);
+    let plan = mobility_plan(&gpu, &g, 2, false, &["velocities"]);
+    let mut program = compile_cached(&gpu, &g, &plan);
+    let m = axis_mobilities(&mut program, &x);
     drop(program);
     let steps = 4000u64;
-    let (sq, pair) = crate::fcm::noise_statistics(&gpu, "pse.json", sets, &x, steps, 17);
+    let (sq, pair) = noise_statistics(&gpu, "pse.json", sets, &x, steps, 17);
     let s = steps as f64;
     // A variance from s normal samples has relative standard deviation sqrt(2 / s)
     // (2.2 % here); 5 of them is the bound.
@@ -380,16 +351,16 @@ fn noise_follows_the_particles_not_the_cell_order() {
     let Some(gpu) = gpu() else { return };
     let (l, n) = (16.0, 150usize);
     let mut rng = Rng::new(23);
-    let x = random_positions(&mut rng, n, l);
+    let x = random_positions(&mut rng, n, [l; 3]);
     let f = vec![[0.0; 3]; n];
     let run = |cells: &str, seed: u64| {
         let mut sets = vec![("box", "[16, 16, 16]"), ("lanczos_tolerance", "1e-5")];
         if !cells.is_empty() {
             sets.push(("cells", cells));
         }
-        let g = load_with("pse.json", &sets, seed);
-        let plan = pse_plan(&gpu, &g, n as u32, &["noise"]);
-        let mut program = compile(&gpu, &g, &plan);
+        let g = load_with("pse.json", &sets, 1, seed);
+        let plan = mobility_plan(&gpu, &g, n as u32, false, &["noise"]);
+        let mut program = compile_cached(&gpu, &g, &plan);
         eval(&mut program, &x, &f, None)["noise"].clone()
     };
     // The default cells (2 per axis here: the cutoff is about 5.8) and one cell.
@@ -417,7 +388,7 @@ fn noise_follows_the_particles_not_the_cell_order() {
 fn open_boundary_rpy_matches_the_closed_form() {
     let Some(gpu) = gpu() else { return };
     let mut rng = Rng::new(2);
-    let mut x = random_positions(&mut rng, 40, 10.0);
+    let mut x = random_positions(&mut rng, 40, [10.0; 3]);
     x[1] = [x[0][0] + 0.9, x[0][1], x[0][2]];
     let f: Vec<[f64; 3]> = (0..x.len())
         .map(|_| [0, 1, 2].map(|_| rng.uniform(-1.0, 1.0)))
@@ -425,13 +396,14 @@ fn open_boundary_rpy_matches_the_closed_form() {
     let g = load_with(
         "rpy_open.json",
         &[("radius", "0.8"), ("viscosity", "2.0")],
+        1,
         0,
     );
-    let plan = pse_plan(&gpu, &g, x.len() as u32, &["velocities"]);
-    let mut program = compile(&gpu, &g, &plan);
+    let plan = mobility_plan(&gpu, &g, x.len() as u32, false, &["velocities"]);
+    let mut program = compile_cached(&gpu, &g, &plan);
     let v = &eval(&mut program, &x, &f, None)["velocities"];
-    let x32 = rows(&particles(&x));
-    let f32_ = rows(&particles(&f));
+    let x32 = vectors(&particles(&x));
+    let f32_ = vectors(&particles(&f));
     let mut worst: f64 = 0.0;
     let mut scale: f64 = 0.0;
     for i in 0..x.len() {
@@ -461,7 +433,7 @@ fn open_boundary_noise_covariance_is_the_rpy_tensor() {
     let a = 1.0;
     let x = vec![[0.0, 0.0, 0.0], [1.5, 0.0, 0.0]];
     let steps = 3000u64;
-    let (sq, pair) = crate::fcm::noise_statistics(
+    let (sq, pair) = noise_statistics(
         &gpu,
         "rpy_open.json",
         r#"{"radius": 1.0, "tolerance": 1e-3}"#,
@@ -495,33 +467,10 @@ fn open_boundary_noise_covariance_is_the_rpy_tensor() {
 
 #[test]
 fn bad_settings_get_clear_errors() {
-    let load_err = |sets: &[(&str, &str)]| -> String {
-        let overrides = sets
-            .iter()
-            .map(|(k, v)| {
-                let json: serde_json::Value = serde_json::from_str(v).unwrap();
-                (
-                    k.to_string(),
-                    mesoflow::expr::ParamValue::from_json(&json).unwrap(),
-                )
-            })
-            .collect();
-        match graph::load(
-            &root().join("graphs/pse.json"),
-            registry(),
-            &LoadOptions {
-                overrides,
-                ..Default::default()
-            },
-        ) {
-            Ok(_) => panic!("{sets:?} loaded"),
-            Err(e) => e.to_string(),
-        }
-    };
     // A split so small that the near field reaches past half the box.
-    let e = load_err(&[("box", "[8, 8, 8]"), ("split", "0.3")]);
+    let e = load_error("pse.json", &[("box", "[8, 8, 8]"), ("split", "0.3")]);
     assert!(e.contains("exceeds half the periodic box"), "{e}");
     // A split so large that the far grid explodes.
-    let e = load_err(&[("box", "[64, 64, 64]"), ("split", "200")]);
+    let e = load_error("pse.json", &[("box", "[64, 64, 64]"), ("split", "200")]);
     assert!(e.contains("lower the split"), "{e}");
 }

@@ -4,9 +4,9 @@
 use std::collections::BTreeMap;
 
 use mesoflow::nodes::random;
-use mesoflow::value::{HostArray, HostData};
+use mesoflow::value::HostArray;
 
-use crate::util::{gpu, load, run_graph, tmpdir, write_graph};
+use crate::util::{f32s, gpu, load, run_graph, tmpdir, u32s, write_graph};
 
 fn graph(nodes: &str, outputs: &str) -> String {
     format!(r#"{{"mesoflow": 1, "nodes": [{nodes}], "outputs": {{{outputs}}}}}"#)
@@ -17,20 +17,6 @@ fn run(json: &str, steps: u64, fuse: bool) -> BTreeMap<String, HostArray> {
     let dir = tmpdir("random");
     let g = load(&write_graph(&dir, "g.json", json));
     run_graph(&gpu, &g, &BTreeMap::new(), None, steps, fuse)
-}
-
-fn words(a: &HostArray) -> Vec<u32> {
-    match &a.data {
-        HostData::U32(v) => v.clone(),
-        other => panic!("expected u32 data, got {other:?}"),
-    }
-}
-
-fn floats(a: &HostArray) -> Vec<f32> {
-    match &a.data {
-        HostData::F32(v) => v.clone(),
-        other => panic!("expected f32 data, got {other:?}"),
-    }
 }
 
 /// Seeds whose halves are NaN bit patterns as f32 (they travel through f32 params).
@@ -50,7 +36,7 @@ fn gpu_words_equal_rust_bit_for_bit() {
                 ),
                 r#""w": "r.out""#,
             );
-            let got = words(&run(&json, steps, true)["w"]);
+            let got = u32s(&run(&json, steps, true)["w"]);
             for (i, w) in got.iter().enumerate() {
                 let want = random::bits(i as u64, steps - 1, seed, stream);
                 assert_eq!(
@@ -79,7 +65,7 @@ fn uniforms_are_exact_and_normals_match_the_f64_reference() {
         );
         let out = run(&json, 3, true);
         let step = 2;
-        for (i, u) in floats(&out["u"]).iter().enumerate() {
+        for (i, u) in f32s(&out["u"]).iter().enumerate() {
             // 24-bit uniforms are exact in f32.
             assert_eq!(
                 *u as f64,
@@ -87,7 +73,7 @@ fn uniforms_are_exact_and_normals_match_the_f64_reference() {
                 "uniform {i}"
             );
         }
-        for (i, g) in floats(&out["g"]).iter().enumerate() {
+        for (i, g) in f32s(&out["g"]).iter().enumerate() {
             let want = 1.0 + 2.0 * random::normal(i as u64, step, seed, 4);
             // f32 log, sqrt, cos and sin on the GPU: a few 1e-6 of the spread (std 2).
             assert!(
@@ -113,19 +99,19 @@ fn draws_depend_on_step_and_stream_and_not_on_fusion() {
     let fused = run(&json, 4, true);
     let unfused = run(&json, 4, false);
     assert_eq!(
-        floats(&fused["g"]),
-        floats(&unfused["g"]),
+        f32s(&fused["g"]),
+        f32s(&unfused["g"]),
         "fusion changes no draw"
     );
-    assert_eq!(floats(&fused["y"]), floats(&unfused["y"]));
+    assert_eq!(f32s(&fused["y"]), f32s(&unfused["y"]));
     assert_eq!(
-        floats(&fused["g"]),
-        floats(&run(&json, 4, true)["g"]),
+        f32s(&fused["g"]),
+        f32s(&run(&json, 4, true)["g"]),
         "reruns reproduce"
     );
     assert_ne!(
-        floats(&fused["g"]),
-        floats(&run(&json, 3, true)["g"]),
+        f32s(&fused["g"]),
+        f32s(&run(&json, 3, true)["g"]),
         "steps differ"
     );
 }
@@ -162,8 +148,8 @@ fn normals_pass_statistical_tests() {
         r#""a": "a.out", "b": "b.out""#,
     );
     let out = run(&json, 1, true);
-    let a: Vec<f64> = floats(&out["a"]).iter().map(|&x| x as f64).collect();
-    let b: Vec<f64> = floats(&out["b"]).iter().map(|&x| x as f64).collect();
+    let a: Vec<f64> = f32s(&out["a"]).iter().map(|&x| x as f64).collect();
+    let b: Vec<f64> = f32s(&out["b"]).iter().map(|&x| x as f64).collect();
     let nf = n as f64;
     let mean = a.iter().sum::<f64>() / nf;
     let var = a.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (nf - 1.0);

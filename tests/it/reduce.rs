@@ -3,17 +3,18 @@
 
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{Rng, gpu, rel_max_err, run_node_and_reference};
+use crate::util::{Rng, assert_like_reference, gpu, run_node_and_reference};
 
 /// Compares a node with its reference on the given inputs (relative to the largest
 /// reference magnitude).
 fn check(kind: &str, params: &str, inputs: &[(&str, HostArray)], tol: f64) {
-    let (out, refs) = run_node_and_reference(kind, params, inputs);
-    let (err, at) = rel_max_err(&out["out"], &refs[0]);
     let sizes: Vec<String> = inputs.iter().map(|(_, a)| a.ty.to_string()).collect();
-    assert!(
-        err <= tol,
-        "{kind} {params} on {sizes:?}: error {err:e} at {at} (tolerance {tol:e})"
+    assert_like_reference(
+        kind,
+        params,
+        inputs,
+        tol,
+        &format!("{kind} {params} on {sizes:?}"),
     );
 }
 

@@ -5,21 +5,7 @@ use std::collections::BTreeMap;
 
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{Rng, gpu, load, root, run_graph, tmpdir, write_graph};
-
-fn inputs(pairs: &[(&str, HostArray)]) -> BTreeMap<String, HostArray> {
-    pairs
-        .iter()
-        .map(|(n, a)| (n.to_string(), a.clone()))
-        .collect()
-}
-
-fn f32s(a: &HostArray) -> Vec<f32> {
-    match &a.data {
-        mesoflow::value::HostData::F32(v) => v.clone(),
-        other => panic!("expected f32 data, got {other:?}"),
-    }
-}
+use crate::util::{Rng, f32s, gpu, load, named, plan_graph, root, run_graph, tmpdir, write_graph};
 
 #[test]
 fn relax_example_matches_its_closed_form() {
@@ -31,8 +17,8 @@ fn relax_example_matches_its_closed_form() {
         let out = run_graph(
             &gpu,
             &g,
-            &inputs(&[("positions", x0.clone())]),
-            Some(vec!["positions".into()]),
+            &named(&[("positions", x0.clone())]),
+            Some(&["positions"]),
             steps,
             true,
         );
@@ -55,7 +41,7 @@ fn fused_and_unfused_runs_agree() {
     let g = load(&root().join("graphs/fixtures/pointwise_all.json"));
     let mut rng = Rng::new(5);
     let p = ValueType::Particles { n: 37, k: 3 };
-    let data = inputs(&[
+    let data = named(&[
         ("x", rng.array(p, 0.5, 2.0)),
         ("y", rng.array(p, 0.5, 2.0)),
         ("s", rng.array(ValueType::Scalar, 0.5, 2.0)),
@@ -84,7 +70,7 @@ fn subgraphs_expand_with_their_own_params() {
         "subgraph nodes carry prefixed ids"
     );
     let x = Rng::new(3).array(ValueType::Particles { n: 50, k: 3 }, -1.0, 1.0);
-    let out = run_graph(&gpu, &g, &inputs(&[("x", x.clone())]), None, 1, true);
+    let out = run_graph(&gpu, &g, &named(&[("x", x.clone())]), None, 1, true);
     for ((soft, both), x) in f32s(&out["soft"])
         .iter()
         .zip(f32s(&out["both"]))
@@ -121,7 +107,7 @@ fn states_carry_across_steps_including_copies_and_swaps() {
         let out = run_graph(
             &gpu,
             &g,
-            &inputs(&[("x", x.clone()), ("y", y.clone())]),
+            &named(&[("x", x.clone()), ("y", y.clone())]),
             None,
             steps,
             true,
@@ -180,7 +166,6 @@ fn identical_kernels_share_one_pipeline() {
     let Some(gpu) = gpu() else { return };
     use mesoflow::exec::Program;
     use mesoflow::gpu::KernelCache;
-    use mesoflow::plan::{self, PlanOptions};
     let dir = tmpdir("pipeline-cache");
     let g = load(&write_graph(
         &dir,
@@ -188,12 +173,7 @@ fn identical_kernels_share_one_pipeline() {
         &mesoflow::bench::chain_graph(20),
     ));
     let ty = ValueType::Particles { n: 64, k: 1 };
-    let opts = PlanOptions {
-        outputs: None,
-        inputs: [("x".to_string(), ty)].into_iter().collect(),
-        fuse: false,
-    };
-    let p = plan::plan(&g, &opts, &gpu.caps).unwrap();
+    let p = plan_graph(&gpu.caps, &g, [("x".to_string(), ty)].into(), None, false);
     let mut cache = KernelCache::default();
     let program = Program::compile(&gpu, &g, &p, &mut cache).unwrap();
     // Twenty unfused scale nodes: one pointwise pipeline, plus the clock tick and the copy.

@@ -6,7 +6,9 @@ use std::collections::BTreeMap;
 use mesoflow::gpu::GpuContext;
 use mesoflow::value::{HostArray, HostData, ValueType};
 
-use crate::util::{Rng, compile_error, gpu, reference, run_node, with_caps};
+use crate::util::{
+    ANY_U32, Rng, compile_error, gpu, indices, random_keys, reference, run_node, with_caps,
+};
 
 const PATHS: [&str; 2] = ["subgroup", "portable"];
 
@@ -74,18 +76,9 @@ fn check(x: &HostArray, path: &str) {
     }
 }
 
-fn indices(data: Vec<u32>) -> HostArray {
-    HostArray::u32(
-        ValueType::Indices {
-            n: data.len() as u32,
-        },
-        data,
-    )
-}
-
+/// `n` random full-range words (seeded).
 fn random_u32(n: u64, seed: u64) -> HostArray {
-    let mut rng = Rng::new(seed);
-    indices((0..n).map(|_| rng.next_u64() as u32).collect())
+    indices(&random_keys(n as usize, ANY_U32, seed))
 }
 
 #[test]
@@ -119,9 +112,9 @@ fn u32_scans_match_exactly_at_every_length() {
 #[test]
 fn u32_scans_of_constant_arrays() {
     for path in PATHS {
-        check(&indices(vec![1; 100_003]), path);
-        check(&indices(vec![0; 5000]), path);
-        check(&indices(vec![u32::MAX; 9000]), path);
+        check(&indices(&vec![1; 100_003]), path);
+        check(&indices(&vec![0; 5000]), path);
+        check(&indices(&vec![u32::MAX; 9000]), path);
     }
 }
 

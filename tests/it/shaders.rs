@@ -3,20 +3,14 @@
 
 use mesoflow::gpu::shaders;
 
-fn validate(name: &str, src: &str) {
-    let module = naga::front::wgsl::parse_str(src)
-        .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
-    let caps = naga::valid::Capabilities::FLOAT64
-        | naga::valid::Capabilities::SHADER_FLOAT32_ATOMIC
-        | naga::valid::Capabilities::SUBGROUP
-        | naga::valid::Capabilities::SHADER_INT64
-        | naga::valid::Capabilities::SHADER_INT64_ATOMIC_ALL_OPS;
-    let mut v = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), caps);
-    v.subgroup_stages(naga::valid::ShaderStages::COMPUTE);
-    v.subgroup_operations(naga::valid::SubgroupOperationSet::all());
-    v.validate(&module)
-        .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
-}
+use crate::util::validate_wgsl;
+
+/// Every capability mesoflow may request of a device.
+const EVERY_CAPABILITY: naga::valid::Capabilities = naga::valid::Capabilities::FLOAT64
+    .union(naga::valid::Capabilities::SHADER_FLOAT32_ATOMIC)
+    .union(naga::valid::Capabilities::SUBGROUP)
+    .union(naga::valid::Capabilities::SHADER_INT64)
+    .union(naga::valid::Capabilities::SHADER_INT64_ATOMIC_ALL_OPS);
 
 #[test]
 fn every_shader_file_validates() {
@@ -27,7 +21,7 @@ fn every_shader_file_validates() {
             continue;
         }
         let src = shaders::source(path).unwrap_or_else(|e| panic!("{path}: {e}"));
-        validate(path, &src);
+        validate_wgsl(path, &src, EVERY_CAPABILITY);
         n += 1;
     }
     assert!(n >= 3);
@@ -39,7 +33,7 @@ fn mpcd_binning_validates_with_either_sum_atomics() {
         for main in ["mpcd/bin.wgsl", "mpcd/stream_bin.wgsl"] {
             let src = shaders::resolve(&format!("#import {sums}\n#import {main}\n"))
                 .unwrap_or_else(|e| panic!("{sums}: {e}"));
-            validate(&format!("{main} after {sums}"), &src);
+            validate_wgsl(&format!("{main} after {sums}"), &src, EVERY_CAPABILITY);
         }
     }
 }
@@ -60,7 +54,7 @@ fn generated_pointwise_kernels_validate() {
         let mut generated = 0;
         for l in &p.step {
             if let Launch::Fused(k) = l {
-                validate("generated", &k.source);
+                validate_wgsl("generated", &k.source, EVERY_CAPABILITY);
                 generated += 1;
             }
         }

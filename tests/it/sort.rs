@@ -4,9 +4,11 @@
 use std::collections::BTreeMap;
 
 use mesoflow::gpu::GpuContext;
-use mesoflow::value::{HostArray, ValueType};
+use mesoflow::value::HostArray;
 
-use crate::util::{Rng, compile_error, gpu, reference, run_node, with_caps};
+use crate::util::{
+    ANY_U32, Rng, compile_error, gpu, indices, random_keys, reference, run_node, with_caps,
+};
 
 /// Every variant but `auto` (which runs one of them).
 const PATHS: [&str; 4] = ["tile4096", "tile2048", "subgroup", "portable"];
@@ -15,20 +17,11 @@ const PATHS: [&str; 4] = ["tile4096", "tile2048", "subgroup", "portable"];
 const TILES: [usize; 4] = [4096, 3072, 2048, 3840];
 const SUBGROUP_TILE: usize = 3840;
 
-fn keys_array(keys: &[u32]) -> HostArray {
-    HostArray::u32(
-        ValueType::Indices {
-            n: keys.len() as u32,
-        },
-        keys.to_vec(),
-    )
-}
-
 /// Sorts `keys` by their low `bits` bits on the given path and compares keys and
 /// permutation with the reference, element by element.
 fn check_on(gpu: &GpuContext, keys: &[u32], bits: u32, path: &str) {
     let params = format!(r#"{{"bits": {bits}, "variant": "{path}"}}"#);
-    let x = keys_array(keys);
+    let x = indices(keys);
     let inputs: BTreeMap<String, HostArray> = [("keys".to_string(), x.clone())].into();
     let got = run_node(gpu, "sort", &params, &inputs);
     let want = reference("sort", &params, &[Some(&x)]);
@@ -59,11 +52,6 @@ fn check(keys: &[u32], bits: u32, path: &str) {
     }
 }
 
-fn random(n: usize, seed: u64) -> Vec<u32> {
-    let mut rng = Rng::new(seed);
-    (0..n).map(|_| rng.next_u64() as u32).collect()
-}
-
 #[test]
 fn random_keys_at_every_tile_boundary() {
     let mut sizes = vec![0, 1, 2, 3, 100, 1000];
@@ -74,7 +62,7 @@ fn random_keys_at_every_tile_boundary() {
     }
     for path in PATHS {
         for (i, &n) in sizes.iter().enumerate() {
-            check(&random(n, i as u64), 32, path);
+            check(&random_keys(n, ANY_U32, i as u64), 32, path);
         }
     }
 }
@@ -90,7 +78,10 @@ fn equal_keys_keep_their_input_order() {
         shifted.push(3);
         check(&shifted, 32, path);
         // Few distinct keys: long runs of equal ones in every tile.
-        let few: Vec<u32> = random(50_000, 3).iter().map(|k| k % 5).collect();
+        let few: Vec<u32> = random_keys(50_000, ANY_U32, 3)
+            .iter()
+            .map(|k| k % 5)
+            .collect();
         check(&few, 32, path);
     }
 }
@@ -114,7 +105,7 @@ fn extreme_sorted_and_reversed_keys() {
 #[test]
 fn fewer_bits_sort_by_the_low_bits_only() {
     // Full-range keys: the bits above `bits` are set and must be ignored, yet kept.
-    let keys = random(20_000, 5);
+    let keys = random_keys(20_000, ANY_U32, 5);
     for path in PATHS {
         for bits in [1, 3, 4, 5, 8, 9, 20, 31] {
             check(&keys, bits, path);
@@ -125,10 +116,13 @@ fn fewer_bits_sort_by_the_low_bits_only() {
 #[test]
 fn many_tiles() {
     for path in PATHS {
-        check(&random(300_000, 6), 32, path);
+        check(&random_keys(300_000, ANY_U32, 6), 32, path);
     }
     // A cell-hash-like sort: 22-bit keys, many particles per cell.
-    let cells: Vec<u32> = random(200_000, 7).iter().map(|k| k >> 14).collect();
+    let cells: Vec<u32> = random_keys(200_000, ANY_U32, 7)
+        .iter()
+        .map(|k| k >> 14)
+        .collect();
     check(&cells, 22, "auto");
 }
 
@@ -136,7 +130,7 @@ fn many_tiles() {
 fn sorts_fold_their_dispatches_past_the_workgroup_cap() {
     let Some(mut gpu) = gpu() else { return };
     // 7 to 14 tiles on 3 workgroups per dimension (and 256 `offsets` workgroups).
-    let keys = random(7 * SUBGROUP_TILE + 5, 8);
+    let keys = random_keys(7 * SUBGROUP_TILE + 5, ANY_U32, 8);
     with_caps(
         &mut gpu,
         |c| c.max_workgroups_per_dim = 3,
@@ -152,13 +146,13 @@ fn sorts_fold_their_dispatches_past_the_workgroup_cap() {
 #[test]
 fn auto_runs_without_subgroups_and_subgroup_fails_clearly() {
     let Some(mut gpu) = gpu() else { return };
-    let keys = random(5000, 9);
+    let keys = random_keys(5000, ANY_U32, 9);
     with_caps(
         &mut gpu,
         |c| c.subgroups = None,
         |gpu| {
             check_on(gpu, &keys, 32, "auto");
-            let inputs = [("keys".to_string(), keys_array(&keys))].into();
+            let inputs = [("keys".to_string(), indices(&keys))].into();
             for v in ["subgroup", "tile4096"] {
                 let params = format!(r#"{{"variant": "{v}"}}"#);
                 let err = compile_error(gpu, "sort", &params, &inputs);
@@ -178,7 +172,7 @@ fn the_subgroup_path_follows_the_reported_subgroup_sizes() {
     let Some((min, _)) = gpu.caps.subgroups else {
         return;
     };
-    let keys = random(3 * SUBGROUP_TILE + 17, 10);
+    let keys = random_keys(3 * SUBGROUP_TILE + 17, ANY_U32, 10);
     // Subgroups that may be wider than 32 lanes: four-word ballot masks, same result.
     with_caps(
         &mut gpu,
@@ -198,7 +192,7 @@ fn the_subgroup_path_follows_the_reported_subgroup_sizes() {
         },
         |gpu| {
             check_on(gpu, &keys, 32, "auto");
-            let inputs = [("keys".to_string(), keys_array(&keys))].into();
+            let inputs = [("keys".to_string(), indices(&keys))].into();
             for v in ["subgroup", "tile4096"] {
                 let params = format!(r#"{{"variant": "{v}"}}"#);
                 let err = compile_error(gpu, "sort", &params, &inputs);

@@ -1,0 +1,12 @@
+//! MPCD (nodes/mpcd/, graphs/mpcd.json) by topic: streaming and walls against an f64
+//! event schedule, binning with exact cell sums and the collisions' per-cell conservation
+//! laws and f64 references, the whole graph (initial state, measurement, momentum over
+//! many steps, bad input), the thermostats, viscosity against kinetic theory and measured
+//! values, and solute coupling. Shared helpers: `crate::util::mpcd`.
+
+mod collide;
+mod graph;
+mod solute;
+mod streaming;
+mod thermostats;
+mod viscosity;

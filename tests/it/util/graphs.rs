@@ -1,0 +1,148 @@
+//! Graph files for tests: writing and loading them, `graphs/` files with `--set` values,
+//! graphs of one node, and the errors of loading and validating.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use mesoflow::expr::ParamValue;
+use mesoflow::graph::{self, Graph, LoadOptions};
+use mesoflow::value::ValueType;
+
+use super::{registry, root, tmpdir};
+
+/// Writes a graph file and returns its path.
+pub fn write_graph(dir: &Path, name: &str, json: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, json).unwrap();
+    p
+}
+
+/// Loads a graph file with the default options (one step, seed 0), panicking with the
+/// loader's report.
+pub fn load(path: &Path) -> Graph {
+    graph::load(path, registry(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// `--set` values given as JSON literals, as the loader takes them.
+fn overrides(sets: &[(&str, &str)]) -> BTreeMap<String, ParamValue> {
+    sets.iter()
+        .map(|(k, v)| {
+            let json: serde_json::Value = serde_json::from_str(v).unwrap();
+            (k.to_string(), ParamValue::from_json(&json).unwrap())
+        })
+        .collect()
+}
+
+/// `graphs/<name>` loaded with these `--set` values (JSON literals) for a run of `steps`
+/// steps with this seed.
+pub fn load_with(name: &str, sets: &[(&str, &str)], steps: u64, seed: u64) -> Graph {
+    let opts = LoadOptions {
+        overrides: overrides(sets),
+        steps,
+        seed,
+    };
+    graph::load(&root().join("graphs").join(name), registry(), &opts)
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The report of loading `graphs/<name>` with these `--set` values, which must fail.
+pub fn load_error(name: &str, sets: &[(&str, &str)]) -> String {
+    let opts = LoadOptions {
+        overrides: overrides(sets),
+        ..Default::default()
+    };
+    match graph::load(&root().join("graphs").join(name), registry(), &opts) {
+        Ok(_) => panic!("{name} with {sets:?} loaded"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// How a graph-file input declares a value type.
+pub fn input_decl(t: &ValueType) -> String {
+    match *t {
+        ValueType::Particles { n, k } => {
+            format!(r#"{{"type": "particles", "rows": {n}, "cols": {k}}}"#)
+        }
+        ValueType::Indices { n } => format!(r#"{{"type": "indices", "rows": {n}}}"#),
+        ValueType::RealGrid { dims, comps } => {
+            format!(
+                r#"{{"type": "real_grid", "dims": [{}, {}, {}], "comps": {comps}}}"#,
+                dims[0], dims[1], dims[2]
+            )
+        }
+        ValueType::HalfComplexGrid { dims, comps } => format!(
+            r#"{{"type": "half_complex_grid", "dims": [{}, {}, {}], "comps": {comps}}}"#,
+            dims[0], dims[1], dims[2]
+        ),
+        ValueType::ComplexGrid { dims, comps } => {
+            format!(
+                r#"{{"type": "complex_grid", "dims": [{}, {}, {}], "comps": {comps}}}"#,
+                dims[0], dims[1], dims[2]
+            )
+        }
+        ValueType::Scalar => r#"{"type": "scalar"}"#.into(),
+        ValueType::Frames { .. } => panic!("frames are outputs only, not graph inputs"),
+    }
+}
+
+/// A graph of one node: its inputs are graph inputs of the same names, its outputs are
+/// graph outputs of the same names.
+pub fn single_node_graph(kind: &str, params: &str, inputs: &[(&str, ValueType)]) -> String {
+    let k = registry()
+        .get(kind)
+        .unwrap_or_else(|| panic!("no kind {kind}"));
+    let decls: Vec<String> = inputs
+        .iter()
+        .map(|(n, t)| format!(r#""{n}": {}"#, input_decl(t)))
+        .collect();
+    let wires: Vec<String> = inputs
+        .iter()
+        .map(|(n, _)| format!(r#""{n}": "inputs.{n}""#))
+        .collect();
+    let outs: Vec<String> = k
+        .outputs()
+        .iter()
+        .map(|p| format!(r#""{0}": "n.{0}""#, p.name))
+        .collect();
+    format!(
+        r#"{{"mesoflow": 1, "inputs": {{{}}}, "nodes": [{{"id": "n", "kind": "{kind}", "params": {params}, "inputs": {{{}}}}}], "outputs": {{{}}}}}"#,
+        decls.join(", "),
+        wires.join(", "),
+        outs.join(", ")
+    )
+}
+
+/// A fresh folder of its own for each one-node graph (tests run in parallel).
+fn single_node_dir(kind: &str) -> PathBuf {
+    static GRAPHS: AtomicUsize = AtomicUsize::new(0);
+    tmpdir(&format!(
+        "{kind}-{}",
+        GRAPHS.fetch_add(1, Ordering::Relaxed)
+    ))
+}
+
+/// Writes [`single_node_graph`] into a fresh folder and loads it: the folder (for the
+/// caller to remove) and the graph.
+pub fn load_single_node(
+    kind: &str,
+    params: &str,
+    inputs: &[(&str, ValueType)],
+) -> (PathBuf, Graph) {
+    let dir = single_node_dir(kind);
+    let path = write_graph(&dir, "g.json", &single_node_graph(kind, params, inputs));
+    (dir, load(&path))
+}
+
+/// The problems `mesoflow validate` reports for a one-`kind`-node graph, which must have
+/// some.
+pub fn validation_error(kind: &str, params: &str, inputs: &[(&str, ValueType)]) -> String {
+    let dir = single_node_dir(kind);
+    let path = write_graph(&dir, "g.json", &single_node_graph(kind, params, inputs));
+    let report = mesoflow::cli::check_graph(registry(), &path);
+    let _ = std::fs::remove_dir_all(&dir);
+    match report {
+        Ok(_) => panic!("{kind} {params} validated"),
+        Err(e) => e,
+    }
+}
