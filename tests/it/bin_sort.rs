@@ -284,7 +284,9 @@ fn bad_bins_get_clear_errors() {
             "g.json",
             &util::single_node_graph("bin_sort", params, &[("keys", t)]),
         );
-        let e = mesoflow::cli::check_graph(util::registry(), &path).unwrap_err();
+        let e = mesoflow::plan::validate_file(util::registry(), &path)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains(want), "{params}: {e}");
         if params.contains("bins") && !params.contains("variant") {
             assert!(

@@ -219,7 +219,9 @@ fn cell_hash_params_are_checked() {
             "g.json",
             &single_node_graph("cell_hash", params, &[("positions", t)]),
         );
-        let e = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
+        let e = mesoflow::plan::validate_file(crate::util::registry(), &path)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains(want), "{params}: {e}");
     }
 }
@@ -239,7 +241,9 @@ fn scatter_by_a_permutation_must_fill_its_output() {
             ],
         ),
     );
-    let e = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
+    let e = mesoflow::plan::validate_file(crate::util::registry(), &path)
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("with `permutation` the index must place every row"),
         "{e}"

@@ -192,7 +192,9 @@ fn per_component_values_must_match_the_components() {
             &[("x", P(4, 3))],
         ),
     );
-    let err = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
+    let err = mesoflow::plan::validate_file(crate::util::registry(), &path)
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("2 per-component values given for a value with 3 components"),
         "{err}"

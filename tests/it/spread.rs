@@ -395,7 +395,9 @@ fn bad_spread_params_are_plan_errors() {
             "g.json",
             &single_node_graph("spread", params, &inputs),
         );
-        let e = mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap_err();
+        let e = mesoflow::plan::validate_file(crate::util::registry(), &path)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains(want), "{params}: {e}");
     }
 }

@@ -116,6 +116,27 @@ pub fn single_node_graph(kind: &str, params: &str, inputs: &[(&str, ValueType)])
     )
 }
 
+/// A graph of `n` scale nodes in a chain (x -> s0 -> ... -> s{n-1} -> y), each scaling
+/// by 1.0001.
+pub fn chain_graph(n: usize) -> String {
+    let nodes: Vec<String> = (0..n)
+        .map(|i| {
+            let src = match i {
+                0 => "inputs.x".to_string(),
+                _ => format!("s{}.out", i - 1),
+            };
+            format!(
+                r#"{{"id": "s{i}", "kind": "scale", "params": {{"factor": 1.0001}}, "inputs": {{"x": "{src}"}}}}"#
+            )
+        })
+        .collect();
+    format!(
+        r#"{{"mesoflow": 1, "inputs": {{"x": {{"type": "particles", "cols": 1}}}}, "nodes": [{}], "outputs": {{"y": "s{}.out"}}}}"#,
+        nodes.join(", "),
+        n - 1
+    )
+}
+
 /// Runs a loaded graph on the GPU and returns its outputs by name.
 pub fn run_graph(
     gpu: &GpuContext,
