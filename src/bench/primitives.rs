@@ -58,7 +58,7 @@ fn header(gpu: &GpuContext, reps: u64) {
     println!(
         "ms, min ms: the whole call end to end ({}), median and fastest of {reps}; launches ms: \
          sum of per-launch medians; rates from the end-to-end median",
-        end_to_end_clock(&gpu)
+        end_to_end_clock(gpu)
     );
     println!(
         "{:<30} {:>11} {:>9} {:>9} {:>12} {:>9} {:>9} {:>11}",
