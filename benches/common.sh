@@ -1,6 +1,7 @@
-# Sourced by the benches/gpu_*.sh scripts (from the repository root, with the kit and a
-# release binary in .gpu/): the GPU environment, `bin`, a log in $OUT/bench.log, `run`
-# (echo a command, run it, keep its output in the log) and a header with date and GPU.
+# Sourced by benches/gpu.sh and benches/gpu_variants.sh (from the repository root, with
+# the kit and a release binary in .gpu/): the GPU environment, `bin`, a log in
+# $OUT/bench.log, `run` (echo a command, run it, keep its output in the log) and a header
+# with the date, the GPU and its driver.
 set -uo pipefail
 source .gpu/gpu-env.sh
 export PYTHONUNBUFFERED=1

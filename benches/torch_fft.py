@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """cuFFT through PyTorch, the reference for `mesoflow bench fft`: torch.fft.rfftn then
 irfftn over the last three dims of a (comps, n, n, n) float32 CUDA tensor, timed with CUDA
-events (warm-up, then the median of --reps runs), with the same columns as mesoflow's
-table. The times include PyTorch's own per-call overhead, as the issue's figures do.
+events (warm-up, then the median of --reps runs), with the columns of mesoflow's table:
+"cuFFT ms" compares with its end-to-end "e2e ms". The times include PyTorch's own
+per-call overhead, as the issue's figures do.
 
     python3 benches/torch_fft.py [--sizes 64,96,...] [--comps 3] [--reps 20] [--max-ref 512]
 """

@@ -1,7 +1,8 @@
 """PyTorch (CUB) counterparts of `mesoflow bench sort` and `mesoflow bench scan`, in the
 same table format: torch.sort of 1e7 int32 keys (stable, with the sorting indices),
 torch.cumsum of 1e8 int32, and torch.sum of 1e8 float32, on CUDA, timed with CUDA events
-(3 warm-up calls, then the median of 20).
+around each call (3 warm-up calls, then the median of 20): what mesoflow's end-to-end
+"ms" and "min ms" columns measure.
 
 GB/s counts each operation's own input and output once: sort reads 4 bytes per key and
 writes the sorted key (4) and its int64 index (8); cumsum of int32 writes int64 by default

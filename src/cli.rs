@@ -5,17 +5,19 @@
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use thiserror::Error;
 
-use crate::exec::{Profile, Program, RunOptions, RunStats};
-use crate::expr::ParamValue;
-use crate::gpu::{DeviceCaps, GpuContext, KernelCache};
-use crate::graph::{self, Dim, Graph, InputShape, LoadOptions};
-use crate::node::Registry;
-use crate::plan::{self, Plan, PlanOptions};
-use crate::value::{HostArray, HostData, ValueType};
+use mesoflow::exec::{ExecError, Profile, Program, RunOptions, RunStats};
+use mesoflow::expr::{self, ParamValue};
+use mesoflow::gpu::{DeviceCaps, GpuContext, GpuError, KernelCache};
+use mesoflow::graph::{self, Graph, LoadOptions};
+use mesoflow::node::Registry;
+use mesoflow::plan::{self, Plan, PlanOptions};
+use mesoflow::value::{HostArray, HostData};
+
+use crate::bench::{BenchCommand, BenchError};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -97,64 +99,53 @@ pub enum Command {
     /// Benchmarks run on the GPU (see BENCHMARKS.md).
     Bench {
         #[command(subcommand)]
-        which: crate::bench::BenchCommand,
+        which: BenchCommand,
     },
 }
 
-/// A failure with its exit code.
-#[derive(Debug)]
+/// A failure of a command, with its exit code.
+#[derive(Debug, Error)]
 pub enum CliError {
     /// Something the user gave is wrong (exit 2).
+    #[error("{0}")]
     Input(String),
     /// Running failed (exit 1).
+    #[error("{0}")]
     Runtime(String),
+    #[error(transparent)]
+    Bench(#[from] BenchError),
 }
 
 impl CliError {
-    fn code(&self) -> u8 {
+    /// 2 for problems in what the user gave, 1 for failures while running.
+    pub fn exit_code(&self) -> u8 {
         match self {
             CliError::Input(_) => 2,
             CliError::Runtime(_) => 1,
+            CliError::Bench(e) if e.is_bad_input() => 2,
+            CliError::Bench(_) => 1,
         }
     }
 }
 
-impl From<crate::exec::ExecError> for CliError {
-    fn from(e: crate::exec::ExecError) -> Self {
+impl From<ExecError> for CliError {
+    fn from(e: ExecError) -> Self {
         match e {
-            crate::exec::ExecError::Input { .. } => CliError::Input(e.to_string()),
+            ExecError::Input { .. } => CliError::Input(e.to_string()),
             other => CliError::Runtime(other.to_string()),
         }
     }
 }
 
-impl From<crate::gpu::GpuError> for CliError {
-    fn from(e: crate::gpu::GpuError) -> Self {
+impl From<GpuError> for CliError {
+    fn from(e: GpuError) -> Self {
         CliError::Runtime(e.to_string())
     }
 }
 
-/// Entry point of the binary.
-pub fn main() -> ExitCode {
-    let cli = match Cli::try_parse() {
-        Ok(c) => c,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
-        }
-    };
-    match execute(cli.command) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            let (CliError::Input(m) | CliError::Runtime(m)) = &e;
-            eprintln!("error: {}", m.trim_end());
-            ExitCode::from(e.code())
-        }
-    }
-}
-
+/// Runs one command.
 pub fn execute(cmd: Command) -> Result<(), CliError> {
-    let registry = crate::nodes::registry();
+    let registry = mesoflow::nodes::registry();
     match cmd {
         Command::Run {
             graph,
@@ -195,7 +186,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             println!("{}", gpu.caps.summary());
             Ok(())
         }
-        Command::Bench { which } => crate::bench::run(which),
+        Command::Bench { which } => Ok(crate::bench::run(which)?),
     }
 }
 
@@ -206,45 +197,12 @@ fn split_pair<'s>(arg: &'s str, flag: &str, what: &str) -> Result<(&'s str, &'s 
 }
 
 /// `--set NAME=VALUE` arguments as param values.
-pub fn parse_sets(sets: &[String]) -> Result<BTreeMap<String, ParamValue>, CliError> {
-    let mut out = BTreeMap::new();
-    for s in sets {
-        let (name, value) = split_pair(s, "set", "NAME=VALUE")?;
-        let v = ParamValue::from_cli(value)
-            .map_err(|e| CliError::Input(format!("--set {name}: {e}")))?;
-        if out.insert(name.trim().to_string(), v).is_some() {
-            return Err(CliError::Input(format!("--set {name} is given twice")));
-        }
-    }
-    Ok(out)
+fn parse_sets(sets: &[String]) -> Result<BTreeMap<String, ParamValue>, CliError> {
+    expr::parse_overrides(sets).map_err(|e| CliError::Input(format!("--set {e}")))
 }
 
 fn load(registry: &Registry, path: &Path, opts: &LoadOptions) -> Result<Graph, CliError> {
     graph::load(path, registry, opts).map_err(|p| CliError::Input(p.to_string()))
-}
-
-/// Input types from the declarations with the sizes' defaults (free counts: 1).
-pub fn declared_input_types(g: &Graph) -> BTreeMap<String, ValueType> {
-    let size = |s: &str| g.sizes.iter().find(|d| d.name == s).map(|d| d.default);
-    g.inputs
-        .iter()
-        .filter_map(|i| {
-            let shape = match &i.shape {
-                InputShape::Particles {
-                    rows: Dim::Free,
-                    cols,
-                } => InputShape::Particles {
-                    rows: Dim::Fixed(1),
-                    cols: *cols,
-                },
-                InputShape::Indices { rows: Dim::Free } => InputShape::Indices {
-                    rows: Dim::Fixed(1),
-                },
-                other => other.clone(),
-            };
-            shape.with_sizes(size).map(|t| (i.name.clone(), t))
-        })
-        .collect()
 }
 
 fn read_inputs(g: &Graph, args: &[String]) -> Result<BTreeMap<String, HostArray>, CliError> {
@@ -265,7 +223,7 @@ fn read_inputs(g: &Graph, args: &[String]) -> Result<BTreeMap<String, HostArray>
         if out.contains_key(name) {
             return Err(CliError::Input(format!("--input {name} is given twice")));
         }
-        let arr = crate::npy::read_input(Path::new(file), &g.inputs[i].shape)
+        let arr = mesoflow::npy::read_input(Path::new(file), &g.inputs[i].shape)
             .map_err(|e| CliError::Input(format!("--input {name}: {e}")))?;
         out.insert(name.to_string(), arr);
     }
@@ -406,7 +364,7 @@ fn run(
     for (name, arr) in &results {
         match files.get(name) {
             Some(f) => {
-                crate::npy::write(f, arr).map_err(|e| CliError::Runtime(e.to_string()))?;
+                mesoflow::npy::write(f, arr).map_err(|e| CliError::Runtime(e.to_string()))?;
                 println!("{name}: {} -> {}", arr.ty, f.display());
             }
             None => println!("{name}: {}", summary(arr)),
@@ -416,7 +374,7 @@ fn run(
 }
 
 /// Shape and statistics of an array, with its first values.
-pub fn summary(a: &HostArray) -> String {
+fn summary(a: &HostArray) -> String {
     let v = a.data.to_f64();
     if v.is_empty() {
         return format!("{} (empty)", a.ty);
@@ -497,21 +455,12 @@ fn print_profile(stats: &RunStats) {
     );
 }
 
-/// Caps for checks that do not depend on a device: no binding-size limit.
-fn structural_caps() -> DeviceCaps {
-    DeviceCaps {
-        max_binding: u64::MAX,
-        max_buffer: u64::MAX,
-        ..DeviceCaps::baseline()
-    }
-}
-
 fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
     let mut failures = Vec::new();
     for path in graphs {
-        match check_graph(registry, path) {
+        match plan::validate_file(registry, path) {
             Ok(summary) => println!("{}: ok ({summary})", path.display()),
-            Err(e) => failures.push(e),
+            Err(e) => failures.push(e.to_string()),
         }
     }
     if failures.is_empty() {
@@ -519,69 +468,6 @@ fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
     } else {
         Err(CliError::Input(failures.join("")))
     }
-}
-
-/// Loads a graph with its defaults and plans all its outputs with the declared inputs.
-pub fn check_graph(registry: &Registry, path: &Path) -> Result<String, String> {
-    let g = graph::load(path, registry, &LoadOptions::default()).map_err(|p| p.to_string())?;
-    let all = declared_input_types(&g);
-    let plan_with = |inputs: &BTreeMap<String, ValueType>, outputs: Option<Vec<String>>| {
-        let opts = PlanOptions {
-            outputs,
-            inputs: inputs.clone(),
-            fuse: true,
-        };
-        plan::plan(&g, &opts, &structural_caps()).map_err(|p| p.to_string())
-    };
-    let first_error = match plan_with(&all, None) {
-        Ok(p) => {
-            return Ok(format!(
-                "{} nodes, {} launches per step",
-                g.nodes.len(),
-                p.step.len()
-            ));
-        }
-        Err(e) => e,
-    };
-    // Some outputs or optional inputs may need other params than the defaults (FCM's
-    // rotation needs its finer grid): valid when every output plans in some run, with
-    // the optional inputs or without them; the rest is reported as notes.
-    let required: BTreeMap<String, ValueType> = all
-        .iter()
-        .filter(|(name, _)| g.inputs.iter().any(|i| &i.name == *name && !i.optional))
-        .map(|(k, v)| (k.clone(), *v))
-        .collect();
-    let mut notes = Vec::new();
-    let mut launches = 0;
-    for out in &g.outputs {
-        let only = Some(vec![out.name.clone()]);
-        match plan_with(&all, only.clone()) {
-            Ok(p) => launches = launches.max(p.step.len()),
-            Err(e_all) => match plan_with(&required, only) {
-                Ok(p) => {
-                    launches = launches.max(p.step.len());
-                    notes.push(format!(
-                        "output `{}` plans without the optional inputs only (with the defaults):\n{e_all}",
-                        out.name
-                    ));
-                }
-                Err(_) => {
-                    notes.push(format!(
-                        "output `{}` does not plan with the default params:\n{e_all}",
-                        out.name
-                    ));
-                }
-            },
-        }
-    }
-    if notes.len() == g.outputs.len() || g.outputs.is_empty() {
-        return Err(first_error);
-    }
-    Ok(format!(
-        "{} nodes, up to {launches} launches per step\nnotes:\n{}",
-        g.nodes.len(),
-        notes.join("\n")
-    ))
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -606,7 +492,7 @@ fn inspect(
             seed: 0,
         },
     )?;
-    let mut inputs = declared_input_types(&g);
+    let mut inputs = g.declared_input_types();
     for (name, arr) in read_inputs(&g, input_args)? {
         inputs.insert(name, arr.ty);
     }

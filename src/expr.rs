@@ -10,6 +10,47 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
+use thiserror::Error;
+
+/// A bad `NAME=VALUE` param assignment (a command line's `--set`).
+#[derive(Debug, Error, PartialEq)]
+#[non_exhaustive]
+pub enum OverrideError {
+    #[error("`{0}`: expected NAME=VALUE")]
+    Malformed(String),
+    #[error("{name}: {source}")]
+    Value {
+        name: String,
+        #[source]
+        source: ExprError,
+    },
+    #[error("{0} is given twice")]
+    Repeated(String),
+}
+
+/// Graph param values from `NAME=VALUE` assignments (values as [`ParamValue::from_cli`]
+/// reads them), each name at most once: what `LoadOptions::overrides` takes.
+pub fn parse_overrides(
+    assignments: &[String],
+) -> Result<BTreeMap<String, ParamValue>, OverrideError> {
+    let mut out = BTreeMap::new();
+    for a in assignments {
+        let (name, value) = a
+            .split_once('=')
+            .filter(|(n, v)| !n.trim().is_empty() && !v.is_empty())
+            .ok_or_else(|| OverrideError::Malformed(a.clone()))?;
+        let name = name.trim();
+        let v = ParamValue::from_cli(value).map_err(|source| OverrideError::Value {
+            name: name.to_string(),
+            source,
+        })?;
+        if out.insert(name.to_string(), v).is_some() {
+            return Err(OverrideError::Repeated(name.to_string()));
+        }
+    }
+    Ok(out)
+}
+
 /// The value of a param after resolution.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ParamValue {
@@ -881,5 +922,29 @@ mod tests {
             ParamValue::Bool(true)
         );
         assert!(ParamValue::from_cli("[1, \"a\"]").is_err());
+    }
+
+    #[test]
+    fn overrides() {
+        let args = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let parsed = parse_overrides(&args(&["box=[64,64,32]", " dt =0.5"])).unwrap();
+        assert_eq!(parsed["box"], ParamValue::Numbers(vec![64.0, 64.0, 32.0]));
+        assert_eq!(parsed["dt"], ParamValue::Number(0.5));
+        assert_eq!(
+            parse_overrides(&args(&["dt"])),
+            Err(OverrideError::Malformed("dt".into()))
+        );
+        assert_eq!(
+            parse_overrides(&args(&["=1"])),
+            Err(OverrideError::Malformed("=1".into()))
+        );
+        assert_eq!(
+            parse_overrides(&args(&["dt=1", "dt=2"])),
+            Err(OverrideError::Repeated("dt".into()))
+        );
+        assert!(matches!(
+            parse_overrides(&args(&["box=[1,"])),
+            Err(OverrideError::Value { name, .. }) if name == "box"
+        ));
     }
 }

@@ -5,8 +5,6 @@
 //! --[`exec::Program::compile`]--> [`exec::Program`] --run--> outputs.
 //! See ARCHITECTURE.md for the code map and the invariants.
 
-pub mod bench;
-pub mod cli;
 pub mod exec;
 pub mod expr;
 pub mod gpu;

@@ -4,22 +4,24 @@
 //! separate box against f64 references: the self-mobility (Hasimoto's periodic value for
 //! the window's radius; for the Gaussian the exact periodic Gaussian mobility) over
 //! random positions, and for the Gaussian the pair mobility against a direct Fourier sum.
+//! Times are end to end (the whole evaluation, as UAMMD's figures are) beside the
+//! per-launch sum; comparisons with UAMMD use the end-to-end time.
 //! `--plot FILE.svg` draws error against time: the user's guide to kernel and tolerance.
 
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
-use super::{runtime, time_loaded};
-use crate::cli::CliError;
-use crate::exec::{Profile, Program, RunOptions};
-use crate::expr::ParamValue;
-use crate::gpu::{GpuContext, KernelCache};
-use crate::graph::{self, Graph, LoadOptions};
-use crate::node::Registry;
-use crate::nodes::fcm::{plan as fcm_plan, reference};
-use crate::plan::{self, PlanOptions};
-use crate::value::{HostArray, ValueType};
+use mesoflow::exec::{Profile, Program, RunOptions};
+use mesoflow::expr::ParamValue;
+use mesoflow::gpu::{GpuContext, KernelCache};
+use mesoflow::graph::{self, Graph, LoadOptions};
+use mesoflow::node::Registry;
+use mesoflow::nodes::fcm::{plan as fcm_plan, reference};
+use mesoflow::plan::{self, PlanOptions};
+use mesoflow::value::{HostArray, ValueType};
+
+use super::{BenchError, TimedRun, end_to_end_clock, ms, time_loaded};
 
 /// What to measure.
 pub struct FcmBench {
@@ -60,8 +62,12 @@ struct Row {
     n: u32,
     grid: u32,
     support: String,
-    ms: f64,
-    noise_ms: Option<f64>,
+    /// One M F end to end, ms.
+    e2e_ms: f64,
+    /// The sum of its launches, ms.
+    launches_ms: f64,
+    /// M F plus the noise: (end to end, launch sum), ms.
+    noise_ms: Option<(f64, f64)>,
     self_max: f64,
     self_mean: f64,
     pair: Option<f64>,
@@ -84,12 +90,12 @@ pub(super) fn load(
     path: &Path,
     sets: &[(&str, ParamValue)],
     registry: &Registry,
-) -> Result<Graph, CliError> {
+) -> Result<Graph, BenchError> {
     let overrides = sets
         .iter()
         .map(|(k, v)| (k.to_string(), v.clone()))
         .collect();
-    graph::load(
+    Ok(graph::load(
         path,
         registry,
         &LoadOptions {
@@ -97,8 +103,7 @@ pub(super) fn load(
             steps: 1,
             seed: 1,
         },
-    )
-    .map_err(|p| CliError::Input(p.to_string()))
+    )?)
 }
 
 pub(super) fn param(g: &Graph, name: &str) -> Option<ParamValue> {
@@ -123,27 +128,25 @@ pub(super) fn velocities(
     program: &mut Program,
     x: &[[f64; 3]],
     f: &[[f64; 3]],
-) -> Result<Vec<[f64; 3]>, CliError> {
+) -> Result<Vec<[f64; 3]>, BenchError> {
     let data = [
         ("positions".to_string(), particles(x)),
         ("forces".to_string(), particles(f)),
     ]
     .into_iter()
     .collect();
-    program.upload(&data).map_err(runtime)?;
-    program
-        .run(&RunOptions {
-            steps: 1,
-            profile: Profile::Off,
-            progress: false,
-        })
-        .map_err(runtime)?;
-    let out = program.read_outputs().map_err(runtime)?;
+    program.upload(&data)?;
+    program.run(&RunOptions {
+        steps: 1,
+        profile: Profile::Off,
+        progress: false,
+    })?;
+    let out = program.read_outputs()?;
     let v = out
         .iter()
         .find(|(k, _)| k == "velocities")
         .map(|(_, v)| v.data.to_f64())
-        .ok_or_else(|| CliError::Runtime("the graph has no `velocities` output".into()))?;
+        .ok_or_else(|| BenchError::Wrong("the graph has no `velocities` output".into()))?;
     Ok(v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
 }
 
@@ -155,7 +158,7 @@ fn accuracy(
     registry: &Registry,
     kernel: &str,
     tolerance: f64,
-) -> Result<(f64, f64, Option<f64>), CliError> {
+) -> Result<(f64, f64, Option<f64>), BenchError> {
     let l = bench.error_box;
     let g = load(
         &bench.graph,
@@ -186,7 +189,7 @@ fn accuracy(
     let mut errors = Vec::new();
     {
         let p = plan_for(gpu, &g, 1)?;
-        let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(runtime)?;
+        let mut program = Program::compile(gpu, &g, &p, &mut cache)?;
         for _ in 0..bench.error_samples {
             let x = [0, 1, 2].map(|_| (rng.uniform() - 0.5) * l);
             for axis in 0..3 {
@@ -201,7 +204,7 @@ fn accuracy(
     let self_mean = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
     let pair = if gaussian {
         let p = plan_for(gpu, &g, 2)?;
-        let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(runtime)?;
+        let mut program = Program::compile(gpu, &g, &p, &mut cache)?;
         let mut worst: f64 = 0.0;
         for r in [2.0 * a, 4.0 * a] {
             for _ in 0..2 {
@@ -232,7 +235,7 @@ fn accuracy(
     Ok((self_max, self_mean, pair))
 }
 
-pub(super) fn plan_for(gpu: &GpuContext, g: &Graph, n: u32) -> Result<plan::Plan, CliError> {
+pub(super) fn plan_for(gpu: &GpuContext, g: &Graph, n: u32) -> Result<plan::Plan, BenchError> {
     let p3 = ValueType::Particles { n, k: 3 };
     let opts = PlanOptions {
         outputs: Some(vec!["velocities".into()]),
@@ -241,10 +244,10 @@ pub(super) fn plan_for(gpu: &GpuContext, g: &Graph, n: u32) -> Result<plan::Plan
             .collect(),
         fuse: true,
     };
-    plan::plan(g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))
+    Ok(plan::plan(g, &opts, &gpu.caps)?)
 }
 
-/// GPU time of one evaluation of `output` for N random particles in a cube of side L.
+/// One evaluation of `output` for N random particles in a cube of side L, timed.
 pub(super) fn timed(
     gpu: &GpuContext,
     g: &Graph,
@@ -252,7 +255,7 @@ pub(super) fn timed(
     n: u32,
     output: &str,
     reps: u64,
-) -> Result<(f64, u64), CliError> {
+) -> Result<TimedRun, BenchError> {
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ n as u64);
     let x: Vec<[f64; 3]> = (0..n)
         .map(|_| [0, 1, 2].map(|_| (rng.uniform() - 0.5) * l))
@@ -266,13 +269,13 @@ pub(super) fn timed(
     ]
     .into_iter()
     .collect();
-    let (run, memory) = time_loaded(gpu, g, &inputs, Some(vec![output.into()]), reps, true)?;
+    let run = time_loaded(gpu, g, &inputs, Some(vec![output.into()]), reps, true)?;
     if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
         for t in &run.timings {
             print!("{}", t.breakdown());
         }
     }
-    Ok((run.step_time().as_secs_f64() * 1e3, memory))
+    Ok(run)
 }
 
 fn support_text(g: &Graph, kernel: &str) -> String {
@@ -285,38 +288,45 @@ fn support_text(g: &Graph, kernel: &str) -> String {
     }
 }
 
-pub fn run(bench: &FcmBench) -> Result<(), CliError> {
+pub fn run(bench: &FcmBench) -> Result<(), BenchError> {
     if bench.reps == 0 || bench.error_samples == 0 {
-        return Err(CliError::Input(
+        return Err(BenchError::Args(
             "--reps and --error-samples must be positive".into(),
         ));
     }
-    let gpu = GpuContext::new().map_err(runtime)?;
-    let registry = crate::nodes::registry();
+    let gpu = GpuContext::new()?;
+    let registry = mesoflow::nodes::registry();
     println!("adapter: {}", gpu.caps.summary());
     println!(
-        "graph {}; a = 1, eta = 1; time: median GPU time of one evaluation over {} runs (sum of its launches); errors measured in a box of side {} at {} random positions (self) and 4 pairs at 2a and 4a (pair, Gaussian only, relative to the self-mobility)",
+        "graph {}; a = 1, eta = 1; time: median of one evaluation over {} runs, e2e: end to end ({}), \
+         ns/part and the ratio to UAMMD from it; launches: sum of its launches' medians; errors \
+         measured in a box of side {} at {} random positions (self) and 4 pairs at 2a and 4a (pair, \
+         Gaussian only, relative to the self-mobility)",
         bench.graph.display(),
         bench.reps,
+        end_to_end_clock(&gpu),
         bench.error_box,
         bench.error_samples
     );
     println!(
-        "{:<8} {:>6} {:>6} {:>8} {:>5} {:>4} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8} {:>9}",
+        "{:<8} {:>6} {:>6} {:>8} {:>5} {:>4} {:>9} {:>11} {:>8} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>9} {:>7}",
         "kernel",
         "tol",
         "L",
         "N",
         "grid",
         "sup",
-        "ms",
+        "e2e ms",
+        "launches ms",
         "ns/part",
-        "noise ms",
+        "noise e2e",
+        "launches ms",
         "self max",
         "self mean",
         "pair max",
         "MiB",
-        "UAMMD ms"
+        "UAMMD ms",
+        "/UAMMD"
     );
     let mut rows: Vec<Row> = Vec::new();
     for kernel in &bench.kernels {
@@ -343,15 +353,17 @@ pub fn run(bench: &FcmBench) -> Result<(), CliError> {
                     Some(ParamValue::Numbers(v)) => v[0] as u32,
                     _ => 0,
                 };
-                let (ms, memory) = timed(&gpu, &g, l, n, "velocities", bench.reps)?;
+                let run = timed(&gpu, &g, l, n, "velocities", bench.reps)?;
                 let noise_ms = if bench.noise {
                     sets.push(("temperature", ParamValue::Number(1.0)));
                     let g = load(&bench.graph, &sets, &registry)?;
-                    Some(timed(&gpu, &g, l, n, "fluctuating_velocities", bench.reps)?.0)
+                    let noisy = timed(&gpu, &g, l, n, "fluctuating_velocities", bench.reps)?;
+                    Some((ms(noisy.end_to_end()), ms(noisy.launch_sum())))
                 } else {
                     None
                 };
-                let uammd = UAMMD
+                let e2e_ms = ms(run.end_to_end());
+                let (uammd, ratio) = UAMMD
                     .iter()
                     .find(|u| {
                         kernel == "gaussian"
@@ -359,8 +371,8 @@ pub fn run(bench: &FcmBench) -> Result<(), CliError> {
                             && u.1 == l
                             && u.2 == n
                     })
-                    .map(|u| format!("{:.3}", u.3))
-                    .unwrap_or_else(|| "-".into());
+                    .map(|u| (format!("{:.3}", u.3), format!("{:.2}", e2e_ms / u.3)))
+                    .unwrap_or_else(|| ("-".into(), "-".into()));
                 let row = Row {
                     kernel: kernel.clone(),
                     tolerance: tol,
@@ -368,48 +380,56 @@ pub fn run(bench: &FcmBench) -> Result<(), CliError> {
                     n,
                     grid,
                     support: support_text(&g, kernel),
-                    ms,
+                    e2e_ms,
+                    launches_ms: ms(run.launch_sum()),
                     noise_ms,
                     self_max,
                     self_mean,
                     pair,
-                    memory,
+                    memory: run.memory,
+                };
+                let (noise_e2e, noise_launches) = match row.noise_ms {
+                    Some((e2e, launches)) => (format!("{e2e:.4}"), format!("{launches:.4}")),
+                    None => ("-".into(), "-".into()),
                 };
                 println!(
-                    "{:<8} {:>6.0e} {:>6} {:>8} {:>5} {:>4} {:>9.4} {:>8.2} {:>9} {:>9.2e} {:>9.2e} {:>9} {:>8.0} {:>9}",
+                    "{:<8} {:>6.0e} {:>6} {:>8} {:>5} {:>4} {:>9.4} {:>11.4} {:>8.2} {:>9} {:>11} {:>9.2e} {:>9.2e} {:>9} {:>8.0} {:>9} {:>7}",
                     row.kernel,
                     row.tolerance,
                     row.l,
                     row.n,
                     row.grid,
                     row.support,
-                    row.ms,
-                    row.ms * 1e6 / row.n as f64,
-                    row.noise_ms
-                        .map(|t| format!("{t:.4}"))
-                        .unwrap_or_else(|| "-".into()),
+                    row.e2e_ms,
+                    row.launches_ms,
+                    row.e2e_ms * 1e6 / row.n as f64,
+                    noise_e2e,
+                    noise_launches,
                     row.self_max,
                     row.self_mean,
                     row.pair
                         .map(|p| format!("{p:.2e}"))
                         .unwrap_or_else(|| "-".into()),
                     row.memory as f64 / (1u64 << 20) as f64,
-                    uammd
+                    uammd,
+                    ratio
                 );
                 rows.push(row);
             }
         }
     }
     if let Some(path) = &bench.plot {
-        plot(path, &rows)
-            .map_err(|e| CliError::Runtime(format!("--plot {}: {e}", path.display())))?;
+        plot(path, &rows).map_err(|message| BenchError::Plot {
+            path: path.clone(),
+            message,
+        })?;
         println!("plot: {}", path.display());
     }
     Ok(())
 }
 
-/// Error (worst self-mobility) against time, one series per kernel and particle count,
-/// UAMMD's Gaussian figures as crosses at their reported errors.
+/// Error (worst self-mobility) against the end-to-end time, one series per kernel and
+/// particle count, UAMMD's Gaussian figures as crosses at their reported errors.
 fn plot(path: &Path, rows: &[Row]) -> Result<(), String> {
     use plotters::prelude::*;
     let err = |e: &dyn std::fmt::Display| e.to_string();
@@ -420,7 +440,7 @@ fn plot(path: &Path, rows: &[Row]) -> Result<(), String> {
         root.fill(&WHITE).map_err(|e| err(&e))?;
         let times: Vec<f64> = rows
             .iter()
-            .map(|r| r.ms)
+            .map(|r| r.e2e_ms)
             .chain(UAMMD.iter().map(|u| u.3))
             .collect();
         let errors: Vec<f64> = rows.iter().map(|r| r.self_max.max(1e-9)).collect();
@@ -446,7 +466,7 @@ fn plot(path: &Path, rows: &[Row]) -> Result<(), String> {
             .map_err(|e| err(&e))?;
         chart
             .configure_mesh()
-            .x_desc("GPU time per evaluation (ms)")
+            .x_desc("GPU time per evaluation, end to end (ms)")
             .y_desc("worst relative self-mobility error")
             .draw()
             .map_err(|e| err(&e))?;
@@ -468,7 +488,7 @@ fn plot(path: &Path, rows: &[Row]) -> Result<(), String> {
             let mut pts: Vec<(f64, f64)> = rows
                 .iter()
                 .filter(|r| &r.kernel == kernel && r.n == *n)
-                .map(|r| (r.ms, r.self_max.max(1e-9)))
+                .map(|r| (r.e2e_ms, r.self_max.max(1e-9)))
                 .collect();
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             chart

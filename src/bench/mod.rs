@@ -1,13 +1,22 @@
-//! `mesoflow bench ...`: benchmarks meant for the GPU machine. Each prints one table
-//! (BENCHMARKS.md records them with adapter and date); comparisons with other libraries
-//! run in the same command through the scripts in `benches/`.
+//! `mesoflow bench ...`: benchmarks meant for the GPU machine. Each prints one table;
+//! `benches/gpu.sh SUITE` runs them with the peers measured in the same call (the PyTorch
+//! scripts, CUDA), and BENCHMARKS.md keeps the current tables.
 //!
-//! Node benchmarks go through the engine like any graph: [`time_graph`] plans and
-//! compiles a graph file and times each launch with GPU timestamps.
+//! Node benchmarks go through the engine like any graph: [`time_loaded`] plans and
+//! compiles a graph and times it twice, per launch (each launch in a compute pass of its
+//! own, between GPU timestamps: where the time goes) and per step end to end (the step's
+//! dispatches in one pass as a normal run records them, first to last timestamp: the
+//! time of the whole call, gaps between kernels included, as a peer timed with CUDA
+//! events around its call is measured). Tables show both; comparisons with peers use
+//! the end-to-end figure.
+//!
+//! Nothing here depends on the command line: `cli` parses the arguments into a
+//! [`BenchCommand`] and wraps [`BenchError`].
 
 mod fcm;
 mod fft;
 mod mpcd;
+mod overhead;
 mod primitives;
 mod pse;
 mod reduce;
@@ -18,13 +27,64 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::Subcommand;
+use thiserror::Error;
 
-use crate::cli::CliError;
-use crate::exec::{Profile, Program, RunOptions};
-use crate::gpu::{Binding, CompileCtx, GpuContext, KernelCache, KernelSpec, WG_1D};
-use crate::graph::{self, LoadOptions};
-use crate::plan::{self, PlanOptions};
-use crate::value::{HostArray, ValueType};
+use mesoflow::exec::{ExecError, Profile, Program, RunOptions};
+use mesoflow::expr::{self, OverrideError, ParamValue};
+use mesoflow::gpu::{CompileError, GpuContext, GpuError, KernelCache};
+use mesoflow::graph::{self, Graph, LoadOptions, Problems};
+use mesoflow::node;
+use mesoflow::plan::{self, PlanOptions};
+use mesoflow::value::{HostArray, RefArray, ValueType};
+
+/// A failure of a benchmark.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum BenchError {
+    /// A bad argument.
+    #[error("{0}")]
+    Args(String),
+    #[error("--set {0}")]
+    Overrides(#[from] OverrideError),
+    /// A graph file that does not load, or a graph that does not plan.
+    #[error(transparent)]
+    Graph(#[from] Problems),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error(transparent)]
+    Exec(#[from] ExecError),
+    #[error("a bench kernel: {0}")]
+    Kernel(#[from] CompileError),
+    #[error("{context}: {source}")]
+    Io {
+        context: String,
+        source: std::io::Error,
+    },
+    /// A node's f64 reference could not be computed for the bench's own inputs.
+    #[error("the f64 reference of `{kind}`: {message}")]
+    Reference { kind: String, message: String },
+    /// A result failed its check (so that a fast wrong kernel does not pass).
+    #[error("{0}")]
+    Wrong(String),
+    #[error("--plot {path}: {message}")]
+    Plot { path: PathBuf, message: String },
+}
+
+impl BenchError {
+    /// Whether the failure lies in what the user gave (arguments, graph files, params)
+    /// rather than in running.
+    pub fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            BenchError::Args(_) | BenchError::Overrides(_) | BenchError::Graph(_)
+        )
+    }
+
+    fn io(context: impl Into<String>) -> impl FnOnce(std::io::Error) -> BenchError {
+        let context = context.into();
+        move |source| BenchError::Io { context, source }
+    }
+}
 
 /// GPU time of one launch of a timed graph.
 #[derive(Clone, Debug)]
@@ -34,7 +94,6 @@ pub struct Timing {
     /// Mean over the timed steps: the amortised cost of a launch whose dispatches run on
     /// some steps only (`Period`), which its median does not show.
     pub mean: Duration,
-    pub min: Duration,
     /// With MESOFLOW_BENCH_DISPATCHES set: each dispatch's kernel, median and mean time
     /// (each in a pass of its own, so their sum is a little above `median`; the mean
     /// shows what a dispatch that runs every K steps costs amortised).
@@ -66,21 +125,52 @@ fn median_duration(samples: &[Duration]) -> Duration {
     s.get(s.len() / 2).copied().unwrap_or_default()
 }
 
-/// A timed graph run: per-launch GPU times and the outputs of the last step.
+fn mean_duration(samples: &[Duration]) -> Duration {
+    samples.iter().sum::<Duration>() / (samples.len().max(1) as u32)
+}
+
+/// A timed graph: per-launch and end-to-end GPU times, and the outputs of the last step.
 pub struct TimedRun {
     pub timings: Vec<Timing>,
+    /// Each timed step end to end: first to last timestamp of the step's one compute
+    /// pass, or the host's time from submission to the end of the wait for a graph with
+    /// loops or on a device without timestamp queries.
+    pub steps: Vec<Duration>,
     pub outputs: BTreeMap<String, HostArray>,
+    /// The plan's GPU memory in bytes.
+    pub memory: u64,
 }
 
 impl TimedRun {
-    /// Sum of the launches' medians: the GPU time of one step.
-    pub fn step_time(&self) -> Duration {
+    /// Sum of the launches' medians: one step's GPU time without the gaps between
+    /// kernels (each launch timed in a pass of its own).
+    pub fn launch_sum(&self) -> Duration {
         self.timings.iter().map(|t| t.median).sum()
     }
 
     /// Sum of the launches' means: one step amortised over the timed steps.
-    pub fn mean_step_time(&self) -> Duration {
+    pub fn mean_launch_sum(&self) -> Duration {
         self.timings.iter().map(|t| t.mean).sum()
+    }
+
+    /// Median step end to end: the time of one call, as peers are timed.
+    pub fn end_to_end(&self) -> Duration {
+        median_duration(&self.steps)
+    }
+
+    /// Mean step end to end (amortising dispatches that run on some steps only).
+    pub fn mean_end_to_end(&self) -> Duration {
+        mean_duration(&self.steps)
+    }
+}
+
+/// How end-to-end figures of loop-free graphs are taken on this device, for table
+/// headers (a graph with loops is timed on the host clock anyway: `TimedRun::steps`).
+fn end_to_end_clock(gpu: &GpuContext) -> &'static str {
+    if gpu.caps.timestamps {
+        "GPU timestamps"
+    } else {
+        "host clock"
     }
 }
 
@@ -88,96 +178,86 @@ impl TimedRun {
 /// GPU's clocks are up before timing: a GPU that idled while the host prepared data runs
 /// its first milliseconds of work at reduced clocks (seen on an H100: a 3-D FFT timed 4x
 /// slower right after the host had built its input).
-fn warm_up(program: &mut Program) -> Result<(), CliError> {
+fn warm_up(program: &mut Program) -> Result<(), BenchError> {
     let start = Instant::now();
     let mut steps = 2;
     while start.elapsed() < Duration::from_millis(500) {
-        program
-            .run(&RunOptions {
-                steps,
-                profile: Profile::Off,
-                progress: false,
-            })
-            .map_err(runtime)?;
+        program.run(&RunOptions {
+            steps,
+            profile: Profile::Off,
+            progress: false,
+        })?;
         steps = (steps * 2).min(1 << 14);
     }
     Ok(())
 }
 
-/// Plans, compiles and runs `graph_json` for `reps` steps with per-launch GPU timestamps
-/// (after a warm-up of at least half a second of back-to-back runs).
+/// Loads a graph given as JSON text (through a temporary file) with its defaults.
+fn load_text(graph_json: &str) -> Result<Graph, BenchError> {
+    let dir = std::env::temp_dir().join(format!("mesoflow-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(BenchError::io(dir.display().to_string()))?;
+    let file = dir.join("timed.json");
+    std::fs::write(&file, graph_json).map_err(BenchError::io(file.display().to_string()))?;
+    let loaded = graph::load(&file, &mesoflow::nodes::registry(), &LoadOptions::default());
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(loaded?)
+}
+
+/// [`time_loaded`] for a graph given as JSON text, every output.
 pub fn time_graph(
     gpu: &GpuContext,
     graph_json: &str,
     inputs: &BTreeMap<String, HostArray>,
     reps: u64,
     fuse: bool,
-) -> Result<TimedRun, CliError> {
-    let dir = std::env::temp_dir().join(format!("mesoflow-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(runtime)?;
-    let file = dir.join("timed.json");
-    std::fs::write(&file, graph_json).map_err(runtime)?;
-    let registry = crate::nodes::registry();
-    let g = graph::load(&file, &registry, &LoadOptions::default())
-        .map_err(|p| CliError::Input(p.to_string()))?;
-    let run = time_loaded(gpu, &g, inputs, None, reps, fuse);
-    let _ = std::fs::remove_dir_all(&dir);
-    run.map(|(run, _)| run)
+) -> Result<TimedRun, BenchError> {
+    time_loaded(gpu, &load_text(graph_json)?, inputs, None, reps, fuse)
 }
 
-/// [`time_graph`] for a loaded graph and these outputs (all when `None`); also returns
-/// the plan's memory total in bytes.
+/// Plans and compiles `g` for these outputs (all when `None`), warms the GPU up (at
+/// least half a second of back-to-back runs), then runs `reps` steps timed per launch and
+/// `reps` steps timed end to end (and with MESOFLOW_BENCH_DISPATCHES `reps` more timed
+/// per dispatch).
 pub fn time_loaded(
     gpu: &GpuContext,
-    g: &graph::Graph,
+    g: &Graph,
     inputs: &BTreeMap<String, HostArray>,
     outputs: Option<Vec<String>>,
     reps: u64,
     fuse: bool,
-) -> Result<(TimedRun, u64), CliError> {
+) -> Result<TimedRun, BenchError> {
     let opts = PlanOptions {
         outputs,
         inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse,
     };
-    let p = plan::plan(g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
+    let p = plan::plan(g, &opts, &gpu.caps)?;
     let mut cache = KernelCache::default();
-    let mut program = Program::compile(gpu, g, &p, &mut cache).map_err(runtime)?;
-    program.upload(inputs).map_err(runtime)?;
+    let mut program = Program::compile(gpu, g, &p, &mut cache)?;
+    program.upload(inputs)?;
     warm_up(&mut program)?;
-    let stats = program
-        .run(&RunOptions {
+    let timed = |program: &mut Program, profile| {
+        program.run(&RunOptions {
             steps: reps,
-            profile: Profile::Launches,
+            profile,
             progress: false,
         })
-        .map_err(runtime)?;
-    // Per-dispatch medians on request (a second, separately timed run).
+    };
+    let per_launch = timed(&mut program, Profile::Launches)?;
+    let per_step = timed(&mut program, Profile::Steps)?;
     let per_dispatch = if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
-        program
-            .run(&RunOptions {
-                steps: reps,
-                profile: Profile::Dispatches,
-                progress: false,
-            })
-            .map_err(runtime)?
-            .profile
+        timed(&mut program, Profile::Dispatches)?.profile
     } else {
         Vec::new()
     };
-    let outputs = program
-        .read_outputs()
-        .map_err(runtime)?
-        .into_iter()
-        .collect();
-    let timings = stats
+    let outputs = program.read_outputs()?.into_iter().collect();
+    let timings = per_launch
         .profile
         .iter()
         .map(|r| Timing {
             label: r.label.clone(),
             median: r.median(),
             mean: r.total / (r.calls.max(1) as u32),
-            min: r.samples.iter().min().copied().unwrap_or_default(),
             dispatches: per_dispatch
                 .iter()
                 .find(|d| d.label == r.label)
@@ -185,16 +265,23 @@ pub fn time_loaded(
                     d.dispatch_samples
                         .iter()
                         .map(|(kernel, samples)| {
-                            let mean =
-                                samples.iter().sum::<Duration>() / (samples.len().max(1) as u32);
-                            (kernel.clone(), median_duration(samples), mean)
+                            (
+                                kernel.clone(),
+                                median_duration(samples),
+                                mean_duration(samples),
+                            )
                         })
                         .collect()
                 })
                 .unwrap_or_default(),
         })
         .collect();
-    Ok((TimedRun { timings, outputs }, p.memory.total()))
+    Ok(TimedRun {
+        timings,
+        steps: per_step.step_samples,
+        outputs,
+        memory: p.memory.total(),
+    })
 }
 
 #[derive(Subcommand, Debug)]
@@ -350,7 +437,7 @@ pub enum BenchCommand {
 }
 
 /// `--sizes` values L:N.
-fn parse_sizes(sizes: &[String]) -> Result<Vec<(f64, u32)>, CliError> {
+fn parse_sizes(sizes: &[String]) -> Result<Vec<(f64, u32)>, BenchError> {
     sizes
         .iter()
         .map(|s| {
@@ -358,7 +445,7 @@ fn parse_sizes(sizes: &[String]) -> Result<Vec<(f64, u32)>, CliError> {
                 .split_once(':')
                 .and_then(|(l, n)| Some((l.parse::<f64>().ok()?, n.parse::<u32>().ok()?)));
             parsed.filter(|(l, n)| *l > 0.0 && *n > 0).ok_or_else(|| {
-                CliError::Input(format!(
+                BenchError::Args(format!(
                     "--sizes `{s}`: expected L:N with L > 0 and N > 0 (e.g. 129:100000)"
                 ))
             })
@@ -366,13 +453,19 @@ fn parse_sizes(sizes: &[String]) -> Result<Vec<(f64, u32)>, CliError> {
         .collect()
 }
 
-pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
+/// `--set` values as graph param overrides, in the order given.
+fn parse_sets(sets: &[String]) -> Result<Vec<(String, ParamValue)>, BenchError> {
+    Ok(expr::parse_overrides(sets)?.into_iter().collect())
+}
+
+/// Runs one benchmark and prints its table.
+pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
     match cmd {
         BenchCommand::Overhead {
             nodes,
             elements,
             reps,
-        } => overhead(nodes, elements, reps),
+        } => overhead::run(nodes, elements, reps),
         BenchCommand::Reduce { n, reps } => reduce::run(n, reps),
         BenchCommand::Spread {
             cells,
@@ -402,25 +495,24 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             sets,
         } => {
             let kernels = if kernels.iter().any(|k| k == "all") {
-                crate::nodes::spread::window::NAMES
+                mesoflow::nodes::spread::window::NAMES
                     .iter()
                     .map(|s| s.to_string())
                     .collect()
             } else {
                 kernels
             };
-            let sizes = parse_sizes(&sizes)?;
             fcm::run(&fcm::FcmBench {
                 graph,
                 kernels,
                 tolerances,
-                sizes,
+                sizes: parse_sizes(&sizes)?,
                 noise,
                 reps,
                 error_box,
                 error_samples,
                 plot,
-                sets: crate::cli::parse_sets(&sets)?.into_iter().collect(),
+                sets: parse_sets(&sets)?,
             })
         }
         BenchCommand::Mpcd {
@@ -434,7 +526,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             sizes,
             density,
             reps,
-            sets: crate::cli::parse_sets(&sets)?.into_iter().collect(),
+            sets: parse_sets(&sets)?,
         }),
         BenchCommand::Pse {
             graph,
@@ -453,240 +545,44 @@ pub fn run(cmd: BenchCommand) -> Result<(), CliError> {
             noise,
             reps,
             error_box,
-            sets: crate::cli::parse_sets(&sets)?.into_iter().collect(),
+            sets: parse_sets(&sets)?,
         }),
     }
 }
 
-/// A runtime error of a bench (GPU, graph or reference), as the CLI reports it.
-fn runtime(e: impl std::fmt::Display) -> CliError {
-    CliError::Runtime(e.to_string())
-}
-
 /// A node's f64 reference outputs (`cpu_reference`) for `params` and `inputs`: what the
 /// benches check their GPU outputs against.
-pub(crate) fn node_reference(
+fn node_reference(
     kind: &str,
-    params: &BTreeMap<String, crate::expr::ParamValue>,
-    inputs: &[Option<crate::value::RefArray>],
-) -> Result<Vec<crate::value::RefArray>, CliError> {
-    let registry = crate::nodes::registry();
-    let kind = registry
+    params: &BTreeMap<String, ParamValue>,
+    inputs: &[Option<RefArray>],
+) -> Result<Vec<RefArray>, BenchError> {
+    let failed = |message: String| BenchError::Reference {
+        kind: kind.to_string(),
+        message,
+    };
+    let registry = mesoflow::nodes::registry();
+    let node_kind = registry
         .get(kind)
-        .ok_or_else(|| runtime(format!("no node kind `{kind}`")))?;
-    let params = crate::node::check_params(&kind.params(), params)
-        .map_err(|e| runtime(format!("{} params: {e:?}", kind.name())))?;
-    let node = kind.build(&params).map_err(runtime)?;
+        .ok_or_else(|| failed("no such node kind".into()))?;
+    let params =
+        node::check_params(&node_kind.params(), params).map_err(|e| failed(format!("{e:?}")))?;
+    let built = node_kind
+        .build(&params)
+        .map_err(|e| failed(e.to_string()))?;
     let types: Vec<Option<ValueType>> = inputs.iter().map(|r| r.as_ref().map(|r| r.ty)).collect();
-    let sig = node
-        .infer(&types)
-        .map_err(|e| runtime(format!("{}: {e:?}", kind.name())))?;
+    let sig = built.infer(&types).map_err(|e| failed(format!("{e:?}")))?;
     let mut out: Vec<_> = sig
         .outputs
         .iter()
-        .map(|t| crate::value::RefArray::new(*t, vec![0.0; t.words() as usize]))
+        .map(|t| RefArray::new(*t, vec![0.0; t.words() as usize]))
         .collect();
-    node.cpu_reference(inputs, &mut out, crate::node::RefCtx::default());
+    built.cpu_reference(inputs, &mut out, node::RefCtx::default());
     Ok(out)
 }
 
-/// A graph file with a chain of `n` scale nodes.
-pub fn chain_graph(n: usize) -> String {
-    let mut nodes = Vec::new();
-    for i in 0..n {
-        let src = if i == 0 {
-            "inputs.x".to_string()
-        } else {
-            format!("s{}.out", i - 1)
-        };
-        nodes.push(format!(
-            r#"{{"id": "s{i}", "kind": "scale", "params": {{"factor": 1.0001}}, "inputs": {{"x": "{src}"}}}}"#
-        ));
-    }
-    format!(
-        r#"{{"mesoflow": 1, "doc": "chain of {n} scale nodes",
-  "inputs": {{"x": {{"type": "particles", "cols": 1}}}},
-  "nodes": [{}],
-  "outputs": {{"y": "s{}.out"}}}}"#,
-        nodes.join(",\n"),
-        n - 1
-    )
-}
-
-fn overhead(nodes: usize, elements: u32, reps: u64) -> Result<(), CliError> {
-    if nodes == 0 || reps == 0 {
-        return Err(CliError::Input(
-            "--nodes and --reps must be positive".into(),
-        ));
-    }
-    let gpu = GpuContext::new().map_err(runtime)?;
-    let dir = std::env::temp_dir().join(format!("mesoflow-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(runtime)?;
-    let file = dir.join("chain.json");
-    std::fs::write(&file, chain_graph(nodes)).map_err(runtime)?;
-    let registry = crate::nodes::registry();
-    let g = graph::load(&file, &registry, &LoadOptions::default())
-        .map_err(|p| CliError::Input(p.to_string()))?;
-    let ty = ValueType::Particles { n: elements, k: 1 };
-    let opts = PlanOptions {
-        outputs: None,
-        inputs: [("x".to_string(), ty)].into_iter().collect(),
-        fuse: false,
-    };
-    let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
-    let mut cache = KernelCache::default();
-    let mut program = Program::compile(&gpu, &g, &p, &mut cache).map_err(runtime)?;
-    let x = HostArray::f32(ty, (0..elements).map(|i| i as f32).collect());
-    program
-        .upload(&[("x".to_string(), x)].into_iter().collect())
-        .map_err(runtime)?;
-    let run = |program: &mut Program, steps: u64| {
-        program.run(&RunOptions {
-            steps,
-            profile: Profile::Off,
-            progress: false,
-        })
-    };
-    run(&mut program, 2).map_err(runtime)?; // warm-up
-    let mut exec_times = Vec::new();
-    for _ in 0..5 {
-        let stats = run(&mut program, reps).map_err(runtime)?;
-        exec_times.push(stats.wall.as_secs_f64());
-    }
-    let exec = median(&mut exec_times) / (reps as f64 * nodes as f64);
-
-    // Raw wgpu: one pipeline, pre-made bind groups, all dispatches in one pass per submit.
-    let src = crate::gpu::shaders::resolve(&raw_kernel_source()).map_err(runtime)?;
-    let mut cx = CompileCtx {
-        gpu: &gpu,
-        kernels: &mut cache,
-        clock: &dummy(&gpu),
-        allocated: Default::default(),
-    };
-    let k = cx
-        .kernel(&KernelSpec::new(
-            "raw scale",
-            src,
-            &[
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::Uniform,
-            ],
-        ))
-        .map_err(runtime)?;
-    let bufs: Vec<wgpu::Buffer> = (0..2).map(|_| storage(&gpu, elements as u64 * 4)).collect();
-    let uni = cx.uniform("n", bytemuck::bytes_of(&elements));
-    let dispatches: Vec<_> = (0..nodes)
-        .map(|i| {
-            cx.dispatch(
-                &k,
-                &[&bufs[i % 2], &bufs[(i + 1) % 2], &uni],
-                cx.grid_1d(elements as u64, WG_1D),
-            )
-        })
-        .collect();
-    let per_submit = (4096 / (nodes + 1)).max(1) as u64;
-    let raw_run = |reps: u64| -> Result<f64, CliError> {
-        let t = Instant::now();
-        let mut last = None;
-        let mut done = 0;
-        while done < reps {
-            let n = per_submit.min(reps - done);
-            let mut enc = gpu.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&Default::default());
-                for _ in 0..n {
-                    for d in &dispatches {
-                        pass.set_pipeline(&d.kernel.pipeline);
-                        pass.set_bind_group(0, &d.bind_group, &[]);
-                        pass.dispatch_workgroups(d.workgroups[0], d.workgroups[1], d.workgroups[2]);
-                    }
-                }
-            }
-            let idx = gpu.queue.submit([enc.finish()]);
-            if let Some(prev) = last.replace(idx) {
-                gpu.wait(prev).map_err(runtime)?;
-            }
-            done += n;
-        }
-        if let Some(prev) = last {
-            gpu.wait(prev).map_err(runtime)?;
-        }
-        Ok(t.elapsed().as_secs_f64())
-    };
-    raw_run(2)?;
-    let mut raw_times = Vec::new();
-    for _ in 0..5 {
-        raw_times.push(raw_run(reps)?);
-    }
-    let raw = median(&mut raw_times) / (reps as f64 * nodes as f64);
-
-    // Submit-and-wait round trip of one tiny dispatch.
-    let mut rt = Vec::new();
-    for _ in 0..50 {
-        let t = Instant::now();
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            let d = &dispatches[0];
-            pass.set_pipeline(&d.kernel.pipeline);
-            pass.set_bind_group(0, &d.bind_group, &[]);
-            pass.dispatch_workgroups(d.workgroups[0], d.workgroups[1], d.workgroups[2]);
-        }
-        let idx = gpu.queue.submit([enc.finish()]);
-        gpu.wait(idx).map_err(runtime)?;
-        rt.push(t.elapsed().as_secs_f64());
-    }
-    let roundtrip = median(&mut rt);
-    let _ = std::fs::remove_dir_all(&dir);
-
-    println!("adapter: {}", gpu.caps.summary());
-    println!(
-        "chain of {nodes} unfused pointwise nodes, {elements} elements each, {reps} repetitions, median of 5"
-    );
-    println!("{:<44} {:>12}", "", "us per node");
-    println!(
-        "{:<44} {:>12.3}",
-        "mesoflow executor (graph file, planned)",
-        exec * 1e6
-    );
-    println!(
-        "{:<44} {:>12.3}",
-        "raw wgpu (same kernel, one pass per submit)",
-        raw * 1e6
-    );
-    println!("{:<44} {:>12.3}", "ratio executor / raw", exec / raw);
-    println!(
-        "{:<44} {:>12.1}",
-        "submit-and-wait round trip (us)",
-        roundtrip * 1e6
-    );
-    Ok(())
-}
-
-fn raw_kernel_source() -> String {
-    format!(
-        "#import common/index.wgsl\n@group(0) @binding(0) var<storage, read> x: array<f32>;\n@group(0) @binding(1) var<storage, read_write> y: array<f32>;\n@group(0) @binding(2) var<uniform> n: vec4<u32>;\n@compute @workgroup_size({WG_1D})\nfn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {{\n    let i = flat_index(wid, nwg, lid, {WG_1D}u);\n    if (i < n.x) {{ y[i] = 1.0001 * x[i]; }}\n}}\n"
-    )
-}
-
-fn storage(gpu: &GpuContext, bytes: u64) -> wgpu::Buffer {
-    gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("bench"),
-        size: bytes.max(16),
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
-}
-
-fn dummy(gpu: &GpuContext) -> wgpu::Buffer {
-    storage(gpu, 16)
-}
-
 /// Median of a sample (sorts it).
-pub fn median(v: &mut [f64]) -> f64 {
+fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     let n = v.len();
     if n % 2 == 1 {
@@ -694,4 +590,9 @@ pub fn median(v: &mut [f64]) -> f64 {
     } else {
         0.5 * (v[n / 2 - 1] + v[n / 2])
     }
+}
+
+/// Milliseconds of a duration, for tables.
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
 }

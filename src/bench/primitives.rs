@@ -1,9 +1,10 @@
 //! `mesoflow bench sort` and `mesoflow bench scan`: the `sort` and `scan` nodes on random
-//! u32 data, timed per launch with GPU timestamps ([`time_graph`]). Each result is checked
+//! u32 data, timed end to end and per launch ([`time_graph`]). Each result is checked
 //! on the host (sortedness, a valid and stable permutation; every prefix sum), so a fast
 //! wrong kernel cannot pass. `bench sort --variant all` runs every sort variant on the same
 //! keys, one row each. benches/torch_primitives.py prints the same table for PyTorch (CUB)
-//! on the same sizes.
+//! on the same sizes, timed with CUDA events around each call: the "ms" and "min ms"
+//! columns here are the end-to-end times it compares with, and the rates come from them.
 //!
 //! GB/s counts the operation's own input and output once (sort: 4 bytes of key in, 8 of
 //! key and index out; scan: 4 in, 4 out). The kernels move more (sort: about 80 bytes per
@@ -12,12 +13,12 @@
 
 use std::collections::BTreeMap;
 
-use super::{TimedRun, runtime, time_graph};
-use crate::cli::CliError;
-use crate::gpu::GpuContext;
-use crate::nodes::scan::Variant;
-use crate::nodes::sort::{self, SortVariant};
-use crate::value::{HostArray, HostData, ValueType};
+use mesoflow::gpu::GpuContext;
+use mesoflow::nodes::scan::Variant;
+use mesoflow::nodes::sort::{self, SortVariant};
+use mesoflow::value::{HostArray, HostData, ValueType};
+
+use super::{BenchError, TimedRun, end_to_end_clock, ms, time_graph};
 
 /// Random u32 from a fixed splitmix64 sequence.
 fn random_u32(n: u32, seed: u64) -> Vec<u32> {
@@ -33,39 +34,48 @@ fn random_u32(n: u32, seed: u64) -> Vec<u32> {
         .collect()
 }
 
-fn check_args(n: u32, reps: u64) -> Result<(), CliError> {
+fn check_args(n: u32, reps: u64) -> Result<(), BenchError> {
     if n == 0 || reps == 0 {
-        return Err(CliError::Input("--n and --reps must be positive".into()));
+        return Err(BenchError::Args("--n and --reps must be positive".into()));
     }
     Ok(())
 }
 
-fn u32s<'a>(run: &'a TimedRun, name: &str) -> Result<&'a [u32], CliError> {
+fn u32s<'a>(run: &'a TimedRun, name: &str) -> Result<&'a [u32], BenchError> {
     match run.outputs.get(name).map(|a| &a.data) {
         Some(HostData::U32(v)) => Ok(v),
-        _ => Err(CliError::Runtime(format!("output `{name}` is missing"))),
+        _ => Err(BenchError::Wrong(format!(
+            "output `{name}` is missing or not u32"
+        ))),
     }
 }
 
-/// The shared table (the same columns as benches/torch_primitives.py, plus the rate of
-/// the traffic the kernels themselves move): header, then one row per call.
-fn header(gpu: &GpuContext) {
+/// The shared table (the columns of benches/torch_primitives.py, end to end, plus the
+/// per-launch sum and the rate of the traffic the kernels themselves move): header, then
+/// one row per call.
+fn header(gpu: &GpuContext, reps: u64) {
     println!("adapter: {}", gpu.caps.summary());
     println!(
-        "{:<30} {:>11} {:>9} {:>9} {:>9} {:>9} {:>11}",
-        "op", "n", "ms", "min ms", "G/s", "GB/s", "moved GB/s"
+        "ms, min ms: the whole call end to end ({}), median and fastest of {reps}; launches ms: \
+         sum of per-launch medians; rates from the end-to-end median",
+        end_to_end_clock(gpu)
+    );
+    println!(
+        "{:<30} {:>11} {:>9} {:>9} {:>12} {:>9} {:>9} {:>11}",
+        "op", "n", "ms", "min ms", "launches ms", "G/s", "GB/s", "moved GB/s"
     );
 }
 
 fn row(what: &str, n: u32, run: &TimedRun, bytes_per_elem: f64, moved_per_elem: f64) {
-    let t = run.step_time().as_secs_f64();
-    let min: f64 = run.timings.iter().map(|t| t.min.as_secs_f64()).sum();
+    let t = run.end_to_end().as_secs_f64();
+    let min = run.steps.iter().min().copied().unwrap_or_default();
     println!(
-        "{:<30} {:>11} {:>9.4} {:>9.4} {:>9.2} {:>9.1} {:>11.1}",
+        "{:<30} {:>11} {:>9.4} {:>9.4} {:>12.4} {:>9.2} {:>9.1} {:>11.1}",
         what,
         n,
         t * 1e3,
-        min * 1e3,
+        ms(min),
+        ms(run.launch_sum()),
         n as f64 / t / 1e9,
         bytes_per_elem * n as f64 / t / 1e9,
         moved_per_elem * n as f64 / t / 1e9
@@ -116,7 +126,7 @@ fn check_sort(keys: &[u32], run: &TimedRun, variant: &str) -> Result<(), String>
 /// the same keys, one table row each; then a variant the device cannot run is skipped,
 /// and one whose result is wrong is reported after the table (and fails the command)
 /// without hiding the others' times.
-pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
+pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), BenchError> {
     check_args(n, reps)?;
     let all = variant == "all";
     let variants: Vec<&str> = if all {
@@ -124,12 +134,12 @@ pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
     } else if SortVariant::NAMES.contains(&variant) {
         vec![variant]
     } else {
-        return Err(CliError::Input(format!(
+        return Err(BenchError::Args(format!(
             "--variant {variant}: expected all or one of {}",
             SortVariant::NAMES.join(", ")
         )));
     };
-    let gpu = GpuContext::new().map_err(runtime)?;
+    let gpu = GpuContext::new()?;
     let keys = random_u32(n, 1);
     let ty = ValueType::Indices { n };
     let inputs: BTreeMap<String, HostArray> =
@@ -138,14 +148,15 @@ pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
     let mut notes = Vec::new();
     let mut wrong = Vec::new();
     for v in variants {
-        let parsed = SortVariant::from_name(v).ok_or_else(|| runtime("unknown variant"))?;
+        let parsed = SortVariant::from_name(v)
+            .ok_or_else(|| BenchError::Args(format!("--variant {v}: no such sort variant")))?;
         let traffic = match sort::traffic_per_key(parsed, &gpu.caps, 32, n as u64) {
             Ok(t) => t,
             Err(e) if all => {
                 notes.push(format!("{v} skipped: {e}"));
                 continue;
             }
-            Err(e) => return Err(CliError::Input(e.to_string())),
+            Err(e) => return Err(BenchError::Args(e.to_string())),
         };
         let graph = format!(
             r#"{{"mesoflow": 1, "doc": "bench: stable radix sort of n u32 keys with their permutation",
@@ -168,7 +179,7 @@ pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
             Err(e) => wrong.push(e),
         }
     }
-    header(&gpu);
+    header(&gpu, reps);
     for (v, run, traffic) in &rows {
         row(
             &format!("sort u32 keys + perm ({v})"),
@@ -186,19 +197,19 @@ pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
     if wrong.is_empty() {
         Ok(())
     } else {
-        Err(CliError::Runtime(wrong.join("\n")))
+        Err(BenchError::Wrong(wrong.join("\n")))
     }
 }
 
-pub fn scan(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
+pub fn scan(n: u32, reps: u64, variant: &str) -> Result<(), BenchError> {
     check_args(n, reps)?;
     if !Variant::NAMES.contains(&variant) {
-        return Err(CliError::Input(format!(
+        return Err(BenchError::Args(format!(
             "--variant {variant}: expected one of {}",
             Variant::NAMES.join(", ")
         )));
     }
-    let gpu = GpuContext::new().map_err(runtime)?;
+    let gpu = GpuContext::new()?;
     // Full-range words, so the sums wrap (as documented) many times.
     let x = random_u32(n, 2);
     let graph = format!(
@@ -216,13 +227,13 @@ pub fn scan(n: u32, reps: u64, variant: &str) -> Result<(), CliError> {
     let mut acc = 0u32;
     for (i, (&o, &v)) in out.iter().zip(&x).enumerate() {
         if o != acc {
-            return Err(CliError::Runtime(format!(
+            return Err(BenchError::Wrong(format!(
                 "scan: out[{i}] = {o}, expected {acc}"
             )));
         }
         acc = acc.wrapping_add(v);
     }
-    header(&gpu);
+    header(&gpu, reps);
     row(
         &format!("exclusive scan u32 ({variant})"),
         n,

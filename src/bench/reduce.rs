@@ -1,16 +1,28 @@
 //! `mesoflow bench reduce`: sums of 10^8 f32 (blocked and compensated), a dot product
-//! and a max, timed per launch with GPU timestamps; bandwidth counts bytes read. The
-//! result is checked against an f64 sum on the host, so a fast wrong kernel cannot pass.
+//! and a max, each a graph of its own timed end to end and per launch; bandwidth counts
+//! bytes read. The result is checked against an f64 sum on the host, so a fast wrong
+//! kernel cannot pass. `benches/torch_reduce.py` times the same calls for CUB.
 
 use std::collections::BTreeMap;
 
-use super::{Timing, runtime, time_graph};
-use crate::cli::CliError;
-use crate::gpu::GpuContext;
-use crate::value::{HostArray, ValueType};
+use mesoflow::gpu::GpuContext;
+use mesoflow::value::{HostArray, ValueType};
 
-pub fn run(n: u32, reps: u64) -> Result<(), CliError> {
-    let gpu = GpuContext::new().map_err(runtime)?;
+use super::{BenchError, end_to_end_clock, ms, time_graph};
+
+/// (row label, node kind, params, bytes read per element)
+const OPERATIONS: [(&str, &str, &str, f64); 4] = [
+    ("sum", "sum", "{}", 4.0),
+    ("sum_compensated", "sum", r#"{"compensated": true}"#, 4.0),
+    ("dot", "dot", "{}", 8.0),
+    ("max", "max", "{}", 4.0),
+];
+
+pub fn run(n: u32, reps: u64) -> Result<(), BenchError> {
+    if n == 0 || reps == 0 {
+        return Err(BenchError::Args("--n and --reps must be positive".into()));
+    }
+    let gpu = GpuContext::new()?;
     // Mixed magnitudes with both signs, from a fixed xorshift sequence.
     let mut s = 0x2545_F491_4F6C_DD1Du64;
     let mut next = || {
@@ -31,40 +43,47 @@ pub fn run(n: u32, reps: u64) -> Result<(), CliError> {
     let inputs: BTreeMap<String, HostArray> = [("x".to_string(), HostArray::f32(ty, x))]
         .into_iter()
         .collect();
-    let graph = r#"{"mesoflow": 1,
-      "inputs": {"x": {"type": "particles", "cols": 1}},
-      "nodes": [
-        {"id": "sum", "kind": "sum", "inputs": {"x": "inputs.x"}},
-        {"id": "sum_compensated", "kind": "sum", "params": {"compensated": true}, "inputs": {"x": "inputs.x"}},
-        {"id": "dot", "kind": "dot", "inputs": {"a": "inputs.x", "b": "inputs.x"}},
-        {"id": "max", "kind": "max", "inputs": {"x": "inputs.x"}}
-      ],
-      "outputs": {"sum": "sum.out", "sum_compensated": "sum_compensated.out", "dot": "dot.out", "max": "max.out"}}"#;
-    let run = time_graph(&gpu, graph, &inputs, reps, true)?;
-    let bytes = |t: &Timing| if t.label == "dot" { 8.0 } else { 4.0 } * n as f64;
     println!("adapter: {}", gpu.caps.summary());
     println!(
-        "reductions of n = {n} f32 (mixed magnitudes 1e-3..1e3, random signs), median of {reps}"
+        "reductions of n = {n} f32 (mixed magnitudes 1e-3..1e3, random signs), median of {reps}; \
+         e2e: the whole call, one graph per operation; launches: per-launch sum; GB/s from e2e"
     );
     println!(
-        "{:<18} {:>10} {:>10} {:>14}",
-        "node", "ms", "GB/s", "rel. error"
+        "{:<18} {:>10} {:>12} {:>10} {:>14}",
+        "node", "e2e ms", "launches ms", "GB/s", "rel. error"
     );
-    for t in &run.timings {
-        let got = run.outputs[&t.label].data.to_f64()[0];
-        let err = match t.label.as_str() {
-            "sum" | "sum_compensated" => format!("{:.1e}", (got - exact).abs() / abs),
+    for (label, kind, params, bytes) in OPERATIONS {
+        let inputs_of_kind = if kind == "dot" {
+            r#"{"a": "inputs.x", "b": "inputs.x"}"#
+        } else {
+            r#"{"x": "inputs.x"}"#
+        };
+        let graph = format!(
+            r#"{{"mesoflow": 1,
+      "inputs": {{"x": {{"type": "particles", "cols": 1}}}},
+      "nodes": [{{"id": "{label}", "kind": "{kind}", "params": {params}, "inputs": {inputs_of_kind}}}],
+      "outputs": {{"out": "{label}.out"}}}}"#
+        );
+        let run = time_graph(&gpu, &graph, &inputs, reps, true)?;
+        let got = run.outputs["out"].data.to_f64()[0];
+        let err = match kind {
+            "sum" => format!("{:.1e}", (got - exact).abs() / abs),
             _ => "-".into(),
         };
-        let ms = t.median.as_secs_f64() * 1e3;
+        let e2e = run.end_to_end();
         println!(
-            "{:<18} {:>10.4} {:>10.1} {:>14}",
-            t.label,
-            ms,
-            bytes(t) / t.median.as_secs_f64() / 1e9,
+            "{:<18} {:>10.4} {:>12.4} {:>10.1} {:>14}",
+            label,
+            ms(e2e),
+            ms(run.launch_sum()),
+            bytes * n as f64 / e2e.as_secs_f64() / 1e9,
             err
         );
     }
-    println!("(error of a sum: |sum - f64 sum| / sum |x|; sum = {exact:.6e}, sum |x| = {abs:.6e})");
+    println!(
+        "(error of a sum: |sum - f64 sum| / sum |x|; sum = {exact:.6e}, sum |x| = {abs:.6e}; \
+         e2e by {})",
+        end_to_end_clock(&gpu)
+    );
     Ok(())
 }

@@ -1,14 +1,16 @@
 //! `mesoflow bench spread`: spreading and interpolation per particle on a 128^3 grid,
 //! Gaussian support 8 (and 4), densities 1 and 0.1 particles per cell, random and
 //! pre-sorted positions, 1 and 3 components (the setups of UAMMD's benchmark), for each
-//! workgroup size asked for.
+//! workgroup size asked for. Spreading and interpolation are graphs of their own, each
+//! timed end to end (the figure UAMMD's per-call times compare with) and per launch.
 
 use std::collections::BTreeMap;
 
-use super::{node_reference, runtime, time_graph};
-use crate::cli::CliError;
-use crate::gpu::GpuContext;
-use crate::value::{HostArray, RefArray, ValueType};
+use mesoflow::expr::ParamValue;
+use mesoflow::gpu::GpuContext;
+use mesoflow::value::{HostArray, RefArray, ValueType};
+
+use super::{BenchError, end_to_end_clock, ms, node_reference, time_graph};
 
 /// (support, particles per cell, sorted, components)
 const CASES: [(u32, f64, bool, u32); 8] = [
@@ -22,30 +24,35 @@ const CASES: [(u32, f64, bool, u32); 8] = [
     (8, 1.0, true, 3),
 ];
 
-pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Result<(), CliError> {
+pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Result<(), BenchError> {
     if let Some(bad) = cases.iter().find(|&&c| c >= CASES.len()) {
-        return Err(CliError::Input(format!(
+        return Err(BenchError::Args(format!(
             "--cases: no row {bad} (rows 0 to {})",
             CASES.len() - 1
         )));
     }
-    let gpu = GpuContext::new().map_err(runtime)?;
+    let gpu = GpuContext::new()?;
     let l = n_cells as f64;
     println!("adapter: {}", gpu.caps.summary());
     println!(
-        "{n_cells}^3 grid (h = 1); support 8: Gaussian, support 4: Peskin 4-point; median GPU time of {reps} runs per launch"
+        "{n_cells}^3 grid (h = 1); support 8: Gaussian, support 4: Peskin 4-point; median of {reps} \
+         runs; e2e: the operation's graph end to end ({}), ns/part. from it; launches: sum of \
+         per-launch medians",
+        end_to_end_clock(&gpu)
     );
     println!(
-        "{:>7} {:>7} {:>9} {:>6} {:>5} {:>9} {:>11} {:>11} {:>11} {:>11}",
+        "{:>7} {:>7} {:>9} {:>6} {:>5} {:>9} {:>10} {:>11} {:>9} {:>10} {:>11} {:>9}",
         "support",
         "density",
         "N",
         "sorted",
         "comps",
         "wg",
-        "spread ms",
+        "spread e2e",
+        "launches ms",
         "ns/part.",
-        "interp ms",
+        "interp e2e",
+        "launches ms",
         "ns/part."
     );
     let mut s = 0x9E37_79B9_7F4A_7C15u64;
@@ -84,24 +91,19 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
             .map(|_| (next() - 0.5) as f32)
             .collect();
         let want: f64 = vals.iter().map(|&v| v as f64).sum();
-        let inputs: BTreeMap<String, HostArray> = [
-            (
-                "positions".to_string(),
-                HostArray::f32(ValueType::Particles { n, k: 3 }, pos.concat()),
-            ),
+        let positions = HostArray::f32(ValueType::Particles { n, k: 3 }, pos.concat());
+        let field = HostArray::f32(
+            ValueType::RealGrid {
+                dims: [n_cells; 3],
+                comps,
+            },
+            field,
+        );
+        let spread_inputs: BTreeMap<String, HostArray> = [
+            ("positions".to_string(), positions.clone()),
             (
                 "values".to_string(),
                 HostArray::f32(ValueType::Particles { n, k: comps }, vals),
-            ),
-            (
-                "field".to_string(),
-                HostArray::f32(
-                    ValueType::RealGrid {
-                        dims: [n_cells; 3],
-                        comps,
-                    },
-                    field,
-                ),
             ),
         ]
         .into_iter()
@@ -118,7 +120,8 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         // random input runs them after sorting in the graph (Morton order of 4-cell
         // blocks, whole blocks of about 64 particles at 1 per cell: one box run), shown
         // as "sort+box" (the radix sort) and "bin+box" (the counting sort, bin_sort), the
-        // sort, the gathers and the scatter back included in the times.
+        // sort and the gathers included in the spreading times, the scatter back in the
+        // interpolation's (which takes the sorted positions the spreading graph gives).
         // (label, params of both nodes, params of spreading only, sort node in the graph
         // first)
         let mut runs: Vec<(String, String, &str, Option<&str>)> = workgroups
@@ -170,7 +173,7 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
             ));
         }
         // The interpolation check's inputs, the same for every kernel of this row.
-        let check = InterpolationCheck::new(&inputs);
+        let check = InterpolationCheck::new(&positions, &field);
         // The sorts' Morton blocks of 4 cells a side, and their key bits.
         let blocks = n_cells.div_ceil(4);
         let bits = 3 * (blocks as f64).log2().ceil().max(1.0) as u32;
@@ -181,81 +184,112 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
             let params = format!(
                 r#"{{"box": [{l}, {l}, {l}], "grid": [{n_cells}, {n_cells}, {n_cells}], {window}, {extra}{spread_only}}}"#
             );
-            let (sorting, spread_in, interp_in, u) = if let Some(sort) = sort_first {
-                let sort_params = if sort == "sort" {
-                    format!(r#""bits": {bits}"#)
-                } else {
-                    format!(r#""bins": {}"#, 1u64 << bits)
-                };
-                (
-                    format!(
-                        r#"{{"id": "hash", "kind": "cell_hash", "params": {{"box": [{l}, {l}, {l}], "cells": [{blocks}, {blocks}, {blocks}], "order": "morton"}}, "inputs": {{"positions": "inputs.positions"}}}},
-                    {{"id": "order", "kind": "{sort}", "params": {{{sort_params}}}, "inputs": {{"keys": "hash.out"}}}},
-                    {{"id": "sorted_positions", "kind": "gather", "inputs": {{"values": "inputs.positions", "index": "order.perm"}}}},
-                    {{"id": "sorted_values", "kind": "gather", "inputs": {{"values": "inputs.values", "index": "order.perm"}}}},
-                    {{"id": "back", "kind": "scatter", "params": {{"permutation": true}}, "inputs": {{"values": "interpolate.out", "index": "order.perm"}}}},"#
-                    ),
-                    r#""positions": "sorted_positions.out", "values": "sorted_values.out""#,
-                    r#""positions": "sorted_positions.out""#,
-                    "back.out",
-                )
-            } else {
-                (
-                    String::new(),
-                    r#""positions": "inputs.positions", "values": "inputs.values""#,
-                    r#""positions": "inputs.positions""#,
-                    "interpolate.out",
-                )
-            };
-            let graph = format!(
-                r#"{{"mesoflow": 1,
-                  "inputs": {{"positions": {{"type": "particles", "cols": 3}}, "values": {{"type": "particles", "cols": {comps}}},
-                             "field": {{"type": "real_grid", "dims": [{n_cells}, {n_cells}, {n_cells}], "comps": {comps}}}}},
-                  "nodes": [
-                    {sorting}
-                    {{"id": "spread", "kind": "spread", "params": {params}, "inputs": {{{spread_in}}}}},
-                    {{"id": "interpolate", "kind": "interpolate", "params": {interp_params}, "inputs": {{"grid": "inputs.field", {interp_in}}}}}
-                  ],
-                  "outputs": {{"grid": "spread.out", "u": "{u}"}}}}"#
+            let interpolate = format!(
+                r#"{{"id": "interpolate", "kind": "interpolate", "params": {interp_params}, "inputs": {{"grid": "inputs.field", "positions": "inputs.positions"}}}}"#
             );
-            let run = time_graph(&gpu, &graph, &inputs, reps, true)?;
-            let t = |label: &str| {
-                run.timings
-                    .iter()
-                    .find(|t| t.label == label)
-                    .map(|t| t.median.as_secs_f64())
-                    .unwrap_or(f64::NAN)
-            };
-            let (mut ts, mut ti) = (t("spread"), t("interpolate"));
-            if sort_first.is_some() {
-                ts += t("hash") + t("order") + t("sorted_positions") + t("sorted_values");
-                ti += t("back");
+            // Sorted first: the sorting nodes before spreading, which also gives the sorted
+            // positions and the permutation; the interpolation graph reads them and
+            // scatters its values back to input order.
+            let (spreading, spread_in, sorted_outputs, interpolation, perm_input, u) =
+                match sort_first {
+                    Some(sort) => (
+                        sorting_nodes(sort, l, blocks, bits),
+                        r#""positions": "sorted_positions.out", "values": "sorted_values.out""#,
+                        r#", "sorted_positions": "sorted_positions.out", "perm": "order.perm""#,
+                        format!(
+                            r#"{interpolate},
+                        {{"id": "back", "kind": "scatter", "params": {{"permutation": true}}, "inputs": {{"values": "interpolate.out", "index": "inputs.perm"}}}}"#
+                        ),
+                        r#", "perm": {"type": "indices"}"#,
+                        "back.out",
+                    ),
+                    None => (
+                        String::new(),
+                        r#""positions": "inputs.positions", "values": "inputs.values""#,
+                        "",
+                        interpolate,
+                        "",
+                        "interpolate.out",
+                    ),
+                };
+            let spread_graph = format!(
+                r#"{{"mesoflow": 1,
+                  "inputs": {{"positions": {{"type": "particles", "cols": 3}}, "values": {{"type": "particles", "cols": {comps}}}}},
+                  "nodes": [
+                    {spreading}
+                    {{"id": "spread", "kind": "spread", "params": {params}, "inputs": {{{spread_in}}}}}
+                  ],
+                  "outputs": {{"grid": "spread.out"{sorted_outputs}}}}}"#
+            );
+            let spread_run = time_graph(&gpu, &spread_graph, &spread_inputs, reps, true)?;
+            let mut interp_inputs: BTreeMap<String, HostArray> =
+                [("field".to_string(), field.clone())].into_iter().collect();
+            match sort_first {
+                Some(_) => {
+                    for (name, output) in [("positions", "sorted_positions"), ("perm", "perm")] {
+                        let value = spread_run.outputs.get(output).ok_or_else(|| {
+                            BenchError::Wrong(format!("the spreading graph gave no `{output}`"))
+                        })?;
+                        interp_inputs.insert(name.to_string(), value.clone());
+                    }
+                }
+                None => {
+                    interp_inputs.insert("positions".to_string(), positions.clone());
+                }
             }
+            let interp_graph = format!(
+                r#"{{"mesoflow": 1,
+                  "inputs": {{"positions": {{"type": "particles", "cols": 3}},
+                             "field": {{"type": "real_grid", "dims": [{n_cells}, {n_cells}, {n_cells}], "comps": {comps}}}{perm_input}}},
+                  "nodes": [{interpolation}],
+                  "outputs": {{"u": "{u}"}}}}"#
+            );
+            let interp_run = time_graph(&gpu, &interp_graph, &interp_inputs, reps, true)?;
+            let (ts, ti) = (spread_run.end_to_end(), interp_run.end_to_end());
             // Mass check: the grid integrates to the sum of the values (a wrong kernel fails).
-            let total: f64 = run.outputs["grid"].data.to_f64().iter().sum();
+            let total: f64 = spread_run.outputs["grid"].data.to_f64().iter().sum();
             let mut mass = if (total - want).abs() > 1e-3 * want.abs().max(1.0) + 1e-2 {
                 "  MASS MISMATCH"
             } else {
                 ""
             };
             // Interpolation check: the first particles against the node's f64 reference.
-            let err = check.error(&interp_params, &run.outputs["u"])?;
+            let err = check.error(&interp_params, &interp_run.outputs["u"])?;
             if err > 1e-4 {
                 mass = "  INTERPOLATION MISMATCH";
             }
             println!(
-                "{support:>7} {density:>7} {n:>9} {sorted:>6} {comps:>5} {wg:>9} {:>11.4} {:>11.3} {:>11.4} {:>11.3}{mass}",
-                ts * 1e3,
-                ts * 1e9 / n as f64,
-                ti * 1e3,
-                ti * 1e9 / n as f64
+                "{support:>7} {density:>7} {n:>9} {sorted:>6} {comps:>5} {wg:>9} {:>10.4} {:>11.4} {:>9.3} {:>10.4} {:>11.4} {:>9.3}{mass}",
+                ms(ts),
+                ms(spread_run.launch_sum()),
+                ts.as_secs_f64() * 1e9 / n as f64,
+                ms(ti),
+                ms(interp_run.launch_sum()),
+                ti.as_secs_f64() * 1e9 / n as f64
             );
-            for timing in &run.timings {
+            for timing in spread_run.timings.iter().chain(&interp_run.timings) {
                 print!("{}", timing.breakdown());
             }
         }
     }
     Ok(())
+}
+
+/// The nodes that sort random input before spreading: the positions hashed to Morton
+/// blocks, sorted (`sort`: the radix sort, `bin_sort`: the counting sort) and gathered with
+/// the values.
+fn sorting_nodes(sort: &str, l: f64, blocks: u32, bits: u32) -> String {
+    let sort_params = if sort == "sort" {
+        format!(r#""bits": {bits}"#)
+    } else {
+        format!(r#""bins": {}"#, 1u64 << bits)
+    };
+    format!(
+        r#"{{"id": "hash", "kind": "cell_hash", "params": {{"box": [{l}, {l}, {l}], "cells": [{blocks}, {blocks}, {blocks}], "order": "morton"}}, "inputs": {{"positions": "inputs.positions"}}}},
+        {{"id": "order", "kind": "{sort}", "params": {{{sort_params}}}, "inputs": {{"keys": "hash.out"}}}},
+        {{"id": "sorted_positions", "kind": "gather", "inputs": {{"values": "inputs.positions", "index": "order.perm"}}}},
+        {{"id": "sorted_values", "kind": "gather", "inputs": {{"values": "inputs.values", "index": "order.perm"}}}},"#
+    )
 }
 
 /// The interpolation check of a row: the first `CHECKED` particles and the field as f64
@@ -268,9 +302,8 @@ struct InterpolationCheck {
 impl InterpolationCheck {
     const CHECKED: u32 = 256;
 
-    fn new(inputs: &BTreeMap<String, HostArray>) -> Self {
-        let pos = &inputs["positions"];
-        let field = inputs["field"].to_ref();
+    fn new(pos: &HostArray, field: &HostArray) -> Self {
+        let field = field.to_ref();
         let (ValueType::Particles { n, k }, ValueType::RealGrid { comps, .. }) = (pos.ty, field.ty)
         else {
             unreachable!("the bench's own inputs")
@@ -288,14 +321,18 @@ impl InterpolationCheck {
     /// Largest error of the interpolated values `got` (their first rows) against the
     /// interpolate node's f64 reference for `params`, relative to the largest reference
     /// value.
-    fn error(&self, params: &str, got: &HostArray) -> Result<f64, CliError> {
+    fn error(&self, params: &str, got: &HostArray) -> Result<f64, BenchError> {
+        let bad = |message: String| BenchError::Reference {
+            kind: "interpolate".into(),
+            message,
+        };
         let raw: BTreeMap<String, serde_json::Value> =
-            serde_json::from_str(params).map_err(runtime)?;
+            serde_json::from_str(params).map_err(|e| bad(e.to_string()))?;
         let params = raw
             .into_iter()
-            .map(|(n, v)| crate::expr::ParamValue::from_json(&v).map(|v| (n, v)))
+            .map(|(n, v)| ParamValue::from_json(&v).map(|v| (n, v)))
             .collect::<Result<_, _>>()
-            .map_err(runtime)?;
+            .map_err(|e| bad(e.to_string()))?;
         let want = node_reference("interpolate", &params, &self.inputs)?
             .remove(0)
             .data;

@@ -53,6 +53,9 @@ pub enum Profile {
     Launches,
     /// Each dispatch in a compute pass of its own (the passes of an FFT, say).
     Dispatches,
+    /// Whole steps end to end, each recorded as the unprofiled run records it
+    /// (`RunStats::step_samples`).
+    Steps,
 }
 
 /// How to run.
@@ -122,6 +125,10 @@ pub struct RunStats {
     /// Per-launch GPU times when profiling; `timed_by_gpu` says whether timestamps were used.
     pub profile: Vec<ProfileRow>,
     pub timed_by_gpu: bool,
+    /// With `Profile::Steps`: each step's time from its first kernel's start to its last
+    /// one's end, the gaps between kernels included (timed on the host around the step
+    /// where `timed_by_gpu` is false).
+    pub step_samples: Vec<Duration>,
 }
 
 /// Timestamp queries for the timed units of a profiled step, two per unit.
@@ -789,6 +796,7 @@ impl<'a> Program<'a> {
             Profile::Off => self.run_batched(opts)?,
             Profile::Launches => self.run_profiled(opts.steps, false)?,
             Profile::Dispatches => self.run_profiled(opts.steps, true)?,
+            Profile::Steps => self.run_timed_steps(opts.steps)?,
         };
         Ok(RunStats {
             wall: t0.elapsed(),
@@ -870,6 +878,7 @@ impl<'a> Program<'a> {
             wall: Duration::ZERO,
             profile: Vec::new(),
             timed_by_gpu: false,
+            step_samples: Vec::new(),
         })
     }
 
@@ -893,6 +902,86 @@ impl<'a> Program<'a> {
             wall: Duration::ZERO,
             profile: rows,
             timed_by_gpu: use_gpu,
+            step_samples: Vec::new(),
+        })
+    }
+
+    /// Times whole steps: each step's dispatches in one compute pass, recorded as
+    /// `run_batched` records them, with timestamps written at the pass's beginning and
+    /// end, one step per submission. A step's time thus runs from its first kernel's start
+    /// to its last one's end, the gaps between kernels included: what CUDA events around
+    /// a library call measure. A program with loops makes host round trips inside its
+    /// steps, and a device without timestamp queries has no GPU clock to read: those
+    /// steps are timed on the host, from the first submission to the end of the wait.
+    fn run_timed_steps(&mut self, steps: u64) -> Result<RunStats, ExecError> {
+        let by_gpu = self.gpu.caps.timestamps && !self.has_loops();
+        let queries = by_gpu.then(|| {
+            self.gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("step timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            })
+        });
+        let resolve = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("step timestamps resolve"),
+            size: 16,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let period = self.gpu.queue.get_timestamp_period() as f64;
+        let mut samples = Vec::with_capacity(steps as usize);
+        for s in 0..steps {
+            let step = self.steps_done + s;
+            let parity = (step % 2) as usize;
+            let Some(qs) = &queries else {
+                let t = Instant::now();
+                let idx = if self.has_loops() {
+                    let (idx, counts) = self.submit_step_with_loops(step)?;
+                    self.note_iterations(counts);
+                    idx
+                } else {
+                    let dispatches: Vec<&Dispatch> = self.step[parity]
+                        .iter()
+                        .flat_map(|c| &c.dispatches)
+                        .chain(std::iter::once(&self.clock_tick))
+                        .collect();
+                    self.submit(&dispatches, step)
+                };
+                self.gpu.wait(idx)?;
+                samples.push(t.elapsed());
+                continue;
+            };
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("step"),
+                    timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
+                        query_set: qs,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    }),
+                });
+                for c in &self.step[parity] {
+                    Self::record(&mut pass, &c.dispatches, step);
+                }
+                Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), step);
+            }
+            enc.resolve_query_set(qs, 0..2, &resolve, 0);
+            let idx = self.gpu.queue.submit([enc.finish()]);
+            self.gpu.wait(idx)?;
+            let ticks: Vec<u64> =
+                bytemuck::pod_collect_to_vec(&self.gpu.read_buffer(&resolve, 16)?);
+            samples.push(Duration::from_nanos(
+                (ticks[1].saturating_sub(ticks[0]) as f64 * period) as u64,
+            ));
+        }
+        self.steps_done += steps;
+        Ok(RunStats {
+            steps,
+            wall: Duration::ZERO,
+            profile: Vec::new(),
+            timed_by_gpu: by_gpu,
+            step_samples: samples,
         })
     }
 

@@ -9,7 +9,7 @@
 mod load;
 mod schema;
 
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::fmt;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -277,6 +277,32 @@ impl Graph {
 
     pub fn output(&self, name: &str) -> Option<usize> {
         self.outputs.iter().position(|o| o.name == name)
+    }
+
+    /// Every input's type from its declaration, with the declared sizes' defaults and
+    /// one row where the count is free: the inputs a plan assumes when no data is given
+    /// (`validate`, `inspect`).
+    pub fn declared_input_types(&self) -> BTreeMap<String, ValueType> {
+        let size = |s: &str| self.sizes.iter().find(|d| d.name == s).map(|d| d.default);
+        self.inputs
+            .iter()
+            .filter_map(|i| {
+                let shape = match &i.shape {
+                    InputShape::Particles {
+                        rows: Dim::Free,
+                        cols,
+                    } => InputShape::Particles {
+                        rows: Dim::Fixed(1),
+                        cols: *cols,
+                    },
+                    InputShape::Indices { rows: Dim::Free } => InputShape::Indices {
+                        rows: Dim::Fixed(1),
+                    },
+                    other => other.clone(),
+                };
+                shape.with_sizes(size).map(|t| (i.name.clone(), t))
+            })
+            .collect()
     }
 
     /// A value's name as users write it: `inputs.x`, `state.x`, `node.port`.

@@ -5,6 +5,7 @@
 //! and assigns buffers with reuse. A plan needs no GPU: `mesoflow inspect` prints it and
 //! tests check it on machines without one. The executor compiles it afterwards.
 
+mod check;
 mod demand;
 mod fold;
 mod forward;
@@ -18,6 +19,7 @@ mod show;
 
 use std::collections::{BTreeMap, BTreeSet};
 
+pub use check::{Validation, validate_file};
 pub use fuse::FusedKernel;
 pub use show::{human_bytes, to_dot, to_text};
 

@@ -286,3 +286,48 @@ fn missing_or_unknown_adapters_are_clear_errors() {
         );
     }
 }
+
+/// The numbers on a table row after its label.
+fn row_numbers(text: &str, label: &str) -> Vec<f64> {
+    let row = text
+        .lines()
+        .find(|l| l.starts_with(label))
+        .unwrap_or_else(|| panic!("no row `{label}` in:\n{text}"));
+    row[label.len()..]
+        .split_whitespace()
+        .filter_map(|w| w.parse().ok())
+        .collect()
+}
+
+#[test]
+fn bench_tables_give_the_end_to_end_time_beside_the_launch_sum() {
+    if gpu().is_none() {
+        return;
+    }
+    let o = mesoflow(&["bench", "overhead", "--nodes", "4", "--reps", "2"]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.lines().any(|l| l.starts_with("us per node")
+            && l.contains("end to end")
+            && l.contains("launches")),
+        "{t}"
+    );
+    // Wall, end to end and launch sum for the executor; wall and end to end for raw wgpu.
+    let executor = row_numbers(&t, "mesoflow executor (graph file, planned)");
+    assert_eq!(executor.len(), 3, "{t}");
+    assert!(executor.iter().all(|&us| us > 0.0), "{t}");
+    assert_eq!(row_numbers(&t, "raw wgpu").len(), 2, "{t}");
+
+    let o = mesoflow(&["bench", "scan", "--n", "1000", "--reps", "2"]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.contains("the whole call end to end") && t.contains("launches ms"),
+        "{t}"
+    );
+    fails_with(
+        &["bench", "overhead", "--nodes", "0"],
+        &["--nodes and --reps must be positive"],
+    );
+}

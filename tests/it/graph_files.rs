@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use mesoflow::cli::check_graph;
+use mesoflow::plan::validate_file;
 
 use crate::util::{registry, root};
 
@@ -27,7 +27,7 @@ fn every_valid_graph_file_loads_and_plans() {
     let invalid = root().join("graphs/fixtures/invalid");
     let mut checked = 0;
     for f in files.iter().filter(|f| !f.starts_with(&invalid)) {
-        if let Err(e) = check_graph(registry(), f) {
+        if let Err(e) = validate_file(registry(), f) {
             panic!("{} should be valid:\n{e}", f.display());
         }
         checked += 1;
@@ -48,9 +48,9 @@ fn every_invalid_fixture_reports_its_problems() {
         let expect_file = f.with_extension("expect");
         let expected = std::fs::read_to_string(&expect_file)
             .unwrap_or_else(|_| panic!("{} has no {}", f.display(), expect_file.display()));
-        let err = match check_graph(registry(), f) {
+        let err = match validate_file(registry(), f) {
             Ok(_) => panic!("{} should fail", f.display()),
-            Err(e) => e,
+            Err(e) => e.to_string(),
         };
         for line in expected.lines().filter(|l| !l.trim().is_empty()) {
             assert!(

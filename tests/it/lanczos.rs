@@ -196,9 +196,13 @@ fn diagonal_operator_from_a_pointwise_product() {
     assert!(err < 1e-5, "error {err:.3e}");
     assert_eq!(iters[0].1.len(), 2);
     assert_eq!(iters[0].1[0], iters[0].1[1]);
-    // Profiled runs time the loop on the host and agree.
-    let (profiled, _) = run(&gpu, &json, &inputs, 1, Profile::Launches).unwrap();
-    assert_eq!(profiled["out"].data.to_f64(), out["out"].data.to_f64());
+    // Profiled runs (per launch, and whole steps end to end) time the loop on the host
+    // and agree, iterations included.
+    for profile in [Profile::Launches, Profile::Steps] {
+        let (profiled, counts) = run(&gpu, &json, &inputs, 1, profile).unwrap();
+        assert_eq!(profiled["out"].data.to_f64(), out["out"].data.to_f64());
+        assert_eq!(counts[0].1, vec![iters[0].1[0]], "{profile:?}");
+    }
 }
 
 #[test]

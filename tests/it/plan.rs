@@ -14,7 +14,7 @@ fn plan_file(
     fuse: bool,
 ) -> (mesoflow::graph::Graph, Plan) {
     let g = load(path);
-    let inputs = mesoflow::cli::declared_input_types(&g);
+    let inputs = g.declared_input_types();
     let p = plan_graph(&DeviceCaps::baseline(), &g, inputs, outputs, fuse);
     (g, p)
 }
@@ -44,7 +44,7 @@ fn unknown_output_is_a_plan_error() {
     let g = load(&root().join("graphs/fixtures/branches.json"));
     let opts = PlanOptions {
         outputs: Some(vec!["c".into()]),
-        inputs: mesoflow::cli::declared_input_types(&g),
+        inputs: g.declared_input_types(),
         fuse: true,
     };
     let e = plan::plan(&g, &opts, &DeviceCaps::baseline())
@@ -56,7 +56,7 @@ fn unknown_output_is_a_plan_error() {
 #[test]
 fn a_chain_fuses_into_one_kernel_and_keeps_intermediates_in_registers() {
     let dir = tmpdir("plan-chain");
-    let path = write_graph(&dir, "chain.json", &mesoflow::bench::chain_graph(5));
+    let path = write_graph(&dir, "chain.json", &crate::util::chain_graph(5));
     let (_, fused) = plan_file(&path, None, true);
     assert_eq!(fused.step.len(), 1);
     let Launch::Fused(k) = &fused.step[0] else {
@@ -77,7 +77,7 @@ fn a_chain_fuses_into_one_kernel_and_keeps_intermediates_in_registers() {
 #[test]
 fn pooled_buffers_are_reused_along_a_chain() {
     let dir = tmpdir("plan-reuse");
-    let path = write_graph(&dir, "chain.json", &mesoflow::bench::chain_graph(6));
+    let path = write_graph(&dir, "chain.json", &crate::util::chain_graph(6));
     let (_, p) = plan_file(&path, None, false);
     // Five intermediate values, at most two alive at once: two pooled buffers.
     let pool: Vec<_> = p
@@ -190,7 +190,7 @@ fn absent_optional_inputs_drop_the_nodes_that_need_them() {
 #[test]
 fn inputs_sharing_a_size_must_agree() {
     let g = load(&root().join("graphs/fixtures/pointwise_all.json"));
-    let mut inputs = mesoflow::cli::declared_input_types(&g);
+    let mut inputs = g.declared_input_types();
     inputs.insert("y".into(), ValueType::Particles { n: 36, k: 3 });
     let e = plan::plan(
         &g,

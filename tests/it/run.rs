@@ -141,7 +141,7 @@ fn every_example_runs() {
             continue;
         }
         let g = load(&path);
-        let types = mesoflow::cli::declared_input_types(&g);
+        let types = g.declared_input_types();
         let mut rng = Rng::new(11);
         let data: BTreeMap<String, HostArray> = types
             .iter()
@@ -170,7 +170,7 @@ fn identical_kernels_share_one_pipeline() {
     let g = load(&write_graph(
         &dir,
         "chain.json",
-        &mesoflow::bench::chain_graph(20),
+        &crate::util::chain_graph(20),
     ));
     let ty = ValueType::Particles { n: 64, k: 1 };
     let p = plan_graph(&gpu.caps, &g, [("x".to_string(), ty)].into(), None, false);
@@ -186,4 +186,49 @@ fn identical_kernels_share_one_pipeline() {
     // A second program over the same cache builds nothing new.
     let again = Program::compile(&gpu, &g, &p, &mut cache).unwrap();
     assert_eq!(again.kernels_built, 0);
+}
+
+#[test]
+fn whole_steps_are_timed_end_to_end_and_compute_what_unprofiled_runs_do() {
+    let Some(gpu) = gpu() else { return };
+    use mesoflow::exec::{Profile, Program, RunOptions};
+    use mesoflow::gpu::KernelCache;
+    use mesoflow::plan::{self, PlanOptions};
+    let dir = tmpdir("step-timing");
+    let g = load(&write_graph(
+        &dir,
+        "chain.json",
+        &crate::util::chain_graph(8),
+    ));
+    let ty = ValueType::Particles { n: 300, k: 1 };
+    let x = HostArray::f32(ty, (0..300).map(|i| i as f32).collect());
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: [("x".to_string(), ty)].into_iter().collect(),
+        fuse: false,
+    };
+    let p = plan::plan(&g, &opts, &gpu.caps).unwrap();
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(&gpu, &g, &p, &mut cache).unwrap();
+    program.upload(&crate::util::named(&[("x", x)])).unwrap();
+    let mut outputs = Vec::new();
+    for profile in [Profile::Off, Profile::Steps] {
+        let stats = program
+            .run(&RunOptions {
+                steps: 3,
+                profile,
+                progress: false,
+            })
+            .unwrap();
+        if profile == Profile::Steps {
+            assert_eq!(stats.step_samples.len(), 3);
+            assert!(stats.step_samples.iter().all(|d| !d.is_zero()), "{stats:?}");
+            assert_eq!(stats.timed_by_gpu, gpu.caps.timestamps);
+            assert!(stats.profile.is_empty());
+        } else {
+            assert!(stats.step_samples.is_empty());
+        }
+        outputs.push(program.read_outputs().unwrap());
+    }
+    assert_eq!(outputs[0], outputs[1]);
 }

@@ -43,7 +43,7 @@ fn generated_pointwise_kernels_validate() {
     use mesoflow::plan::{self, Launch, PlanOptions};
     // A graph that uses every element-wise kind, fused and unfused.
     let g = crate::util::load(&crate::util::root().join("graphs/fixtures/pointwise_all.json"));
-    let inputs = mesoflow::cli::declared_input_types(&g);
+    let inputs = g.declared_input_types();
     for fuse in [true, false] {
         let opts = PlanOptions {
             outputs: None,

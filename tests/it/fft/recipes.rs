@@ -70,7 +70,7 @@ fn unfriendly_sizes_are_plan_errors_naming_the_next_friendly_size() {
             )],
         ),
     );
-    mesoflow::cli::check_graph(crate::util::registry(), &path).unwrap();
+    mesoflow::plan::validate_file(crate::util::registry(), &path).unwrap();
     assert_eq!(next_friendly(97), 98);
     assert_eq!(next_friendly(1025), 1029);
 }

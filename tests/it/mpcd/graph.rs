@@ -351,7 +351,7 @@ fn bad_mpcd_input_gets_messages_naming_file_node_and_port() {
         &g,
         &PlanOptions {
             outputs: None,
-            inputs: mesoflow::cli::declared_input_types(&g),
+            inputs: g.declared_input_types(),
             fuse: true,
         },
         &caps,

@@ -139,10 +139,31 @@ pub fn load_single_node(
 pub fn validation_error(kind: &str, params: &str, inputs: &[(&str, ValueType)]) -> String {
     let dir = single_node_dir(kind);
     let path = write_graph(&dir, "g.json", &single_node_graph(kind, params, inputs));
-    let report = mesoflow::cli::check_graph(registry(), &path);
+    let report = mesoflow::plan::validate_file(registry(), &path);
     let _ = std::fs::remove_dir_all(&dir);
     match report {
         Ok(_) => panic!("{kind} {params} validated"),
-        Err(e) => e,
+        Err(e) => e.to_string(),
     }
+}
+
+/// A graph of `n` scale nodes in a chain (x -> s0 -> ... -> s{n-1} -> y), each scaling
+/// by 1.0001.
+pub fn chain_graph(n: usize) -> String {
+    let nodes: Vec<String> = (0..n)
+        .map(|i| {
+            let src = match i {
+                0 => "inputs.x".to_string(),
+                _ => format!("s{}.out", i - 1),
+            };
+            format!(
+                r#"{{"id": "s{i}", "kind": "scale", "params": {{"factor": 1.0001}}, "inputs": {{"x": "{src}"}}}}"#
+            )
+        })
+        .collect();
+    format!(
+        r#"{{"mesoflow": 1, "inputs": {{"x": {{"type": "particles", "cols": 1}}}}, "nodes": [{}], "outputs": {{"y": "s{}.out"}}}}"#,
+        nodes.join(", "),
+        n - 1
+    )
 }

@@ -1,0 +1,105 @@
+#!/usr/bin/env bash
+# The GPU benchmarks as named suites: each runs the `mesoflow bench` commands behind the
+# tables of BENCHMARKS.md and the peers measured in the same call (PyTorch's cuFFT and
+# CUB through benches/torch_*.py, CUDA through benches/atomics.cu). On the GPU machine,
+# from the repository root, with the kit and a release binary in .gpu/
+# (../shared/gpu/README.md):
+#
+#   bash benches/gpu.sh SUITE...
+#
+#   fcm         FCM against UAMMD (Gaussian, with noise; plot), the tolerances that reach
+#               UAMMD's quoted errors, every kernel (plot), where 10^5 spends its time,
+#               Brownian dynamics (the colloids example) at 10^4 and 10^5
+#   pse         PSE per split with noise, where split 0.5 at 10^5 spends its time
+#   mpcd        MPCD particle-steps per second, per dispatch, torch's copy bandwidth
+#   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
+#   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
+#               request counts
+#   fft         rfft + irfft against cuFFT (torch), convolutions (a folded filter)
+#   primitives  reduce, sort (every variant), scan against CUB (torch)
+#   overhead    the executor against raw wgpu
+#   all         every suite above, in this order
+#
+# Each suite is sized for one device call (ten minutes at most). The log, headed once by
+# the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
+# without OUT); plots to $OUT.
+set -uo pipefail
+suites=(fcm pse mpcd spread atomics fft primitives overhead)
+usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
+want=()
+for s in "$@"; do
+  case " ${suites[*]} all " in
+    *" $s "*) ;;
+    *) echo "gpu.sh: no suite \`$s\`" >&2; usage >&2; exit 2 ;;
+  esac
+  if [ "$s" = all ]; then want+=("${suites[@]}"); else want+=("$s"); fi
+done
+if [ ${#want[@]} -eq 0 ]; then usage >&2; exit 2; fi
+source benches/common.sh
+out=${OUT:-/tmp}
+run $bin info
+
+suite_fcm() {
+  run $bin bench fcm --noise --reps 20 --plot "$out/fcm_gaussian.svg"
+  run $bin bench fcm --tolerances 3e-3,5e-5 --sizes 128:100000,256:1000000 --reps 20
+  run $bin bench fcm --kernels es,peskin3,peskin4,peskin6 --reps 10 --plot "$out/fcm_kernels.svg"
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench fcm --tolerances 1e-2 --sizes 127:100000 --reps 20
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench fcm --tolerances 1e-3 --sizes 129:100000 --reps 20
+  for size in 10000:64 100000:128; do
+    run $bin run graphs/examples/colloids.json --set n=${size%:*} --set side=${size#*:} \
+      --steps 500 --seed 1 --output diffusion --output theory
+  done
+}
+
+suite_pse() {
+  run $bin bench pse --noise --reps 20
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench pse --splits 0.5 --sizes 128:100000 --reps 20
+}
+
+suite_mpcd() {
+  run $bin bench mpcd --reps 20
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench mpcd --reps 20
+  run python3 benches/torch_reduce.py
+}
+
+suite_spread() {
+  run $bin bench spread --cells 128 --reps 10
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench spread --cells 128 --reps 10 --cases 2
+}
+
+suite_atomics() {
+  local exe=$out/atomics
+  nvcc -O3 -arch=sm_90 benches/atomics.cu -o "$exe" 2>&1 | tee -a "$log"
+  run "$exe"
+  if command -v ncu >/dev/null; then
+    echo "== ncu L2 requests and sectors of the same patterns" | tee -a "$log"
+    timeout 240 ncu --clock-control none --metrics lts__t_sectors_op_red.sum,lts__t_requests_srcunit_tex_op_red.sum,lts__t_sectors_op_atom.sum,lts__t_requests_srcunit_tex_op_atom.sum,gpu__time_duration.sum "$exe" once 2>&1 \
+      | grep -E 'global_rows|lts__|gpu__time' | tee -a "$log"
+  fi
+  rm -f "$exe"
+}
+
+suite_fft() {
+  local sizes=64,96,128,162,168,175,180,189,192,216,256,375,384
+  run $bin bench fft --sizes $sizes --comps 3 --reps 20
+  run python3 benches/torch_fft.py --sizes $sizes --comps 3 --reps 20
+  run $bin bench fft --sizes 54,108,128,162,192,256,384 --comps 3 --reps 20 --filter
+}
+
+suite_primitives() {
+  run $bin bench reduce --n 100000000 --reps 20
+  run python3 benches/torch_reduce.py
+  run $bin bench sort --n 10000000 --reps 20 --variant all
+  run $bin bench scan --n 100000000 --reps 20
+  run python3 benches/torch_primitives.py --sort-n 10000000 --scan-n 100000000 --reps 20
+}
+
+suite_overhead() {
+  run $bin bench overhead --nodes 1000 --elements 256 --reps 50
+}
+
+for s in "${want[@]}"; do
+  echo "######## suite $s" | tee -a "$log"
+  "suite_$s"
+done
+exit 0

@@ -1,0 +1,118 @@
+//! Checking a graph file without a GPU (`mesoflow validate`): loaded with its defaults and
+//! planned for its declared inputs against device-independent capabilities.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::Path;
+
+use super::{PlanOptions, plan};
+use crate::gpu::DeviceCaps;
+use crate::graph::{self, LoadOptions, Problems};
+use crate::node::Registry;
+use crate::value::ValueType;
+
+/// What [`validate_file`] found in a valid graph file.
+#[derive(Clone, Debug)]
+pub struct Validation {
+    pub nodes: usize,
+    /// Launches per step: the plan's, or where outputs plan separately, the most any
+    /// of them needs.
+    pub launches: usize,
+    /// Outputs that plan only without the optional inputs, or not at all, with the
+    /// default params (each with the problems met).
+    pub notes: Vec<String>,
+}
+
+impl fmt::Display for Validation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.notes.is_empty() {
+            write!(
+                f,
+                "{} nodes, {} launches per step",
+                self.nodes, self.launches
+            )
+        } else {
+            write!(
+                f,
+                "{} nodes, up to {} launches per step\nnotes:\n{}",
+                self.nodes,
+                self.launches,
+                self.notes.join("\n")
+            )
+        }
+    }
+}
+
+/// Capabilities for checks that do not depend on a device: the baseline's, with no
+/// binding or buffer size limit.
+fn structural_caps() -> DeviceCaps {
+    DeviceCaps {
+        max_binding: u64::MAX,
+        max_buffer: u64::MAX,
+        ..DeviceCaps::baseline()
+    }
+}
+
+/// Loads a graph file with its defaults and plans all its outputs with the declared
+/// inputs ([`graph::Graph::declared_input_types`]). Some outputs or optional inputs may
+/// need other params than the defaults (FCM's rotation needs its finer grid): the file
+/// is valid when some output plans, with the optional inputs or without them, and the
+/// others are reported as notes; otherwise the error is the problems of planning
+/// everything.
+pub fn validate_file(registry: &Registry, path: &Path) -> Result<Validation, Problems> {
+    let g = graph::load(path, registry, &LoadOptions::default())?;
+    let all = g.declared_input_types();
+    let caps = structural_caps();
+    let plan_with = |inputs: &BTreeMap<String, ValueType>, outputs: Option<Vec<String>>| {
+        let opts = PlanOptions {
+            outputs,
+            inputs: inputs.clone(),
+            fuse: true,
+        };
+        plan(&g, &opts, &caps)
+    };
+    let first_error = match plan_with(&all, None) {
+        Ok(p) => {
+            return Ok(Validation {
+                nodes: g.nodes.len(),
+                launches: p.step.len(),
+                notes: Vec::new(),
+            });
+        }
+        Err(e) => e,
+    };
+    let required: BTreeMap<String, ValueType> = all
+        .iter()
+        .filter(|(name, _)| g.inputs.iter().any(|i| &i.name == *name && !i.optional))
+        .map(|(k, v)| (k.clone(), *v))
+        .collect();
+    let mut notes = Vec::new();
+    let mut launches = 0;
+    for out in &g.outputs {
+        let only = Some(vec![out.name.clone()]);
+        match plan_with(&all, only.clone()) {
+            Ok(p) => launches = launches.max(p.step.len()),
+            Err(e_all) => match plan_with(&required, only) {
+                Ok(p) => {
+                    launches = launches.max(p.step.len());
+                    notes.push(format!(
+                        "output `{}` plans without the optional inputs only (with the defaults):\n{e_all}",
+                        out.name
+                    ));
+                }
+                Err(_) => notes.push(format!(
+                    "output `{}` does not plan with the default params:\n{e_all}",
+                    out.name
+                )),
+            },
+        }
+    }
+    if notes.len() == g.outputs.len() {
+        return Err(first_error);
+    }
+    Ok(Validation {
+        nodes: g.nodes.len(),
+        launches,
+        notes,
+    })
+}
