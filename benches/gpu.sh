@@ -19,6 +19,10 @@
 #   primitives  reduce, sort (every variant), scan against CUB (torch)
 #   overhead    the executor against raw wgpu
 #   all         every suite above, in this order
+#   compare     the FCM, PSE, spread, FFT and MPCD rows timed with $BEFORE (another
+#               release binary, e.g. .gpu/mesoflow-before) and with .gpu/mesoflow,
+#               alternating ROUNDS times (2): that a change left the speed as it was
+#               (not in `all`)
 #
 # Each suite is sized for one device call (ten minutes at most). The log, headed once by
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
@@ -29,7 +33,7 @@ usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
   case " ${suites[*]} all " in
-    *" $s "*) ;;
+    *" $s "* | compare) ;;
     *) echo "gpu.sh: no suite \`$s\`" >&2; usage >&2; exit 2 ;;
   esac
   if [ "$s" = all ]; then want+=("${suites[@]}"); else want+=("$s"); fi
@@ -92,6 +96,29 @@ suite_primitives() {
   run $bin bench sort --n 10000000 --reps 20 --variant all
   run $bin bench scan --n 100000000 --reps 20
   run python3 benches/torch_primitives.py --sort-n 10000000 --scan-n 100000000 --reps 20
+}
+
+# Rows that every binary since the session-6 one understands (per-launch medians).
+compare_rows() {
+  local b=$1
+  run $b bench fcm --tolerances 1e-2,1e-3,1e-4 --sizes 128:100000 --reps 20
+  run $b bench pse --splits 0.5 --sizes 128:100000 --reps 20
+  run $b bench spread --cells 128 --reps 10
+  run $b bench fft --sizes 128,162,192 --comps 3 --reps 20
+  run $b bench mpcd --reps 20
+}
+
+suite_compare() {
+  if [ ! -x "${BEFORE:-}" ]; then
+    echo "gpu.sh compare: set BEFORE to the other binary" | tee -a "$log"
+    return
+  fi
+  for round in $(seq 1 "${ROUNDS:-2}"); do
+    echo "######## compare round $round: before ($BEFORE)" | tee -a "$log"
+    compare_rows "$BEFORE"
+    echo "######## compare round $round: after ($bin)" | tee -a "$log"
+    compare_rows "$bin"
+  done
 }
 
 suite_overhead() {
