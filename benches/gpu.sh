@@ -32,8 +32,8 @@ suites=(fcm pse mpcd spread atomics fft primitives overhead)
 usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
-  case " ${suites[*]} all " in
-    *" $s "* | compare) ;;
+  case " ${suites[*]} all compare " in
+    *" $s "*) ;;
     *) echo "gpu.sh: no suite \`$s\`" >&2; usage >&2; exit 2 ;;
   esac
   if [ "$s" = all ]; then want+=("${suites[@]}"); else want+=("$s"); fi
