@@ -9,7 +9,7 @@
 
 use std::f64::consts::PI;
 
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::gpu::{CompileCtx, CompileError, Dispatch, NodeIo};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
     RefCtx, Registry, Signature,
@@ -720,27 +720,14 @@ impl GpuKernels for StokesNoiseNode {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        let ty = self.ty();
-        let source = crate::transform::standalone_source(&self.body, &ty, false);
-        let mut bindings = vec![Binding::StorageRead, Binding::StorageReadWrite];
-        if self.body.uses_step {
-            bindings.push(Binding::StorageRead);
-        }
-        let kernel = cx.kernel(&KernelSpec::new("stokes_noise", source, &bindings))?;
-        let params = cx.table(
-            "stokes_noise params",
-            bytemuck::cast_slice(&self.body.param_words()),
-        );
-        let mut buffers = vec![&params, io.outputs[0].buffer];
-        if self.body.uses_step {
-            buffers.push(cx.clock);
-        }
-        let modes = ty.words() / 2 / 3;
-        Ok(vec![cx.dispatch(
-            &kernel,
-            &buffers,
-            cx.grid_1d(modes, WG_1D),
-        )])
+        let out = io.outputs[0];
+        Ok(vec![crate::transform::standalone_dispatch(
+            cx,
+            "stokes_noise",
+            &self.body,
+            None,
+            out,
+        )?])
     }
 }
 

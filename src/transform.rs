@@ -12,7 +12,7 @@
 use std::fmt::Write;
 
 use crate::gpu::{
-    Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo, WG_1D,
+    Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo, Slot, WG_1D,
 };
 use crate::value::{ValueType, half_dims};
 
@@ -211,34 +211,39 @@ pub fn standalone_source(body: &SpectralBody, ty: &ValueType, reads_input: bool)
         .expect("common/index.wgsl, common/wave.wgsl and the body's imports are embedded")
 }
 
-/// A spectral node that is not folded into a transform: its function over every wave
-/// vector of its input.
+/// The kernel of a spectral function run alone over every wave vector of `out`: on
+/// `input` (a spectral node that is not folded into a transform), or on zeros (a
+/// generator such as `stokes_noise`). `label` names the kernel and its params table.
 pub fn standalone_dispatch(
     cx: &mut CompileCtx,
+    label: &str,
     body: &SpectralBody,
-    io: &NodeIo,
+    input: Option<&wgpu::Buffer>,
+    out: Slot,
 ) -> Result<Dispatch, CompileError> {
-    let input = io.inputs[0]
-        .ok_or_else(|| CompileError::Unsupported("a spectral node needs its input".into()))?;
-    let out = io.outputs[0];
-    let source = standalone_source(body, &out.ty, true);
-    let mut bindings = vec![
-        Binding::StorageRead,
-        Binding::StorageRead,
-        Binding::StorageReadWrite,
-    ];
+    let source = standalone_source(body, &out.ty, input.is_some());
+    let mut bindings = vec![Binding::StorageRead];
+    if input.is_some() {
+        bindings.push(Binding::StorageRead);
+    }
+    bindings.push(Binding::StorageReadWrite);
     if body.uses_step {
         bindings.push(Binding::StorageRead);
     }
-    let kernel = cx.kernel(&KernelSpec::new("spectral", source, &bindings))?;
-    let params = cx.table("spectral params", bytemuck::cast_slice(&body.param_words()));
+    let kernel = cx.kernel(&KernelSpec::new(label, source, &bindings))?;
+    let params = cx.table(
+        &format!("{label} params"),
+        bytemuck::cast_slice(&body.param_words()),
+    );
     let cells = match out.ty {
         ValueType::ComplexGrid { comps, .. } | ValueType::HalfComplexGrid { comps, .. } => {
             out.ty.words() / 2 / comps.max(1) as u64
         }
         _ => 0,
     };
-    let mut buffers = vec![&params, input.buffer, out.buffer];
+    let mut buffers = vec![&params];
+    buffers.extend(input);
+    buffers.push(out.buffer);
     if body.uses_step {
         buffers.push(cx.clock);
     }

@@ -417,7 +417,21 @@ impl<'a> Program<'a> {
         let dispatches = match inst.node.lowering() {
             Lowering::Kernels(k) => k.compile(cx, io).map_err(err)?,
             Lowering::Spectral(body) => {
-                vec![transform::standalone_dispatch(cx, &body, io).map_err(err)?]
+                let input = io.inputs[0].ok_or_else(|| {
+                    err(CompileError::Unsupported(
+                        "a spectral node needs its input".into(),
+                    ))
+                })?;
+                vec![
+                    transform::standalone_dispatch(
+                        cx,
+                        "spectral",
+                        &body,
+                        Some(input.buffer),
+                        io.outputs[0],
+                    )
+                    .map_err(err)?,
+                ]
             }
             _ => panic!(
                 "node `{}` scheduled as a single launch cannot run as one",
