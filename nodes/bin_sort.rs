@@ -171,12 +171,13 @@ struct BinSort {
 }
 
 impl Node for BinSort {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(Some(t @ ValueType::Indices { n })) = inputs.first().copied() else {
             return Err(PortError::new("keys", "is required"));
         };
         let bins = ValueType::Indices { n: self.bins };
         Ok(Signature {
+            plan: None,
             outputs: vec![t, t, bins, bins],
             scratch: scratch_bytes(n as u64, self.bins as u64),
         })

@@ -5,6 +5,7 @@
 //! a stable order inside each cell.
 
 use crate::expr::ParamValue;
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
@@ -164,7 +165,7 @@ impl CellHash {
 }
 
 impl Node for CellHash {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(ValueType::Particles { n, k }) = inputs[0] else {
             unreachable!("port type checked")
         };
@@ -303,7 +304,7 @@ struct Histogram {
 }
 
 impl Node for Histogram {
-    fn infer(&self, _: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, _: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         Ok(Signature::outputs(vec![ValueType::Indices {
             n: self.bins,
         }]))

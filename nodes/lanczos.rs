@@ -8,6 +8,7 @@
 //! and the stopping rule of Ando et al. (2012), eq. 27: the relative change
 //! |y_k - y_(k-1)| / |y_k| at most `tolerance`. The answer is V_k y_k.
 
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo};
 use crate::node::{
     Decision, GpuIterative, IterativeKernels, LoopError, Lowering, Node, NodeKind, ParamSpec,
@@ -151,7 +152,7 @@ struct Shape {
 }
 
 impl Node for Lanczos {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let z = inputs[0].expect("required");
         if let Some(p) = inputs[1]
             && p != z
@@ -163,6 +164,7 @@ impl Node for Lanczos {
         }
         let layout = Layout::new(z.words(), self.max_iterations);
         Ok(Signature {
+            plan: None,
             outputs: vec![z, z],
             scratch: vec![
                 (self.max_iterations as u64 + 3) * z.bytes(),
@@ -480,7 +482,7 @@ impl NodeKind for MatvecKind {
 struct Matvec;
 
 impl Node for Matvec {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let (Some(ValueType::Particles { n: rows, k: cols }), Some(x)) = (inputs[0], inputs[1])
         else {
             unreachable!("port types checked")

@@ -2,6 +2,7 @@
 //! (the `perm` of a sort: `gather(values, perm)` reorders, `scatter(values, perm)` undoes).
 //! Rows are copied as raw 4-byte words, so f32 particle arrays and u32 index arrays alike.
 
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
@@ -83,7 +84,7 @@ impl Node for Gather {
         (!self.enabled).then_some(0)
     }
 
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let values = inputs[0].expect("required");
         let Some(ValueType::Indices { n }) = inputs[1] else {
             unreachable!("port type checked")
@@ -216,7 +217,7 @@ impl Node for Scatter {
         (!self.enabled).then_some(0)
     }
 
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let values = inputs[0].expect("required");
         let Some(ValueType::Indices { n }) = inputs[1] else {
             unreachable!("port type checked")

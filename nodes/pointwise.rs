@@ -2,6 +2,7 @@
 //! neighbours, or alone); each kind is a WGSL body plus its f64 CPU reference, written
 //! side by side in one table row.
 
+use crate::gpu::DeviceCaps;
 use crate::node::{
     Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PointwiseBody, PortError, PortSpec,
     RefCtx, Registry, Signature,
@@ -400,7 +401,7 @@ struct PointwiseNode {
 }
 
 impl Node for PointwiseNode {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let mut shape: Option<(usize, ValueType)> = None;
         for (i, t) in inputs.iter().enumerate() {
             let Some(t) = t else { continue };

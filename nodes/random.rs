@@ -11,6 +11,7 @@
 //! `random_bits` writes the raw words.
 
 use super::pointwise::{BASE, ElemCtx, Param, PointwiseKind};
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
@@ -269,7 +270,7 @@ struct RandomBits {
 }
 
 impl Node for RandomBits {
-    fn infer(&self, _: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, _: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         Ok(Signature::outputs(vec![ValueType::Indices {
             n: self.count,
         }]))

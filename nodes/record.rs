@@ -1,6 +1,7 @@
 //! `record`: a trajectory, snapshots of a particle array every few steps, kept on the GPU
 //! for the whole run (a persistent output) and read back once at the end.
 
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
@@ -64,7 +65,7 @@ struct Record {
 }
 
 impl Node for Record {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(ValueType::Particles { n, k }) = inputs[0] else {
             unreachable!("port type checked")
         };

@@ -7,6 +7,7 @@
 //! conserved totals (momentum) to about f32 rounding of the result.
 
 use crate::expr::ParamValue;
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
@@ -185,7 +186,7 @@ struct FlatReduce {
 }
 
 impl Node for FlatReduce {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let a = inputs[0].expect("required");
         if self.kind.map == Map::Product {
             let b = inputs[1].expect("required");
@@ -197,6 +198,7 @@ impl Node for FlatReduce {
             }
         }
         Ok(Signature {
+            plan: None,
             outputs: vec![ValueType::Scalar],
             scratch: vec![8 * groups_for(a.words()) as u64],
         })
@@ -331,7 +333,7 @@ struct ColumnReduce {
 }
 
 impl Node for ColumnReduce {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(ValueType::Particles { n, k }) = inputs[0] else {
             unreachable!("port type checked")
         };
@@ -342,6 +344,7 @@ impl Node for ColumnReduce {
             ));
         }
         Ok(Signature {
+            plan: None,
             outputs: vec![ValueType::Particles { n: 1, k }],
             scratch: vec![32 * groups_for(n as u64 * 4) as u64],
         })
@@ -492,7 +495,7 @@ fn segment_bounds(starts: &[f64], s: usize, rows: usize) -> (usize, usize) {
 }
 
 impl Node for SegmentReduce {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(ValueType::Particles { k, .. }) = inputs[0] else {
             unreachable!("port type checked")
         };

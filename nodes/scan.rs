@@ -246,11 +246,12 @@ struct ScanNode {
 }
 
 impl Node for ScanNode {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(Some(t)) = inputs.first() else {
             return Err(PortError::new("x", "is required"));
         };
         Ok(Signature {
+            plan: None,
             outputs: vec![*t],
             scratch: scratch_bytes(t.words()),
         })

@@ -358,11 +358,12 @@ impl SortNode {
 }
 
 impl Node for SortNode {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(Some(t)) = inputs.first() else {
             return Err(PortError::new("keys", "is required"));
         };
         Ok(Signature {
+            plan: None,
             outputs: vec![*t, *t],
             scratch: scratch_bytes(t.words(), self.bits, self.variant),
         })

@@ -9,6 +9,7 @@
 
 use std::f64::consts::PI;
 
+use crate::gpu::DeviceCaps;
 use crate::gpu::{CompileCtx, CompileError, Dispatch, NodeIo};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
@@ -548,7 +549,7 @@ struct SpectralNode {
 }
 
 impl Node for SpectralNode {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let t = inputs
             .first()
             .copied()
@@ -700,7 +701,7 @@ impl StokesNoiseNode {
 }
 
 impl Node for StokesNoiseNode {
-    fn infer(&self, _: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, _: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         Ok(Signature::outputs(vec![self.ty()]))
     }
 

@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use crate::expr::{HostFunction, HostFunctions, ParamValue};
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, NodeIo};
+pub use crate::gpu::{NodeDecision, NodePlan};
 use crate::transform::{SpectralBody, Transform};
 use crate::value::{PortType, RefArray, ValueType};
 
@@ -356,12 +357,16 @@ impl PortError {
     }
 }
 
-/// Output types and scratch needs of a node for given input types.
-#[derive(Clone, Debug, PartialEq)]
+/// Output types and scratch needs of a node for given input types, and the node's
+/// decision for them.
+#[derive(Clone, Debug)]
 pub struct Signature {
     pub outputs: Vec<ValueType>,
     /// Scratch buffers in bytes, live only while the node runs; the planner pools them.
     pub scratch: Vec<u64>,
+    /// What a node with several strategies chose for these inputs and this adapter (see
+    /// [`NodePlan`]): the plan keeps it, `inspect` prints it, compilation reads it.
+    pub plan: Option<NodePlan>,
 }
 
 impl Signature {
@@ -369,7 +374,18 @@ impl Signature {
         Signature {
             outputs,
             scratch: Vec::new(),
+            plan: None,
         }
+    }
+
+    pub fn with_scratch(mut self, scratch: Vec<u64>) -> Self {
+        self.scratch = scratch;
+        self
+    }
+
+    pub fn with_plan(mut self, plan: impl NodeDecision) -> Self {
+        self.plan = Some(NodePlan::new(plan));
+        self
     }
 }
 
@@ -493,9 +509,15 @@ pub struct RefCtx {
 
 /// A node instance with checked params.
 pub trait Node: Send + Sync {
-    /// Output types for the given input types (`None`: an absent optional input). Inputs
-    /// already match their ports' [`PortType`]s; this checks the relations between them.
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError>;
+    /// Output types for the given input types (`None`: an absent optional input) on an
+    /// adapter with these capabilities. Inputs already match their ports' [`PortType`]s;
+    /// this checks the relations between them. A node with several strategies decides
+    /// here, once, and returns its decision in [`Signature::plan`].
+    fn infer(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+    ) -> Result<Signature, PortError>;
 
     fn lowering(&self) -> Lowering<'_>;
 

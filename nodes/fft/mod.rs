@@ -243,7 +243,7 @@ impl FftNode {
 }
 
 impl Node for FftNode {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let (dims, comps) = self.grid(inputs)?;
         for (a, &n) in dims.iter().enumerate() {
             if n == 0 {

@@ -5,6 +5,7 @@ use super::{
     CellSums, Geometry, SUM_V, SumsLayout, check_rule, fx_round, geometry_params, grid_shift,
     key_into, key_of, particle_ports, rule_param, thermal_params, value_of,
 };
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D, shaders};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
@@ -163,7 +164,7 @@ impl MpcdBin {
 }
 
 impl Node for MpcdBin {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = self.geo.particles("positions", inputs[0])?;
         let nv = self.geo.particles("velocities", inputs[1])?;
         if n != nv {
@@ -578,7 +579,7 @@ impl MpcdCollide {
 }
 
 impl Node for MpcdCollide {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = self.geo.particles("velocities", inputs[0])?;
         match inputs[1] {
             Some(ValueType::Indices { n: nc }) if nc == n => {}

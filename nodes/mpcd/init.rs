@@ -3,6 +3,7 @@
 //! Maxwell-Boltzmann at kT with the mean velocity (summed in exact fixed point) removed.
 
 use super::{Geometry, geometry_params, key_into, key_of, thermal_params};
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
@@ -129,7 +130,7 @@ impl MpcdInit {
 }
 
 impl Node for MpcdInit {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         if let Some(given) = self.given(inputs)? {
             return Ok(Signature::outputs(vec![given, given]));
         }
@@ -138,6 +139,7 @@ impl Node for MpcdInit {
             k: self.geo.dims() as u32,
         };
         Ok(Signature {
+            plan: None,
             outputs: vec![t, t],
             scratch: vec![32],
         })

@@ -4,6 +4,7 @@
 use super::{
     Geometry, SUM_V, SumsLayout, fx_round, geometry_params, thermal_params, value_of, words_of,
 };
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
@@ -113,7 +114,7 @@ fn add(acc: &mut [f64], i: usize, v: i64) {
 }
 
 impl Node for MpcdMeasure {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = self.geo.particles("positions", inputs[0])?;
         let nv = self.geo.particles("velocities", inputs[1])?;
         if n != nv {
@@ -307,7 +308,7 @@ struct MpcdAverage {
 }
 
 impl Node for MpcdAverage {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let want = HEAD as u32 + 4 * self.u.bins;
         if inputs[0] != Some(ValueType::Indices { n: want }) {
             return Err(PortError::new(

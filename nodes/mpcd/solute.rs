@@ -5,6 +5,7 @@
 //! v' = u + R (v - u), V' = u + R (V - u), conserving each cell's momentum and energy.
 
 use super::{Geometry, SumsLayout, geometry_params, grid_shift, key_into, key_of, thermal_params};
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
@@ -114,7 +115,7 @@ fn round_even(x: f64) -> i64 {
 }
 
 impl Node for MpcdBinSolute {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let ncells = self.geo.ncells();
         let solvent = match inputs[0] {
             Some(ValueType::Indices { n }) => SumsLayout::of_words(ncells, n as u64),

@@ -2,6 +2,7 @@
 //! plates (bounce-back or specular) perpendicular to the last axis and a periodic wrap.
 
 use super::{Geometry, geometry_params, particle_ports};
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
@@ -162,7 +163,7 @@ impl MpcdStream {
 }
 
 impl Node for MpcdStream {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = self.geo.particles("positions", inputs[0])?;
         let nv = self.geo.particles("velocities", inputs[1])?;
         if n != nv {

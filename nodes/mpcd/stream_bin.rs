@@ -16,6 +16,7 @@
 use super::collide::{MpcdBin, MpcdBinKind};
 use super::particle_ports;
 use super::stream::{MpcdStream, MpcdStreamKind};
+use crate::gpu::DeviceCaps;
 use crate::gpu::{
     Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Period, Slot, WG_1D,
 };
@@ -84,9 +85,16 @@ struct MpcdStreamBin {
 }
 
 impl Node for MpcdStreamBin {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
-        let moved = self.stream.infer(inputs)?.outputs;
-        let binned = self.bin.infer(&[Some(moved[0]), Some(moved[1])])?.outputs;
+    fn infer(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+    ) -> Result<Signature, PortError> {
+        let moved = self.stream.infer(inputs, caps)?.outputs;
+        let binned = self
+            .bin
+            .infer(&[Some(moved[0]), Some(moved[1])], caps)?
+            .outputs;
         let mut sig = Signature::outputs(vec![moved[0], moved[1], binned[0], binned[1]]);
         if self.sort_every > 0 {
             // Streamed positions and velocities, cells, sorted cells, permutation, then
@@ -99,8 +107,10 @@ impl Node for MpcdStreamBin {
                 cells.bytes(),
                 cells.bytes(),
             ];
-            sig.scratch
-                .extend(self.sorter.infer(&[Some(cells)])?.scratch);
+            // The sorter's decision, if it takes one, is this node's: its compile gets it.
+            let sorter = self.sorter.infer(&[Some(cells)], caps)?;
+            sig.scratch.extend(sorter.scratch);
+            sig.plan = sorter.plan;
         }
         Ok(sig)
     }
@@ -215,6 +225,7 @@ impl GpuKernels for MpcdStreamBin {
                 },
             ],
             scratch: sort_scratch.to_vec(),
+            plan: io.plan,
         };
         for d in self.sorter.compile(cx, &sort_io)? {
             out.push(d.on_steps(on));

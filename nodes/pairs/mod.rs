@@ -565,7 +565,7 @@ impl NeighbourSum {
 }
 
 impl Node for NeighbourSum {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = check_rows(&self.kernel, inputs)?;
         let Some(ValueType::Indices { n: keys }) = inputs[2] else {
             unreachable!("port type checked")
@@ -837,7 +837,7 @@ pub struct NeighbourList {
 }
 
 impl Node for NeighbourList {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(ValueType::Particles { n, .. }) = inputs[0] else {
             unreachable!("port type checked")
         };
@@ -1050,7 +1050,7 @@ pub struct AllPairs {
 }
 
 impl Node for AllPairs {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = check_rows(&self.kernel, inputs)?;
         Ok(Signature::outputs(vec![ValueType::Particles { n, k: 3 }]))
     }

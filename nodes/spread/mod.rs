@@ -13,6 +13,7 @@ pub mod tilegen;
 pub mod window;
 
 use crate::expr::ParamValue;
+use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Slot};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
@@ -540,7 +541,7 @@ impl Spread {
 }
 
 impl Node for Spread {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = check_positions(&self.gw, inputs[0])?;
         let Some(ValueType::Particles { n: m, k: comps }) = inputs[1] else {
             unreachable!("port type checked")
@@ -910,7 +911,7 @@ struct Interpolate {
 }
 
 impl Node for Interpolate {
-    fn infer(&self, inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(ValueType::RealGrid { dims, comps }) = inputs[0] else {
             unreachable!("port type checked")
         };

@@ -571,7 +571,10 @@ fn node_reference(
         .build(&params)
         .map_err(|e| failed(e.to_string()))?;
     let types: Vec<Option<ValueType>> = inputs.iter().map(|r| r.as_ref().map(|r| r.ty)).collect();
-    let sig = built.infer(&types).map_err(|e| failed(format!("{e:?}")))?;
+    // Output types only: the baseline adapter serves (the decisions do not change them).
+    let sig = built
+        .infer(&types, &mesoflow::gpu::DeviceCaps::baseline())
+        .map_err(|e| failed(format!("{e:?}")))?;
     let mut out: Vec<_> = sig
         .outputs
         .iter()

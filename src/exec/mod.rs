@@ -14,7 +14,7 @@ use thiserror::Error;
 
 use crate::gpu::{
     Binding, CompileCtx, CompileError, Dispatch, GpuContext, GpuError, KernelCache, KernelSpec,
-    NodeIo, Slot, WG_1D,
+    NodeIo, NodePlan, Slot, WG_1D,
 };
 use crate::graph::{Graph, NodeId};
 use crate::ids::IdVec;
@@ -337,13 +337,14 @@ impl<'a> Program<'a> {
     }
 
     /// The buffers a node's launch binds, for a step of the given parity.
-    fn node_io(
-        &self,
+    fn node_io<'p>(
+        &'p self,
         inputs: &[Option<ValueId>],
         outputs: &[ValueId],
         scratch: &[ValueId],
+        plan: Option<&'p NodePlan>,
         parity: usize,
-    ) -> NodeIo<'_> {
+    ) -> NodeIo<'p> {
         let slot = |v: ValueId| Slot {
             buffer: self.buffer(v, parity),
             ty: self.plan.values[v].ty,
@@ -352,6 +353,7 @@ impl<'a> Program<'a> {
             inputs: inputs.iter().map(|v| v.map(slot)).collect(),
             outputs: outputs.iter().map(|&v| slot(v)).collect(),
             scratch: scratch.iter().map(|&v| self.buffer(v, parity)).collect(),
+            plan,
         }
     }
 
@@ -368,13 +370,18 @@ impl<'a> Program<'a> {
                 inputs,
                 outputs,
                 scratch,
+                plan,
                 ..
-            } => self.compile_node(cx, *node, &self.node_io(inputs, outputs, scratch, parity)),
+            } => {
+                let io = self.node_io(inputs, outputs, scratch, plan.as_ref(), parity);
+                self.compile_node(cx, *node, &io)
+            }
             Launch::Transform {
                 node,
                 inputs,
                 outputs,
                 scratch,
+                plan,
                 fold,
                 ..
             } => {
@@ -383,7 +390,7 @@ impl<'a> Program<'a> {
                     TransformFold::Hosts(f) => std::slice::from_ref(&f.output),
                     _ => outputs.as_slice(),
                 };
-                let io = self.node_io(inputs, outputs, scratch, parity);
+                let io = self.node_io(inputs, outputs, scratch, plan.as_ref(), parity);
                 self.compile_transform(cx, *node, fold, &io)
             }
             Launch::Fused(k) => self.compile_fused(cx, k, parity),
@@ -393,10 +400,11 @@ impl<'a> Program<'a> {
                 inputs,
                 outputs,
                 scratch,
+                plan,
                 body,
                 ..
             } => {
-                let io = self.node_io(inputs, outputs, scratch, parity);
+                let io = self.node_io(inputs, outputs, scratch, plan.as_ref(), parity);
                 self.compile_loop(cx, *node, body, &io, parity)
             }
         }

@@ -241,11 +241,58 @@ pub struct Slot<'a> {
     pub ty: ValueType,
 }
 
-/// The buffers of one node invocation, in port order.
+/// The buffers of one node invocation, in port order, and the node's decision for them.
 pub struct NodeIo<'a> {
     pub inputs: Vec<Option<Slot<'a>>>,
     pub outputs: Vec<Slot<'a>>,
     pub scratch: Vec<&'a wgpu::Buffer>,
+    /// What the node decided when it was planned for these inputs (`Signature::plan`).
+    pub plan: Option<&'a NodePlan>,
+}
+
+impl NodeIo<'_> {
+    /// The node's planned decision as its own type. A node that decides in `infer` finds
+    /// it here; its absence (or another type) is a planner bug.
+    pub fn plan<T: NodeDecision>(&self) -> &T {
+        self.plan
+            .and_then(|p| p.get::<T>())
+            .expect("the node's decision is planned with it (Signature::plan)")
+    }
+}
+
+/// A node's decision for one set of input types and one adapter: a value of the node's
+/// own type (spreading's strategy), shown as one line by `mesoflow inspect`.
+pub trait NodeDecision: std::any::Any + std::fmt::Display + Send + Sync {}
+
+impl<T: std::any::Any + std::fmt::Display + Send + Sync> NodeDecision for T {}
+
+/// A node's decision as the plan carries it: taken once in `Node::infer`, read back by
+/// the node when it compiles ([`NodeIo::plan`]).
+#[derive(Clone)]
+pub struct NodePlan(Arc<dyn NodeDecision>);
+
+impl NodePlan {
+    pub fn new(decision: impl NodeDecision) -> Self {
+        NodePlan(Arc::new(decision))
+    }
+
+    /// The decision as the node's own type; `None` for another type.
+    pub fn get<T: NodeDecision>(&self) -> Option<&T> {
+        let any: &dyn std::any::Any = &*self.0;
+        any.downcast_ref()
+    }
+}
+
+impl std::fmt::Display for NodePlan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl std::fmt::Debug for NodePlan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "NodePlan({})", self.0)
+    }
 }
 
 /// What a node may use while compiling: the device, the kernel cache, the engine clock.

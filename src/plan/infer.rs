@@ -4,7 +4,7 @@
 //! An absent optional input makes the nodes that require it absent, and so on downstream.
 
 use super::demand::Demand;
-use crate::gpu::DeviceCaps;
+use crate::gpu::{DeviceCaps, NodePlan};
 use crate::graph::{Graph, NodeId, Problem, Problems, Source};
 use crate::ids::IdVec;
 use crate::value::ValueType;
@@ -21,6 +21,8 @@ pub(super) enum Inferred {
         outputs: Vec<ValueType>,
         /// Scratch buffers in bytes.
         scratch: Vec<u64>,
+        /// The node's decision for these inputs (`Signature::plan`).
+        plan: Option<NodePlan>,
     },
 }
 
@@ -63,6 +65,14 @@ impl Types {
         match &self.nodes[n] {
             Inferred::Present { scratch, .. } => scratch,
             _ => &[],
+        }
+    }
+
+    /// A node's decision for its inputs, where it takes one.
+    pub fn plan(&self, n: NodeId) -> Option<&NodePlan> {
+        match &self.nodes[n] {
+            Inferred::Present { plan, .. } => plan.as_ref(),
+            _ => None,
         }
     }
 }
@@ -200,7 +210,7 @@ impl Inference<'_> {
             self.types.nodes[n] = Inferred::Absent;
             return;
         }
-        match inst.node.infer(&types) {
+        match inst.node.infer(&types, self.caps) {
             Ok(sig) => {
                 assert_eq!(
                     sig.outputs.len(),
@@ -225,6 +235,7 @@ impl Inference<'_> {
                 self.types.nodes[n] = Inferred::Present {
                     outputs: sig.outputs,
                     scratch: sig.scratch,
+                    plan: sig.plan,
                 };
             }
             Err(e) => {

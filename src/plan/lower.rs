@@ -325,6 +325,8 @@ impl Lowerer<'_> {
         let input_types = self.types.inputs_of(g, n);
         let inst = &g.nodes[n];
         let mut notes = inst.node.notes(&input_types);
+        let plan = self.types.plan(n).cloned();
+        notes.extend(plan.as_ref().map(|p| p.to_string()));
         match inst.node.lowering() {
             Lowering::Transform(t) => {
                 notes.extend(t.device_notes(&input_types, self.caps, fold.folding()));
@@ -335,6 +337,7 @@ impl Lowerer<'_> {
                     outputs,
                     scratch,
                     notes,
+                    plan,
                     fold,
                 }
             }
@@ -348,6 +351,7 @@ impl Lowerer<'_> {
                     outputs,
                     scratch,
                     notes,
+                    plan,
                 }
             }
         }
@@ -382,6 +386,7 @@ impl Lowerer<'_> {
             outputs,
             scratch,
             mut notes,
+            plan,
             ..
         } = self.single(phase, Unit::Single(n))
         else {
@@ -409,6 +414,7 @@ impl Lowerer<'_> {
             outputs,
             scratch,
             notes,
+            plan,
             body: body_launches,
         }
     }

@@ -23,7 +23,7 @@ pub use check::{Validation, validate_file};
 pub use fuse::FusedKernel;
 pub use show::{human_bytes, to_dot, to_text};
 
-use crate::gpu::DeviceCaps;
+use crate::gpu::{DeviceCaps, NodePlan};
 use crate::graph::{Graph, NodeId, Problems};
 use crate::ids::IdVec;
 use crate::transform::Folding;
@@ -147,6 +147,8 @@ pub enum Launch {
         scratch: Vec<ValueId>,
         /// The node's own decisions for these inputs (see `Node::notes`).
         notes: Vec<String>,
+        /// The node's decision, handed back to it when it compiles (`Signature::plan`).
+        plan: Option<NodePlan>,
     },
     /// A transform (see `crate::transform`), with what it folds in.
     Transform {
@@ -157,6 +159,7 @@ pub enum Launch {
         outputs: Vec<ValueId>,
         scratch: Vec<ValueId>,
         notes: Vec<String>,
+        plan: Option<NodePlan>,
         fold: TransformFold,
     },
     /// One generated kernel for a chain of element-wise nodes.
@@ -171,6 +174,7 @@ pub enum Launch {
         outputs: Vec<ValueId>,
         scratch: Vec<ValueId>,
         notes: Vec<String>,
+        plan: Option<NodePlan>,
         body: Vec<Launch>,
     },
 }

@@ -99,6 +99,7 @@ fn launch_text(out: &mut String, g: &Graph, plan: &Plan, i: usize, l: &Launch) {
                 scratch,
                 notes,
                 body,
+                ..
             } => {
                 let n = &g.nodes[*node];
                 writeln!(out, "  {:>3}. {} ({}), a loop:", i + 1, n.id, n.kind).unwrap();
@@ -120,6 +121,7 @@ fn launch_text(out: &mut String, g: &Graph, plan: &Plan, i: usize, l: &Launch) {
                 outputs,
                 scratch,
                 notes,
+                ..
             } => node_text(out, g, plan, i, *node, "", inputs, outputs, scratch, notes),
             Launch::Transform {
                 node,
@@ -128,6 +130,7 @@ fn launch_text(out: &mut String, g: &Graph, plan: &Plan, i: usize, l: &Launch) {
                 scratch,
                 notes,
                 fold,
+                ..
             } => {
                 let mut head = String::new();
                 match fold {

@@ -3,6 +3,7 @@
 
 use std::collections::BTreeMap;
 
+use mesoflow::gpu::DeviceCaps;
 use mesoflow::node::{RefCtx, check_params};
 use mesoflow::value::{HostArray, RefArray, ValueType};
 
@@ -19,7 +20,8 @@ pub fn reference(kind: &str, params: &str, inputs: &[Option<&HostArray>]) -> Vec
     let p = check_params(&k.params(), &raw).unwrap();
     let node = k.build(&p).unwrap();
     let types: Vec<Option<ValueType>> = inputs.iter().map(|a| a.map(|a| a.ty)).collect();
-    let sig = node.infer(&types).unwrap();
+    // Output types only: the baseline adapter serves (the decisions do not change them).
+    let sig = node.infer(&types, &DeviceCaps::baseline()).unwrap();
     let refs: Vec<Option<RefArray>> = inputs.iter().map(|a| a.map(|a| a.to_ref())).collect();
     let mut outs: Vec<RefArray> = sig
         .outputs
