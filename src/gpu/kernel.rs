@@ -101,6 +101,7 @@ impl KernelCache {
         if let Some(k) = self.map.get(spec) {
             return Ok(k.clone());
         }
+        dump(spec);
         let k = Arc::new(build_kernel(gpu, spec)?);
         self.built += 1;
         self.map.insert(spec.clone(), k.clone());
@@ -113,6 +114,42 @@ impl KernelCache {
 
     pub fn is_empty(&self) -> bool {
         self.map.is_empty()
+    }
+}
+
+/// For kernel work and for checking that a refactor leaves the kernels as they were:
+/// with `MESOFLOW_KERNEL_DUMP=<folder>`, every kernel built is written there as
+/// `<hash of its spec>.wgsl`, its label, entry, bindings and constants in a comment
+/// first, so two runs' folders compare file by file. Failing to write is reported on
+/// stderr, never an error of the run.
+fn dump(spec: &KernelSpec) {
+    use std::hash::{Hash, Hasher};
+    static DIR: std::sync::OnceLock<Option<std::path::PathBuf>> = std::sync::OnceLock::new();
+    let Some(dir) = DIR
+        .get_or_init(|| std::env::var_os("MESOFLOW_KERNEL_DUMP").map(Into::into))
+        .as_deref()
+    else {
+        return;
+    };
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    spec.hash(&mut h);
+    let constants: Vec<String> = spec
+        .constants
+        .iter()
+        .map(|(n, bits)| format!("{n} = {}", f64::from_bits(*bits)))
+        .collect();
+    let text = format!(
+        "// {}\n// entry {}, bindings {:?}, specialise {}\n// constants: {}\n{}",
+        spec.label,
+        spec.entry,
+        spec.bindings,
+        spec.specialise,
+        constants.join(", "),
+        spec.source
+    );
+    let file = dir.join(format!("{:016x}.wgsl", h.finish()));
+    if let Err(e) = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&file, text)) {
+        eprintln!("mesoflow: MESOFLOW_KERNEL_DUMP: cannot write {}: {e}", file.display());
     }
 }
 
@@ -437,21 +474,6 @@ pub fn grid_1d(items: u64, wg: u32, max_per_dim: u32) -> [u32; 3] {
     [x as u32, y as u32, 1]
 }
 
-#[cfg(test)]
-mod tests {
-    use super::grid_1d;
-
-    #[test]
-    fn grid_folds_past_the_dimension_cap() {
-        assert_eq!(grid_1d(0, 256, 65535), [0, 1, 1]);
-        assert_eq!(grid_1d(1, 256, 65535), [1, 1, 1]);
-        assert_eq!(grid_1d(256 * 65535, 256, 65535), [65535, 1, 1]);
-        let g = grid_1d(256 * 65535 + 1, 256, 65535);
-        assert_eq!(g, [65535, 2, 1]);
-        assert!(g[0] as u64 * g[1] as u64 * 256 > 256 * 65535);
-    }
-}
-
 /// The runtime checks naga adds to the kernels. By default (`trusted`) loops are not
 /// force-bounded and workgroup and private array indices are not clamped: every loop of
 /// mesoflow's kernels ends by construction and every such index is in range by
@@ -490,4 +512,19 @@ fn runtime_checks() -> Option<wgpu::ShaderRuntimeChecks> {
         }
         Some(checks)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::grid_1d;
+
+    #[test]
+    fn grid_folds_past_the_dimension_cap() {
+        assert_eq!(grid_1d(0, 256, 65535), [0, 1, 1]);
+        assert_eq!(grid_1d(1, 256, 65535), [1, 1, 1]);
+        assert_eq!(grid_1d(256 * 65535, 256, 65535), [65535, 1, 1]);
+        let g = grid_1d(256 * 65535 + 1, 256, 65535);
+        assert_eq!(g, [65535, 2, 1]);
+        assert!(g[0] as u64 * g[1] as u64 * 256 > 256 * 65535);
+    }
 }
