@@ -1,0 +1,289 @@
+//! Running a compiled program: the prologue, then the steps recorded into compute
+//! passes, several steps per submission and at most two submissions in flight; loops
+//! with their host decisions; the progress bar.
+
+use std::time::{Duration, Instant};
+
+use super::{CompiledLoop, ExecError, Profile, Program, RunOptions, RunStats};
+use crate::gpu::{Dispatch, GpuError};
+use crate::node::{Decision, Lowering};
+
+impl Program<'_> {
+    /// Records the dispatches that run on step `step` (see `Period`).
+    pub(super) fn record(pass: &mut wgpu::ComputePass, dispatches: &[Dispatch], step: u64) {
+        for d in dispatches {
+            if d.workgroups.contains(&0) || !d.runs_at(step) {
+                continue;
+            }
+            pass.set_pipeline(&d.kernel.pipeline);
+            pass.set_bind_group(0, &d.bind_group, &[]);
+            pass.dispatch_workgroups(d.workgroups[0], d.workgroups[1], d.workgroups[2]);
+        }
+    }
+
+    /// Resets persistent values and the clock, then runs the prologue.
+    fn start(&mut self) -> Result<(), ExecError> {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        for (b, info) in self.buffers.iter().zip(&self.plan.buffers) {
+            if info.role == crate::plan::BufferRole::Persistent {
+                enc.clear_buffer(b, 0, None);
+            }
+        }
+        enc.clear_buffer(&self.clock, 0, None);
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            for c in &self.prologue {
+                Self::record(&mut pass, &c.dispatches, 0);
+            }
+        }
+        let idx = self.gpu.queue.submit([enc.finish()]);
+        self.gpu.wait(idx)?;
+        self.steps_done = 0;
+        self.iterations.clear();
+        Ok(())
+    }
+
+    pub(super) fn has_loops(&self) -> bool {
+        self.step[0].iter().any(|c| c.looped.is_some())
+    }
+
+    /// Submits the dispatches that run on step `step` in one compute pass.
+    pub(super) fn submit(&self, dispatches: &[&Dispatch], step: u64) -> wgpu::SubmissionIndex {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            for d in dispatches {
+                Self::record(&mut pass, std::slice::from_ref(*d), step);
+            }
+        }
+        self.gpu.queue.submit([enc.finish()])
+    }
+
+    /// Runs an iterative node: `pending` (work recorded before it) goes out with the
+    /// first iteration; each iteration ends with a host round trip that reads the node's
+    /// status and asks it whether to go on. Leaves the node's finishing dispatches in
+    /// `pending` and returns the number of iterations.
+    fn run_loop<'p>(
+        &'p self,
+        lp: &'p CompiledLoop,
+        pending: &mut Vec<&'p Dispatch>,
+        step: u64,
+    ) -> Result<u32, ExecError> {
+        let inst = &self.graph.nodes[lp.node];
+        let Lowering::Iterative(it) = inst.node.lowering() else {
+            unreachable!("compiled as a loop")
+        };
+        // Iteration k goes out with a copy of the status after it. While the host reads
+        // and judges iteration k, iteration k + 1 already runs (speculatively: when k
+        // finishes, its work is discarded; it only wrote basis rows past the answer), so
+        // the GPU does not idle through the round trip.
+        let bytes = lp.kernels.status_bytes.max(4).next_multiple_of(4);
+        let submit_iteration = |pending: &mut Vec<&'p Dispatch>, k: usize| {
+            for c in &lp.body {
+                pending.extend(&c.dispatches);
+            }
+            pending.extend(&lp.kernels.iterate);
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                for d in pending.iter() {
+                    Self::record(&mut pass, std::slice::from_ref(*d), step);
+                }
+            }
+            enc.copy_buffer_to_buffer(&lp.kernels.status, 0, &lp.staging[k % 2], 0, bytes);
+            pending.clear();
+            self.gpu.queue.submit([enc.finish()])
+        };
+        pending.extend(&lp.kernels.start);
+        let mut iterations = 1usize;
+        let mut current = submit_iteration(pending, iterations);
+        loop {
+            let next = submit_iteration(pending, iterations + 1);
+            let staging = &lp.staging[iterations % 2];
+            let (tx, rx) = std::sync::mpsc::channel();
+            staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send(r);
+            });
+            self.gpu.wait(current)?;
+            rx.recv()
+                .map_err(|_| GpuError::Device("buffer map callback never ran".into()))?
+                .map_err(|e| GpuError::Device(format!("mapping a status buffer failed: {e}")))?;
+            let status =
+                staging.slice(..).get_mapped_range().map_err(|e| {
+                    GpuError::Device(format!("reading a status buffer failed: {e}"))
+                })?[..lp.kernels.status_bytes as usize]
+                    .to_vec();
+            staging.unmap();
+            match it.decide(iterations, &status) {
+                Ok(Decision::Continue) => {
+                    iterations += 1;
+                    current = next;
+                }
+                Ok(Decision::Finish(answer)) => {
+                    self.gpu.queue.write_buffer(
+                        &lp.kernels.answer,
+                        lp.kernels.answer_offset,
+                        &answer,
+                    );
+                    pending.extend(&lp.kernels.finish);
+                    return Ok(iterations as u32);
+                }
+                Err(source) => {
+                    return Err(ExecError::Loop {
+                        node: inst.id.clone(),
+                        kind: inst.kind,
+                        step: step + 1,
+                        source,
+                    });
+                }
+            }
+        }
+    }
+
+    /// Submits one step of a program with loops; returns the last submission and the
+    /// iterations of each loop.
+    pub(super) fn submit_step_with_loops(
+        &self,
+        step: u64,
+    ) -> Result<(wgpu::SubmissionIndex, Vec<u32>), ExecError> {
+        let parity = (step % 2) as usize;
+        let mut pending: Vec<&Dispatch> = Vec::new();
+        let mut counts = Vec::new();
+        for c in &self.step[parity] {
+            match &c.looped {
+                None => pending.extend(&c.dispatches),
+                Some(lp) => counts.push(self.run_loop(lp, &mut pending, step)?),
+            }
+        }
+        pending.push(&self.clock_tick);
+        Ok((self.submit(&pending, step), counts))
+    }
+
+    /// Runs a loop alone and waits for it: its wall time (host round trips included) and
+    /// its iterations.
+    pub(super) fn time_loop(&self, lp: &CompiledLoop, step: u64) -> Result<(Duration, u32), ExecError> {
+        let t = Instant::now();
+        let mut pending = Vec::new();
+        let k = self.run_loop(lp, &mut pending, step)?;
+        let idx = self.submit(&pending, step);
+        self.gpu.wait(idx)?;
+        Ok((t.elapsed(), k))
+    }
+
+    /// Iterations each loop took at every step of the last run, by node id.
+    pub fn loop_iterations(&self) -> &[(String, Vec<u32>)] {
+        &self.iterations
+    }
+
+    pub(super) fn note_iterations(&mut self, counts: Vec<u32>) {
+        if self.iterations.is_empty() {
+            self.iterations = self.step[0]
+                .iter()
+                .filter(|c| c.looped.is_some())
+                .map(|c| (c.label.clone(), Vec::new()))
+                .collect();
+        }
+        for (row, k) in self.iterations.iter_mut().zip(counts) {
+            row.1.push(k);
+        }
+    }
+
+    /// Runs the prologue and `steps` time steps.
+    pub fn run(&mut self, opts: &RunOptions) -> Result<RunStats, ExecError> {
+        if opts.steps == 0 {
+            return Err(ExecError::Run(
+                "the number of steps must be at least 1".into(),
+            ));
+        }
+        let t0 = Instant::now();
+        self.start()?;
+        let stats = match opts.profile {
+            Profile::Off => self.run_batched(opts)?,
+            Profile::Launches => self.run_profiled(opts.steps, false)?,
+            Profile::Dispatches => self.run_profiled(opts.steps, true)?,
+            Profile::Steps => self.run_timed_steps(opts.steps)?,
+        };
+        Ok(RunStats {
+            wall: t0.elapsed(),
+            ..stats
+        })
+    }
+
+    fn run_batched(&mut self, opts: &RunOptions) -> Result<RunStats, ExecError> {
+        let per_step: usize = self.step[0]
+            .iter()
+            .map(|c| c.dispatches.len())
+            .sum::<usize>()
+            + 1;
+        // Several steps per submission, bounded so that the progress bar moves and the
+        // driver's queue stays shallow.
+        let steps_per_submit = ((4096 / per_step).max(1) as u64).min(opts.steps);
+        let bar = if opts.progress && opts.steps > 1 {
+            let b = indicatif::ProgressBar::new(opts.steps);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{bar:40} {pos}/{len} steps  {per_sec}  eta {eta}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            Some(b)
+        } else {
+            None
+        };
+        let mut in_flight: Option<(wgpu::SubmissionIndex, u64)> = None;
+        let mut done = 0;
+        if self.has_loops() {
+            // Loops decide on the host, so steps go out one at a time.
+            while done < opts.steps {
+                let (idx, counts) = self.submit_step_with_loops(self.steps_done + done)?;
+                self.note_iterations(counts);
+                self.gpu.wait(idx)?;
+                done += 1;
+                if let Some(b) = &bar {
+                    b.inc(1);
+                }
+            }
+        }
+        while done < opts.steps {
+            let n = steps_per_submit.min(opts.steps - done);
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                for s in 0..n {
+                    let step = self.steps_done + done + s;
+                    let parity = (step % 2) as usize;
+                    for c in &self.step[parity] {
+                        Self::record(&mut pass, &c.dispatches, step);
+                    }
+                    Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), step);
+                }
+            }
+            let idx = self.gpu.queue.submit([enc.finish()]);
+            if let Some((prev, k)) = in_flight.take() {
+                self.gpu.wait(prev)?;
+                if let Some(b) = &bar {
+                    b.inc(k);
+                }
+            }
+            in_flight = Some((idx, n));
+            done += n;
+        }
+        if let Some((prev, k)) = in_flight {
+            self.gpu.wait(prev)?;
+            if let Some(b) = &bar {
+                b.inc(k);
+            }
+        }
+        if let Some(b) = bar {
+            b.finish_and_clear();
+        }
+        self.steps_done += opts.steps;
+        Ok(RunStats {
+            steps: opts.steps,
+            wall: Duration::ZERO,
+            profile: Vec::new(),
+            timed_by_gpu: false,
+            step_samples: Vec::new(),
+        })
+    }
+}
