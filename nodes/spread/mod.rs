@@ -9,6 +9,7 @@
 
 pub mod boxgen;
 pub mod interpgen;
+pub mod strategy;
 pub mod tilegen;
 pub mod window;
 
@@ -20,6 +21,10 @@ use crate::node::{
     RefCtx, Registry, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
+use strategy::{
+    InterpolatePlan, InterpolateStrategy, SpreadDecision, SpreadPlan, SpreadStrategy, TileLaunch,
+    TileMode, Variant, box_run,
+};
 use window::Window;
 
 /// Components one dispatch carries; more go in several dispatches.
@@ -69,14 +74,6 @@ impl GridWindow {
             1
         } else {
             chunks(count)
-        }
-    }
-
-    /// Lanes per particle of the lane kernels (interpgen.rs) on this adapter, or None.
-    pub fn lane_segment(&self, cx: &CompileCtx) -> Option<u32> {
-        match cx.caps().subgroups {
-            Some((min, _)) if self.lanes => interpgen::segment(self.window.support(), min),
-            _ => None,
         }
     }
 
@@ -291,20 +288,6 @@ fn grid_window(p: &Params) -> Result<GridWindow, String> {
     })
 }
 
-fn use_atomics(p: &Params, cx_atomics: bool) -> Result<bool, CompileError> {
-    match p.get("variant") {
-        Some(ParamValue::Text(v)) if v == "atomic" => {
-            if cx_atomics {
-                Ok(true)
-            } else {
-                Err(CompileError::Unsupported("variant \"atomic\" needs float atomics (SHADER_FLOAT32_ATOMIC), which this adapter lacks; use \"portable\" or \"auto\"".into()))
-            }
-        }
-        Some(ParamValue::Text(v)) if v == "portable" => Ok(false),
-        _ => Ok(cx_atomics),
-    }
-}
-
 /// Layout of `Geometry` in shaders/spread/geometry.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -456,65 +439,21 @@ impl NodeKind for SpreadKind {
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
         Ok(Box::new(Spread {
             gw: grid_window(p)?,
-            params: p.clone(),
+            tiles: TileMode::parse(p.text("tiles")),
+            sorted_input: p.flag("sorted_input"),
+            variant: Variant::parse(p.text("variant")),
         }))
     }
 }
 
 struct Spread {
     gw: GridWindow,
-    params: Params,
+    tiles: TileMode,
+    sorted_input: bool,
+    variant: Variant,
 }
 
 impl Spread {
-    /// Whether spreading `n` particles may go tile by tile (tilegen.rs), as far as the
-    /// params and sizes tell; the adapter may still rule it out (`tile_launch`).
-    fn wants_tiles(&self, n: u32) -> bool {
-        n > 0
-            && self.gw.dims() == 3
-            && match self.params.text("tiles") {
-                "on" => true,
-                "off" => false,
-                _ => {
-                    let overlap = n as f64 * (self.gw.window.support() as f64).powi(3)
-                        / self.gw.cell_count() as f64;
-                    overlap >= TILE_MIN_OVERLAP && !self.uses_boxes(n)
-                }
-            }
-    }
-
-    /// How the tile kernel runs on this adapter, or why it cannot: no subgroups as wide as
-    /// the support, or not even one component's padded tile fits in workgroup memory.
-    fn tile_launch(&self, cx: &CompileCtx) -> Result<TileLaunch, String> {
-        let ns = self.gw.window.support();
-        let seg = self.gw.lane_segment(cx).ok_or_else(|| {
-            format!(
-                "needs subgroups at least as wide as the support ({ns} cells; this adapter's: {})",
-                match cx.caps().subgroups {
-                    Some((min, _)) => format!("{min} lanes"),
-                    None => "none".into(),
-                }
-            )
-        })?;
-        let memory = cx.caps().max_workgroup_storage;
-        let min_subgroup = cx.caps().subgroups.map_or(1, |(min, _)| min);
-        let bytes = |c| tilegen::workgroup_bytes(ns, c, min_subgroup);
-        let per_dispatch = (1..=CHUNK_COMPS)
-            .take_while(|&c| bytes(c) <= memory)
-            .last()
-            .ok_or_else(|| {
-                format!(
-                    "needs {} bytes of workgroup memory for support {ns}; this adapter has {memory}",
-                    bytes(1)
-                )
-            })?;
-        Ok(TileLaunch {
-            per_dispatch,
-            seg,
-            min_subgroup,
-        })
-    }
-
     /// Scratch of tiled spreading, by role: per particle its tile (the sort key) and its
     /// anchor inside the tile, then bin_sort's outputs (the particles tile by tile, the
     /// sorted keys, each tile's count and first slot) and bin_sort's own scratch.
@@ -531,17 +470,10 @@ impl Spread {
         tilegen::tiles_per_axis(&self.gw.cells).iter().product()
     }
 
-    /// Whether spreading `n` particles goes box by box (shaders/spread/box.wgsl): sorted
-    /// input, dense enough, and a support wide enough to pay and narrow enough to fit.
-    fn uses_boxes(&self, n: u32) -> bool {
-        self.params.get("sorted_input") == Some(&ParamValue::Bool(true))
-            && (BOX_MIN_SUPPORT..=boxgen::BMAX).contains(&self.gw.window.support())
-            && n as f64 >= BOX_MIN_DENSITY * self.gw.cell_count() as f64
-    }
 }
 
 impl Node for Spread {
-    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Result<Signature, PortError> {
         let n = check_positions(&self.gw, inputs[0])?;
         let Some(ValueType::Particles { n: m, k: comps }) = inputs[1] else {
             unreachable!("port type checked")
@@ -553,13 +485,25 @@ impl Node for Spread {
             ));
         }
         self.gw.check_resolution("values")?;
-        let mut sig = Signature::outputs(vec![self.gw.grid_type(comps)]);
-        // Planned without the adapter: where it turns out unable to run tiles under
-        // `auto`, the node spreads otherwise and this scratch goes unused.
-        if self.wants_tiles(n) {
-            sig.scratch = self.tile_scratch(n);
-        }
-        Ok(sig)
+        let decision = strategy::spread(
+            &self.gw,
+            self.tiles,
+            self.sorted_input,
+            self.variant,
+            n,
+            comps,
+            caps,
+        );
+        let scratch = match decision.0 {
+            Ok(SpreadPlan {
+                strategy: SpreadStrategy::Tiles(_),
+                ..
+            }) => self.tile_scratch(n),
+            _ => Vec::new(),
+        };
+        Ok(Signature::outputs(vec![self.gw.grid_type(comps)])
+            .with_scratch(scratch)
+            .with_plan(decision))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -603,35 +547,28 @@ impl GpuKernels for Spread {
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
         let (pos, vals, out, n, comps) = spread_ports(io);
-        let atomics = use_atomics(&self.params, cx.caps().f32_atomics)?;
-        let add = if atomics {
-            "spread/add_atomic.wgsl"
-        } else {
-            "spread/add_cas.wgsl"
-        };
+        let plan = io
+            .plan::<SpreadDecision>()
+            .0
+            .clone()
+            .map_err(CompileError::Unsupported)?;
+        let add = plan.add.shader();
         let ns = self.gw.window.support();
-        if self.wants_tiles(n) {
-            match self.tile_launch(cx) {
-                Ok(launch) => return self.compile_tiles(cx, io, add, launch),
-                Err(why) if self.params.text("tiles") == "on" => {
-                    return Err(CompileError::Unsupported(format!(
-                        "spread: tiles \"on\" {why}; use tiles \"auto\" or \"off\""
-                    )));
-                }
-                Err(_) => {}
-            }
-        }
-        let boxed = self.uses_boxes(n);
-        let lanes = self.gw.lane_segment(cx);
+        let (boxed, lanes) = match plan.strategy {
+            SpreadStrategy::Tiles(launch) => return self.compile_tiles(cx, io, add, launch),
+            SpreadStrategy::Boxes { run } => (Some(run), None),
+            SpreadStrategy::Lanes { seg } => (None, Some(seg)),
+            SpreadStrategy::Table => (None, None),
+        };
         let prefix = format!("{}{}", cx.shader(self.gw.window.shader())?, cx.shader(add)?);
         // The workgroup-table kernel's source, where neither generated kernel serves.
-        let plain = if boxed || lanes.is_some() {
+        let plain = if boxed.is_some() || lanes.is_some() {
             String::new()
         } else {
             format!("{prefix}{}", cx.shader("spread/spread.wgsl")?)
         };
         let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
-        let chunks = self.gw.chunks(n, comps);
+        let chunks = plan.chunks;
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
             let bindings = [
@@ -642,14 +579,11 @@ impl GpuKernels for Spread {
             ];
             let name = |how: &str| format!("spread ({}{how})", self.gw.window.shader());
             let generated = |text: String| composed(&prefix, &text);
-            let (spec, groups) = if boxed {
+            let (spec, groups) = if let Some(run) = boxed {
                 let text = boxgen::spread_source(ns, self.gw.dims() as u32, chunk, comps);
                 (
                     KernelSpec::new(name(", boxes"), generated(text)?, &bindings),
-                    cx.grid_1d(
-                        (n as u64).div_ceil(box_run(n, self.gw.cell_count() as u64) as u64),
-                        1,
-                    ),
+                    cx.grid_1d((n as u64).div_ceil(run as u64), 1),
                 )
             } else if let Some(seg) = lanes {
                 let text = interpgen::spread_source(
@@ -685,23 +619,6 @@ impl GpuKernels for Spread {
         }
         Ok(dispatches)
     }
-}
-
-/// Supports covering a cell, on average (particles per cell x support^3), from which
-/// `tiles: auto` spreads tile by tile: the tile kernel's cost per tile (a few rounds of
-/// dependent loads, barriers, the flush of the padded tile) pays off where every cell
-/// takes many adds. Measured on an H200 (BENCHMARKS.md): 51 (support 8 at 0.1 per cell)
-/// 0.85 against 1.35 ns per particle; 17 (PSE's far field, support 6 at 0.08 per cell,
-/// 3 components) 0.233 against about 0.2 ms; 3 (FCM at 1e-2) 0.69 against 0.60 ms.
-const TILE_MIN_OVERLAP: f64 = 32.0;
-
-/// How the tile kernel runs on an adapter: components per dispatch (as many as workgroup
-/// memory holds, up to CHUNK_COMPS), lanes per particle, and the smallest subgroup it
-/// must size its per-subgroup sums for.
-struct TileLaunch {
-    per_dispatch: u32,
-    seg: u32,
-    min_subgroup: u32,
 }
 
 /// The spread node's ports: positions, values, the grid, and the particle count and
@@ -837,26 +754,6 @@ impl Spread {
     }
 }
 
-/// Particles per cell below which spreading sorted input box by box stops paying (the
-/// box of a run then holds few particles: one grid atomic per box cell is no saving; on
-/// an H200 at 0.1 per cell the box kernel took 1.75 ns per particle against 1.54 for the
-/// per-particle kernel, at 1 per cell 1.0 against 1.8).
-const BOX_MIN_DENSITY: f64 = 0.5;
-
-/// Smallest support spread box by box: the box's z sums run over all 16 box cells, so
-/// small supports waste most of them (support 4 at 1 per cell: 0.69 ns per particle
-/// against 0.32 for the per-particle kernel on an H200).
-const BOX_MIN_SUPPORT: u32 = 6;
-
-/// Particles per workgroup of the box kernels (shaders/spread/box.wgsl): about as many
-/// as a 4^3 block of cells holds (a Morton order of cells visits such blocks whole), a
-/// power of two from 4 to 64, so that a run's box stays within 16 cells per axis: 64 at
-/// one particle per cell, 8 at 0.1.
-fn box_run(count: u32, cells: u64) -> u32 {
-    let per_block = (64.0 * count as f64 / cells.max(1) as f64).ceil() as u32;
-    per_block.next_power_of_two().clamp(4, 64)
-}
-
 pub struct InterpolateKind;
 
 impl NodeKind for InterpolateKind {
@@ -900,18 +797,18 @@ impl NodeKind for InterpolateKind {
     fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
         Ok(Box::new(Interpolate {
             gw: grid_window(p)?,
-            params: p.clone(),
+            variant: Variant::parse(p.text("variant")),
         }))
     }
 }
 
 struct Interpolate {
     gw: GridWindow,
-    params: Params,
+    variant: Variant,
 }
 
 impl Node for Interpolate {
-    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+    fn infer(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(ValueType::RealGrid { dims, comps }) = inputs[0] else {
             unreachable!("port type checked")
         };
@@ -934,10 +831,8 @@ impl Node for Interpolate {
         }
         let n = check_positions(&self.gw, inputs[1])?;
         self.gw.check_resolution("grid")?;
-        Ok(Signature::outputs(vec![ValueType::Particles {
-            n,
-            k: comps,
-        }]))
+        let plan = strategy::interpolate(&self.gw, self.variant, n, comps, caps);
+        Ok(Signature::outputs(vec![ValueType::Particles { n, k: comps }]).with_plan(plan))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -990,30 +885,21 @@ impl GpuKernels for Interpolate {
         let ValueType::Particles { n, .. } = pos.ty else {
             unreachable!()
         };
-        // With subgroups, a segment of lanes per particle and no workgroup memory
-        // (interpgen.rs) where the support fits a subgroup; else the per-particle kernel,
-        // reducing with subgroup shuffles where it can (variant "portable" forces the
-        // workgroup-memory tree).
-        let portable = self.params.get("variant") == Some(&ParamValue::Text("portable".into()));
+        let plan = io.plan::<InterpolatePlan>();
         let ns = self.gw.window.support();
-        let lanes = self.gw.lane_segment(cx).filter(|_| !portable);
         let window = cx.shader(self.gw.window.shader())?;
         // The workgroup-table kernel's source, where the lane kernel does not serve.
-        let source = match lanes {
-            Some(_) => String::new(),
-            None => {
-                let file = if cx.caps().subgroups.is_some() && !portable {
-                    "spread/interpolate_subgroup.wgsl"
-                } else {
-                    "spread/interpolate.wgsl"
-                };
-                format!("{window}{}", cx.shader(file)?)
+        let (lanes, source) = match plan.strategy {
+            InterpolateStrategy::Lanes { seg } => (Some(seg), String::new()),
+            InterpolateStrategy::Table { subgroups } => {
+                let file = InterpolateStrategy::table_shader(subgroups);
+                (None, format!("{window}{}", cx.shader(file)?))
             }
         };
         // Without weights the binding still needs a buffer; the kernel never reads it.
         let quadrature = weights.map(|w| w.buffer).unwrap_or(grid.buffer);
         let mut dispatches = Vec::new();
-        let chunks = self.gw.chunks(n, comps);
+        let chunks = plan.chunks;
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
             let bindings = [

@@ -10,6 +10,7 @@ mod fcm;
 mod fft;
 mod graph_files;
 mod lanczos;
+mod layout;
 mod mpcd;
 mod nodes;
 mod pairs;
