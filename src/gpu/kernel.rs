@@ -437,21 +437,6 @@ pub fn grid_1d(items: u64, wg: u32, max_per_dim: u32) -> [u32; 3] {
     [x as u32, y as u32, 1]
 }
 
-#[cfg(test)]
-mod tests {
-    use super::grid_1d;
-
-    #[test]
-    fn grid_folds_past_the_dimension_cap() {
-        assert_eq!(grid_1d(0, 256, 65535), [0, 1, 1]);
-        assert_eq!(grid_1d(1, 256, 65535), [1, 1, 1]);
-        assert_eq!(grid_1d(256 * 65535, 256, 65535), [65535, 1, 1]);
-        let g = grid_1d(256 * 65535 + 1, 256, 65535);
-        assert_eq!(g, [65535, 2, 1]);
-        assert!(g[0] as u64 * g[1] as u64 * 256 > 256 * 65535);
-    }
-}
-
 /// The runtime checks naga adds to the kernels. By default (`trusted`) loops are not
 /// force-bounded and workgroup and private array indices are not clamped: every loop of
 /// mesoflow's kernels ends by construction and every such index is in range by
@@ -490,4 +475,19 @@ fn runtime_checks() -> Option<wgpu::ShaderRuntimeChecks> {
         }
         Some(checks)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::grid_1d;
+
+    #[test]
+    fn grid_folds_past_the_dimension_cap() {
+        assert_eq!(grid_1d(0, 256, 65535), [0, 1, 1]);
+        assert_eq!(grid_1d(1, 256, 65535), [1, 1, 1]);
+        assert_eq!(grid_1d(256 * 65535, 256, 65535), [65535, 1, 1]);
+        let g = grid_1d(256 * 65535 + 1, 256, 65535);
+        assert_eq!(g, [65535, 2, 1]);
+        assert!(g[0] as u64 * g[1] as u64 * 256 > 256 * 65535);
+    }
 }
