@@ -40,7 +40,7 @@ use crate::gpu::{
     Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo, WG_1D,
 };
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Registry,
     Signature,
 };
 use crate::nodes::scan::{self, Path, ScanKernels, Variant};
@@ -100,69 +100,50 @@ pub fn scratch_bytes(n: u64, bins: u64) -> Vec<u64> {
     s
 }
 
-pub struct BinSortKind;
-
-impl NodeKind for BinSortKind {
-    fn name(&self) -> &'static str {
-        "bin_sort"
-    }
-
-    fn doc(&self) -> &'static str {
-        "counting sort of keys into `bins` bins by atomics (order inside a bin NOT stable: use `sort` where it matters; keys >= bins sort last, uncounted), with permutation, count and first slot per bin"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "keys",
-            PortType::Indices,
-            "bin of each element (keys >= bins go to an overflow bin after all the others)",
-        )]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "perm",
-                PortType::Indices,
-                "input index of each sorted slot: keys_out[s] = keys[perm[s]] (any order inside a bin)",
-            ),
-            PortSpec::new(
-                "keys",
-                PortType::Indices,
-                "the keys in ascending order of bin (keys >= bins last)",
-            ),
-            PortSpec::new(
-                "count",
-                PortType::Indices,
-                "keys in each bin (`bins` values; keys >= bins not counted)",
-            ),
-            PortSpec::new(
-                "start",
-                PortType::Indices,
-                "first slot of each bin: the exclusive prefix sum of count",
-            ),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::integer(
-                "bins",
-                None,
-                1.0,
-                MAX_BINS,
-                "number of bins (keys in [0, bins)); the counters take 4 bytes per bin",
-            ),
-            Variant::param(),
-        ]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn bin_sort_kind() -> NodeKind {
+    NodeKind::declare(
+        "bin_sort",
+        "counting sort of keys into `bins` bins by atomics (order inside a bin NOT stable: use `sort` where it matters; keys >= bins sort last, uncounted), with permutation, count and first slot per bin",
+    )
+    .input(PortSpec::new(
+        "keys",
+        PortType::Indices,
+        "bin of each element (keys >= bins go to an overflow bin after all the others)",
+    ))
+    .output(PortSpec::new(
+        "perm",
+        PortType::Indices,
+        "input index of each sorted slot: keys_out[s] = keys[perm[s]] (any order inside a bin)",
+    ))
+    .output(PortSpec::new(
+        "keys",
+        PortType::Indices,
+        "the keys in ascending order of bin (keys >= bins last)",
+    ))
+    .output(PortSpec::new(
+        "count",
+        PortType::Indices,
+        "keys in each bin (`bins` values; keys >= bins not counted)",
+    ))
+    .output(PortSpec::new(
+        "start",
+        PortType::Indices,
+        "first slot of each bin: the exclusive prefix sum of count",
+    ))
+    .param(ParamSpec::integer(
+        "bins",
+        None,
+        1.0,
+        MAX_BINS,
+        "number of bins (keys in [0, bins)); the counters take 4 bytes per bin",
+    ))
+    .param(Variant::param())
+    .build(|p| {
         Ok(Box::new(BinSort {
             bins: p.number("bins") as u32,
             variant: Variant::from_params(p)?,
         }))
-    }
+    })
 }
 
 struct BinSort {
@@ -398,7 +379,7 @@ pub fn record(
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(BinSortKind);
+    r.add(bin_sort_kind());
 }
 
 #[cfg(test)]

@@ -8,75 +8,63 @@ use crate::expr::ParamValue;
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
-    RefCtx, Registry, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, PortError, PortSpec, RefCtx,
+    Registry, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
-pub struct CellHashKind;
-
-impl NodeKind for CellHashKind {
-    fn name(&self) -> &'static str {
-        "cell_hash"
-    }
-
-    fn doc(&self) -> &'static str {
-        "cell index of each particle in a box centred at the origin (linear or Morton order; periodic wrap)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "positions",
-            PortType::Particles(None),
-            "positions (N x 2 or N x 3)",
-        )]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "out",
-            PortType::Indices,
-            "cell index per particle",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec {
-                name: "box",
-                kind: ParamKind::Numbers {
-                    len: None,
-                    min: f64::MIN_POSITIVE,
-                    max: f64::MAX,
-                },
-                default: None,
-                doc: "box lengths per axis (2 or 3 values)",
-            },
-            ParamSpec {
-                name: "cells",
-                kind: ParamKind::Numbers {
-                    len: None,
-                    min: 1.0,
-                    max: u32::MAX as f64,
-                },
-                default: None,
-                doc: "cells per axis (cells may be non-cubic: size box/cells per axis)",
-            },
-            ParamSpec::choice("order", "linear", &["linear", "morton"], "cell numbering"),
-            ParamSpec {
-                name: "periodic",
-                kind: ParamKind::Numbers {
-                    len: None,
-                    min: 0.0,
-                    max: 1.0,
-                },
-                default: Some(ParamValue::Numbers(vec![1.0, 1.0, 1.0])),
-                doc: "1 for a periodic axis (wrapped), 0 for a walled one (clamped to the edge cells)",
-            },
-        ]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn cell_hash_kind() -> NodeKind {
+    NodeKind::declare(
+        "cell_hash",
+        "cell index of each particle in a box centred at the origin (linear or Morton order; periodic wrap)",
+    )
+    .input(PortSpec::new(
+        "positions",
+        PortType::Particles(None),
+        "positions (N x 2 or N x 3)",
+    ))
+    .output(PortSpec::new(
+        "out",
+        PortType::Indices,
+        "cell index per particle",
+    ))
+    .param(ParamSpec {
+        name: "box",
+        kind: ParamKind::Numbers {
+            len: None,
+            min: f64::MIN_POSITIVE,
+            max: f64::MAX,
+        },
+        default: None,
+        doc: "box lengths per axis (2 or 3 values)",
+    })
+    .param(ParamSpec {
+        name: "cells",
+        kind: ParamKind::Numbers {
+            len: None,
+            min: 1.0,
+            max: u32::MAX as f64,
+        },
+        default: None,
+        doc: "cells per axis (cells may be non-cubic: size box/cells per axis)",
+    })
+    .param(ParamSpec::choice(
+        "order",
+        "linear",
+        &["linear", "morton"],
+        "cell numbering",
+    ))
+    .param(ParamSpec {
+        name: "periodic",
+        kind: ParamKind::Numbers {
+            len: None,
+            min: 0.0,
+            max: 1.0,
+        },
+        default: Some(ParamValue::Numbers(vec![1.0, 1.0, 1.0])),
+        doc: "1 for a periodic axis (wrapped), 0 for a walled one (clamped to the edge cells)",
+    })
+    .build(|p| {
         let lengths = p.numbers("box").to_vec();
         let cells = p.numbers("cells").to_vec();
         let dims = lengths.len();
@@ -111,7 +99,7 @@ impl NodeKind for CellHashKind {
             morton,
             periodic,
         }))
-    }
+    })
 }
 
 struct CellHash {
@@ -263,40 +251,25 @@ impl GpuKernels for CellHash {
     }
 }
 
-pub struct HistogramKind;
-
-impl NodeKind for HistogramKind {
-    fn name(&self) -> &'static str {
-        "histogram"
-    }
-
-    fn doc(&self) -> &'static str {
-        "count of each key in [0, bins) (keys past the last bin are not counted)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("keys", PortType::Indices, "keys to count")]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("out", PortType::Indices, "count per bin")]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![ParamSpec::integer(
-            "bins",
-            None,
-            1.0,
-            u32::MAX as f64,
-            "number of bins",
-        )]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn histogram_kind() -> NodeKind {
+    NodeKind::declare(
+        "histogram",
+        "count of each key in [0, bins) (keys past the last bin are not counted)",
+    )
+    .input(PortSpec::new("keys", PortType::Indices, "keys to count"))
+    .output(PortSpec::new("out", PortType::Indices, "count per bin"))
+    .param(ParamSpec::integer(
+        "bins",
+        None,
+        1.0,
+        u32::MAX as f64,
+        "number of bins",
+    ))
+    .build(|p| {
         Ok(Box::new(Histogram {
             bins: p.number("bins") as u32,
         }))
-    }
+    })
 }
 
 struct Histogram {
@@ -357,6 +330,6 @@ impl GpuKernels for Histogram {
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(CellHashKind);
-    r.add(HistogramKind);
+    r.add(cell_hash_kind());
+    r.add(histogram_kind());
 }

@@ -12,83 +12,66 @@ use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo};
 use crate::node::{
     Decision, GpuIterative, IterativeKernels, LoopError, Lowering, Node, NodeKind, ParamSpec,
-    Params, PortError, PortSpec, RefCtx, Registry, Signature,
+    PortError, PortSpec, RefCtx, Registry, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
 const WG: u64 = 256;
 
-pub struct LanczosKind;
-
-impl NodeKind for LanczosKind {
-    fn name(&self) -> &'static str {
-        "lanczos"
-    }
-
-    fn doc(&self) -> &'static str {
-        "f(M) z by Lanczos iteration for an SPD operator M given by the loop body (basis -> nodes -> product), stopping at a relative change below the tolerance"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "z",
-                PortType::Particles(None),
-                "the vector (W for Brownian noise)",
-            ),
-            PortSpec::new(
-                "product",
-                PortType::Particles(None),
-                "M basis: the loop body's result for the current basis vector",
-            )
-            .iterate(),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("out", PortType::Particles(None), "f(M) z"),
-            PortSpec::new(
-                "basis",
-                PortType::Particles(None),
-                "the current Lanczos vector: the loop body computes M basis from it",
-            )
-            .iterate(),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::number(
-                "tolerance",
-                Some(1e-3),
-                1e-7,
-                0.5,
-                "stop when the relative change of the iterate falls below this (f32 limits it to about 1e-6)",
-            ),
-            ParamSpec::integer(
-                "max_iterations",
-                Some(100.0),
-                1.0,
-                1000.0,
-                "iteration cap: not converging within it is an error (it also sizes the basis storage: cap + 3 vectors)",
-            ),
-            ParamSpec::choice(
-                "function",
-                "sqrt",
-                &["sqrt", "inverse_sqrt"],
-                "f: M^(1/2) z (Brownian noise) or M^(-1/2) z",
-            ),
-        ]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn lanczos_kind() -> NodeKind {
+    NodeKind::declare(
+        "lanczos",
+        "f(M) z by Lanczos iteration for an SPD operator M given by the loop body (basis -> nodes -> product), stopping at a relative change below the tolerance",
+    )
+    .input(PortSpec::new(
+        "z",
+        PortType::Particles(None),
+        "the vector (W for Brownian noise)",
+    ))
+    .input(
+        PortSpec::new(
+            "product",
+            PortType::Particles(None),
+            "M basis: the loop body's result for the current basis vector",
+        )
+        .iterate(),
+    )
+    .output(PortSpec::new("out", PortType::Particles(None), "f(M) z"))
+    .output(
+        PortSpec::new(
+            "basis",
+            PortType::Particles(None),
+            "the current Lanczos vector: the loop body computes M basis from it",
+        )
+        .iterate(),
+    )
+    .param(ParamSpec::number(
+        "tolerance",
+        Some(1e-3),
+        1e-7,
+        0.5,
+        "stop when the relative change of the iterate falls below this (f32 limits it to about 1e-6)",
+    ))
+    .param(ParamSpec::integer(
+        "max_iterations",
+        Some(100.0),
+        1.0,
+        1000.0,
+        "iteration cap: not converging within it is an error (it also sizes the basis storage: cap + 3 vectors)",
+    ))
+    .param(ParamSpec::choice(
+        "function",
+        "sqrt",
+        &["sqrt", "inverse_sqrt"],
+        "f: M^(1/2) z (Brownian noise) or M^(-1/2) z",
+    ))
+    .build(|p| {
         Ok(Box::new(Lanczos {
             tolerance: p.number("tolerance"),
             max_iterations: p.number("max_iterations") as u32,
             inverse: p.text("function") == "inverse_sqrt",
         }))
-    }
+    })
 }
 
 pub struct Lanczos {
@@ -444,39 +427,27 @@ pub fn symmetric_eigen(a: &[f64], k: usize) -> (Vec<f64>, Vec<f64>) {
 
 /// A dense matrix times a vector: small operators assembled on the host (a mobility
 /// matrix for a few particles, a test matrix for `lanczos`).
-pub struct MatvecKind;
-
-impl NodeKind for MatvecKind {
-    fn name(&self) -> &'static str {
-        "matvec"
-    }
-
-    fn doc(&self) -> &'static str {
-        "A x for a dense square matrix A (n x n rows) and a vector x of n words (any particle shape)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("matrix", PortType::Particles(None), "A, n rows of n"),
-            PortSpec::new("x", PortType::Particles(None), "x, n words in all"),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "out",
-            PortType::Particles(None),
-            "A x, shaped like x",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        Vec::new()
-    }
-
-    fn build(&self, _: &Params) -> Result<Box<dyn Node>, String> {
-        Ok(Box::new(Matvec))
-    }
+fn matvec_kind() -> NodeKind {
+    NodeKind::declare(
+        "matvec",
+        "A x for a dense square matrix A (n x n rows) and a vector x of n words (any particle shape)",
+    )
+    .input(PortSpec::new(
+        "matrix",
+        PortType::Particles(None),
+        "A, n rows of n",
+    ))
+    .input(PortSpec::new(
+        "x",
+        PortType::Particles(None),
+        "x, n words in all",
+    ))
+    .output(PortSpec::new(
+        "out",
+        PortType::Particles(None),
+        "A x, shaped like x",
+    ))
+    .build(|_| Ok(Box::new(Matvec)))
 }
 
 struct Matvec;
@@ -542,8 +513,8 @@ impl crate::node::GpuKernels for Matvec {
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(LanczosKind);
-    r.add(MatvecKind);
+    r.add(lanczos_kind());
+    r.add(matvec_kind());
 }
 
 #[cfg(test)]
@@ -582,7 +553,8 @@ mod tests {
 
     #[test]
     fn scalar_params_have_defaults() {
-        let specs = LanczosKind.params();
+        let kind = lanczos_kind();
+        let specs = kind.params();
         assert!(specs.iter().all(|s| s.default.is_some()));
         assert!(matches!(
             specs[0].default,

@@ -5,7 +5,7 @@
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Registry,
     Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
@@ -28,41 +28,24 @@ fn with_rows(t: ValueType, rows: u32) -> ValueType {
     }
 }
 
-pub struct GatherKind;
-
-impl NodeKind for GatherKind {
-    fn name(&self) -> &'static str {
-        "gather"
-    }
-
-    fn doc(&self) -> &'static str {
-        "out[i] = values[index[i]] row by row (an index past the last row gives zeros)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("values", PortType::Rows, "rows to pick from"),
-            PortSpec::new(
-                "index",
-                PortType::Indices,
-                "which row of `values` each output row takes",
-            ),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("out", PortType::Rows, "one row per index")]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![enabled_param()]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn gather_kind() -> NodeKind {
+    NodeKind::declare(
+        "gather",
+        "out[i] = values[index[i]] row by row (an index past the last row gives zeros)",
+    )
+    .input(PortSpec::new("values", PortType::Rows, "rows to pick from"))
+    .input(PortSpec::new(
+        "index",
+        PortType::Indices,
+        "which row of `values` each output row takes",
+    ))
+    .output(PortSpec::new("out", PortType::Rows, "one row per index"))
+    .param(enabled_param())
+    .build(|p| {
         Ok(Box::new(Gather {
             enabled: p.flag("enabled"),
         }))
-    }
+    })
 }
 
 /// Lets a graph switch a permutation off by a param (FCM sorts particles only where the
@@ -153,57 +136,38 @@ impl GpuKernels for Gather {
     }
 }
 
-pub struct ScatterKind;
-
-impl NodeKind for ScatterKind {
-    fn name(&self) -> &'static str {
-        "scatter"
-    }
-
-    fn doc(&self) -> &'static str {
-        "out[index[i]] = values[i] row by row (unwritten rows are 0; indices should be distinct)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("values", PortType::Rows, "rows to place"),
-            PortSpec::new(
-                "index",
-                PortType::Indices,
-                "destination row of each row of `values`",
-            ),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("out", PortType::Rows, "the placed rows")]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::integer(
-                "rows",
-                Some(0.0),
-                0.0,
-                u32::MAX as f64,
-                "rows of the output (0: as many as `values`); indices past it are skipped",
-            ),
-            enabled_param(),
-            ParamSpec::flag(
-                "permutation",
-                false,
-                "the index is a permutation of the rows (a sort's perm): every output row is written, so the output is not cleared first (one dispatch less; rows the index misses would hold stale data)",
-            ),
-        ]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn scatter_kind() -> NodeKind {
+    NodeKind::declare(
+        "scatter",
+        "out[index[i]] = values[i] row by row (unwritten rows are 0; indices should be distinct)",
+    )
+    .input(PortSpec::new("values", PortType::Rows, "rows to place"))
+    .input(PortSpec::new(
+        "index",
+        PortType::Indices,
+        "destination row of each row of `values`",
+    ))
+    .output(PortSpec::new("out", PortType::Rows, "the placed rows"))
+    .param(ParamSpec::integer(
+        "rows",
+        Some(0.0),
+        0.0,
+        u32::MAX as f64,
+        "rows of the output (0: as many as `values`); indices past it are skipped",
+    ))
+    .param(enabled_param())
+    .param(ParamSpec::flag(
+        "permutation",
+        false,
+        "the index is a permutation of the rows (a sort's perm): every output row is written, so the output is not cleared first (one dispatch less; rows the index misses would hold stale data)",
+    ))
+    .build(|p| {
         Ok(Box::new(Scatter {
             rows: p.number("rows") as u32,
             enabled: p.flag("enabled"),
             permutation: p.flag("permutation"),
         }))
-    }
+    })
 }
 
 struct Scatter {
@@ -314,6 +278,6 @@ impl GpuKernels for Scatter {
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(GatherKind);
-    r.add(ScatterKind);
+    r.add(gather_kind());
+    r.add(scatter_kind());
 }

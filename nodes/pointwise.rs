@@ -332,65 +332,44 @@ pub static KINDS: &[PointwiseKind] = &[
     },
 ];
 
-impl NodeKind for &'static PointwiseKind {
-    fn name(&self) -> &'static str {
-        self.name
-    }
-
-    fn doc(&self) -> &'static str {
-        self.doc
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        self.inputs
-            .iter()
-            .map(|&(n, d, opt)| {
-                let ty = if self.linear {
-                    PortType::Linear
-                } else {
-                    PortType::RealArray
-                };
-                let p = PortSpec::new(n, ty, d);
-                if opt { p.optional() } else { p }
-            })
-            .collect()
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
+/// The node kind of a table row.
+pub(crate) fn pointwise_kind(row: &'static PointwiseKind) -> NodeKind {
+    let ty = if row.linear {
+        PortType::Linear
+    } else {
+        PortType::RealArray
+    };
+    let inputs = row.inputs.iter().map(move |&(n, d, opt)| {
+        let p = PortSpec::new(n, ty, d);
+        if opt { p.optional() } else { p }
+    });
+    NodeKind::declare(row.name, row.doc)
+        .inputs(inputs)
+        .output(PortSpec::new(
             "out",
-            if self.linear {
-                PortType::Linear
-            } else {
-                PortType::RealArray
-            },
+            ty,
             "result, shaped like the non-scalar inputs",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        (self.params)()
-    }
-
-    fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
-        let values = (self.flatten)(params);
-        if self.per_component && values.len() > MAX_COMPONENTS {
-            return Err(format!(
-                "at most {MAX_COMPONENTS} per-component values are supported, got {}",
-                values.len()
-            ));
-        }
-        let mut gpu_params: Vec<f32> = values.iter().map(|v| v.gpu()).collect();
-        if self.per_component {
-            gpu_params.resize(MAX_COMPONENTS, 0.0);
-        }
-        Ok(Box::new(PointwiseNode {
-            kind: self,
-            values: values.iter().map(|v| v.host()).collect(),
-            gpu_params,
-            generated: (self.shape)(params),
-        }))
-    }
+        ))
+        .params((row.params)())
+        .build(move |params| {
+            let values = (row.flatten)(params);
+            if row.per_component && values.len() > MAX_COMPONENTS {
+                return Err(format!(
+                    "at most {MAX_COMPONENTS} per-component values are supported, got {}",
+                    values.len()
+                ));
+            }
+            let mut gpu_params: Vec<f32> = values.iter().map(|v| v.gpu()).collect();
+            if row.per_component {
+                gpu_params.resize(MAX_COMPONENTS, 0.0);
+            }
+            Ok(Box::new(PointwiseNode {
+                kind: row,
+                values: values.iter().map(|v| v.host()).collect(),
+                gpu_params,
+                generated: (row.shape)(params),
+            }))
+        })
 }
 
 struct PointwiseNode {
@@ -481,7 +460,7 @@ impl Node for PointwiseNode {
 }
 
 pub fn register(r: &mut Registry) {
-    for k in KINDS {
-        r.add(k);
+    for row in KINDS {
+        r.add(pointwise_kind(row));
     }
 }

@@ -10,7 +10,7 @@
 //! them into their consumers (the noise of an integrator costs no pass of its own);
 //! `random_bits` writes the raw words.
 
-use super::pointwise::{BASE, ElemCtx, Param, PointwiseKind};
+use super::pointwise::{BASE, ElemCtx, Param, PointwiseKind, pointwise_kind};
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
@@ -227,40 +227,28 @@ pub static GENERATORS: &[PointwiseKind] = &[
 ];
 
 /// `random_bits`: raw Philox words as u32 indices.
-pub struct RandomBitsKind;
-
-impl NodeKind for RandomBitsKind {
-    fn name(&self) -> &'static str {
-        "random_bits"
-    }
-
-    fn doc(&self) -> &'static str {
-        "raw Philox4x32-10 words (u32), a pure function of (seed, stream, step, element)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        Vec::new()
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("out", PortType::Indices, "random words")]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![
-            seed_param(),
-            stream_param(),
-            ParamSpec::integer("count", None, 0.0, u32::MAX as f64, "number of words"),
-        ]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn random_bits_kind() -> NodeKind {
+    NodeKind::declare(
+        "random_bits",
+        "raw Philox4x32-10 words (u32), a pure function of (seed, stream, step, element)",
+    )
+    .output(PortSpec::new("out", PortType::Indices, "random words"))
+    .param(seed_param())
+    .param(stream_param())
+    .param(ParamSpec::integer(
+        "count",
+        None,
+        0.0,
+        u32::MAX as f64,
+        "number of words",
+    ))
+    .build(|p| {
         Ok(Box::new(RandomBits {
             seed: p.number("seed") as u64,
             stream: p.number("stream") as u32,
             count: p.number("count") as u32,
         }))
-    }
+    })
 }
 
 struct RandomBits {
@@ -319,10 +307,10 @@ impl GpuKernels for RandomBits {
 }
 
 pub fn register(r: &mut Registry) {
-    for k in GENERATORS {
-        r.add(k);
+    for row in GENERATORS {
+        r.add(pointwise_kind(row));
     }
-    r.add(RandomBitsKind);
+    r.add(random_bits_kind());
 }
 
 #[cfg(test)]

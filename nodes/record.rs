@@ -4,59 +4,42 @@
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Registry,
     Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
-pub struct RecordKind;
-
-impl NodeKind for RecordKind {
-    fn name(&self) -> &'static str {
-        "record"
-    }
-
-    fn doc(&self) -> &'static str {
-        "a trajectory: frame j holds x after step (j + 1) * every (frames past the last step stay zero)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "x",
-            PortType::Particles(None),
-            "the array to record (N x k)",
-        )]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("out", PortType::Frames, "the frames (F x N x k)").persistent()]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::integer(
-                "every",
-                Some(1.0),
-                1.0,
-                u32::MAX as f64,
-                "steps between frames",
-            ),
-            ParamSpec::integer(
-                "frames",
-                None,
-                1.0,
-                u32::MAX as f64,
-                "number of frames; graphs usually pass \"= floor(steps / every)\"",
-            ),
-        ]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn record_kind() -> NodeKind {
+    NodeKind::declare(
+        "record",
+        "a trajectory: frame j holds x after step (j + 1) * every (frames past the last step stay zero)",
+    )
+    .input(PortSpec::new(
+        "x",
+        PortType::Particles(None),
+        "the array to record (N x k)",
+    ))
+    .output(PortSpec::new("out", PortType::Frames, "the frames (F x N x k)").persistent())
+    .param(ParamSpec::integer(
+        "every",
+        Some(1.0),
+        1.0,
+        u32::MAX as f64,
+        "steps between frames",
+    ))
+    .param(ParamSpec::integer(
+        "frames",
+        None,
+        1.0,
+        u32::MAX as f64,
+        "number of frames; graphs usually pass \"= floor(steps / every)\"",
+    ))
+    .build(|p| {
         Ok(Box::new(Record {
             every: p.number("every") as u32,
             frames: p.number("frames") as u32,
         }))
-    }
+    })
 }
 
 struct Record {
@@ -155,5 +138,5 @@ impl GpuKernels for Record {
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(RecordKind);
+    r.add(record_kind());
 }

@@ -10,8 +10,8 @@ use crate::expr::ParamValue;
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
-    RefCtx, Registry, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, PortError, PortSpec, RefCtx,
+    Registry, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
@@ -139,45 +139,28 @@ static FLAT: &[FlatKind] = &[
     },
 ];
 
-impl NodeKind for &'static FlatKind {
-    fn name(&self) -> &'static str {
-        self.name
-    }
-
-    fn doc(&self) -> &'static str {
-        self.doc
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        if self.map == Map::Product {
-            vec![
-                PortSpec::new("a", PortType::RealArray, "first operand"),
-                PortSpec::new("b", PortType::RealArray, "second operand, shaped like a"),
-            ]
-        } else {
-            vec![PortSpec::new("x", PortType::RealArray, "values")]
-        }
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("out", PortType::Scalar, "the result")]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        if self.op == Op::Sum {
-            vec![compensated_param()]
-        } else {
-            Vec::new()
-        }
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
-        let compensated = p.get("compensated") == Some(&ParamValue::Bool(true));
-        Ok(Box::new(FlatReduce {
-            kind: self,
-            compensated,
-        }))
-    }
+/// The node kind of a table row.
+fn flat_kind(row: &'static FlatKind) -> NodeKind {
+    let inputs = if row.map == Map::Product {
+        vec![
+            PortSpec::new("a", PortType::RealArray, "first operand"),
+            PortSpec::new("b", PortType::RealArray, "second operand, shaped like a"),
+        ]
+    } else {
+        vec![PortSpec::new("x", PortType::RealArray, "values")]
+    };
+    NodeKind::declare(row.name, row.doc)
+        .inputs(inputs)
+        .output(PortSpec::new("out", PortType::Scalar, "the result"))
+        // Only sums (sum, dot, norm) carry an error term.
+        .params((row.op == Op::Sum).then(compensated_param))
+        .build(move |p| {
+            let compensated = p.get("compensated") == Some(&ParamValue::Bool(true));
+            Ok(Box::new(FlatReduce {
+                kind: row,
+                compensated,
+            }))
+        })
 }
 
 struct FlatReduce {
@@ -285,46 +268,29 @@ impl GpuKernels for FlatReduce {
 }
 
 /// Per-component reduction over the rows of a particle array.
-pub struct ColumnReduceKind;
-
-impl NodeKind for ColumnReduceKind {
-    fn name(&self) -> &'static str {
-        "column_reduce"
-    }
-
-    fn doc(&self) -> &'static str {
-        "sum, mean, max or min of each column of a particle array (N x k, k <= 4) -> 1 x k"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "x",
-            PortType::Particles(None),
-            "rows to reduce",
-        )]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "out",
-            PortType::Particles(None),
-            "one row: the per-column result",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::choice("op", "sum", OPS, "the reduction"),
-            compensated_param(),
-        ]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn column_reduce_kind() -> NodeKind {
+    NodeKind::declare(
+        "column_reduce",
+        "sum, mean, max or min of each column of a particle array (N x k, k <= 4) -> 1 x k",
+    )
+    .input(PortSpec::new(
+        "x",
+        PortType::Particles(None),
+        "rows to reduce",
+    ))
+    .output(PortSpec::new(
+        "out",
+        PortType::Particles(None),
+        "one row: the per-column result",
+    ))
+    .param(ParamSpec::choice("op", "sum", OPS, "the reduction"))
+    .param(compensated_param())
+    .build(|p| {
         Ok(Box::new(ColumnReduce {
             op: Op::parse(p.text("op")),
             compensated: p.flag("compensated"),
         }))
-    }
+    })
 }
 
 struct ColumnReduce {
@@ -426,58 +392,39 @@ impl GpuKernels for ColumnReduce {
 }
 
 /// Per-segment reduction of rows sorted by segment.
-pub struct SegmentReduceKind;
-
-impl NodeKind for SegmentReduceKind {
-    fn name(&self) -> &'static str {
-        "segment_reduce"
-    }
-
-    fn doc(&self) -> &'static str {
-        "sum, mean, max or min of each segment of rows (segment s = rows starts[s] .. starts[s+1], the last ends at N)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "values",
-                PortType::Particles(None),
-                "rows, sorted by segment",
-            ),
-            PortSpec::new(
-                "starts",
-                PortType::Indices,
-                "first row of each segment (non-decreasing)",
-            ),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "out",
-            PortType::Particles(None),
-            "one row per segment",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::choice(
-                "op",
-                "sum",
-                OPS,
-                "the reduction (empty segments: 0, or -inf / +inf for max / min)",
-            ),
-            compensated_param(),
-        ]
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn segment_reduce_kind() -> NodeKind {
+    NodeKind::declare(
+        "segment_reduce",
+        "sum, mean, max or min of each segment of rows (segment s = rows starts[s] .. starts[s+1], the last ends at N)",
+    )
+    .input(PortSpec::new(
+        "values",
+        PortType::Particles(None),
+        "rows, sorted by segment",
+    ))
+    .input(PortSpec::new(
+        "starts",
+        PortType::Indices,
+        "first row of each segment (non-decreasing)",
+    ))
+    .output(PortSpec::new(
+        "out",
+        PortType::Particles(None),
+        "one row per segment",
+    ))
+    .param(ParamSpec::choice(
+        "op",
+        "sum",
+        OPS,
+        "the reduction (empty segments: 0, or -inf / +inf for max / min)",
+    ))
+    .param(compensated_param())
+    .build(|p| {
         Ok(Box::new(SegmentReduce {
             op: Op::parse(p.text("op")),
             compensated: p.flag("compensated"),
         }))
-    }
+    })
 }
 
 struct SegmentReduce {
@@ -571,9 +518,9 @@ impl GpuKernels for SegmentReduce {
 }
 
 pub fn register(r: &mut Registry) {
-    for k in FLAT {
-        r.add(k);
+    for row in FLAT {
+        r.add(flat_kind(row));
     }
-    r.add(ColumnReduceKind);
-    r.add(SegmentReduceKind);
+    r.add(column_reduce_kind());
+    r.add(segment_reduce_kind());
 }

@@ -203,42 +203,27 @@ impl ScanKernels {
     }
 }
 
-pub struct ScanKind;
-
-impl NodeKind for ScanKind {
-    fn name(&self) -> &'static str {
-        "scan"
-    }
-
-    fn doc(&self) -> &'static str {
-        "exclusive prefix sum over the flat words: out[i] = x[0] + ... + x[i-1] (u32 sums wrap mod 2^32)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "x",
-            PortType::RealOrIndices,
-            "values to sum (u32 indices or f32 words)",
-        )]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "out",
-            PortType::RealOrIndices,
-            "exclusive prefix sums, shaped like x (out[0] = 0)",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![Variant::param()]
-    }
-
-    fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
+fn scan_kind() -> NodeKind {
+    NodeKind::declare(
+        "scan",
+        "exclusive prefix sum over the flat words: out[i] = x[0] + ... + x[i-1] (u32 sums wrap mod 2^32)",
+    )
+    .input(PortSpec::new(
+        "x",
+        PortType::RealOrIndices,
+        "values to sum (u32 indices or f32 words)",
+    ))
+    .output(PortSpec::new(
+        "out",
+        PortType::RealOrIndices,
+        "exclusive prefix sums, shaped like x (out[0] = 0)",
+    ))
+    .param(Variant::param())
+    .build(|params| {
         Ok(Box::new(ScanNode {
             variant: Variant::from_params(params)?,
         }))
-    }
+    })
 }
 
 struct ScanNode {
@@ -312,7 +297,7 @@ impl GpuKernels for ScanNode {
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(ScanKind);
+    r.add(scan_kind());
 }
 
 #[cfg(test)]

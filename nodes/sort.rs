@@ -50,7 +50,7 @@ use crate::gpu::{
     Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo,
 };
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Registry,
     Signature,
 };
 use crate::nodes::scan::{self, Path, ScanKernels};
@@ -282,50 +282,31 @@ fn scratch_bytes(n: u64, bits: u32, variant: SortVariant) -> Vec<u64> {
     s
 }
 
-pub struct SortKind;
-
-impl NodeKind for SortKind {
-    fn name(&self) -> &'static str {
-        "sort"
-    }
-
-    fn doc(&self) -> &'static str {
-        "stable radix sort of u32 keys by their low `bits` bits, with the sorting permutation"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new("keys", PortType::Indices, "keys to sort")]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "keys",
-                PortType::Indices,
-                "the keys in ascending order of their low `bits` bits (equal ones in input order)",
-            ),
-            PortSpec::new(
-                "perm",
-                PortType::Indices,
-                "input index of each sorted key: keys_out[i] = keys[perm[i]]",
-            ),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![
-            ParamSpec::integer(
-                "bits",
-                Some(32.0),
-                1.0,
-                32.0,
-                "low key bits to sort by; higher bits are ignored (and kept)",
-            ),
-            SortVariant::param(),
-        ]
-    }
-
-    fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
+fn sort_kind() -> NodeKind {
+    NodeKind::declare(
+        "sort",
+        "stable radix sort of u32 keys by their low `bits` bits, with the sorting permutation",
+    )
+    .input(PortSpec::new("keys", PortType::Indices, "keys to sort"))
+    .output(PortSpec::new(
+        "keys",
+        PortType::Indices,
+        "the keys in ascending order of their low `bits` bits (equal ones in input order)",
+    ))
+    .output(PortSpec::new(
+        "perm",
+        PortType::Indices,
+        "input index of each sorted key: keys_out[i] = keys[perm[i]]",
+    ))
+    .param(ParamSpec::integer(
+        "bits",
+        Some(32.0),
+        1.0,
+        32.0,
+        "low key bits to sort by; higher bits are ignored (and kept)",
+    ))
+    .param(SortVariant::param())
+    .build(|params| {
         let name = params.text("variant");
         let variant =
             SortVariant::from_name(name).ok_or_else(|| format!("unknown variant `{name}`"))?;
@@ -333,7 +314,7 @@ impl NodeKind for SortKind {
             bits: params.number("bits") as u32,
             variant,
         }))
-    }
+    })
 }
 
 pub(crate) struct SortNode {
@@ -648,7 +629,7 @@ impl GpuKernels for SortNode {
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(SortKind);
+    r.add(sort_kind());
 }
 
 #[cfg(test)]

@@ -497,49 +497,34 @@ static KINDS: &[SpectralKind] = &[
     },
 ];
 
-impl NodeKind for &'static SpectralKind {
-    fn name(&self) -> &'static str {
-        self.name
-    }
-
-    fn doc(&self) -> &'static str {
-        self.doc
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
+/// The node kind of a table row.
+fn spectral_kind(row: &'static SpectralKind) -> NodeKind {
+    NodeKind::declare(row.name, row.doc)
+        .input(PortSpec::new(
             "x",
             PortType::Spectrum,
             "a spectrum (half spectrum of rfft, or full spectrum of fft)",
-        )]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
+        ))
+        .output(PortSpec::new(
             "out",
             PortType::Spectrum,
             "the result, shaped like the input",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        (self.params)()
-    }
-
-    fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
-        let values = (self.values)(params);
-        if values[..3].iter().any(|&l| l <= 0.0) {
-            return Err(format!(
-                "box lengths must be positive, got {:?}",
-                &values[..3]
-            ));
-        }
-        Ok(Box::new(SpectralNode {
-            kind: self,
-            body: (self.gpu)(&values),
-            values,
-        }))
-    }
+        ))
+        .params((row.params)())
+        .build(move |params| {
+            let values = (row.values)(params);
+            if values[..3].iter().any(|&l| l <= 0.0) {
+                return Err(format!(
+                    "box lengths must be positive, got {:?}",
+                    &values[..3]
+                ));
+            }
+            Ok(Box::new(SpectralNode {
+                kind: row,
+                body: (row.gpu)(&values),
+                values,
+            }))
+        })
 }
 
 struct SpectralNode {
@@ -628,48 +613,32 @@ fn apply_reference(values: &[f64], apply: Apply, out: &mut RefArray, step: u64) 
 /// `stokes_noise`: the fluctuating part of `stokes` alone, as a half spectrum generated
 /// from nothing (its inverse transform, interpolated, is M^(1/2) W). It draws the same
 /// numbers as a `stokes` node with the same seed, stream and step.
-pub struct StokesNoiseKind;
-
-impl NodeKind for StokesNoiseKind {
-    fn name(&self) -> &'static str {
-        "stokes_noise"
-    }
-
-    fn doc(&self) -> &'static str {
-        "the half spectrum of noise * M^(1/2) W for periodic Stokes flow (the fluctuating part of `stokes`, with the same draws): its inverse rfft, interpolated, has covariance noise^2 M"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        Vec::new()
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "out",
-            PortType::HalfComplexGrid,
-            "half spectrum of the fluctuating velocity, 3 components",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = stokes_params(1.0);
-        p.insert(
-            1,
-            ParamSpec {
-                name: "grid",
-                kind: ParamKind::Numbers {
-                    len: Some(3),
-                    min: 1.0,
-                    max: 65536.0,
-                },
-                default: None,
-                doc: "cells per axis of the real-space grid",
+fn stokes_noise_kind() -> NodeKind {
+    let mut params = stokes_params(1.0);
+    params.insert(
+        1,
+        ParamSpec {
+            name: "grid",
+            kind: ParamKind::Numbers {
+                len: Some(3),
+                min: 1.0,
+                max: 65536.0,
             },
-        );
-        p
-    }
-
-    fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
+            default: None,
+            doc: "cells per axis of the real-space grid",
+        },
+    );
+    NodeKind::declare(
+        "stokes_noise",
+        "the half spectrum of noise * M^(1/2) W for periodic Stokes flow (the fluctuating part of `stokes`, with the same draws): its inverse rfft, interpolated, has covariance noise^2 M",
+    )
+    .output(PortSpec::new(
+        "out",
+        PortType::HalfComplexGrid,
+        "half spectrum of the fluctuating velocity, 3 components",
+    ))
+    .params(params)
+    .build(|params| {
         let values = stokes_values(params, false);
         let grid = params.numbers("grid");
         if grid.iter().any(|g| g.fract() != 0.0) {
@@ -682,7 +651,7 @@ impl NodeKind for StokesNoiseKind {
             body: stokes_body(&values),
             values,
         }))
-    }
+    })
 }
 
 struct StokesNoiseNode {
@@ -733,8 +702,8 @@ impl GpuKernels for StokesNoiseNode {
 }
 
 pub fn register(r: &mut Registry) {
-    for k in KINDS {
-        r.add(k);
+    for row in KINDS {
+        r.add(spectral_kind(row));
     }
-    r.add(StokesNoiseKind);
+    r.add(stokes_noise_kind());
 }

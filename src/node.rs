@@ -541,16 +541,116 @@ pub trait Node: Send + Sync {
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx);
 }
 
-/// A node kind: the factory behind a `kind` name in graph files.
-pub trait NodeKind: Send + Sync {
-    fn name(&self) -> &'static str;
+/// Builds a node from checked params; the error names what is wrong with them together.
+pub type BuildFn = dyn Fn(&Params) -> Result<Box<dyn Node>, String> + Send + Sync;
+
+/// A node kind: the factory behind a `kind` name in graph files, declared as data (see
+/// [`NodeKind::declare`]).
+pub struct NodeKind {
+    name: &'static str,
+    doc: &'static str,
+    inputs: Vec<PortSpec>,
+    outputs: Vec<PortSpec>,
+    params: Vec<ParamSpec>,
+    build: Box<BuildFn>,
+}
+
+impl NodeKind {
+    /// Starts a declaration:
+    /// `NodeKind::declare("gather", "doc").input(..).output(..).param(..).build(|p| ..)`.
+    /// Ports and params keep the order they are declared in.
+    pub fn declare(name: &'static str, doc: &'static str) -> KindDecl {
+        KindDecl {
+            name,
+            doc,
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            params: Vec::new(),
+        }
+    }
+
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
+
     /// One line, shown by `mesoflow nodes`.
-    fn doc(&self) -> &'static str;
-    fn inputs(&self) -> Vec<PortSpec>;
-    fn outputs(&self) -> Vec<PortSpec>;
-    fn params(&self) -> Vec<ParamSpec>;
+    pub fn doc(&self) -> &'static str {
+        self.doc
+    }
+
+    pub fn inputs(&self) -> &[PortSpec] {
+        &self.inputs
+    }
+
+    pub fn outputs(&self) -> &[PortSpec] {
+        &self.outputs
+    }
+
+    pub fn params(&self) -> &[ParamSpec] {
+        &self.params
+    }
+
     /// Builds a node from checked params; the error names what is wrong with them together.
-    fn build(&self, params: &Params) -> Result<Box<dyn Node>, String>;
+    pub fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
+        (self.build)(params)
+    }
+}
+
+/// A [`NodeKind`] being declared: its ports and params so far. [`KindDecl::build`] ends it.
+#[must_use = "a declaration is a kind only once `build` gives it its factory"]
+pub struct KindDecl {
+    name: &'static str,
+    doc: &'static str,
+    inputs: Vec<PortSpec>,
+    outputs: Vec<PortSpec>,
+    params: Vec<ParamSpec>,
+}
+
+impl KindDecl {
+    pub fn input(mut self, port: PortSpec) -> Self {
+        self.inputs.push(port);
+        self
+    }
+
+    pub fn inputs(mut self, ports: impl IntoIterator<Item = PortSpec>) -> Self {
+        self.inputs.extend(ports);
+        self
+    }
+
+    pub fn output(mut self, port: PortSpec) -> Self {
+        self.outputs.push(port);
+        self
+    }
+
+    pub fn outputs(mut self, ports: impl IntoIterator<Item = PortSpec>) -> Self {
+        self.outputs.extend(ports);
+        self
+    }
+
+    pub fn param(mut self, param: ParamSpec) -> Self {
+        self.params.push(param);
+        self
+    }
+
+    pub fn params(mut self, params: impl IntoIterator<Item = ParamSpec>) -> Self {
+        self.params.extend(params);
+        self
+    }
+
+    /// Ends the declaration with the factory that builds a node from checked params.
+    pub fn build(
+        self,
+        build: impl Fn(&Params) -> Result<Box<dyn Node>, String> + Send + Sync + 'static,
+    ) -> NodeKind {
+        NodeKind {
+            name: self.name,
+            doc: self.doc,
+            inputs: self.inputs,
+            outputs: self.outputs,
+            params: self.params,
+            build: Box::new(build),
+        }
+    }
 }
 
 /// What graph files may name: node kinds by name, and the host functions param
@@ -558,7 +658,8 @@ pub trait NodeKind: Send + Sync {
 /// ones); loading and planning are handed it and know no family.
 #[derive(Clone, Default)]
 pub struct Registry {
-    kinds: BTreeMap<&'static str, Arc<dyn NodeKind>>,
+    /// Shared, so that a registry clones cheaply (a kind's factory is not `Clone`).
+    kinds: BTreeMap<&'static str, Arc<NodeKind>>,
     functions: HostFunctions,
 }
 
@@ -573,18 +674,19 @@ impl Registry {
     }
 
     /// Adds a kind. Two kinds with one name are a programming error.
-    pub fn add(&mut self, kind: impl NodeKind + 'static) {
+    pub fn add(&mut self, kind: NodeKind) {
         let name = kind.name();
         let previous = self.kinds.insert(name, Arc::new(kind));
         assert!(previous.is_none(), "node kind `{name}` registered twice");
     }
 
-    pub fn get(&self, name: &str) -> Option<&Arc<dyn NodeKind>> {
-        self.kinds.get(name)
+    pub fn get(&self, name: &str) -> Option<&NodeKind> {
+        self.kinds.get(name).map(Arc::as_ref)
     }
 
-    pub fn kinds(&self) -> impl Iterator<Item = &Arc<dyn NodeKind>> {
-        self.kinds.values()
+    /// The kinds in name order.
+    pub fn kinds(&self) -> impl Iterator<Item = &NodeKind> {
+        self.kinds.values().map(Arc::as_ref)
     }
 
     /// Known names closest to `name`, for "did you mean" hints.
@@ -656,6 +758,50 @@ mod tests {
         let errs = check_params(&specs, &raw).unwrap_err();
         let names: Vec<&str> = errs.iter().map(|(n, _)| n.as_str()).collect();
         assert_eq!(names, vec!["c", "a", "b"]);
+    }
+
+    /// A kind that refuses to build, naming its param: enough to see the factory run.
+    fn test_kind(name: &'static str) -> NodeKind {
+        NodeKind::declare(name, "a test kind")
+            .input(PortSpec::new("a", PortType::Scalar, ""))
+            .inputs([PortSpec::new("b", PortType::Scalar, "").optional()])
+            .output(PortSpec::new("out", PortType::Scalar, ""))
+            .param(ParamSpec::flag("f", false, ""))
+            .params([ParamSpec::number("x", None, 0.0, 1.0, "")])
+            .build(|p| Err(format!("x is {}", p.number("x"))))
+    }
+
+    #[test]
+    fn declarations_keep_their_order() {
+        let kind = test_kind("k");
+        let names = |ports: &[PortSpec]| ports.iter().map(|p| p.name).collect::<Vec<_>>();
+        assert_eq!(names(kind.inputs()), ["a", "b"]);
+        assert!(kind.inputs()[1].optional);
+        assert_eq!(names(kind.outputs()), ["out"]);
+        let params: Vec<&str> = kind.params().iter().map(|p| p.name).collect();
+        assert_eq!(params, ["f", "x"]);
+        let raw = BTreeMap::from([("x".to_string(), ParamValue::Number(0.5))]);
+        let checked = check_params(kind.params(), &raw).unwrap();
+        assert_eq!(kind.build(&checked).err().as_deref(), Some("x is 0.5"));
+    }
+
+    #[test]
+    fn registry_finds_kinds_by_name() {
+        let mut r = Registry::default();
+        r.add(test_kind("second"));
+        r.add(test_kind("first"));
+        assert_eq!(r.get("first").map(NodeKind::name), Some("first"));
+        assert!(r.get("third").is_none());
+        let names: Vec<&str> = r.kinds().map(NodeKind::name).collect();
+        assert_eq!(names, ["first", "second"]);
+    }
+
+    #[test]
+    #[should_panic(expected = "node kind `k` registered twice")]
+    fn registering_a_name_twice_panics() {
+        let mut r = Registry::default();
+        r.add(test_kind("k"));
+        r.add(test_kind("k"));
     }
 
     #[test]

@@ -25,7 +25,7 @@ pub use plan::{is_friendly, next_friendly};
 
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
-    Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry, Signature,
+    Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Registry, Signature,
 };
 use crate::transform::{Folding, LinePass, SpectralBody, Transform};
 use crate::value::{PortType, RefArray, ValueType};
@@ -33,70 +33,45 @@ use plan::{Buf, Key, Kind, Limits, MAX_LENGTH};
 
 const AXES: &[&str] = &["x", "xy", "xyz"];
 
-struct FftKind(Kind);
-
-impl FftKind {
-    fn port_types(&self) -> (PortType, PortType) {
-        match self.0 {
-            Kind::Forward | Kind::Inverse => (PortType::ComplexGrid, PortType::ComplexGrid),
-            Kind::RealForward => (PortType::RealGrid, PortType::HalfComplexGrid),
-            Kind::RealInverse => (PortType::HalfComplexGrid, PortType::RealGrid),
+/// The node kind of one transform (`fft`, `ifft`, `rfft`, `irfft`).
+fn fft_kind(kind: Kind) -> NodeKind {
+    let doc = match kind {
+        Kind::Forward => {
+            "complex FFT over x, xy or xyz, e^{-2 pi i k.x/n}, unnormalised; batched over components; sizes with factors 2, 3, 5, 7"
         }
-    }
-}
-
-impl NodeKind for FftKind {
-    fn name(&self) -> &'static str {
-        self.0.name()
-    }
-
-    fn doc(&self) -> &'static str {
-        match self.0 {
-            Kind::Forward => {
-                "complex FFT over x, xy or xyz, e^{-2 pi i k.x/n}, unnormalised; batched over components; sizes with factors 2, 3, 5, 7"
-            }
-            Kind::Inverse => {
-                "inverse complex FFT, e^{+2 pi i k.x/n} times 1/N (N: product of the transformed sizes), so ifft(fft(x)) = x"
-            }
-            Kind::RealForward => {
-                "real-to-complex FFT: real grid -> Hermitian half spectrum (x wave numbers 0..=nx/2), e^{-2 pi i k.x/n}, unnormalised"
-            }
-            Kind::RealInverse => {
-                "complex-to-real FFT: Hermitian half spectrum -> real grid, times 1/N, so irfft(rfft(x)) = x (as numpy's irfftn)"
-            }
+        Kind::Inverse => {
+            "inverse complex FFT, e^{+2 pi i k.x/n} times 1/N (N: product of the transformed sizes), so ifft(fft(x)) = x"
         }
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "x",
-            self.port_types().0,
-            "the grid to transform",
-        )]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
+        Kind::RealForward => {
+            "real-to-complex FFT: real grid -> Hermitian half spectrum (x wave numbers 0..=nx/2), e^{-2 pi i k.x/n}, unnormalised"
+        }
+        Kind::RealInverse => {
+            "complex-to-real FFT: Hermitian half spectrum -> real grid, times 1/N, so irfft(rfft(x)) = x (as numpy's irfftn)"
+        }
+    };
+    let (input, output) = match kind {
+        Kind::Forward | Kind::Inverse => (PortType::ComplexGrid, PortType::ComplexGrid),
+        Kind::RealForward => (PortType::RealGrid, PortType::HalfComplexGrid),
+        Kind::RealInverse => (PortType::HalfComplexGrid, PortType::RealGrid),
+    };
+    NodeKind::declare(kind.name(), doc)
+        .input(PortSpec::new("x", input, "the grid to transform"))
+        .output(PortSpec::new(
             "out",
-            self.port_types().1,
+            output,
             "the transform, on the same cells",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        vec![ParamSpec::choice(
+        ))
+        .param(ParamSpec::choice(
             "axes",
             "xyz",
             AXES,
             "axes to transform: x (1-D), xy (2-D) or xyz (3-D); axes of size 1 are skipped",
-        )]
-    }
-
-    fn build(&self, params: &Params) -> Result<Box<dyn Node>, String> {
-        let a = params.text("axes");
-        let axes = [a.contains('x'), a.contains('y'), a.contains('z')];
-        Ok(Box::new(FftNode { kind: self.0, axes }))
-    }
+        ))
+        .build(move |params| {
+            let a = params.text("axes");
+            let axes = [a.contains('x'), a.contains('y'), a.contains('z')];
+            Ok(Box::new(FftNode { kind, axes }))
+        })
 }
 
 struct FftNode {
@@ -424,6 +399,6 @@ pub fn register(r: &mut Registry) {
         Kind::RealForward,
         Kind::RealInverse,
     ] {
-        r.add(FftKind(k));
+        r.add(fft_kind(k));
     }
 }

@@ -25,53 +25,37 @@ fn shift_param() -> ParamSpec {
     )
 }
 
-pub struct MpcdBinKind;
-
-impl NodeKind for MpcdBinKind {
-    fn name(&self) -> &'static str {
-        "mpcd_bin"
-    }
-
-    fn doc(&self) -> &'static str {
-        "MPCD cells of this step's randomly shifted grid, and per cell the count, sum v and, for a thermostat, sum |v|^2 (exact 64-bit fixed point; native 64-bit atomics where the adapter has them)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        particle_ports()
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("cell", PortType::Indices, "linear cell index per particle"),
-            PortSpec::new(
-                "sums",
-                PortType::Indices,
-                "8 words per cell: (lo, hi) u32 pairs of the 64-bit count and sums of v_x, v_y, v_z (units v_th/2^24); then with a thermostat a pair of sum |v|^2 per cell (units v_th^2/2^16)",
-            ),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = geometry_params();
-        p.extend(thermal_params());
-        p.push(shift_param());
-        p.push(rule_param());
-        p.push(thermostat_param(
-            "the collision's thermostat: any but none adds the sums of |v|^2 it needs",
-        ));
-        p.push(ParamSpec::choice(
-            "atomics",
-            "auto",
-            &["auto", "int64", "int32"],
-            "auto: native 64-bit atomics where the adapter has them (one return-less add per sum), else int32; int32: pairs of 32-bit atomics with a carry (any adapter). Both give the same exact sums",
-        ));
-        p.extend(key_params());
-        p
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
-        Ok(Box::new(MpcdBin::from_params(p)?))
-    }
+pub(super) fn mpcd_bin_kind() -> NodeKind {
+    NodeKind::declare(
+        "mpcd_bin",
+        "MPCD cells of this step's randomly shifted grid, and per cell the count, sum v and, for a thermostat, sum |v|^2 (exact 64-bit fixed point; native 64-bit atomics where the adapter has them)",
+    )
+    .inputs(particle_ports())
+    .output(PortSpec::new(
+        "cell",
+        PortType::Indices,
+        "linear cell index per particle",
+    ))
+    .output(PortSpec::new(
+        "sums",
+        PortType::Indices,
+        "8 words per cell: (lo, hi) u32 pairs of the 64-bit count and sums of v_x, v_y, v_z (units v_th/2^24); then with a thermostat a pair of sum |v|^2 per cell (units v_th^2/2^16)",
+    ))
+    .params(geometry_params())
+    .params(thermal_params())
+    .param(shift_param())
+    .param(rule_param())
+    .param(thermostat_param(
+        "the collision's thermostat: any but none adds the sums of |v|^2 it needs",
+    ))
+    .param(ParamSpec::choice(
+        "atomics",
+        "auto",
+        &["auto", "int64", "int32"],
+        "auto: native 64-bit atomics where the adapter has them (one return-less add per sum), else int32; int32: pairs of 32-bit atomics with a carry (any adapter). Both give the same exact sums",
+    ))
+    .params(key_params())
+    .build(|p| Ok(Box::new(MpcdBin::from_params(p)?)))
 }
 
 /// The thermostat choice (mpcd_collide's; mpcd_bin's says whether to sum |v|^2).
@@ -286,93 +270,77 @@ impl GpuKernels for MpcdBin {
     }
 }
 
-pub struct MpcdCollideKind;
-
-impl NodeKind for MpcdCollideKind {
-    fn name(&self) -> &'static str {
-        "mpcd_collide"
-    }
-
-    fn doc(&self) -> &'static str {
-        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC). With mpcd_bin_solute's sums (SRD) u_c is the mass-weighted mean of solvent and solute, the thermostat counts both species, and the node run with the same params on the solute's velocities and cells rotates and scales the solute by the same rotation and factor of each cell"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "velocities",
-                PortType::Particles(None),
-                "velocities (N x d)",
-            ),
-            PortSpec::new("cell", PortType::Indices, "cell per particle (mpcd_bin)"),
-            PortSpec::new(
-                "sums",
-                PortType::Indices,
-                "cell sums (mpcd_bin, or mpcd_bin_solute with a solute)",
-            ),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "velocities",
-            PortType::Particles(None),
-            "velocities after the collision",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = geometry_params();
-        p.extend(thermal_params());
-        p.extend([
-            ParamSpec::flag(
-                "shift",
-                true,
-                "whether mpcd_bin shifts the grid (with walls, the first and last layers are then cut cells)",
-            ),
-            rule_param(),
-            ParamSpec::number(
-                "acceptance",
-                Some(0.01),
-                0.0,
-                f64::MAX,
-                "MPCD-BC acceptance parameter A: a cell pair collides with probability tanh(A du n1 n2)",
-            ),
-            ParamSpec::number(
-                "angle",
-                Some(130.0),
-                0.0,
-                180.0,
-                "rotation angle in degrees",
-            ),
-            ParamSpec::number(
-                "density",
-                Some(10.0),
-                f64::MIN_POSITIVE,
-                f64::MAX,
-                "mean particles per cell M (the fill level of virtual particles)",
-            ),
-            ParamSpec::flag(
-                "ghosts",
-                true,
-                "with walls: fill wall-cut cells holding fewer than M particles with virtual particles (Lamura et al.)",
-            ),
-            thermostat_param(
-                "none; rescale: relative velocities of every cell scaled to kT; monte_carlo: Hecht's cell scaling (give mpcd_bin the same: it then sums |v|^2)",
-            ),
-            ParamSpec::number(
-                "mc_scale",
-                Some(0.3),
-                0.0,
-                10.0,
-                "Monte-Carlo thermostat: scale factor drawn from [1, 1 + c) or its inverse",
-            ),
-        ]);
-        p.extend(key_params());
-        p
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+pub(super) fn mpcd_collide_kind() -> NodeKind {
+    NodeKind::declare(
+        "mpcd_collide",
+        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC). With mpcd_bin_solute's sums (SRD) u_c is the mass-weighted mean of solvent and solute, the thermostat counts both species, and the node run with the same params on the solute's velocities and cells rotates and scales the solute by the same rotation and factor of each cell",
+    )
+    .input(PortSpec::new(
+        "velocities",
+        PortType::Particles(None),
+        "velocities (N x d)",
+    ))
+    .input(PortSpec::new(
+        "cell",
+        PortType::Indices,
+        "cell per particle (mpcd_bin)",
+    ))
+    .input(PortSpec::new(
+        "sums",
+        PortType::Indices,
+        "cell sums (mpcd_bin, or mpcd_bin_solute with a solute)",
+    ))
+    .output(PortSpec::new(
+        "velocities",
+        PortType::Particles(None),
+        "velocities after the collision",
+    ))
+    .params(geometry_params())
+    .params(thermal_params())
+    .param(ParamSpec::flag(
+        "shift",
+        true,
+        "whether mpcd_bin shifts the grid (with walls, the first and last layers are then cut cells)",
+    ))
+    .param(rule_param())
+    .param(ParamSpec::number(
+        "acceptance",
+        Some(0.01),
+        0.0,
+        f64::MAX,
+        "MPCD-BC acceptance parameter A: a cell pair collides with probability tanh(A du n1 n2)",
+    ))
+    .param(ParamSpec::number(
+        "angle",
+        Some(130.0),
+        0.0,
+        180.0,
+        "rotation angle in degrees",
+    ))
+    .param(ParamSpec::number(
+        "density",
+        Some(10.0),
+        f64::MIN_POSITIVE,
+        f64::MAX,
+        "mean particles per cell M (the fill level of virtual particles)",
+    ))
+    .param(ParamSpec::flag(
+        "ghosts",
+        true,
+        "with walls: fill wall-cut cells holding fewer than M particles with virtual particles (Lamura et al.)",
+    ))
+    .param(thermostat_param(
+        "none; rescale: relative velocities of every cell scaled to kT; monte_carlo: Hecht's cell scaling (give mpcd_bin the same: it then sums |v|^2)",
+    ))
+    .param(ParamSpec::number(
+        "mc_scale",
+        Some(0.3),
+        0.0,
+        10.0,
+        "Monte-Carlo thermostat: scale factor drawn from [1, 1 + c) or its inverse",
+    ))
+    .params(key_params())
+    .build(|p| {
         let geo = Geometry::from_params(p)?;
         let thermostat = match p.text("thermostat") {
             "none" => 0,
@@ -408,7 +376,7 @@ impl NodeKind for MpcdCollideKind {
             mass: p.number("mass"),
             density: p.number("density"),
         }))
-    }
+    })
 }
 
 struct MpcdCollide {

@@ -6,68 +6,54 @@ use super::{Geometry, geometry_params, key_into, key_of, thermal_params};
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Signature,
 };
 use crate::nodes::random;
 use crate::value::{PortType, RefArray, ValueType};
 
-pub struct MpcdInitKind;
-
-impl NodeKind for MpcdInitKind {
-    fn name(&self) -> &'static str {
-        "mpcd_init"
-    }
-
-    fn doc(&self) -> &'static str {
-        "MPCD initial state: round(density x cells) particles uniform in the box, Maxwell-Boltzmann velocities with zero mean (Philox at step 0 of streams stream and stream + 1), or copies of given positions and velocities"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "positions",
-                PortType::Particles(None),
-                "given initial positions (N x d; with `velocities`): copied instead of drawn",
-            )
-            .optional(),
-            PortSpec::new(
-                "velocities",
-                PortType::Particles(None),
-                "given initial velocities (N x d; with `positions`), copied as they are",
-            )
-            .optional(),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("positions", PortType::Particles(None), "positions (N x d)"),
-            PortSpec::new(
-                "velocities",
-                PortType::Particles(None),
-                "velocities (N x d)",
-            ),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = geometry_params();
-        p.extend(thermal_params());
-        p.extend([
-            ParamSpec::number(
-                "density",
-                Some(10.0),
-                f64::MIN_POSITIVE,
-                f64::MAX,
-                "mean particles per cell",
-            ),
-            random::seed_param(),
-            random::stream_param(),
-        ]);
-        p
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+pub(super) fn mpcd_init_kind() -> NodeKind {
+    NodeKind::declare(
+        "mpcd_init",
+        "MPCD initial state: round(density x cells) particles uniform in the box, Maxwell-Boltzmann velocities with zero mean (Philox at step 0 of streams stream and stream + 1), or copies of given positions and velocities",
+    )
+    .input(
+        PortSpec::new(
+            "positions",
+            PortType::Particles(None),
+            "given initial positions (N x d; with `velocities`): copied instead of drawn",
+        )
+        .optional(),
+    )
+    .input(
+        PortSpec::new(
+            "velocities",
+            PortType::Particles(None),
+            "given initial velocities (N x d; with `positions`), copied as they are",
+        )
+        .optional(),
+    )
+    .output(PortSpec::new(
+        "positions",
+        PortType::Particles(None),
+        "positions (N x d)",
+    ))
+    .output(PortSpec::new(
+        "velocities",
+        PortType::Particles(None),
+        "velocities (N x d)",
+    ))
+    .params(geometry_params())
+    .params(thermal_params())
+    .param(ParamSpec::number(
+        "density",
+        Some(10.0),
+        f64::MIN_POSITIVE,
+        f64::MAX,
+        "mean particles per cell",
+    ))
+    .param(random::seed_param())
+    .param(random::stream_param())
+    .build(|p| {
         let geo = Geometry::from_params(p)?;
         let volume_cells: f64 = geo.lengths.iter().map(|l| (l / geo.cell).round()).product();
         let n = (p.number("density") * volume_cells).round();
@@ -90,7 +76,7 @@ impl NodeKind for MpcdInitKind {
             stream,
             vth: (p.number("temperature") / p.number("mass")).sqrt(),
         }))
-    }
+    })
 }
 
 struct MpcdInit {

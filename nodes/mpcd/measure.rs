@@ -7,7 +7,7 @@ use super::{
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
@@ -26,81 +26,69 @@ fn bins_param() -> ParamSpec {
     )
 }
 
-pub struct MpcdMeasureKind;
-
-impl NodeKind for MpcdMeasureKind {
-    fn name(&self) -> &'static str {
-        "mpcd_measure"
-    }
-
-    fn doc(&self) -> &'static str {
-        "MPCD observables summed over the sampled steps (step >= warmup, every `every`): momentum, cell temperature terms, v_x profile along the last axis"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("positions", PortType::Particles(None), "positions (N x d)"),
-            PortSpec::new(
-                "velocities",
-                PortType::Particles(None),
-                "velocities (N x d): momentum and profile",
-            ),
-            PortSpec::new(
-                "sums",
-                PortType::Indices,
-                "cell sums (mpcd_bin): the cell means and counts of the temperature",
-            ),
-            PortSpec::new("cell", PortType::Indices, "cell per particle (mpcd_bin)"),
-            PortSpec::new(
-                "before",
-                PortType::Particles(None),
-                "velocities before the collision (N x d): temperature from them relative to the cell means",
-            ),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "sums",
-                PortType::Indices,
-                "u32 words: samples; 64-bit (lo, hi) pairs of sum v_a (3), sum |v - u_c|^2, sum (n_c - 1); per bin sum v_x and count (fixed point of mpcd_bin)",
-            )
-            .persistent(),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = geometry_params();
-        p.extend(thermal_params());
-        p.extend([
-            bins_param(),
-            ParamSpec::integer(
-                "warmup",
-                Some(0.0),
-                0.0,
-                u32::MAX as f64,
-                "steps before the first sample",
-            ),
-            ParamSpec::integer(
-                "every",
-                Some(1.0),
-                1.0,
-                u32::MAX as f64,
-                "steps between samples",
-            ),
-        ]);
-        p
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+pub(super) fn mpcd_measure_kind() -> NodeKind {
+    NodeKind::declare(
+        "mpcd_measure",
+        "MPCD observables summed over the sampled steps (step >= warmup, every `every`): momentum, cell temperature terms, v_x profile along the last axis",
+    )
+    .input(PortSpec::new(
+        "positions",
+        PortType::Particles(None),
+        "positions (N x d)",
+    ))
+    .input(PortSpec::new(
+        "velocities",
+        PortType::Particles(None),
+        "velocities (N x d): momentum and profile",
+    ))
+    .input(PortSpec::new(
+        "sums",
+        PortType::Indices,
+        "cell sums (mpcd_bin): the cell means and counts of the temperature",
+    ))
+    .input(PortSpec::new(
+        "cell",
+        PortType::Indices,
+        "cell per particle (mpcd_bin)",
+    ))
+    .input(PortSpec::new(
+        "before",
+        PortType::Particles(None),
+        "velocities before the collision (N x d): temperature from them relative to the cell means",
+    ))
+    .output(
+        PortSpec::new(
+            "sums",
+            PortType::Indices,
+            "u32 words: samples; 64-bit (lo, hi) pairs of sum v_a (3), sum |v - u_c|^2, sum (n_c - 1); per bin sum v_x and count (fixed point of mpcd_bin)",
+        )
+        .persistent(),
+    )
+    .params(geometry_params())
+    .params(thermal_params())
+    .param(bins_param())
+    .param(ParamSpec::integer(
+        "warmup",
+        Some(0.0),
+        0.0,
+        u32::MAX as f64,
+        "steps before the first sample",
+    ))
+    .param(ParamSpec::integer(
+        "every",
+        Some(1.0),
+        1.0,
+        u32::MAX as f64,
+        "steps between samples",
+    ))
+    .build(|p| {
         let geo = Geometry::from_params(p)?;
         let mut u = geo.thermal_uniform(p);
         u.bins = p.number("bins") as u32;
         u.warmup = p.number("warmup") as u32;
         u.every = p.number("every") as u32;
         Ok(Box::new(MpcdMeasure { geo, u }))
-    }
+    })
 }
 
 struct MpcdMeasure {
@@ -247,59 +235,41 @@ impl GpuKernels for MpcdMeasure {
     }
 }
 
-pub struct MpcdAverageKind;
-
-impl NodeKind for MpcdAverageKind {
-    fn name(&self) -> &'static str {
-        "mpcd_average"
-    }
-
-    fn doc(&self) -> &'static str {
-        "MPCD averages of mpcd_measure's sums: mean v_x per profile bin, temperature m sum|v - u_c|^2 / (d sum(n_c - 1)), mean total momentum"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "sums",
-            PortType::Indices,
-            "mpcd_measure's sums",
-        )]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "profile",
-                PortType::Particles(Some(1)),
-                "mean v_x per bin (bins x 1; NaN for a bin never sampled)",
-            ),
-            PortSpec::new(
-                "temperature",
-                PortType::Scalar,
-                "mean kT (NaN before a sample)",
-            ),
-            PortSpec::new(
-                "momentum",
-                PortType::Particles(None),
-                "mean total momentum (1 x d; NaN before a sample)",
-            ),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = geometry_params();
-        p.extend(thermal_params());
-        p.push(bins_param());
-        p
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+pub(super) fn mpcd_average_kind() -> NodeKind {
+    NodeKind::declare(
+        "mpcd_average",
+        "MPCD averages of mpcd_measure's sums: mean v_x per profile bin, temperature m sum|v - u_c|^2 / (d sum(n_c - 1)), mean total momentum",
+    )
+    .input(PortSpec::new(
+        "sums",
+        PortType::Indices,
+        "mpcd_measure's sums",
+    ))
+    .output(PortSpec::new(
+        "profile",
+        PortType::Particles(Some(1)),
+        "mean v_x per bin (bins x 1; NaN for a bin never sampled)",
+    ))
+    .output(PortSpec::new(
+        "temperature",
+        PortType::Scalar,
+        "mean kT (NaN before a sample)",
+    ))
+    .output(PortSpec::new(
+        "momentum",
+        PortType::Particles(None),
+        "mean total momentum (1 x d; NaN before a sample)",
+    ))
+    .params(geometry_params())
+    .params(thermal_params())
+    .param(bins_param())
+    .build(|p| {
         let geo = Geometry::from_params(p)?;
         let mut u = geo.thermal_uniform(p);
         u.mass = p.number("mass") as f32;
         u.bins = p.number("bins") as u32;
         Ok(Box::new(MpcdAverage { geo, u }))
-    }
+    })
 }
 
 struct MpcdAverage {

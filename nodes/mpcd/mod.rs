@@ -466,12 +466,12 @@ pub fn value_of(lo: f64, hi: f64) -> i64 {
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(init::MpcdInitKind);
-    r.add(stream::MpcdStreamKind);
-    r.add(stream_bin::MpcdStreamBinKind);
-    r.add(collide::MpcdBinKind);
-    r.add(collide::MpcdCollideKind);
-    r.add(solute::MpcdBinSoluteKind);
-    r.add(measure::MpcdMeasureKind);
-    r.add(measure::MpcdAverageKind);
+    r.add(init::mpcd_init_kind());
+    r.add(stream::mpcd_stream_kind());
+    r.add(stream_bin::mpcd_stream_bin_kind());
+    r.add(collide::mpcd_bin_kind());
+    r.add(collide::mpcd_collide_kind());
+    r.add(solute::mpcd_bin_solute_kind());
+    r.add(measure::mpcd_measure_kind());
+    r.add(measure::mpcd_average_kind());
 }

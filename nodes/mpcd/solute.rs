@@ -8,77 +8,58 @@ use super::{Geometry, SumsLayout, geometry_params, grid_shift, key_into, key_of,
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Signature,
 };
 use crate::nodes::random;
 use crate::value::{PortType, RefArray, ValueType};
 
-pub struct MpcdBinSoluteKind;
-
-impl NodeKind for MpcdBinSoluteKind {
-    fn name(&self) -> &'static str {
-        "mpcd_bin_solute"
-    }
-
-    fn doc(&self) -> &'static str {
-        "MPCD solute coupling: the cells of a second species of mass M in this step's shifted grid (the solvent's: same seed, stream and box) and the solvent's cell sums with the solute added, weighted by M / m (the mass-weighted cell means of mpcd_collide, its thermostat and virtual particles); SRD only"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "sums",
-                PortType::Indices,
-                "the solvent's cell sums (mpcd_bin)",
-            ),
-            PortSpec::new(
-                "positions",
-                PortType::Particles(None),
-                "solute positions (N_s x d)",
-            ),
-            PortSpec::new(
-                "velocities",
-                PortType::Particles(None),
-                "solute velocities (N_s x d)",
-            ),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "cell",
-                PortType::Indices,
-                "linear cell index per solute particle",
-            ),
-            PortSpec::new(
-                "sums",
-                PortType::Indices,
-                "mpcd_bin's sums with the solute's M/m-weighted velocity (and, when present, |v|^2) sums added, then the solute count per cell, then the f32 bits of M/m",
-            ),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = geometry_params();
-        p.extend(thermal_params());
-        p.push(ParamSpec::number(
-            "solute_mass",
-            Some(1.0),
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            "solute particle mass M",
-        ));
-        p.push(ParamSpec::flag(
-            "shift",
-            true,
-            "random grid shift (as mpcd_bin: give both the same seed and stream)",
-        ));
-        p.extend([random::seed_param(), random::stream_param()]);
-        p
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+pub(super) fn mpcd_bin_solute_kind() -> NodeKind {
+    NodeKind::declare(
+        "mpcd_bin_solute",
+        "MPCD solute coupling: the cells of a second species of mass M in this step's shifted grid (the solvent's: same seed, stream and box) and the solvent's cell sums with the solute added, weighted by M / m (the mass-weighted cell means of mpcd_collide, its thermostat and virtual particles); SRD only",
+    )
+    .input(PortSpec::new(
+        "sums",
+        PortType::Indices,
+        "the solvent's cell sums (mpcd_bin)",
+    ))
+    .input(PortSpec::new(
+        "positions",
+        PortType::Particles(None),
+        "solute positions (N_s x d)",
+    ))
+    .input(PortSpec::new(
+        "velocities",
+        PortType::Particles(None),
+        "solute velocities (N_s x d)",
+    ))
+    .output(PortSpec::new(
+        "cell",
+        PortType::Indices,
+        "linear cell index per solute particle",
+    ))
+    .output(PortSpec::new(
+        "sums",
+        PortType::Indices,
+        "mpcd_bin's sums with the solute's M/m-weighted velocity (and, when present, |v|^2) sums added, then the solute count per cell, then the f32 bits of M/m",
+    ))
+    .params(geometry_params())
+    .params(thermal_params())
+    .param(ParamSpec::number(
+        "solute_mass",
+        Some(1.0),
+        f64::MIN_POSITIVE,
+        f64::MAX,
+        "solute particle mass M",
+    ))
+    .param(ParamSpec::flag(
+        "shift",
+        true,
+        "random grid shift (as mpcd_bin: give both the same seed and stream)",
+    ))
+    .param(random::seed_param())
+    .param(random::stream_param())
+    .build(|p| {
         let geo = Geometry::from_params(p)?;
         let ratio = p.number("solute_mass") / p.number("mass");
         let r32 = ratio as f32;
@@ -99,7 +80,7 @@ impl NodeKind for MpcdBinSoluteKind {
             seed,
             stream,
         }))
-    }
+    })
 }
 
 struct MpcdBinSolute {

@@ -9,67 +9,51 @@ use crate::node::{
 };
 use crate::value::{PortType, RefArray, ValueType};
 
-pub struct MpcdStreamKind;
-
-impl NodeKind for MpcdStreamKind {
-    fn name(&self) -> &'static str {
-        "mpcd_stream"
-    }
-
-    fn doc(&self) -> &'static str {
-        "MPCD streaming: x += v t + g t^2/2, v_x += g t (g = force/mass along x), exact wall crossings (bounce-back or specular plates), periodic wrap"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        particle_ports()
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "positions",
-                PortType::Particles(None),
-                "positions after the step, wrapped into the box",
-            ),
-            PortSpec::new(
-                "velocities",
-                PortType::Particles(None),
-                "velocities after the step",
-            ),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = geometry_params();
-        p.extend([
-            ParamSpec::choice(
-                "wall_bc",
-                "no_slip",
-                &["no_slip", "slip"],
-                "no_slip: bounce-back (v -> -v); slip: specular reflection (v_z -> -v_z)",
-            ),
-            ParamSpec::number("dt", None, 0.0, f64::MAX, "time step"),
-            ParamSpec::number("mass", Some(1.0), f64::MIN_POSITIVE, f64::MAX, "particle mass m"),
-            ParamSpec::number(
-                "force",
-                Some(0.0),
-                f64::MIN,
-                f64::MAX,
-                "body force per particle along x",
-            ),
-            ParamSpec::choice(
-                "force_shape",
-                "constant",
-                &["constant", "sine"],
-                "constant, or force * sin(2 pi z / L_z) (z the last axis; taken at the start of the step)",
-            ),
-        ]);
-        p
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
-        Ok(Box::new(MpcdStream::from_params(p)?))
-    }
+pub(super) fn mpcd_stream_kind() -> NodeKind {
+    NodeKind::declare(
+        "mpcd_stream",
+        "MPCD streaming: x += v t + g t^2/2, v_x += g t (g = force/mass along x), exact wall crossings (bounce-back or specular plates), periodic wrap",
+    )
+    .inputs(particle_ports())
+    .output(PortSpec::new(
+        "positions",
+        PortType::Particles(None),
+        "positions after the step, wrapped into the box",
+    ))
+    .output(PortSpec::new(
+        "velocities",
+        PortType::Particles(None),
+        "velocities after the step",
+    ))
+    .params(geometry_params())
+    .param(ParamSpec::choice(
+        "wall_bc",
+        "no_slip",
+        &["no_slip", "slip"],
+        "no_slip: bounce-back (v -> -v); slip: specular reflection (v_z -> -v_z)",
+    ))
+    .param(ParamSpec::number("dt", None, 0.0, f64::MAX, "time step"))
+    .param(ParamSpec::number(
+        "mass",
+        Some(1.0),
+        f64::MIN_POSITIVE,
+        f64::MAX,
+        "particle mass m",
+    ))
+    .param(ParamSpec::number(
+        "force",
+        Some(0.0),
+        f64::MIN,
+        f64::MAX,
+        "body force per particle along x",
+    ))
+    .param(ParamSpec::choice(
+        "force_shape",
+        "constant",
+        &["constant", "sine"],
+        "constant, or force * sin(2 pi z / L_z) (z the last axis; taken at the start of the step)",
+    ))
+    .build(|p| Ok(Box::new(MpcdStream::from_params(p)?)))
 }
 
 pub(crate) struct MpcdStream {

@@ -13,58 +13,41 @@
 //! complete in itself (the schedule is `Period` on the node's dispatches), and the results
 //! are those of the unsorted node up to the order of the particles.
 
-use super::collide::{MpcdBin, MpcdBinKind};
+use super::collide::{MpcdBin, mpcd_bin_kind};
 use super::particle_ports;
-use super::stream::{MpcdStream, MpcdStreamKind};
+use super::stream::{MpcdStream, mpcd_stream_kind};
 use crate::gpu::DeviceCaps;
 use crate::gpu::{
     Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Period, Slot, WG_1D,
 };
-use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
-};
+use crate::node::{GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, RefCtx, Signature};
 use crate::nodes::sort::SortNode;
 use crate::value::{RefArray, ValueType};
 
-pub struct MpcdStreamBinKind;
-
-impl NodeKind for MpcdStreamBinKind {
-    fn name(&self) -> &'static str {
-        "mpcd_stream_bin"
-    }
-
-    fn doc(&self) -> &'static str {
-        "MPCD streaming then binning in one kernel: mpcd_stream's outputs (positions, velocities) and mpcd_bin's (cell, sums) of the streamed particles, with the params of both"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        particle_ports()
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        let mut out = MpcdStreamKind.outputs();
-        out.extend(MpcdBinKind.outputs());
-        out
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = MpcdStreamKind.params();
-        for q in MpcdBinKind.params() {
-            if !p.iter().any(|e| e.name == q.name) {
-                p.push(q);
-            }
+pub(super) fn mpcd_stream_bin_kind() -> NodeKind {
+    let (stream, bin) = (mpcd_stream_kind(), mpcd_bin_kind());
+    // The params of both kinds, once each where they share one.
+    let mut params = stream.params().to_vec();
+    for q in bin.params() {
+        if !params.iter().any(|e| e.name == q.name) {
+            params.push(q.clone());
         }
-        p.push(ParamSpec::integer(
-            "sort_every",
-            Some(0.0),
-            0.0,
-            u32::MAX as f64,
-            "reorder the particles by cell on steps 0, K, 2K, ... (stable sort of the cells; outputs in cell order); 0: never",
-        ));
-        p
     }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+    NodeKind::declare(
+        "mpcd_stream_bin",
+        "MPCD streaming then binning in one kernel: mpcd_stream's outputs (positions, velocities) and mpcd_bin's (cell, sums) of the streamed particles, with the params of both",
+    )
+    .inputs(particle_ports())
+    .outputs(stream.outputs().iter().chain(bin.outputs()).cloned())
+    .params(params)
+    .param(ParamSpec::integer(
+        "sort_every",
+        Some(0.0),
+        0.0,
+        u32::MAX as f64,
+        "reorder the particles by cell on steps 0, K, 2K, ... (stable sort of the cells; outputs in cell order); 0: never",
+    ))
+    .build(|p| {
         let bin = MpcdBin::from_params(p)?;
         let bits = (bin.layout().ncells as f64).log2().ceil().max(1.0) as u32;
         Ok(Box::new(MpcdStreamBin {
@@ -73,7 +56,7 @@ impl NodeKind for MpcdStreamBinKind {
             sort_every: p.number("sort_every") as u64,
             sorter: SortNode::radix(bits),
         }))
-    }
+    })
 }
 
 struct MpcdStreamBin {

@@ -358,99 +358,86 @@ fn box_spec(doc: &'static str, required: bool) -> ParamSpec {
     }
 }
 
-pub struct NeighbourSumKind;
-
-impl NodeKind for NeighbourSumKind {
-    fn name(&self) -> &'static str {
-        "neighbour_sum"
-    }
-
-    fn doc(&self) -> &'static str {
-        "per particle, self term plus the pair kernel summed over neighbours within the cutoff, found through a cell list (27 cells; periodic minimum image)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        let mut v = value_inputs();
-        v[0].doc = "positions, sorted by cell (the cell list's order)";
-        v.extend([
-            PortSpec::new(
-                "cells",
-                PortType::Indices,
-                "linear cell index of each (sorted) particle: cell_hash keys after the sort",
-            ),
-            PortSpec::new(
-                "cell_start",
-                PortType::Indices,
-                "first particle of each cell (exclusive scan of the counts)",
-            ),
-            PortSpec::new(
-                "cell_count",
-                PortType::Indices,
-                "particles in each cell",
-            ),
-            PortSpec::new(
-                "list",
-                PortType::Indices,
-                "neighbour list from neighbour_list (same positions and cutoff): read instead of the cells for particles it holds whole",
-            )
-            .optional(),
-            PortSpec::new(
-                "list_count",
-                PortType::Indices,
-                "neighbours of each particle, from neighbour_list",
-            )
-            .optional(),
-        ]);
-        v
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        out_port()
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut v = vec![
-            box_spec("box lengths (Lx, Ly, Lz), centred at the origin", true),
-            ParamSpec {
-                name: "cells",
-                kind: ParamKind::Numbers {
-                    len: Some(3),
-                    min: 1.0,
-                    max: 1024.0,
-                },
-                default: None,
-                doc: "cells per axis of the cell list (cell size >= cutoff)",
-            },
-            ParamSpec {
-                name: "periodic",
-                kind: ParamKind::Numbers {
-                    len: Some(3),
-                    min: 0.0,
-                    max: 1.0,
-                },
-                default: Some(ParamValue::Numbers(vec![1.0, 1.0, 1.0])),
-                doc: "1 for a periodic axis (minimum image), 0 for an open one",
-            },
-            ParamSpec::number(
-                "cutoff",
-                None,
-                0.0,
-                f64::MAX,
-                "pairs with |r| <= cutoff are summed",
-            ),
-            ParamSpec::integer(
-                "lanes",
-                Some(0.0),
-                0.0,
-                32.0,
-                "subgroup lanes per particle walking its candidates together: 0 (auto): 8 where the adapter's subgroups hold at least 8 lanes, else 1; 1: one thread per particle; 2, 4, 8, 16 or 32: that many, refused where subgroups are narrower",
-            ),
-        ];
-        v.extend(kernel_params());
-        v
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn neighbour_sum_kind() -> NodeKind {
+    let mut inputs = value_inputs();
+    inputs[0].doc = "positions, sorted by cell (the cell list's order)";
+    NodeKind::declare(
+        "neighbour_sum",
+        "per particle, self term plus the pair kernel summed over neighbours within the cutoff, found through a cell list (27 cells; periodic minimum image)",
+    )
+    .inputs(inputs)
+    .input(PortSpec::new(
+        "cells",
+        PortType::Indices,
+        "linear cell index of each (sorted) particle: cell_hash keys after the sort",
+    ))
+    .input(PortSpec::new(
+        "cell_start",
+        PortType::Indices,
+        "first particle of each cell (exclusive scan of the counts)",
+    ))
+    .input(PortSpec::new(
+        "cell_count",
+        PortType::Indices,
+        "particles in each cell",
+    ))
+    .input(
+        PortSpec::new(
+            "list",
+            PortType::Indices,
+            "neighbour list from neighbour_list (same positions and cutoff): read instead of the cells for particles it holds whole",
+        )
+        .optional(),
+    )
+    .input(
+        PortSpec::new(
+            "list_count",
+            PortType::Indices,
+            "neighbours of each particle, from neighbour_list",
+        )
+        .optional(),
+    )
+    .outputs(out_port())
+    .param(box_spec(
+        "box lengths (Lx, Ly, Lz), centred at the origin",
+        true,
+    ))
+    .param(ParamSpec {
+        name: "cells",
+        kind: ParamKind::Numbers {
+            len: Some(3),
+            min: 1.0,
+            max: 1024.0,
+        },
+        default: None,
+        doc: "cells per axis of the cell list (cell size >= cutoff)",
+    })
+    .param(ParamSpec {
+        name: "periodic",
+        kind: ParamKind::Numbers {
+            len: Some(3),
+            min: 0.0,
+            max: 1.0,
+        },
+        default: Some(ParamValue::Numbers(vec![1.0, 1.0, 1.0])),
+        doc: "1 for a periodic axis (minimum image), 0 for an open one",
+    })
+    .param(ParamSpec::number(
+        "cutoff",
+        None,
+        0.0,
+        f64::MAX,
+        "pairs with |r| <= cutoff are summed",
+    ))
+    .param(ParamSpec::integer(
+        "lanes",
+        Some(0.0),
+        0.0,
+        32.0,
+        "subgroup lanes per particle walking its candidates together: 0 (auto): 8 where the adapter's subgroups hold at least 8 lanes, else 1; 1: one thread per particle; 2, 4, 8, 16 or 32: that many, refused where subgroups are narrower",
+    ))
+    .params(kernel_params())
+    .build(|p| {
         let lanes = match p.number("lanes") as u32 {
             0 => Lanes::Auto,
             1 => Lanes::Off,
@@ -480,7 +467,7 @@ impl NodeKind for NeighbourSumKind {
             cutoff,
             lanes,
         }))
-    }
+    })
 }
 
 /// The cell list must find every pair within the cutoff among 3 cells per axis, and the
@@ -761,55 +748,43 @@ impl GpuKernels for NeighbourSum {
     }
 }
 
-pub struct NeighbourListKind;
-
-impl NodeKind for NeighbourListKind {
-    fn name(&self) -> &'static str {
-        "neighbour_list"
-    }
-
-    fn doc(&self) -> &'static str {
-        "the neighbours within the cutoff of each particle, found through a cell list, as a list neighbour_sum reads instead of the cells (worth it when one list serves many sums: a Lanczos loop)"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        let mut v = NeighbourSumKind.inputs();
-        v.retain(|p| !matches!(p.name, "values" | "list" | "list_count"));
-        v
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "list",
-                PortType::Indices,
-                "max_neighbours entries per particle, neighbour k of particle i at k * N + i",
-            ),
-            PortSpec::new(
-                "count",
-                PortType::Indices,
-                "neighbours of each particle (past max_neighbours the list holds the first ones, and neighbour_sum walks the cells for that particle)",
-            ),
-        ]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut v: Vec<ParamSpec> = NeighbourSumKind
-            .params()
-            .into_iter()
-            .filter(|p| matches!(p.name, "box" | "cells" | "periodic" | "cutoff"))
-            .collect();
-        v.push(ParamSpec::integer(
-            "max_neighbours",
-            None,
-            1.0,
-            4096.0,
-            "list entries per particle (a particle with more is summed from the cells: correct, slower)",
-        ));
-        v
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn neighbour_list_kind() -> NodeKind {
+    // The cell list and its geometry are neighbour_sum's.
+    let sum = neighbour_sum_kind();
+    let inputs = sum
+        .inputs()
+        .iter()
+        .filter(|p| !matches!(p.name, "values" | "list" | "list_count"))
+        .cloned();
+    let geometry = sum
+        .params()
+        .iter()
+        .filter(|p| matches!(p.name, "box" | "cells" | "periodic" | "cutoff"))
+        .cloned();
+    NodeKind::declare(
+        "neighbour_list",
+        "the neighbours within the cutoff of each particle, found through a cell list, as a list neighbour_sum reads instead of the cells (worth it when one list serves many sums: a Lanczos loop)",
+    )
+    .inputs(inputs)
+    .output(PortSpec::new(
+        "list",
+        PortType::Indices,
+        "max_neighbours entries per particle, neighbour k of particle i at k * N + i",
+    ))
+    .output(PortSpec::new(
+        "count",
+        PortType::Indices,
+        "neighbours of each particle (past max_neighbours the list holds the first ones, and neighbour_sum walks the cells for that particle)",
+    ))
+    .params(geometry)
+    .param(ParamSpec::integer(
+        "max_neighbours",
+        None,
+        1.0,
+        4096.0,
+        "list entries per particle (a particle with more is summed from the cells: correct, slower)",
+    ))
+    .build(|p| {
         if p.numbers("cells").iter().any(|c| c.fract() != 0.0) {
             return Err(format!(
                 "`cells` must be whole numbers, got {:?}",
@@ -825,7 +800,7 @@ impl NodeKind for NeighbourListKind {
         };
         check_geometry(&list.lengths, &list.cells, &list.periodic, list.cutoff)?;
         Ok(Box::new(list))
-    }
+    })
 }
 
 pub struct NeighbourList {
@@ -998,41 +973,25 @@ impl GpuKernels for NeighbourList {
     }
 }
 
-pub struct AllPairsKind;
-
 /// Particles per tile of shaders/pairs/all_pairs.wgsl (its workgroup size).
 const TILE: u32 = 128;
 
-impl NodeKind for AllPairsKind {
-    fn name(&self) -> &'static str {
-        "all_pairs"
-    }
-
-    fn doc(&self) -> &'static str {
-        "per particle, self term plus the pair kernel summed over every other particle within the cutoff (open boundaries; tiled in workgroup memory, O(N^2))"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        value_inputs()
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        out_port()
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut v = vec![ParamSpec::number(
-            "cutoff",
-            Some(f64::MAX),
-            0.0,
-            f64::MAX,
-            "pairs with |r| <= cutoff are summed (default: all)",
-        )];
-        v.extend(kernel_params());
-        v
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn all_pairs_kind() -> NodeKind {
+    NodeKind::declare(
+        "all_pairs",
+        "per particle, self term plus the pair kernel summed over every other particle within the cutoff (open boundaries; tiled in workgroup memory, O(N^2))",
+    )
+    .inputs(value_inputs())
+    .outputs(out_port())
+    .param(ParamSpec::number(
+        "cutoff",
+        Some(f64::MAX),
+        0.0,
+        f64::MAX,
+        "pairs with |r| <= cutoff are summed (default: all)",
+    ))
+    .params(kernel_params())
+    .build(|p| {
         let cutoff = p.number("cutoff");
         if p.text("kernel") == "rpy_near" {
             return Err("kernel rpy_near is the near field of a periodic split: use it in neighbour_sum, and rpy for open boundaries".into());
@@ -1041,7 +1000,7 @@ impl NodeKind for AllPairsKind {
             kernel: PairKernel::from_params(p, cutoff)?,
             cutoff,
         }))
-    }
+    })
 }
 
 pub struct AllPairs {
@@ -1135,7 +1094,7 @@ impl GpuKernels for AllPairs {
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(NeighbourSumKind);
-    r.add(NeighbourListKind);
-    r.add(AllPairsKind);
+    r.add(neighbour_sum_kind());
+    r.add(neighbour_list_kind());
+    r.add(all_pairs_kind());
 }

@@ -385,65 +385,47 @@ fn check_positions(gw: &GridWindow, t: Option<ValueType>) -> Result<u32, PortErr
     Ok(n)
 }
 
-pub struct SpreadKind;
-
-impl NodeKind for SpreadKind {
-    fn name(&self) -> &'static str {
-        "spread"
-    }
-
-    fn doc(&self) -> &'static str {
-        "spread particle values onto a periodic grid with a window: f_j = sum_i delta(r_j - q_i) F_i"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new(
-                "positions",
-                PortType::Particles(None),
-                "positions (N x 2 or N x 3)",
-            ),
-            PortSpec::new(
-                "values",
-                PortType::Particles(None),
-                "values per particle (N x C)",
-            ),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "out",
-            PortType::RealGrid,
-            "the grid, C components",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        let mut p = grid_params();
-        p.push(ParamSpec {
-            name: "sorted_input",
-            kind: ParamKind::Bool,
-            default: Some(ParamValue::Bool(false)),
-            doc: "spreading: particles come sorted in space (Morton order of cells best); where they are dense (at least 0.5 per cell) and the support is 6 to 16 cells, spread box by box: runs of up to 64 particles summed in registers over the block of cells their supports cover, one grid atomic per box cell (runs whose box exceeds 16 cells per axis go direct). Interpolation ignores it",
-        });
-        p.push(ParamSpec::choice(
-            "tiles",
-            "auto",
-            &["auto", "on", "off"],
-            "spreading (3D): tile by tile in workgroup memory (cuFINUFFT's shared-memory method): bin_sort's counting sort files each particle under the 8^3-cell tile of its first support cell, one workgroup per tile sums its particles into the padded tile as fixed-point integers (scaled per tile so no sum overflows: each add exact to 2^-30 of the tile's sum of |value| x the window's peak) and adds each padded cell to the grid once. Any input order; 20 bytes of scratch per particle. auto: where it pays (particles per cell x support^3 at least 32, and not where sorted_input spreads box by box) and the adapter has subgroups and the workgroup memory; on: always (an error where the adapter cannot); off: never",
-        ));
-        p
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn spread_kind() -> NodeKind {
+    NodeKind::declare(
+        "spread",
+        "spread particle values onto a periodic grid with a window: f_j = sum_i delta(r_j - q_i) F_i",
+    )
+    .input(PortSpec::new(
+        "positions",
+        PortType::Particles(None),
+        "positions (N x 2 or N x 3)",
+    ))
+    .input(PortSpec::new(
+        "values",
+        PortType::Particles(None),
+        "values per particle (N x C)",
+    ))
+    .output(PortSpec::new(
+        "out",
+        PortType::RealGrid,
+        "the grid, C components",
+    ))
+    .params(grid_params())
+    .param(ParamSpec {
+        name: "sorted_input",
+        kind: ParamKind::Bool,
+        default: Some(ParamValue::Bool(false)),
+        doc: "spreading: particles come sorted in space (Morton order of cells best); where they are dense (at least 0.5 per cell) and the support is 6 to 16 cells, spread box by box: runs of up to 64 particles summed in registers over the block of cells their supports cover, one grid atomic per box cell (runs whose box exceeds 16 cells per axis go direct). Interpolation ignores it",
+    })
+    .param(ParamSpec::choice(
+        "tiles",
+        "auto",
+        &["auto", "on", "off"],
+        "spreading (3D): tile by tile in workgroup memory (cuFINUFFT's shared-memory method): bin_sort's counting sort files each particle under the 8^3-cell tile of its first support cell, one workgroup per tile sums its particles into the padded tile as fixed-point integers (scaled per tile so no sum overflows: each add exact to 2^-30 of the tile's sum of |value| x the window's peak) and adds each padded cell to the grid once. Any input order; 20 bytes of scratch per particle. auto: where it pays (particles per cell x support^3 at least 32, and not where sorted_input spreads box by box) and the adapter has subgroups and the workgroup memory; on: always (an error where the adapter cannot); off: never",
+    ))
+    .build(|p| {
         Ok(Box::new(Spread {
             gw: grid_window(p)?,
             tiles: TileMode::parse(p.text("tiles")),
             sorted_input: p.flag("sorted_input"),
             variant: Variant::parse(p.text("variant")),
         }))
-    }
+    })
 }
 
 struct Spread {
@@ -469,11 +451,14 @@ impl Spread {
     fn tile_count(&self) -> u32 {
         tilegen::tiles_per_axis(&self.gw.cells).iter().product()
     }
-
 }
 
 impl Node for Spread {
-    fn infer(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Result<Signature, PortError> {
+    fn infer(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+    ) -> Result<Signature, PortError> {
         let n = check_positions(&self.gw, inputs[0])?;
         let Some(ValueType::Particles { n: m, k: comps }) = inputs[1] else {
             unreachable!("port type checked")
@@ -754,52 +739,41 @@ impl Spread {
     }
 }
 
-pub struct InterpolateKind;
-
-impl NodeKind for InterpolateKind {
-    fn name(&self) -> &'static str {
-        "interpolate"
-    }
-
-    fn doc(&self) -> &'static str {
-        "interpolate a periodic grid at particles with a window (the adjoint of spread): u_i = sum_j delta(q_i - r_j) v_j dV_j"
-    }
-
-    fn inputs(&self) -> Vec<PortSpec> {
-        vec![
-            PortSpec::new("grid", PortType::RealGrid, "the field, C components"),
-            PortSpec::new(
-                "positions",
-                PortType::Particles(None),
-                "positions (N x 2 or N x 3)",
-            ),
-            PortSpec::new(
-                "weights",
-                PortType::RealGrid,
-                "per-cell quadrature weights dV (default: the cell volume)",
-            )
-            .optional(),
-        ]
-    }
-
-    fn outputs(&self) -> Vec<PortSpec> {
-        vec![PortSpec::new(
-            "out",
-            PortType::Particles(None),
-            "values per particle (N x C)",
-        )]
-    }
-
-    fn params(&self) -> Vec<ParamSpec> {
-        grid_params()
-    }
-
-    fn build(&self, p: &Params) -> Result<Box<dyn Node>, String> {
+fn interpolate_kind() -> NodeKind {
+    NodeKind::declare(
+        "interpolate",
+        "interpolate a periodic grid at particles with a window (the adjoint of spread): u_i = sum_j delta(q_i - r_j) v_j dV_j",
+    )
+    .input(PortSpec::new(
+        "grid",
+        PortType::RealGrid,
+        "the field, C components",
+    ))
+    .input(PortSpec::new(
+        "positions",
+        PortType::Particles(None),
+        "positions (N x 2 or N x 3)",
+    ))
+    .input(
+        PortSpec::new(
+            "weights",
+            PortType::RealGrid,
+            "per-cell quadrature weights dV (default: the cell volume)",
+        )
+        .optional(),
+    )
+    .output(PortSpec::new(
+        "out",
+        PortType::Particles(None),
+        "values per particle (N x C)",
+    ))
+    .params(grid_params())
+    .build(|p| {
         Ok(Box::new(Interpolate {
             gw: grid_window(p)?,
             variant: Variant::parse(p.text("variant")),
         }))
-    }
+    })
 }
 
 struct Interpolate {
@@ -808,7 +782,11 @@ struct Interpolate {
 }
 
 impl Node for Interpolate {
-    fn infer(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Result<Signature, PortError> {
+    fn infer(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+    ) -> Result<Signature, PortError> {
         let Some(ValueType::RealGrid { dims, comps }) = inputs[0] else {
             unreachable!("port type checked")
         };
@@ -964,6 +942,6 @@ impl GpuKernels for Interpolate {
 }
 
 pub fn register(r: &mut Registry) {
-    r.add(SpreadKind);
-    r.add(InterpolateKind);
+    r.add(spread_kind());
+    r.add(interpolate_kind());
 }

@@ -339,11 +339,9 @@ impl fmt::Display for SpreadDecision {
                 "strategy: lanes ({seg} a particle, {}), {add}",
                 order(p.chunks)
             ),
-            SpreadStrategy::Table => write!(
-                f,
-                "strategy: workgroup table ({}), {add}",
-                order(p.chunks)
-            ),
+            SpreadStrategy::Table => {
+                write!(f, "strategy: workgroup table ({}), {add}", order(p.chunks))
+            }
         }
     }
 }

@@ -566,7 +566,7 @@ fn node_reference(
         .get(kind)
         .ok_or_else(|| failed("no such node kind".into()))?;
     let params =
-        node::check_params(&node_kind.params(), params).map_err(|e| failed(format!("{e:?}")))?;
+        node::check_params(node_kind.params(), params).map_err(|e| failed(format!("{e:?}")))?;
     let built = node_kind
         .build(&params)
         .map_err(|e| failed(e.to_string()))?;

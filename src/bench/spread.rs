@@ -285,7 +285,9 @@ fn time_variant(
     .collect();
     let spread_run = time_graph(gpu, &spread_graph, &spread_inputs, reps, true)?;
     let mut interp_inputs: BTreeMap<String, HostArray> =
-        [("field".to_string(), data.field.clone())].into_iter().collect();
+        [("field".to_string(), data.field.clone())]
+            .into_iter()
+            .collect();
     match sort_first {
         Some(_) => {
             for (name, output) in [("positions", "sorted_positions"), ("perm", "perm")] {

@@ -90,7 +90,11 @@ impl StepTimer {
 impl Program<'_> {
     /// Runs steps one launch (or dispatch) per compute pass with timestamps around each
     /// pass, or with a wait after each launch where the device has no timestamp queries.
-    pub(super) fn run_profiled(&mut self, steps: u64, per_dispatch: bool) -> Result<RunStats, ExecError> {
+    pub(super) fn run_profiled(
+        &mut self,
+        steps: u64,
+        per_dispatch: bool,
+    ) -> Result<RunStats, ExecError> {
         let mut rows: Vec<ProfileRow> = self.step[0].iter().map(ProfileRow::of).collect();
         let use_gpu = self.gpu.caps.timestamps;
         let timer = use_gpu.then(|| StepTimer::new(self.gpu, self.timed_units(per_dispatch)));

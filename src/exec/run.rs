@@ -161,7 +161,11 @@ impl Program<'_> {
 
     /// Runs a loop alone and waits for it: its wall time (host round trips included) and
     /// its iterations.
-    pub(super) fn time_loop(&self, lp: &CompiledLoop, step: u64) -> Result<(Duration, u32), ExecError> {
+    pub(super) fn time_loop(
+        &self,
+        lp: &CompiledLoop,
+        step: u64,
+    ) -> Result<(Duration, u32), ExecError> {
         let t = Instant::now();
         let mut pending = Vec::new();
         let k = self.run_loop(lp, &mut pending, step)?;

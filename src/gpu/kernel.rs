@@ -149,7 +149,10 @@ fn dump(spec: &KernelSpec) {
     );
     let file = dir.join(format!("{:016x}.wgsl", h.finish()));
     if let Err(e) = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&file, text)) {
-        eprintln!("mesoflow: MESOFLOW_KERNEL_DUMP: cannot write {}: {e}", file.display());
+        eprintln!(
+            "mesoflow: MESOFLOW_KERNEL_DUMP: cannot write {}: {e}",
+            file.display()
+        );
     }
 }
 

@@ -562,7 +562,7 @@ impl<'r> Loader<'r> {
         raw_params: BTreeMap<String, ParamValue>,
     ) -> bool {
         let id = decl.id.as_str();
-        let Some(kind) = self.registry.get(kind_name).cloned() else {
+        let Some(kind) = self.registry.get(kind_name) else {
             let hint = self
                 .registry
                 .suggest(kind_name)
@@ -575,8 +575,8 @@ impl<'r> Loader<'r> {
             ));
             return false;
         };
-        let input_ports = kind.inputs();
-        let output_ports = kind.outputs();
+        let input_ports = kind.inputs().to_vec();
+        let output_ports = kind.outputs().to_vec();
         for name in decl.inputs.keys() {
             if !input_ports.iter().any(|p| p.name == name) {
                 let known: Vec<&str> = input_ports.iter().map(|p| p.name).collect();
@@ -610,7 +610,7 @@ impl<'r> Loader<'r> {
                 }
             }
         }
-        let params = match check_params(&kind.params(), &raw_params) {
+        let params = match check_params(kind.params(), &raw_params) {
             Ok(p) => p,
             Err(errs) => {
                 for (pname, msg) in errs {

@@ -24,8 +24,15 @@ fn offending(dir: &str, allowed: &[&str], needles: &[&str]) -> Vec<String> {
     rust_files(&root, &mut files);
     let mut found = Vec::new();
     for f in files {
-        let rel = f.strip_prefix(&root).unwrap().to_string_lossy().replace('\\', "/");
-        if allowed.iter().any(|a| rel == *a || rel.starts_with(&format!("{a}/"))) {
+        let rel = f
+            .strip_prefix(&root)
+            .unwrap()
+            .to_string_lossy()
+            .replace('\\', "/");
+        if allowed
+            .iter()
+            .any(|a| rel == *a || rel.starts_with(&format!("{a}/")))
+        {
             continue;
         }
         for (i, line) in std::fs::read_to_string(&f).unwrap().lines().enumerate() {

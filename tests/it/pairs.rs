@@ -496,7 +496,7 @@ fn bad_pair_setups_are_refused_with_reasons() {
             .into_iter()
             .map(|(n, v)| (n, mesoflow::expr::ParamValue::from_json(&v).unwrap()))
             .collect();
-        let p = mesoflow::node::check_params(&k.params(), &raw).unwrap();
+        let p = mesoflow::node::check_params(k.params(), &raw).unwrap();
         k.build(&p).err().unwrap_or_default()
     };
     let e = try_build(

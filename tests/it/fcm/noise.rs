@@ -261,7 +261,7 @@ fn fourier_noise_is_hermitian_and_fresh_every_step() {
         .map(|(k, v)| (k, ParamValue::from_json(&v).unwrap()))
         .collect();
     let node = kind
-        .build(&mesoflow::node::check_params(&kind.params(), &raw).unwrap())
+        .build(&mesoflow::node::check_params(kind.params(), &raw).unwrap())
         .unwrap();
     let ty = out["noise"].ty;
     let mut want = vec![mesoflow::value::RefArray::new(

@@ -162,7 +162,7 @@ fn measure_and_average_match_their_f64_references() {
             .map(|(n, v)| (n, ParamValue::from_json(&v).unwrap()))
             .collect();
         let node = k
-            .build(&mesoflow::node::check_params(&k.params(), &raw).unwrap())
+            .build(&mesoflow::node::check_params(k.params(), &raw).unwrap())
             .unwrap();
         let ins = [
             Some(particles(&x).to_ref()),

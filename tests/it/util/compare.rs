@@ -17,7 +17,7 @@ pub fn reference(kind: &str, params: &str, inputs: &[Option<&HostArray>]) -> Vec
         .into_iter()
         .map(|(n, v)| (n, mesoflow::expr::ParamValue::from_json(&v).unwrap()))
         .collect();
-    let p = check_params(&k.params(), &raw).unwrap();
+    let p = check_params(k.params(), &raw).unwrap();
     let node = k.build(&p).unwrap();
     let types: Vec<Option<ValueType>> = inputs.iter().map(|a| a.map(|a| a.ty)).collect();
     // Output types only: the baseline adapter serves (the decisions do not change them).
