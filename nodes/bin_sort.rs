@@ -37,7 +37,8 @@
 use std::sync::Arc;
 
 use crate::gpu::{
-    Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo, WG_1D,
+    Binding, Choice, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo,
+    WG_1D,
 };
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Registry,
@@ -85,6 +86,44 @@ pub fn scan_path(bins: u64, caps: &DeviceCaps) -> ScanPath {
         ScanPath::Single { threads, quads }
     } else {
         ScanPath::General
+    }
+}
+
+/// How a counting sort runs on an adapter, decided once (in `infer`, or by the node that
+/// sorts inside): the scan kernels' path and how the counters are scanned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BinSortPlan {
+    pub path: Path,
+    pub scan: ScanPath,
+    /// Bins the one-workgroup scan takes on this adapter (for the notes).
+    pub capacity: u64,
+}
+
+/// The plan for `bins` bins with `variant` on this adapter, or why the variant cannot
+/// run there.
+pub fn plan(variant: Variant, bins: u32, caps: &DeviceCaps) -> Result<BinSortPlan, String> {
+    Ok(BinSortPlan {
+        path: variant.choose(caps, "bin_sort", scan::subgroup_scan_fits)?,
+        scan: scan_path(bins as u64, caps),
+        capacity: single_scan_capacity(caps),
+    })
+}
+
+impl std::fmt::Display for BinSortPlan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.scan {
+            ScanPath::Single { threads, quads } => write!(
+                f,
+                "strategy: {} kernels; bins scanned by one workgroup of {threads} threads ({} counters each)",
+                self.path,
+                4 * quads
+            ),
+            ScanPath::General => write!(
+                f,
+                "strategy: {} kernels; more than {} bins: the general scan (the place kernel copies the counts)",
+                self.path, self.capacity
+            ),
+        }
     }
 }
 
@@ -152,16 +191,18 @@ struct BinSort {
 }
 
 impl Node for BinSort {
-    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+    fn infer(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+    ) -> Result<Signature, PortError> {
         let Some(Some(t @ ValueType::Indices { n })) = inputs.first().copied() else {
             return Err(PortError::new("keys", "is required"));
         };
         let bins = ValueType::Indices { n: self.bins };
-        Ok(Signature {
-            plan: None,
-            outputs: vec![t, t, bins, bins],
-            scratch: scratch_bytes(n as u64, self.bins as u64),
-        })
+        Ok(Signature::outputs(vec![t, t, bins, bins])
+            .with_scratch(scratch_bytes(n as u64, self.bins as u64))
+            .with_plan(Choice(plan(self.variant, self.bins, caps))))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -218,19 +259,6 @@ fn shader_kernel(
 }
 
 impl GpuKernels for BinSort {
-    fn device_notes(&self, _inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Vec<String> {
-        vec![match scan_path(self.bins as u64, caps) {
-            ScanPath::Single { threads, quads } => format!(
-                "bins scanned by one workgroup of {threads} threads ({} counters each)",
-                4 * quads
-            ),
-            ScanPath::General => format!(
-                "more than {} bins: the general scan (the place kernel copies the counts)",
-                single_scan_capacity(caps)
-            ),
-        }]
-    }
-
     fn compile(
         &self,
         cx: &mut CompileCtx<'_>,
@@ -246,7 +274,7 @@ impl GpuKernels for BinSort {
         };
         record(
             cx,
-            self.variant,
+            io.plan::<Choice<BinSortPlan>>().get()?,
             self.bins,
             keys.ty.words(),
             &BinSortBuffers {
@@ -280,7 +308,7 @@ pub struct BinSortBuffers<'a> {
 /// rank, scan, place), for the node and for nodes that sort inside (tiled spreading).
 pub fn record(
     cx: &mut CompileCtx<'_>,
-    variant: Variant,
+    plan: &BinSortPlan,
     bins: u32,
     n: u64,
     b: &BinSortBuffers<'_>,
@@ -288,7 +316,7 @@ pub fn record(
     let n32 = u32::try_from(n).map_err(|_| {
         CompileError::Unsupported(format!("bin_sort of {n} keys: at most 2^32 - 1"))
     })?;
-    let path = variant.choose(cx.caps(), "bin_sort", scan::subgroup_scan_fits)?;
+    let path = plan.path;
     let mut out = vec![cx.fill(b.counter, bins as u64 + 1, 0)?];
     if n > 0 {
         let shape = cx.uniform("bin_sort count", bytemuck::cast_slice(&[n32, bins]));
@@ -310,7 +338,7 @@ pub fn record(
         ));
     }
     // Counters the place kernel copies to `count` (the one-workgroup scan writes them).
-    let copy = match scan_path(bins as u64, cx.caps()) {
+    let copy = match plan.scan {
         ScanPath::Single { threads, quads } => {
             let file = match path {
                 Path::Subgroup => "bin_sort/scan_subgroup.wgsl",

@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use crate::gpu::shaders::ShaderError;
 use crate::gpu::{
-    Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo,
+    Binding, Choice, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo,
 };
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
@@ -51,6 +51,25 @@ pub enum Variant {
 pub enum Path {
     Subgroup,
     Portable,
+}
+
+/// The scan node's decision: its kernels' path on this adapter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScanPlan(pub Path);
+
+impl std::fmt::Display for ScanPlan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "strategy: {} kernels", self.0)
+    }
+}
+
+impl std::fmt::Display for Path {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Path::Subgroup => "subgroup",
+            Path::Portable => "portable (workgroup memory)",
+        })
+    }
 }
 
 impl Variant {
@@ -83,7 +102,7 @@ impl Variant {
         caps: &DeviceCaps,
         what: &str,
         fits: impl Fn((u32, u32)) -> Result<(), String>,
-    ) -> Result<Path, CompileError> {
+    ) -> Result<Path, String> {
         let subgroup = match caps.subgroups {
             None => Err("the device has no subgroup operations".to_string()),
             Some(sizes) => fits(sizes),
@@ -92,10 +111,10 @@ impl Variant {
             (Variant::Portable, _) => Ok(Path::Portable),
             (Variant::Auto, Ok(())) | (Variant::Subgroup, Ok(())) => Ok(Path::Subgroup),
             (Variant::Auto, Err(_)) => Ok(Path::Portable),
-            (Variant::Subgroup, Err(why)) => Err(CompileError::Unsupported(format!(
+            (Variant::Subgroup, Err(why)) => Err(format!(
                 "{what} variant `subgroup` cannot run on {}: {why}; use `auto` or `portable`",
                 caps.adapter
-            ))),
+            )),
         }
     }
 }
@@ -231,15 +250,18 @@ struct ScanNode {
 }
 
 impl Node for ScanNode {
-    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+    fn infer(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+    ) -> Result<Signature, PortError> {
         let Some(Some(t)) = inputs.first() else {
             return Err(PortError::new("x", "is required"));
         };
-        Ok(Signature {
-            plan: None,
-            outputs: vec![*t],
-            scratch: scratch_bytes(t.words()),
-        })
+        let path = self.variant.choose(caps, "scan", subgroup_scan_fits);
+        Ok(Signature::outputs(vec![*t])
+            .with_scratch(scratch_bytes(t.words()))
+            .with_plan(Choice(path.map(ScanPlan))))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -281,7 +303,7 @@ impl GpuKernels for ScanNode {
                 "scan: input x or output out has no buffer".into(),
             ));
         };
-        let path = self.variant.choose(cx.caps(), "scan", subgroup_scan_fits)?;
+        let path = io.plan::<Choice<ScanPlan>>().get()?.0;
         let kernels = ScanKernels::new(cx, path, x.ty.elem())?;
         let mut dispatches = Vec::new();
         kernels.record(

@@ -47,7 +47,7 @@
 use std::sync::Arc;
 
 use crate::gpu::{
-    Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo,
+    Binding, Choice, CompileCtx, CompileError, DeviceCaps, Dispatch, Kernel, KernelSpec, NodeIo,
 };
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Registry,
@@ -144,6 +144,16 @@ enum Kernels {
     Portable,
 }
 
+impl std::fmt::Display for Kernels {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Kernels::Tile { quads } => write!(f, "strategy: tile{} kernels", TILE_ROW * quads),
+            Kernels::Subgroup => f.write_str("strategy: subgroup kernels"),
+            Kernels::Portable => f.write_str("strategy: portable kernels (workgroup memory)"),
+        }
+    }
+}
+
 impl Kernels {
     fn tile(self) -> u32 {
         match self {
@@ -220,7 +230,7 @@ fn fits(kernels: Kernels, caps: &DeviceCaps) -> Result<(), String> {
 }
 
 /// The kernels for a device: the variant's own, or for `auto` the first that fits.
-fn choose(variant: SortVariant, caps: &DeviceCaps) -> Result<Kernels, CompileError> {
+fn choose(variant: SortVariant, caps: &DeviceCaps) -> Result<Kernels, String> {
     let wanted = match variant {
         SortVariant::Auto => {
             let first = [Kernels::Tile { quads: AUTO_QUADS }, Kernels::Subgroup]
@@ -233,11 +243,11 @@ fn choose(variant: SortVariant, caps: &DeviceCaps) -> Result<Kernels, CompileErr
         SortVariant::Portable => Kernels::Portable,
     };
     fits(wanted, caps).map_err(|why| {
-        CompileError::Unsupported(format!(
+        format!(
             "sort variant `{}` cannot run on {}: {why}; use `auto` or `portable`",
             variant.name(),
             caps.adapter
-        ))
+        )
     })?;
     Ok(wanted)
 }
@@ -253,7 +263,7 @@ pub fn traffic_per_key(
     bits: u32,
     n: u64,
 ) -> Result<f64, CompileError> {
-    let kernels = choose(variant, caps)?;
+    let kernels = choose(variant, caps).map_err(CompileError::Unsupported)?;
     let passes = bits.div_ceil(kernels.digit_bits()) as f64;
     let per_count = match kernels {
         Kernels::Tile { .. } => 16.0,
@@ -339,15 +349,17 @@ impl SortNode {
 }
 
 impl Node for SortNode {
-    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+    fn infer(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+    ) -> Result<Signature, PortError> {
         let Some(Some(t)) = inputs.first() else {
             return Err(PortError::new("keys", "is required"));
         };
-        Ok(Signature {
-            plan: None,
-            outputs: vec![*t, *t],
-            scratch: scratch_bytes(t.words(), self.bits, self.variant),
-        })
+        Ok(Signature::outputs(vec![*t, *t])
+            .with_scratch(scratch_bytes(t.words(), self.bits, self.variant))
+            .with_plan(Choice(choose(self.variant, caps))))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -571,7 +583,7 @@ impl GpuKernels for SortNode {
         let n32 = u32::try_from(n).map_err(|_| {
             CompileError::Unsupported(format!("sort of {n} keys: at most 2^32 - 1"))
         })?;
-        let kernels = choose(self.variant, cx.caps())?;
+        let kernels = *io.plan::<Choice<Kernels>>().get()?;
         let pass_kernels = PassKernels::new(cx, kernels)?;
 
         let has_pingpong = self.bits > PORTABLE_DIGIT_BITS.min(DIGIT_BITS);

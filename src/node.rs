@@ -491,13 +491,6 @@ pub trait GpuKernels {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError>;
-
-    /// Decisions that depend on the device (a scan's workgroup shape, chosen from its
-    /// limits), shown by `mesoflow inspect` after [`Node::notes`].
-    fn device_notes(&self, inputs: &[Option<ValueType>], caps: &DeviceCaps) -> Vec<String> {
-        let _ = (inputs, caps);
-        Vec::new()
-    }
 }
 
 /// Context given to CPU references.

@@ -21,7 +21,7 @@ use std::f64::consts::PI;
 
 use crate::expr::ParamValue;
 use crate::gpu::{
-    Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo, WG_1D,
+    Binding, Choice, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo, WG_1D,
 };
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
@@ -506,6 +506,22 @@ fn check_geometry(
     }
 }
 
+/// How `neighbour_sum` walks a particle's candidates on an adapter: a segment of `lanes`
+/// subgroup lanes together, or one thread (`None`). Decided once, in `infer`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Traversal {
+    lanes: Option<u32>,
+}
+
+impl std::fmt::Display for Traversal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.lanes {
+            Some(seg) => write!(f, "strategy: {seg} subgroup lanes a particle"),
+            None => f.write_str("strategy: one thread a particle"),
+        }
+    }
+}
+
 /// How many subgroup lanes walk one particle's candidates (the `lanes` param).
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Lanes {
@@ -530,29 +546,36 @@ impl NeighbourSum {
 
     /// Lanes per particle on this device (None: one thread per particle). Segments must
     /// lie inside one subgroup, so at most its smallest size.
-    fn segment(&self, caps: &DeviceCaps) -> Result<Option<u32>, CompileError> {
+    fn segment(&self, caps: &DeviceCaps) -> Result<Traversal, String> {
         let min = caps
             .subgroups
             .map(|(min, _)| min)
             .filter(|m| m.is_power_of_two());
-        match (self.lanes, min) {
-            (Lanes::Off, _) => Ok(None),
-            (Lanes::Auto, Some(min)) if min >= 8 => Ok(Some(8)),
-            (Lanes::Auto, _) => Ok(None),
-            (Lanes::Fixed(seg), Some(min)) if seg <= min => Ok(Some(seg)),
-            (Lanes::Fixed(seg), _) => Err(CompileError::Unsupported(format!(
-                "lanes = {seg} needs subgroups of at least {seg} lanes; this adapter has {}",
-                match caps.subgroups {
-                    Some((a, b)) => format!("{a} to {b}"),
-                    None => "no subgroup operations".into(),
-                }
-            ))),
-        }
+        let lanes = match (self.lanes, min) {
+            (Lanes::Off, _) => None,
+            (Lanes::Auto, Some(min)) if min >= 8 => Some(8),
+            (Lanes::Auto, _) => None,
+            (Lanes::Fixed(seg), Some(min)) if seg <= min => Some(seg),
+            (Lanes::Fixed(seg), _) => {
+                return Err(format!(
+                    "lanes = {seg} needs subgroups of at least {seg} lanes; this adapter has {}",
+                    match caps.subgroups {
+                        Some((a, b)) => format!("{a} to {b}"),
+                        None => "no subgroup operations".into(),
+                    }
+                ));
+            }
+        };
+        Ok(Traversal { lanes })
     }
 }
 
 impl Node for NeighbourSum {
-    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+    fn infer(
+        &self,
+        inputs: &[Option<ValueType>],
+        caps: &DeviceCaps,
+    ) -> Result<Signature, PortError> {
         let n = check_rows(&self.kernel, inputs)?;
         let Some(ValueType::Indices { n: keys }) = inputs[2] else {
             unreachable!("port type checked")
@@ -608,7 +631,8 @@ impl Node for NeighbourSum {
             }
             _ => unreachable!("port types checked"),
         }
-        Ok(Signature::outputs(vec![ValueType::Particles { n, k: 3 }]))
+        Ok(Signature::outputs(vec![ValueType::Particles { n, k: 3 }])
+            .with_plan(Choice(self.segment(caps))))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -684,7 +708,7 @@ impl GpuKernels for NeighbourSum {
             unreachable!()
         };
         let values = io.inputs[1].map(|v| v.buffer);
-        let seg = self.segment(cx.caps())?;
+        let seg = io.plan::<Choice<Traversal>>().get()?.lanes;
         let source = format!(
             "{}{}",
             cx.shader(&self.kernel.shader())?,

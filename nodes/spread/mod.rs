@@ -14,16 +14,17 @@ pub mod tilegen;
 pub mod window;
 
 use crate::expr::ParamValue;
-use crate::gpu::DeviceCaps;
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Slot};
+use crate::gpu::{
+    Binding, Choice, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo, Slot,
+};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
     RefCtx, Registry, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 use strategy::{
-    InterpolatePlan, InterpolateStrategy, SpreadDecision, SpreadPlan, SpreadStrategy, TileLaunch,
-    TileMode, Variant, box_run,
+    InterpolatePlan, InterpolateStrategy, SpreadPlan, SpreadStrategy, TileLaunch, TileMode,
+    Variant, box_run,
 };
 use window::Window;
 
@@ -532,11 +533,7 @@ impl GpuKernels for Spread {
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
         let (pos, vals, out, n, comps) = spread_ports(io);
-        let plan = io
-            .plan::<SpreadDecision>()
-            .0
-            .clone()
-            .map_err(CompileError::Unsupported)?;
+        let plan = *io.plan::<Choice<SpreadPlan>>().get()?;
         let add = plan.add.shader();
         let ns = self.gw.window.support();
         let (boxed, lanes) = match plan.strategy {
@@ -680,7 +677,7 @@ impl Spread {
         // The particles listed tile by tile: the counting sort of bin_sort.
         dispatches.extend(crate::nodes::bin_sort::record(
             cx,
-            crate::nodes::scan::Variant::Auto,
+            &launch.sort,
             nt[3],
             n as u64,
             &crate::nodes::bin_sort::BinSortBuffers {

@@ -9,7 +9,9 @@
 use std::fmt;
 
 use super::{GridWindow, interpgen, tilegen};
-use crate::gpu::DeviceCaps;
+use crate::gpu::{Choice, DeviceCaps};
+use crate::nodes::bin_sort::{self, BinSortPlan};
+use crate::nodes::scan;
 
 /// The `tiles` param of `spread`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -73,13 +75,14 @@ impl Add {
 }
 
 /// How the tile kernel runs on an adapter: components per dispatch (as many as workgroup
-/// memory holds, up to `CHUNK_COMPS`), lanes per particle, and the smallest subgroup it
-/// must size its per-subgroup sums for.
+/// memory holds, up to `CHUNK_COMPS`), lanes per particle, the smallest subgroup it must
+/// size its per-subgroup sums for, and how the counting sort by tile runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TileLaunch {
     pub per_dispatch: u32,
     pub seg: u32,
     pub min_subgroup: u32,
+    pub sort: BinSortPlan,
 }
 
 /// The kernel family that spreads.
@@ -103,12 +106,6 @@ pub struct SpreadPlan {
     /// Interleaved runs the per-particle kernels serve particles in (1: input order).
     pub chunks: u32,
 }
-
-/// `spread`'s decision: its plan, or why its params ask for what the adapter cannot do
-/// (reported when a program is compiled for that adapter, so that a file stays valid
-/// where no device is at hand).
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct SpreadDecision(pub Result<SpreadPlan, String>);
 
 /// What `interpolate` runs for one particle count on one adapter.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -223,10 +220,12 @@ fn tile_launch(gw: &GridWindow, caps: &DeviceCaps) -> Result<TileLaunch, String>
                 bytes(1)
             )
         })?;
+    let tiles = tilegen::tiles_per_axis(&gw.cells).iter().product();
     Ok(TileLaunch {
         per_dispatch,
         seg,
         min_subgroup,
+        sort: bin_sort::plan(scan::Variant::Auto, tiles, caps)?,
     })
 }
 
@@ -239,10 +238,10 @@ pub fn spread(
     n: u32,
     comps: u32,
     caps: &DeviceCaps,
-) -> SpreadDecision {
+) -> Choice<SpreadPlan> {
     let add = match variant {
         Variant::Atomic if !caps.f32_atomics => {
-            return SpreadDecision(Err("variant \"atomic\" needs float atomics (SHADER_FLOAT32_ATOMIC), which this adapter lacks; use \"portable\" or \"auto\"".into()));
+            return Choice(Err("variant \"atomic\" needs float atomics (SHADER_FLOAT32_ATOMIC), which this adapter lacks; use \"portable\" or \"auto\"".into()));
         }
         Variant::Portable => Add::CompareAndSwap,
         _ if caps.f32_atomics => Add::FloatAtomic,
@@ -252,14 +251,14 @@ pub fn spread(
     if wants_tiles(gw, tiles, sorted_input, n) {
         match tile_launch(gw, caps) {
             Ok(launch) => {
-                return SpreadDecision(Ok(SpreadPlan {
+                return Choice(Ok(SpreadPlan {
                     strategy: SpreadStrategy::Tiles(launch),
                     add,
                     chunks,
                 }));
             }
             Err(why) if tiles == TileMode::On => {
-                return SpreadDecision(Err(format!(
+                return Choice(Err(format!(
                     "spread: tiles \"on\" {why}; use tiles \"auto\" or \"off\""
                 )));
             }
@@ -275,7 +274,7 @@ pub fn spread(
     } else {
         SpreadStrategy::Table
     };
-    SpreadDecision(Ok(SpreadPlan {
+    Choice(Ok(SpreadPlan {
         strategy,
         add,
         chunks,
@@ -312,12 +311,9 @@ fn order(chunks: u32) -> String {
     }
 }
 
-impl fmt::Display for SpreadDecision {
+impl fmt::Display for SpreadPlan {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let p = match &self.0 {
-            Ok(p) => p,
-            Err(why) => return write!(f, "strategy: none on this adapter: {why}"),
-        };
+        let p = self;
         let add = match p.add {
             Add::FloatAtomic => "float atomic adds",
             Add::CompareAndSwap => "compare-and-swap adds",

@@ -335,6 +335,31 @@ impl std::fmt::Debug for NodePlan {
     }
 }
 
+/// A decision that may be "not on this adapter": a param asks for what the adapter lacks
+/// (a subgroup kernel without subgroups). The refusal travels with the plan and is the
+/// error of compiling for that adapter, so that a graph file stays valid where no device
+/// is at hand (`mesoflow validate` plans on baseline capabilities).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Choice<T>(pub Result<T, String>);
+
+impl<T> Choice<T> {
+    /// The choice, or the refusal as the compile error.
+    pub fn get(&self) -> Result<&T, CompileError> {
+        self.0
+            .as_ref()
+            .map_err(|why| CompileError::Unsupported(why.clone()))
+    }
+}
+
+impl<T: std::fmt::Display> std::fmt::Display for Choice<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.0 {
+            Ok(choice) => choice.fmt(f),
+            Err(why) => write!(f, "strategy: none on this adapter: {why}"),
+        }
+    }
+}
+
 /// What a node may use while compiling: the device, the kernel cache, the engine clock.
 pub struct CompileCtx<'a> {
     pub gpu: &'a GpuContext,

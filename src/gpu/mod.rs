@@ -7,6 +7,6 @@ pub mod shaders;
 
 pub use context::{DeviceCaps, GPU_TIMEOUT, GpuContext, GpuError};
 pub use kernel::{
-    Binding, CompileCtx, CompileError, Dispatch, Kernel, KernelCache, KernelSpec, NodeDecision,
-    NodeIo, NodePlan, Period, Slot, WG_1D, grid_1d,
+    Binding, Choice, CompileCtx, CompileError, Dispatch, Kernel, KernelCache, KernelSpec,
+    NodeDecision, NodeIo, NodePlan, Period, Slot, WG_1D, grid_1d,
 };

@@ -341,19 +341,14 @@ impl Lowerer<'_> {
                     fold,
                 }
             }
-            lowering => {
-                if let Lowering::Kernels(k) = lowering {
-                    notes.extend(k.device_notes(&input_types, self.caps));
-                }
-                Launch::Node {
-                    node: n,
-                    inputs,
-                    outputs,
-                    scratch,
-                    notes,
-                    plan,
-                }
-            }
+            _ => Launch::Node {
+                node: n,
+                inputs,
+                outputs,
+                scratch,
+                notes,
+                plan,
+            },
         }
     }
 
