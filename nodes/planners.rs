@@ -68,6 +68,41 @@ fn text<'a>(args: &'a [ParamValue], i: usize, what: &str) -> Result<&'a str, Str
     }
 }
 
+/// A grid argument (cells per axis) as u32s: each a whole number from 1 to the longest
+/// FFT axis, and the grid within `MAX_GRID_CELLS`, checked before any conversion.
+fn grid_cells(args: &[ParamValue], i: usize) -> Result<Vec<u32>, String> {
+    let what = format!("argument {} (grid)", i + 1);
+    let cells = numbers(args, i, "grid")?
+        .iter()
+        .map(|&n| {
+            if n.fract() != 0.0 {
+                return Err(format!("{what}: {n} is not a whole number of cells"));
+            }
+            crate::nodes::fft::plan::cells_per_axis(&what, n)
+        })
+        .collect::<Result<Vec<u32>, String>>()?;
+    crate::nodes::fft::plan::checked_grid(&what, cells)
+}
+
+/// A tolerance argument: strictly between 0 and 1 (its logarithm sets supports).
+fn tolerance(args: &[ParamValue], i: usize) -> Result<f64, String> {
+    let t = number(args, i, "tolerance")?;
+    plan::check_tolerance(t).map_err(|e| format!("argument {} ({e})", i + 1))?;
+    Ok(t)
+}
+
+/// A box argument: lengths positive and finite.
+fn box_lengths(args: &[ParamValue], i: usize) -> Result<&[f64], String> {
+    let lengths = numbers(args, i, "box")?;
+    match lengths.iter().find(|l| !(**l > 0.0 && l.is_finite())) {
+        Some(l) => Err(format!(
+            "argument {} (box): lengths must be positive and finite, got {l}",
+            i + 1
+        )),
+        None => Ok(lengths),
+    }
+}
+
 fn arity(args: &[ParamValue], n: usize) -> Result<(), String> {
     if args.len() == n {
         Ok(())
@@ -101,9 +136,9 @@ static FUNCTIONS: &[HostFunction] = &[
             }
             let rotation = a.len() == 5 && flag(a, 4, "rotation")?;
             let g = plan::grid_for(
-                numbers(a, 0, "box")?,
+                box_lengths(a, 0)?,
                 number(a, 1, "radius")?,
-                number(a, 2, "tolerance")?,
+                tolerance(a, 2)?,
                 text(a, 3, "kernel")?,
                 rotation,
             )?;
@@ -127,10 +162,10 @@ static FUNCTIONS: &[HostFunction] = &[
         doc: "fcm_support(tolerance, kernel, width, box, grid): the window support in cells FCM uses: ES by its tolerance rule, the Gaussian (standard deviation width) cut at the same number of standard deviations as on its nominal grid, 0 (the window's own) for Peskin",
         call: |a| {
             arity(a, 5)?;
-            let t = number(a, 0, "tolerance")?;
+            let t = tolerance(a, 0)?;
             let sigma = number(a, 2, "width")?;
-            let lengths = numbers(a, 3, "box")?;
-            let cells = numbers(a, 4, "grid")?;
+            let lengths = box_lengths(a, 3)?;
+            let cells = grid_cells(a, 4)?;
             if lengths.len() != cells.len() {
                 return Err(format!(
                     "box and grid have {} and {} values",
@@ -141,7 +176,7 @@ static FUNCTIONS: &[HostFunction] = &[
             let h = lengths
                 .iter()
                 .zip(cells)
-                .map(|(l, n)| l / n)
+                .map(|(l, n)| l / n as f64)
                 .fold(f64::INFINITY, f64::min);
             Ok(ParamValue::Number(match text(a, 1, "kernel")? {
                 "es" => plan::es_support(t) as f64,
@@ -155,7 +190,7 @@ static FUNCTIONS: &[HostFunction] = &[
         doc: "fcm_beta(tolerance, kernel): the ES shape parameter FCM uses (0 for other windows)",
         call: |a| {
             arity(a, 2)?;
-            let t = number(a, 0, "tolerance")?;
+            let t = tolerance(a, 0)?;
             Ok(ParamValue::Number(if text(a, 1, "kernel")? == "es" {
                 plan::es_beta(plan::es_support(t))
             } else {
@@ -204,9 +239,9 @@ static FUNCTIONS: &[HostFunction] = &[
         call: |a| {
             arity(a, 1)?;
             Ok(ParamValue::Numbers(
-                numbers(a, 0, "grid")?
+                grid_cells(a, 0)?
                     .iter()
-                    .map(|&g| plan::sort_cells(g))
+                    .map(|&g| plan::sort_cells(g as f64))
                     .collect(),
             ))
         },
@@ -228,7 +263,7 @@ static FUNCTIONS: &[HostFunction] = &[
         call: |a| {
             arity(a, 2)?;
             let cell = number(a, 1, "cell")?;
-            let cells: f64 = numbers(a, 0, "box")?.iter().map(|l| l / cell).product();
+            let cells: f64 = box_lengths(a, 0)?.iter().map(|l| l / cell).product();
             Ok(ParamValue::Number(if cells >= 5e5 { 20.0 } else { 0.0 }))
         },
     },
@@ -237,9 +272,9 @@ static FUNCTIONS: &[HostFunction] = &[
         doc: "fcm_sort_bits(grid): key bits of that Morton order (3 per level of the largest axis)",
         call: |a| {
             arity(a, 1)?;
-            let most = numbers(a, 0, "grid")?
+            let most = grid_cells(a, 0)?
                 .iter()
-                .map(|&g| plan::sort_cells(g))
+                .map(|&g| plan::sort_cells(g as f64))
                 .fold(1.0, f64::max);
             Ok(ParamValue::Number(3.0 * most.log2().ceil().max(1.0)))
         },
@@ -249,9 +284,9 @@ static FUNCTIONS: &[HostFunction] = &[
         doc: "fcm_sort_bins(grid): bins of that Morton order (its largest key + 1: every key cell_hash makes for fcm_sort_cells(grid) in morton order), for bin_sort",
         call: |a| {
             arity(a, 1)?;
-            let last: Vec<u32> = numbers(a, 0, "grid")?
+            let last: Vec<u32> = grid_cells(a, 0)?
                 .iter()
-                .map(|&g| plan::sort_cells(g) as u32 - 1)
+                .map(|&g| plan::sort_cells(g as f64) as u32 - 1)
                 .collect();
             if !(2..=3).contains(&last.len()) {
                 return Err(format!(
@@ -269,12 +304,12 @@ static FUNCTIONS: &[HostFunction] = &[
         doc: "fcm_radius(box, grid, radius, tolerance, kernel): the hydrodynamic radius the window has on that grid",
         call: |a| {
             arity(a, 5)?;
-            let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
+            let cells = grid_cells(a, 1)?;
             Ok(ParamValue::Number(plan::effective_radius(
-                numbers(a, 0, "box")?,
+                box_lengths(a, 0)?,
                 &cells,
                 number(a, 2, "radius")?,
-                number(a, 3, "tolerance")?,
+                tolerance(a, 3)?,
                 text(a, 4, "kernel")?,
             )?))
         },
@@ -286,8 +321,8 @@ static FUNCTIONS: &[HostFunction] = &[
             arity(a, 3)?;
             Ok(ParamValue::Number(pse::default_split(
                 positive(a, 0, "radius")?,
-                positive(a, 1, "tolerance")?,
-                numbers(a, 2, "box")?,
+                tolerance(a, 1)?,
+                box_lengths(a, 2)?,
             )?))
         },
     },
@@ -299,8 +334,8 @@ static FUNCTIONS: &[HostFunction] = &[
             Ok(ParamValue::Number(pse::cutoff(
                 positive(a, 0, "radius")?,
                 positive(a, 1, "split")?,
-                positive(a, 2, "tolerance")?,
-            )))
+                tolerance(a, 2)?,
+            )?))
         },
     },
     HostFunction {
@@ -309,15 +344,11 @@ static FUNCTIONS: &[HostFunction] = &[
         call: |a| {
             arity(a, 3)?;
             let g = pse::grid(
-                numbers(a, 0, "box")?,
+                box_lengths(a, 0)?,
                 positive(a, 1, "split")?,
-                number(a, 2, "tolerance")?,
-            );
-            if g.iter().any(|&n| n > 4096) {
-                return Err(format!(
-                    "the far-field grid would be {g:?} cells (more than 4096 per axis): lower the split"
-                ));
-            }
+                tolerance(a, 2)?,
+            )
+            .map_err(|e| format!("{e}: lower the split"))?;
             Ok(ParamValue::Numbers(g.into_iter().map(f64::from).collect()))
         },
     },
@@ -326,9 +357,9 @@ static FUNCTIONS: &[HostFunction] = &[
         doc: "pse_shape(tolerance, grid): the Lindbo-Tornberg support (odd) whose shape sets the far-field Gaussian's width",
         call: |a| {
             arity(a, 2)?;
-            let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
+            let cells = grid_cells(a, 1)?;
             Ok(ParamValue::Number(
-                pse::shape_support(number(a, 0, "tolerance")?, &cells) as f64,
+                pse::shape_support(tolerance(a, 0)?, &cells) as f64,
             ))
         },
     },
@@ -337,10 +368,10 @@ static FUNCTIONS: &[HostFunction] = &[
         doc: "pse_support(tolerance, box, grid, width): support in cells of the far-field Gaussian of that width, cut where the tolerance allows (erfc(m / sqrt 2) <= tol / 10)",
         call: |a| {
             arity(a, 4)?;
-            let cells: Vec<u32> = numbers(a, 2, "grid")?.iter().map(|&n| n as u32).collect();
+            let cells = grid_cells(a, 2)?;
             Ok(ParamValue::Number(pse::support(
-                number(a, 0, "tolerance")?,
-                numbers(a, 1, "box")?,
+                tolerance(a, 0)?,
+                box_lengths(a, 1)?,
                 &cells,
                 positive(a, 3, "width")?,
             ) as f64))
@@ -351,7 +382,7 @@ static FUNCTIONS: &[HostFunction] = &[
         doc: "pse_width(box, grid, support): standard deviation of the far-field Gaussian for that support (half the support over 0.976 sqrt(pi support), Lindbo-Tornberg)",
         call: |a| {
             arity(a, 3)?;
-            let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
+            let cells = grid_cells(a, 1)?;
             let support = number(a, 2, "support")?;
             if !(1.0..=64.0).contains(&support) || support.fract() != 0.0 {
                 return Err(format!(
@@ -359,7 +390,7 @@ static FUNCTIONS: &[HostFunction] = &[
                 ));
             }
             Ok(ParamValue::Number(pse::width(
-                numbers(a, 0, "box")?,
+                box_lengths(a, 0)?,
                 &cells,
                 support as u32,
             )))
@@ -371,7 +402,7 @@ static FUNCTIONS: &[HostFunction] = &[
         call: |a| {
             arity(a, 2)?;
             Ok(ParamValue::Numbers(
-                pse::neighbour_cells(numbers(a, 0, "box")?, positive(a, 1, "cutoff")?)
+                pse::neighbour_cells(box_lengths(a, 0)?, positive(a, 1, "cutoff")?)
                     .into_iter()
                     .map(f64::from)
                     .collect(),
@@ -422,6 +453,89 @@ mod tests {
                 .to_string()
                 .contains("next_fft")
         );
+    }
+
+    /// Grids from hostile boxes, radii, splits and tolerances are errors naming the
+    /// limit, never a panic of the FFT size search or a saturated conversion.
+    #[test]
+    fn hostile_sizes_are_errors_naming_the_limit() {
+        let n = |x: f64| ParamValue::Number(x);
+        let v = |x: &[f64]| ParamValue::Numbers(x.to_vec());
+        let t = |x: &str| ParamValue::Text(x.into());
+        for (name, args, wanted) in [
+            (
+                "fcm_grid",
+                vec![v(&[1e30; 3]), n(1.0), n(1e-3), t("gaussian")],
+                "MAX_LENGTH",
+            ),
+            (
+                "fcm_grid",
+                vec![v(&[8.0; 3]), n(5e-324), n(1e-3), t("es")],
+                "MAX_LENGTH",
+            ),
+            (
+                "fcm_grid",
+                vec![v(&[1000.0; 3]), n(0.4), n(1e-3), t("peskin3")],
+                "MAX_GRID_CELLS",
+            ),
+            (
+                "fcm_grid",
+                vec![v(&[8.0; 3]), n(1.0), n(0.0), t("es")],
+                "tolerance",
+            ),
+            (
+                "pse_grid",
+                vec![v(&[128.0; 3]), n(1e6), n(1e-3)],
+                "MAX_LENGTH",
+            ),
+            (
+                "pse_grid",
+                vec![v(&[1e30; 3]), n(0.5), n(1e-3)],
+                "MAX_LENGTH",
+            ),
+            (
+                "pse_width",
+                vec![v(&[8.0; 3]), v(&[1e30; 3]), n(7.0)],
+                "MAX_LENGTH",
+            ),
+            (
+                "pse_support",
+                vec![n(1e-3), v(&[8.0; 3]), v(&[f64::NAN; 3]), n(1.0)],
+                "argument 3 (grid)",
+            ),
+            (
+                "fcm_sort_bins",
+                vec![v(&[f64::NAN; 3])],
+                "argument 1 (grid)",
+            ),
+            (
+                "fcm_support",
+                vec![n(0.0), t("es"), n(1.0), v(&[8.0; 3]), v(&[8.0; 3])],
+                "tolerance",
+            ),
+            (
+                "fcm_radius",
+                vec![v(&[8.0; 3]), v(&[0.5; 3]), n(1.0), n(1e-3), t("es")],
+                "whole number",
+            ),
+            // PSE's near field: a split of 1e6 used to run the quadrature for minutes.
+            (
+                "pse_cutoff",
+                vec![n(1.0), n(1e6), n(1e-3)],
+                "MAX_FAR_PANELS",
+            ),
+            (
+                "pse_split",
+                vec![n(5e-324), n(1e-3), v(&[8.0; 3])],
+                "MAX_FAR_PANELS",
+            ),
+        ] {
+            let got = std::panic::catch_unwind(|| call(name, &args));
+            let Ok(Err(e)) = got else {
+                panic!("{name}({args:?}) gave {got:?}, not an error");
+            };
+            assert!(e.contains(wanted), "{name}({args:?}): {e}");
+        }
     }
 
     /// fcm_sort_bins covers every Morton key of fcm_sort_cells(grid), and no more than

@@ -5,8 +5,9 @@
 //! composed by graphs/pse.json (the far field is graphs/fcm.json with the screened Green
 //! function of `stokes`, the near field `neighbour_sum` with the `rpy_near` kernel).
 
-use crate::nodes::fcm::plan::{erfc_inverse, fast_fft_size};
+use crate::nodes::fcm::plan::{check_tolerance, erfc_inverse, fast_fft_size};
 use crate::nodes::fft::next_friendly;
+use crate::nodes::fft::plan::{cells_per_axis, checked_grid};
 
 /// Default splitting parameter: 0.5 / a (UAMMD's usual choice for dilute suspensions,
 /// where the near field is cheap), raised where the near-field cutoff would exceed half
@@ -14,12 +15,12 @@ use crate::nodes::fft::next_friendly;
 pub fn default_split(radius: f64, tolerance: f64, lengths: &[f64]) -> Result<f64, String> {
     let half = 0.5 * lengths.iter().copied().fold(f64::INFINITY, f64::min);
     let xi = 0.5 / radius;
-    if cutoff(radius, xi, tolerance) <= half {
+    if cutoff(radius, xi, tolerance)? <= half {
         return Ok(xi);
     }
     // The cutoff falls as xi grows: bisect for the smallest xi that fits.
     let (mut lo, mut hi) = (xi, xi);
-    while cutoff(radius, hi, tolerance) > half {
+    while cutoff(radius, hi, tolerance)? > half {
         hi *= 2.0;
         if hi > 64.0 / radius {
             return Err(format!(
@@ -30,7 +31,7 @@ pub fn default_split(radius: f64, tolerance: f64, lengths: &[f64]) -> Result<f64
     }
     while hi - lo > 1e-6 * hi {
         let mid = 0.5 * (lo + hi);
-        if cutoff(radius, mid, tolerance) > half {
+        if cutoff(radius, mid, tolerance)? > half {
             lo = mid;
         } else {
             hi = mid;
@@ -42,28 +43,32 @@ pub fn default_split(radius: f64, tolerance: f64, lengths: &[f64]) -> Result<f64
 /// Near-field cutoff: where the near field falls below tol / 2 of the self-mobility
 /// (`near_cutoff`; about sqrt(-ln tol) / xi, thesis eq. 20.19, at small xi a, and up to
 /// 2a further at large xi a, where the shells of the RPY spheres widen the screening).
-pub fn cutoff(radius: f64, split: f64, tolerance: f64) -> f64 {
+pub fn cutoff(radius: f64, split: f64, tolerance: f64) -> Result<f64, String> {
     crate::nodes::pairs::rpy::near_cutoff(radius, split, 0.5 * tolerance)
 }
 
 /// Far-field cells per axis: wave numbers up to k_cut = 2 xi sqrt(-ln tol) (where
 /// Hasimoto's factor falls to tol, eq. 20.18), so h = pi / k_cut; FFT-friendly, and the
 /// fast size (2^a or 3 * 2^a) when it is at most 4% finer.
-pub fn grid(lengths: &[f64], split: f64, tolerance: f64) -> Vec<u32> {
+/// Each axis is bounded (`cells_per_axis`, `checked_grid`) before it is converted.
+pub fn grid(lengths: &[f64], split: f64, tolerance: f64) -> Result<Vec<u32>, String> {
+    check_tolerance(tolerance)?;
     let k_cut = 2.0 * split * (-tolerance.ln()).sqrt();
     let h = std::f64::consts::PI / k_cut;
-    lengths
+    let cells = lengths
         .iter()
         .map(|l| {
-            let n = next_friendly(((l / h).floor() as u32 + 1).max(8));
+            let what = format!("the PSE far field (box length {l}, split {split})");
+            let n = next_friendly(cells_per_axis(&what, ((l / h).floor() + 1.0).max(8.0))?);
             let fast = fast_fft_size(n);
-            if (fast as f64) <= 1.04 * n as f64 {
+            Ok(if (fast as f64) <= 1.04 * n as f64 {
                 fast
             } else {
                 n
-            }
+            })
         })
-        .collect()
+        .collect::<Result<Vec<u32>, String>>()?;
+    checked_grid("the PSE far field", cells)
 }
 
 /// The number of standard deviations m the far-field Gaussian is cut at: the quadrature
@@ -135,10 +140,16 @@ pub fn neighbour_cells(lengths: &[f64], cutoff: f64) -> Vec<u32> {
 /// the lattice images (a fine table of `rpy::NearTable`) plus the direct Fourier sum of
 /// the far field. `mesoflow bench pse` measures errors against it (at a split other than
 /// the one benchmarked); the tests have an independent copy.
-pub fn periodic_rpy(r: [f64; 3], l: f64, a: f64, eta: f64, xi: f64) -> [[f64; 3]; 3] {
+pub fn periodic_rpy(
+    r: [f64; 3],
+    l: f64,
+    a: f64,
+    eta: f64,
+    xi: f64,
+) -> Result<[[f64; 3]; 3], String> {
     use std::f64::consts::PI;
-    let reach = crate::nodes::pairs::rpy::near_cutoff(a, xi, 1e-12);
-    let table = crate::nodes::pairs::rpy::NearTable::new(a, eta, xi, reach, 20001);
+    let reach = crate::nodes::pairs::rpy::near_cutoff(a, xi, 1e-12)?;
+    let table = crate::nodes::pairs::rpy::NearTable::new(a, eta, xi, reach, 20001)?;
     let mut m = [[0.0; 3]; 3];
     let add = |f: f64, g: f64, d: [f64; 3], m: &mut [[f64; 3]; 3]| {
         let d2: f64 = d.iter().map(|x| x * x).sum();
@@ -188,7 +199,7 @@ pub fn periodic_rpy(r: [f64; 3], l: f64, a: f64, eta: f64, xi: f64) -> [[f64; 3]
             }
         }
     }
-    m
+    Ok(m)
 }
 
 #[cfg(test)]
@@ -198,9 +209,9 @@ mod tests {
     #[test]
     fn uammd_sizes() {
         // UAMMD's benchmark: a = 1, tol 1e-3, L = 128, xi = 0.5: k_cut = 2.63, h = 1.19.
-        let g = grid(&[128.0; 3], 0.5, 1e-3);
+        let g = grid(&[128.0; 3], 0.5, 1e-3).unwrap();
         assert_eq!(g, vec![108; 3]);
-        let rc = cutoff(1.0, 0.5, 1e-3);
+        let rc = cutoff(1.0, 0.5, 1e-3).unwrap();
         assert!(rc > 5.2565 && rc < 6.5, "{rc}");
         assert_eq!(neighbour_cells(&[128.0; 3], 5.3), vec![24; 3]);
         assert_eq!(shape_support(1e-3, &g), 7);
@@ -215,7 +226,7 @@ mod tests {
 
     #[test]
     fn periodic_rpy_self_is_hasimoto() {
-        let m = periodic_rpy([0.0; 3], 20.0, 1.0, 1.0, 0.7);
+        let m = periodic_rpy([0.0; 3], 20.0, 1.0, 1.0, 0.7).unwrap();
         let want = crate::nodes::fcm::plan::hasimoto(1.0, 20.0) / (6.0 * std::f64::consts::PI);
         assert!(
             (m[0][0] / want - 1.0).abs() < 1e-5,
@@ -228,8 +239,8 @@ mod tests {
     fn split_grows_for_small_boxes() {
         assert_eq!(default_split(1.0, 1e-3, &[128.0; 3]), Ok(0.5));
         let s = default_split(1.0, 1e-3, &[8.0, 8.0, 8.0]).unwrap();
-        assert!(2.0 * cutoff(1.0, s, 1e-3) <= 8.0 && s > 0.5);
+        assert!(2.0 * cutoff(1.0, s, 1e-3).unwrap() <= 8.0 && s > 0.5);
         let s = default_split(1.0, 1e-3, &[2.0, 8.0, 8.0]).unwrap();
-        assert!(cutoff(1.0, s, 1e-3) <= 1.0);
+        assert!(cutoff(1.0, s, 1e-3).unwrap() <= 1.0);
     }
 }

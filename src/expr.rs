@@ -303,6 +303,7 @@ pub fn evaluate(text: &str, scope: &Scope) -> Result<ParamValue, ExprError> {
         toks: lex(text)?,
         pos: 0,
         scope,
+        depth: 0,
     };
     let v = p.expr()?;
     if p.pos != p.toks.len() {
@@ -455,11 +456,28 @@ impl V {
     }
 }
 
+/// How deeply an expression may nest (brackets, calls, unary signs): every level is
+/// seven frames of the recursive-descent parser, over 8 KiB in a debug build (256 levels
+/// overflowed a 2 MiB test thread; 50,000 overflowed the main thread); 64 fit with room.
+pub const MAX_EXPR_NESTING: usize = 64;
+
+/// An expression for an error message: its first 80 characters where it is longer
+/// (a hostile one may be megabytes).
+fn abbreviated(src: &str) -> String {
+    let src = src.trim();
+    match src.char_indices().nth(80) {
+        Some((cut, _)) => format!("{}... ({} characters)", &src[..cut], src.len()),
+        None => src.into(),
+    }
+}
+
 struct Parser<'a> {
     src: &'a str,
     toks: Vec<Tok>,
     pos: usize,
     scope: &'a Scope<'a>,
+    /// Levels of [`Parser::unary`] now open: every recursion of the grammar passes it.
+    depth: usize,
 }
 
 impl Parser<'_> {
@@ -508,7 +526,24 @@ impl Parser<'_> {
         Ok(lhs)
     }
 
+    /// Every nesting of the grammar (a bracket, an argument list, an index, a sign)
+    /// passes here, so the depth bound here bounds the parser's stack.
     fn unary(&mut self) -> Result<V, ExprError> {
+        if self.depth >= MAX_EXPR_NESTING {
+            return Err(ExprError::Syntax {
+                problem: format!(
+                    "nesting deeper than {MAX_EXPR_NESTING} levels (MAX_EXPR_NESTING)"
+                ),
+                expr: abbreviated(self.src),
+            });
+        }
+        self.depth += 1;
+        let v = self.unary_unbounded();
+        self.depth -= 1;
+        v
+    }
+
+    fn unary_unbounded(&mut self) -> Result<V, ExprError> {
         if self.peek_op('-') {
             self.pos += 1;
             let x = self.num()?;
@@ -922,6 +957,33 @@ mod tests {
             ParamValue::Bool(true)
         );
         assert!(ParamValue::from_cli("[1, \"a\"]").is_err());
+    }
+
+    /// Expressions nested 100,000 deep (brackets, signs, calls, arrays) are an error
+    /// naming the limit, not a stack overflow; the limit itself still parses.
+    #[test]
+    fn deep_nesting_is_an_error_not_a_stack_overflow() {
+        let s = scope();
+        let deep = 100_000;
+        for text in [
+            format!("{}1{}", "(".repeat(deep), ")".repeat(deep)),
+            format!("{}1", "-".repeat(deep)),
+            format!("{}1", "+".repeat(deep)),
+            format!("{}1{}", "sqrt(".repeat(deep), ")".repeat(deep)),
+            format!("{}1{}", "[".repeat(deep), "]".repeat(deep)),
+            format!("2{}", "^2".repeat(deep)),
+        ] {
+            let e = evaluate(&text, &s).unwrap_err().to_string();
+            assert!(e.contains("MAX_EXPR_NESTING"), "{e}");
+            assert!(
+                e.len() < 300,
+                "the message quotes the whole expression: {}",
+                e.len()
+            );
+        }
+        let ok = MAX_EXPR_NESTING - 1;
+        let text = format!("{}1{}", "(".repeat(ok), ")".repeat(ok));
+        assert_eq!(eval(&text, &s).unwrap(), 1.0);
     }
 
     #[test]

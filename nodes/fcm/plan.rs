@@ -18,6 +18,7 @@
 //!   follows the actual cell size.
 
 use crate::nodes::fft::next_friendly;
+use crate::nodes::fft::plan::{cells_per_axis, checked_grid};
 
 /// Empirical upsampling of the Gaussian window (thesis Eq. 21.21).
 pub fn gaussian_upsampling(tolerance: f64) -> f64 {
@@ -152,9 +153,12 @@ pub fn grid_for(
     kernel: &str,
     rotation: bool,
 ) -> Result<Vec<u32>, String> {
-    if radius <= 0.0 {
-        return Err(format!("the radius must be positive, got {radius}"));
+    if !(radius > 0.0 && radius.is_finite()) {
+        return Err(format!(
+            "the radius must be positive and finite, got {radius}"
+        ));
     }
+    check_tolerance(tolerance)?;
     let h = radius / radius_per_cell(kernel, tolerance)?;
     // The torque Gaussian's spacing is a bound (the guard `min_width_cells` checks it),
     // so its cell count rounds up; the force grid rounds down as UAMMD's does.
@@ -171,9 +175,12 @@ pub fn grid_for(
     lengths
         .iter()
         .map(|&l| {
-            if l <= 0.0 {
-                return Err(format!("box lengths must be positive, got {l}"));
+            if !(l > 0.0 && l.is_finite()) {
+                return Err(format!("box lengths must be positive and finite, got {l}"));
             }
+            // Bounded before any conversion to u32 (1e30 / h saturates it).
+            let what = format!("a box length of {l} for radius {radius}");
+            cells_per_axis(&what, (l / h).floor().max(1.0))?;
             // Down as UAMMD rounds (its benchmark grids), unless that coarsens the cells
             // by more than 1 % (small boxes: 8.8 cells would become 8).
             let mut n = (l / h).floor().max(1.0);
@@ -183,13 +190,7 @@ pub fn grid_for(
             if let Some(hr) = h_rotation {
                 n = n.max((l / hr).ceil());
             }
-            if n > 4096.0 {
-                return Err(format!(
-                    "a box length of {l} needs {n} cells of {:.4} for radius {radius}; more than the 4096 an FFT axis takes",
-                    l / n
-                ));
-            }
-            let friendly = next_friendly(n as u32);
+            let friendly = next_friendly(cells_per_axis(&what, n)?);
             if kernel == "gaussian" {
                 // A slightly finer grid keeps the Gaussian's radius (it is not tied to
                 // the cell) and, with the same support, its accuracy.
@@ -204,7 +205,20 @@ pub fn grid_for(
             }
             Ok(friendly)
         })
-        .collect()
+        .collect::<Result<Vec<u32>, String>>()
+        .and_then(|cells| checked_grid("the FCM grid", cells))
+}
+
+/// A planner's tolerance: in (0, 1), so that its logarithms and the support rules built
+/// on them stay finite.
+pub fn check_tolerance(tolerance: f64) -> Result<(), String> {
+    if tolerance > 0.0 && tolerance < 1.0 {
+        Ok(())
+    } else {
+        Err(format!(
+            "the tolerance must lie strictly between 0 and 1, got {tolerance}"
+        ))
+    }
 }
 
 /// How much finer than the FFT-friendly size a fast size may make the grid.

@@ -23,6 +23,34 @@ use crate::gpu::DeviceCaps;
 /// would need a multi-pass (four-step) scheme that is not implemented.
 pub const MAX_LENGTH: u32 = 4096;
 
+/// The most cells a host planner may put in one grid (all axes together): 2^30 (1024^3),
+/// 8 GiB as a complex f32 grid, more than one buffer of most adapters holds.
+pub const MAX_GRID_CELLS: f64 = (1u64 << 30) as f64;
+
+/// A planner's cells per axis, checked before the float is converted: a count outside
+/// 1..=[`MAX_LENGTH`] (1e30, infinity or NaN from a huge box or a tiny radius) is an
+/// error naming `what` and the limit, never a saturated u32.
+pub fn cells_per_axis(what: &str, cells: f64) -> Result<u32, String> {
+    if cells.is_finite() && (1.0..=MAX_LENGTH as f64).contains(&cells) {
+        Ok(cells as u32)
+    } else {
+        Err(format!(
+            "{what} needs {cells} cells along an axis; an FFT axis takes 1 to {MAX_LENGTH} (MAX_LENGTH)"
+        ))
+    }
+}
+
+/// The cells of a planner's grid, checked against [`MAX_GRID_CELLS`].
+pub fn checked_grid(what: &str, cells: Vec<u32>) -> Result<Vec<u32>, String> {
+    let total: f64 = cells.iter().map(|&n| n as f64).product();
+    if total > MAX_GRID_CELLS {
+        return Err(format!(
+            "{what} would be a grid of {cells:?} = {total} cells, more than the {MAX_GRID_CELLS} (MAX_GRID_CELLS) a grid may have"
+        ));
+    }
+    Ok(cells)
+}
+
 /// Radices the kernels have butterflies for.
 pub const RADICES: [u32; 6] = [2, 3, 4, 5, 7, 8];
 

@@ -72,7 +72,7 @@ impl PairKernel {
                     radius,
                     viscosity,
                     split,
-                    table: NearTable::shared(radius, viscosity, split, cutoff, points),
+                    table: NearTable::shared(radius, viscosity, split, cutoff, points)?,
                 }
             }
             "lj" => PairKernel::Lj {

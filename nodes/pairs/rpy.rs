@@ -65,13 +65,31 @@ struct FarQuadrature {
     nodes: Vec<(f64, f64)>,
 }
 
+/// The most Gauss-Legendre panels of a [`FarQuadrature`]. Panels grow as xi (r_max + 2a):
+/// about 70 at xi a = 0.5 and 4400 at xi a = 64 (the largest split `pse_split` picks);
+/// a split of 1e6 would need 3e7 panels (5e8 nodes, minutes per distance), so the host
+/// planner refuses it instead of running without end.
+pub const MAX_FAR_PANELS: f64 = 16384.0;
+
+/// The most quadrature nodes times table points one [`NearTable`] may cost (2^26, well under
+/// a second of f64 on the host; the default 4096 points at xi a = 0.5 cost 4.4e6).
+pub const MAX_NEAR_TABLE_WORK: f64 = (1u64 << 26) as f64;
+
 impl FarQuadrature {
-    fn new(a: f64, eta: f64, xi: f64, r_max: f64) -> Self {
+    fn new(a: f64, eta: f64, xi: f64, r_max: f64) -> Result<Self, String> {
         // exp(-k^2 / (4 xi^2)) < 1e-19 past k_max.
         let k_max = 2.0 * xi * 44.0f64.sqrt();
         // Panels of at most a quarter of the fastest oscillation (period 2 pi / (r + 2a)).
         let width = (PI / (4.0 * (r_max + 2.0 * a))).min(k_max / 64.0);
-        let panels = (k_max / width).ceil() as usize;
+        let panels = (k_max / width).ceil();
+        // Checked before the conversion: NaN or infinity (a radius of 5e-324, a cutoff
+        // of 1e300) must not saturate into a huge allocation.
+        if !panels.is_finite() || panels > MAX_FAR_PANELS {
+            return Err(format!(
+                "the RPY near field at split {xi}, radius {a} and distance {r_max} needs {panels} quadrature panels, more than MAX_FAR_PANELS ({MAX_FAR_PANELS}): lower the split or the cutoff (xi (cutoff + 2 radius) of about 1000 at most)"
+            ));
+        }
+        let panels = panels.max(1.0) as usize;
         let width = k_max / panels as f64;
         let mut nodes = Vec::with_capacity(8 * panels);
         for p in 0..panels {
@@ -87,7 +105,7 @@ impl FarQuadrature {
                 }
             }
         }
-        FarQuadrature { nodes }
+        Ok(FarQuadrature { nodes })
     }
 
     /// (f, g) of M_far,free at distance r.
@@ -112,8 +130,21 @@ pub struct NearTable {
 }
 
 impl NearTable {
-    pub fn new(a: f64, eta: f64, xi: f64, cutoff: f64, points: usize) -> Self {
-        let far = FarQuadrature::new(a, eta, xi, cutoff);
+    /// An error (naming the limit) where the table would cost more than
+    /// [`MAX_NEAR_TABLE_WORK`] or its quadrature more than [`MAX_FAR_PANELS`].
+    pub fn new(a: f64, eta: f64, xi: f64, cutoff: f64, points: usize) -> Result<Self, String> {
+        let far = FarQuadrature::new(a, eta, xi, cutoff)?;
+        let work = far.nodes.len() as f64 * points as f64;
+        if work > MAX_NEAR_TABLE_WORK {
+            return Err(format!(
+                "the RPY near-field table of {points} points at split {xi} and cutoff {cutoff} would cost {work} quadrature evaluations, more than MAX_NEAR_TABLE_WORK ({MAX_NEAR_TABLE_WORK}): fewer table_points or a smaller split"
+            ));
+        }
+        if points < 2 {
+            return Err(format!(
+                "the RPY near-field table needs 2 points at least, got {points}"
+            ));
+        }
         let dr = cutoff / (points - 1) as f64;
         let (mut f, mut g) = (Vec::with_capacity(points), Vec::with_capacity(points));
         for i in 0..points {
@@ -123,25 +154,31 @@ impl NearTable {
             f.push(rf - ff);
             g.push(rg - fg);
         }
-        NearTable { cutoff, f, g }
+        Ok(NearTable { cutoff, f, g })
     }
 
     /// [`NearTable::new`], computed once per set of arguments in a process: a graph that
     /// applies the near field twice (PSE's product and its Lanczos body) builds one table.
-    pub fn shared(a: f64, eta: f64, xi: f64, cutoff: f64, points: usize) -> Arc<NearTable> {
+    pub fn shared(
+        a: f64,
+        eta: f64,
+        xi: f64,
+        cutoff: f64,
+        points: usize,
+    ) -> Result<Arc<NearTable>, String> {
         type Key = ([u64; 4], usize);
         static TABLES: OnceLock<Mutex<HashMap<Key, Arc<NearTable>>>> = OnceLock::new();
         let key = ([a, eta, xi, cutoff].map(f64::to_bits), points);
         let tables = TABLES.get_or_init(Default::default);
         if let Some(t) = tables.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
-            return t.clone();
+            return Ok(t.clone());
         }
-        let table = Arc::new(NearTable::new(a, eta, xi, cutoff, points));
+        let table = Arc::new(NearTable::new(a, eta, xi, cutoff, points)?);
         tables
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .insert(key, table.clone());
-        table
+        Ok(table)
     }
 
     /// Linear interpolation, as the GPU does it (0 past the cutoff).
@@ -166,9 +203,10 @@ impl NearTable {
 /// the cutoff is about 2a + sqrt(-ln fraction) / xi at large xi a and
 /// sqrt(-ln fraction) / xi at small; found by stepping out in f64 from the contact
 /// distance, past the last point above the fraction.
-pub fn near_cutoff(a: f64, xi: f64, fraction: f64) -> f64 {
+/// Bounded: an error where the quadrature would pass [`MAX_FAR_PANELS`].
+pub fn near_cutoff(a: f64, xi: f64, fraction: f64) -> Result<f64, String> {
     let reach = 2.0 * a + (-(fraction / 100.0).ln()).sqrt() / xi;
-    let far = FarQuadrature::new(a, 1.0, xi, reach);
+    let far = FarQuadrature::new(a, 1.0, xi, reach)?;
     let limit = fraction / (6.0 * PI * a);
     let above = |r: f64| {
         let (rf, rg) = rpy(r, a, 1.0);
@@ -179,7 +217,7 @@ pub fn near_cutoff(a: f64, xi: f64, fraction: f64) -> f64 {
     let steps = 400;
     let dr = reach / steps as f64;
     let Some(i) = (0..=steps).rev().find(|&i| above(i as f64 * dr)) else {
-        return dr;
+        return Ok(dr);
     };
     let (mut lo, mut hi) = (i as f64 * dr, (i + 1) as f64 * dr);
     while hi - lo > 1e-6 * reach {
@@ -190,7 +228,7 @@ pub fn near_cutoff(a: f64, xi: f64, fraction: f64) -> f64 {
             hi = mid;
         }
     }
-    hi
+    Ok(hi)
 }
 
 /// The self term of the PSE near field in closed form (Fiore et al. 2017; digest
@@ -264,6 +302,19 @@ mod tests {
         }
     }
 
+    /// Splits, cutoffs and table sizes that would make the host quadrature explode
+    /// (minutes, or a saturated allocation) are errors naming the limit.
+    #[test]
+    fn exploding_near_fields_are_refused() {
+        let e = near_cutoff(1.0, 1e6, 1e-3).unwrap_err();
+        assert!(e.contains("MAX_FAR_PANELS"), "{e}");
+        let e = NearTable::new(1.0, 1.0, 0.5, 1e300, 16).unwrap_err();
+        assert!(e.contains("MAX_FAR_PANELS"), "{e}");
+        let e = NearTable::new(1.0, 1.0, 0.5, 6.0, 1 << 22).unwrap_err();
+        assert!(e.contains("MAX_NEAR_TABLE_WORK"), "{e}");
+        assert!(NearTable::new(1.0, 1.0, 0.5, 6.0, 4096).is_ok());
+    }
+
     #[test]
     fn rpy_is_continuous_at_contact() {
         let (a, b) = (rpy(2.0 - 1e-12, 1.0, 1.0), rpy(2.0, 1.0, 1.0));
@@ -273,7 +324,7 @@ mod tests {
     #[test]
     fn near_self_term_matches_the_closed_form() {
         for xi in [0.3, 0.5, 1.0, 2.0] {
-            let t = NearTable::new(1.0, 1.0, xi, 1.0, 3);
+            let t = NearTable::new(1.0, 1.0, xi, 1.0, 3).unwrap();
             let want = near_self(1.0, xi) / (6.0 * PI);
             assert!(
                 ((t.f[0] - want) / want).abs() < 1e-10,
@@ -290,8 +341,8 @@ mod tests {
         // just inside it, it does not. Large xi a: well past sqrt(-ln eps) / xi.
         let self_mobility = 1.0 / (6.0 * PI);
         for (xi, eps) in [(0.5, 1e-3), (1.2, 1e-3), (0.8, 1e-4)] {
-            let rc = near_cutoff(1.0, xi, eps);
-            let t = NearTable::new(1.0, 1.0, xi, 2.0 * rc, 401);
+            let rc = near_cutoff(1.0, xi, eps).unwrap();
+            let t = NearTable::new(1.0, 1.0, xi, 2.0 * rc, 401).unwrap();
             for (i, (f, g)) in t.f.iter().zip(&t.g).enumerate() {
                 let r = i as f64 * 2.0 * rc / 400.0;
                 if r >= rc {
@@ -301,7 +352,7 @@ mod tests {
                     );
                 }
             }
-            let inside = NearTable::new(1.0, 1.0, xi, 0.98 * rc, 2);
+            let inside = NearTable::new(1.0, 1.0, xi, 0.98 * rc, 2).unwrap();
             assert!(inside.f[1].abs().max(inside.g[1].abs()) > 0.5 * eps * self_mobility);
             assert!(rc > (-f64::ln(eps)).sqrt() / xi, "xi {xi}: {rc}");
         }

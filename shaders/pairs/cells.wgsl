@@ -25,10 +25,21 @@ fn offsets(c: i32, n: i32, periodic: bool) -> vec2<i32> {
     return vec2<i32>(max(-1, -c), min(1, n - 1 - c));
 }
 
-// The cell coordinates of a linear cell index.
+// The cell coordinates of a linear cell index. The index comes from a graph's indices
+// port and may be anything: it is clamped to the last cell (valid keys are unchanged),
+// so every cell visited lies in the cell arrays (their lengths the host checks).
 fn cell_coords(key: u32) -> vec3<i32> {
-    return vec3<i32>(i32(key % geo.cells.x), i32((key / geo.cells.x) % geo.cells.y),
-                     i32(key / (geo.cells.x * geo.cells.y)));
+    let k = min(key, geo.cells.x * geo.cells.y * geo.cells.z - 1u);
+    return vec3<i32>(i32(k % geo.cells.x), i32((k / geo.cells.x) % geo.cells.y),
+                     i32(k / (geo.cells.x * geo.cells.y)));
+}
+
+// The sorted slots first..last of a cell's particles, clamped to 0..geo.n whatever
+// cell_start and cell_count hold (a graph may wire its own arrays there): at most n
+// iterations and no slot past the particles; a valid cell list is unchanged.
+fn cell_slots(cell: u32) -> vec2<u32> {
+    let first = min(cell_start[cell], geo.n);
+    return vec2<u32>(first, first + min(cell_count[cell], geo.n - first));
 }
 
 // The displacement x_i - x_j, minimum image on the periodic axes.

@@ -37,9 +37,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             for (var dx = ox.x; dx <= ox.y; dx++) {
                 let cx = (c.x + dx + n.x) % n.x;
                 let cell = u32(cx + n.x * (cy + n.y * cz));
-                let first = cell_start[cell];
-                let last = first + cell_count[cell];
-                for (var j = first; j < last; j++) {
+                let slots = cell_slots(cell);
+                for (var j = slots.x; j < slots.y; j++) {
                     if (j == i) {
                         continue;
                     }

@@ -24,7 +24,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         let m = list_count[i];
         if (m <= LIST_WIDTH) {
             for (var k = 0u; k < m; k++) {
-                let j = list[k * geo.n + i];
+                // A list from any indices port: entries clamped to the particles.
+                let j = min(list[k * geo.n + i], geo.n - 1u);
                 let r = displacement(xi, j);
                 acc += pair_term(r, dot(r, r), value3(j));
             }
@@ -47,9 +48,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             for (var dx = ox.x; dx <= ox.y; dx++) {
                 let cx = (c.x + dx + n.x) % n.x;
                 let cell = u32(cx + n.x * (cy + n.y * cz));
-                let first = cell_start[cell];
-                let last = first + cell_count[cell];
-                for (var j = first; j < last; j++) {
+                let slots = cell_slots(cell);
+                for (var j = slots.x; j < slots.y; j++) {
                     if (j == i) {
                         continue;
                     }

@@ -31,9 +31,10 @@ fn run_sum(xi: vec3<f32>, i: u32, first: u32, last: u32, lane: u32) -> vec3<f32>
     return acc;
 }
 
-// Particles of cells a..=b of one row (consecutive linear keys).
+// Particles of cells a..=b of one row (consecutive linear keys), slots clamped to the
+// particles (`cell_slots`).
 fn cells_run(xi: vec3<f32>, i: u32, a: u32, b: u32, lane: u32) -> vec3<f32> {
-    return run_sum(xi, i, cell_start[a], cell_start[b] + cell_count[b], lane);
+    return run_sum(xi, i, cell_slots(a).x, cell_slots(b).y, lane);
 }
 
 fn own_sum(i: u32, lane: u32) -> vec3<f32> {
@@ -43,7 +44,8 @@ fn own_sum(i: u32, lane: u32) -> vec3<f32> {
         let m = list_count[i];
         if (m <= LIST_WIDTH) {
             for (var k = lane; k < m; k += SEG) {
-                let j = list[k * geo.n + i];
+                // A list from any indices port: entries clamped to the particles.
+                let j = min(list[k * geo.n + i], geo.n - 1u);
                 let r = displacement(xi, j);
                 acc += pair_term(r, dot(r, r), value3(j));
             }

@@ -87,7 +87,8 @@ fn accuracy(
         let d = [0, 1, 2].map(|_| rng.uniform() - 0.5);
         let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         let x1 = [0, 1, 2].map(|c| x0[c] + r * d[c] / norm);
-        let want = periodic_rpy([0, 1, 2].map(|c| x1[c] - x0[c]), l, 1.0, 1.0, xi_ref);
+        let want = periodic_rpy([0, 1, 2].map(|c| x1[c] - x0[c]), l, 1.0, 1.0, xi_ref)
+            .map_err(BenchError::Args)?;
         for axis in 0..3 {
             let mut f = [[0.0; 3]; 2];
             f[0][axis] = 1.0;

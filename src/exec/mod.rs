@@ -47,6 +47,54 @@ pub enum ExecError {
     },
     #[error("{0}")]
     Run(String),
+    /// A buffer of the plan is larger than the adapter allows; found before allocating.
+    #[error(
+        "{what} takes {bytes} bytes ({} MiB), more than this adapter's {limit} of {max} bytes ({} MiB); nothing was allocated",
+        bytes >> 20,
+        max >> 20
+    )]
+    TooLarge {
+        what: String,
+        bytes: u64,
+        limit: &'static str,
+        max: u64,
+    },
+}
+
+/// Checks every buffer the plan will allocate against the adapter's limits before any
+/// is created (wgpu would otherwise fail inside `create_buffer`): each one at most
+/// `max_buffer_size` and, as kernels bind buffers whole, `max_storage_buffer_binding_size`.
+/// wgpu does not expose the device's total memory, so the plan's total
+/// (`MemoryReport::total`, what `inspect` prints) cannot be checked against it; a run
+/// past it fails when the driver runs out.
+fn check_buffer_sizes(gpu: &GpuContext, graph: &Graph, plan: &Plan) -> Result<(), ExecError> {
+    let mut sized: Vec<(String, u64)> = Vec::new();
+    for (i, t) in &plan.inputs {
+        sized.push((format!("input `{}`", graph.inputs[*i].name), t.bytes()));
+    }
+    for s in &plan.states {
+        sized.push((format!("state `{}`", s.name), s.ty.bytes()));
+    }
+    for (i, b) in plan.buffers.iter().enumerate() {
+        sized.push((format!("planned buffer {i}"), b.bytes));
+    }
+    let caps = &gpu.caps;
+    for (what, bytes) in sized {
+        for (limit, max) in [
+            ("max_buffer_size", caps.max_buffer),
+            ("max_storage_buffer_binding_size", caps.max_binding),
+        ] {
+            if bytes.max(16).next_multiple_of(16) > max {
+                return Err(ExecError::TooLarge {
+                    what,
+                    bytes,
+                    limit,
+                    max,
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// What `--profile` times.
@@ -153,6 +201,7 @@ impl<'a> Program<'a> {
         plan: &'a Plan,
         cache: &mut KernelCache,
     ) -> Result<Self, ExecError> {
+        check_buffer_sizes(gpu, graph, plan)?;
         let built_before = cache.built;
         let input_buffers = plan
             .inputs

@@ -53,6 +53,8 @@ pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Grap
         input_alias: HashMap::new(),
         sub_outputs: HashMap::new(),
         stack: Vec::new(),
+        expanded_nodes: 0,
+        folders: SubgraphFolders::new(path),
         root: RootParts::default(),
     };
     let overrides: IndexMap<String, ParamValue> = opts.overrides.clone().into_iter().collect();
@@ -129,8 +131,104 @@ struct Loader<'r> {
     input_alias: HashMap<(String, String), Alias>,
     sub_outputs: HashMap<(String, String), PendingRef>,
     stack: Vec<PathBuf>,
+    /// Nodes declared by every file loaded so far, subgraph nodes included: past
+    /// [`MAX_EXPANDED_NODES`] loading stops (`load_file` refuses every further file).
+    expanded_nodes: usize,
+    folders: SubgraphFolders,
     root: RootParts,
 }
+
+/// The largest graph file read (a graph of the 20,000 nodes [`MAX_EXPANDED_NODES`]
+/// allows takes a few MiB).
+pub const MAX_GRAPH_FILE_BYTES: u64 = 64 << 20;
+
+/// Where subgraph files may come from: the top-level graph's folder and the library
+/// (`MESOFLOW_GRAPH_LIB`, a list of folders as PATH is; by default the `graphs/` folder
+/// mesoflow ships, which holds `lib/`), each with what lies below it. A subgraph path
+/// is relative; it is looked up from the including file's folder, then from each library
+/// folder, and must lead (`..` and symbolic links followed) to a regular file inside one
+/// of them: no absolute paths, no escapes, no FIFOs or devices.
+struct SubgraphFolders {
+    /// Canonical folders a subgraph file must lie in.
+    allowed: Vec<PathBuf>,
+    /// The library folders, where a path not found beside the including file is looked up.
+    library: Vec<PathBuf>,
+}
+
+impl SubgraphFolders {
+    fn new(top: &Path) -> Self {
+        let library: Vec<PathBuf> = match std::env::var_os("MESOFLOW_GRAPH_LIB") {
+            Some(list) => std::env::split_paths(&list).collect(),
+            None => vec![PathBuf::from(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/graphs"
+            ))],
+        };
+        let library: Vec<PathBuf> = library
+            .iter()
+            .filter_map(|d| d.canonicalize().ok())
+            .collect();
+        let top_folder = match top.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let allowed = top_folder
+            .canonicalize()
+            .into_iter()
+            .chain(library.iter().cloned())
+            .collect();
+        SubgraphFolders { allowed, library }
+    }
+
+    fn describe(&self) -> String {
+        let folders: Vec<String> = self
+            .allowed
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        folders.join(", ")
+    }
+
+    /// The file a subgraph node's `graph` path names, included from `including`.
+    fn resolve(&self, including: &Path, sub: &str) -> Result<PathBuf, String> {
+        let rel = Path::new(sub);
+        if rel.has_root() || rel.is_absolute() {
+            return Err(format!(
+                "subgraph path `{sub}` is absolute; give it relative to the graph's folder or to a library folder ({})",
+                self.describe()
+            ));
+        }
+        let here = including.parent().unwrap_or(Path::new("."));
+        for base in std::iter::once(here).chain(self.library.iter().map(PathBuf::as_path)) {
+            let Ok(found) = base.join(rel).canonicalize() else {
+                continue;
+            };
+            if !self.allowed.iter().any(|f| found.starts_with(f)) {
+                return Err(format!(
+                    "subgraph path `{sub}` leads to {}, outside the folders subgraphs may come from ({})",
+                    found.display(),
+                    self.describe()
+                ));
+            }
+            return Ok(found);
+        }
+        Err(format!(
+            "cannot read subgraph file {}: no such file (nor in the library: {})",
+            here.join(rel).display(),
+            self.describe()
+        ))
+    }
+}
+
+/// How deeply subgraphs may include subgraphs: each level is a recursion of the loader,
+/// and a chain of 20,000 files overflowed its stack; 32 levels leave room for the
+/// expressions evaluated at the deepest one on a 2 MiB thread.
+pub const MAX_SUBGRAPH_DEPTH: usize = 32;
+
+/// How many nodes a graph may expand to, subgraph nodes and every copy of a subgraph
+/// counted: 23 small files that each use the next twice expand to 2^22 graphs, so the
+/// depth bound alone does not bound the memory and time of loading.
+pub const MAX_EXPANDED_NODES: usize = 20_000;
 
 fn valid_id(id: &str) -> bool {
     let mut c = id.chars();
@@ -154,6 +252,17 @@ impl<'r> Loader<'r> {
             Some(b) => Problem::node(b.file, b.node, msg),
             None => Problem::file(path, msg),
         };
+        if self.expanded_nodes > MAX_EXPANDED_NODES {
+            return false; // Reported once, where the budget ran out.
+        }
+        if self.stack.len() >= MAX_SUBGRAPH_DEPTH {
+            self.problems.push(problem_here(format!(
+                "subgraphs nest deeper than {MAX_SUBGRAPH_DEPTH} levels (MAX_SUBGRAPH_DEPTH), from {} to {}",
+                self.stack[0].display(),
+                path.display()
+            )));
+            return false;
+        }
         let canonical = path.canonicalize().unwrap_or_else(|_| path.to_path_buf());
         if self.stack.contains(&canonical) {
             let chain: Vec<String> = self.stack.iter().map(|p| p.display().to_string()).collect();
@@ -163,6 +272,25 @@ impl<'r> Loader<'r> {
                 canonical.display()
             )));
             return false;
+        }
+        // Only regular files of a bounded size: a FIFO or /dev/zero would block or never end.
+        match std::fs::metadata(path) {
+            Ok(m) if !m.is_file() => {
+                self.problems.push(problem_here(format!(
+                    "{} is not a regular file",
+                    path.display()
+                )));
+                return false;
+            }
+            Ok(m) if m.len() > MAX_GRAPH_FILE_BYTES => {
+                self.problems.push(problem_here(format!(
+                    "{} takes {} bytes, more than the {MAX_GRAPH_FILE_BYTES} (MAX_GRAPH_FILE_BYTES) a graph file may",
+                    path.display(),
+                    m.len()
+                )));
+                return false;
+            }
+            _ => {}
         }
         let text = match std::fs::read_to_string(path) {
             Ok(t) => t,
@@ -192,6 +320,14 @@ impl<'r> Loader<'r> {
                     file.mesoflow
                 ),
             ));
+            return false;
+        }
+        self.expanded_nodes += file.nodes.len();
+        if self.expanded_nodes > MAX_EXPANDED_NODES {
+            self.problems.push(problem_here(format!(
+                "the graph expands to more than {MAX_EXPANDED_NODES} nodes (MAX_EXPANDED_NODES), subgraphs and every use of one counted; reached loading {}",
+                path.display()
+            )));
             return false;
         }
         self.stack.push(canonical);
@@ -514,17 +650,27 @@ impl<'r> Loader<'r> {
                 }
                 (None, Some(sub)) => {
                     let child_scope = format!("{scope}{id}/");
-                    let loaded = !bad && {
-                        let child_path = path.parent().unwrap_or(Path::new(".")).join(sub);
-                        let overrides: IndexMap<String, ParamValue> =
-                            raw_params.into_iter().collect();
-                        let binding = Binding {
-                            file: path,
-                            node: id,
-                            scope,
-                            inputs: &decl.inputs,
-                        };
-                        self.load_file(&child_path, &child_scope, &overrides, Some(binding))
+                    let child_path = if bad {
+                        None
+                    } else {
+                        self.folders
+                            .resolve(path, sub)
+                            .map_err(|e| self.problems.push(Problem::node(path, id, e)))
+                            .ok()
+                    };
+                    let loaded = match child_path {
+                        None => false,
+                        Some(child_path) => {
+                            let overrides: IndexMap<String, ParamValue> =
+                                raw_params.into_iter().collect();
+                            let binding = Binding {
+                                file: path,
+                                node: id,
+                                scope,
+                                inputs: &decl.inputs,
+                            };
+                            self.load_file(&child_path, &child_scope, &overrides, Some(binding))
+                        }
                     };
                     let entry = if loaded {
                         NodeEntry::Sub(child_scope)
@@ -930,7 +1076,9 @@ impl<'r> Loader<'r> {
                 }
             }
         }
-        for scc in petgraph::algo::tarjan_scc(&g) {
+        // Kosaraju's search keeps its stack on the heap; petgraph's Tarjan recurses once
+        // per node of a path and overflowed the stack on a chain of 10,000 nodes.
+        for scc in petgraph::algo::kosaraju_scc(&g) {
             let cyclic = scc.len() > 1 || g.contains_edge(scc[0], scc[0]);
             if cyclic {
                 let mut ids: Vec<&str> = scc.iter().map(|&ix| nodes[g[ix]].id.as_str()).collect();

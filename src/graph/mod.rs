@@ -14,7 +14,7 @@ use std::fmt;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-pub use load::{LoadOptions, load};
+pub use load::{LoadOptions, MAX_EXPANDED_NODES, MAX_SUBGRAPH_DEPTH, load};
 pub use schema::SCHEMA_VERSION;
 
 use crate::expr::ParamValue;

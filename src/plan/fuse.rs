@@ -24,6 +24,13 @@ use crate::value::ValueType;
 /// Binding budget of a fused kernel: WebGPU guarantees 8 storage buffers per stage.
 const MAX_BINDINGS: usize = 8;
 
+/// The most members one fused kernel has. Shader compilers take time superlinear in a
+/// kernel's straight-line length (a chain of 2,000 element-wise nodes, fused whole, took
+/// minutes to build), so longer groups are cut into consecutive runs of this many; each
+/// cut costs one store and one load per element, nothing on results (values are f32 in
+/// registers and in buffers alike).
+pub const MAX_FUSED_NODES: usize = 64;
+
 pub struct FuseCtx<'a> {
     pub g: &'a Graph,
     pub types: &'a IdVec<NodeId, Inferred>,
@@ -241,7 +248,8 @@ pub fn group(ctx: &FuseCtx) -> Vec<Unit> {
         .collect()
 }
 
-/// Cuts groups into consecutive runs whose kernels fit the binding budget. A run of a
+/// Cuts groups into consecutive runs whose kernels fit the binding budget and
+/// [`MAX_FUSED_NODES`]. A run of a
 /// convex group is convex (members are in topological order, and no outside node sits
 /// between two members), so the cut needs no further checks.
 fn split_for_bindings(
@@ -283,7 +291,7 @@ fn split_for_bindings(
         let mut run: Vec<NodeId> = Vec::new();
         for m in members {
             run.push(m);
-            if run.len() > 1 && bindings(&run) > MAX_BINDINGS {
+            if run.len() > 1 && (run.len() > MAX_FUSED_NODES || bindings(&run) > MAX_BINDINGS) {
                 run.pop();
                 out.push(std::mem::take(&mut run));
                 run.push(m);

@@ -20,7 +20,7 @@ mod show;
 use std::collections::{BTreeMap, BTreeSet};
 
 pub use check::{Validation, validate_file};
-pub use fuse::FusedKernel;
+pub use fuse::{FusedKernel, MAX_FUSED_NODES};
 pub use show::{human_bytes, to_dot, to_text};
 
 use crate::gpu::{DeviceCaps, NodePlan};

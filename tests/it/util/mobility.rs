@@ -14,7 +14,7 @@ use mesoflow::plan::Plan;
 use mesoflow::value::{HostArray, ValueType};
 
 use super::{
-    Rng, compile_cached, particles, plan_graph, random_points, registry, root, run_program, tmpdir,
+    Rng, compile_cached, particles, plan_graph, random_points, registry, run_program, tmpdir,
     vectors, write_graph,
 };
 
@@ -199,7 +199,8 @@ pub fn cholesky_min_pivot(m: &[Vec<f64>]) -> Option<f64> {
 /// graph with a `noise` output): per particle and axis the sum of squares, and the sum
 /// over particles squared (the covariance between particles).
 fn noise_statistics_graph(dir: &Path, name: &str, n: usize, sets: &str) -> PathBuf {
-    let mobility = root().join("graphs").join(name);
+    // Found in the library (the shipped graphs/): the graph itself lies in a temporary folder.
+    let mobility = Path::new(name);
     let json = format!(
         r#"{{"mesoflow": 1,
           "inputs": {{"positions": {{"type": "particles", "rows": {n}, "cols": 3}}}},
