@@ -183,7 +183,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
         Command::Nodes { kind } => nodes(&registry, kind.as_deref()),
         Command::Info => {
             let gpu = GpuContext::new()?;
-            println!("{}", gpu.caps.summary());
+            outln!("{}", gpu.caps.summary());
             Ok(())
         }
         Command::Bench { which } => Ok(crate::bench::run(which)?),
@@ -320,7 +320,7 @@ fn run(
         requested.push(name.to_string());
     }
     let gpu = GpuContext::new()?;
-    eprintln!("mesoflow: {}", gpu.caps.summary());
+    note!("mesoflow: {}", gpu.caps.summary());
     let opts = PlanOptions {
         outputs: if requested.is_empty() {
             None
@@ -341,7 +341,7 @@ fn run(
         progress,
     })?;
     let results = program.read_outputs()?;
-    eprintln!(
+    note!(
         "mesoflow: {} step{} in {:.3} s ({} dispatches per step, GPU memory {} planned + {} tables)",
         stats.steps,
         if stats.steps == 1 { "" } else { "s" },
@@ -353,9 +353,7 @@ fn run(
     for (node, counts) in program.loop_iterations() {
         if let (Some(lo), Some(hi)) = (counts.iter().min(), counts.iter().max()) {
             let mean = counts.iter().map(|&k| k as f64).sum::<f64>() / counts.len() as f64;
-            eprintln!(
-                "mesoflow: loop `{node}`: {mean:.1} iterations per step (min {lo}, max {hi})"
-            );
+            note!("mesoflow: loop `{node}`: {mean:.1} iterations per step (min {lo}, max {hi})");
         }
     }
     if profile != Profile::Off {
@@ -365,9 +363,9 @@ fn run(
         match files.get(name) {
             Some(f) => {
                 mesoflow::npy::write(f, arr).map_err(|e| CliError::Runtime(e.to_string()))?;
-                println!("{name}: {} -> {}", arr.ty, f.display());
+                outln!("{name}: {} -> {}", arr.ty, f.display());
             }
-            None => println!("{name}: {}", summary(arr)),
+            None => outln!("{name}: {}", summary(arr)),
         }
     }
     Ok(())
@@ -400,7 +398,7 @@ fn summary(a: &HostArray) -> String {
 
 fn print_profile(stats: &RunStats) {
     let total: f64 = stats.profile.iter().map(|r| r.total.as_secs_f64()).sum();
-    println!(
+    outln!(
         "profile: GPU time per launch over {} step{} ({})",
         stats.steps,
         if stats.steps == 1 { "" } else { "s" },
@@ -410,15 +408,20 @@ fn print_profile(stats: &RunStats) {
             "wall clock with a wait per launch: no timestamp queries on this device"
         }
     );
-    println!(
+    outln!(
         "  {:<40} {:<28} {:>6} {:>12} {:>12} {:>6}",
-        "launch", "kinds", "calls", "total ms", "mean us", "%"
+        "launch",
+        "kinds",
+        "calls",
+        "total ms",
+        "mean us",
+        "%"
     );
     let mut rows = stats.profile.clone();
     rows.sort_by_key(|r| std::cmp::Reverse(r.total));
     for r in rows {
         let t = r.total.as_secs_f64();
-        println!(
+        outln!(
             "  {:<40} {:<28} {:>6} {:>12.4} {:>12.2} {:>6.1}",
             r.label,
             r.kinds,
@@ -436,7 +439,7 @@ fn print_profile(stats: &RunStats) {
                 continue;
             }
             let d: f64 = samples.iter().map(|d| d.as_secs_f64()).sum();
-            println!(
+            outln!(
                 "    {:<38} {:<28} {:>6} {:>12.4} {:>12.2}",
                 "",
                 kernel,
@@ -446,7 +449,7 @@ fn print_profile(stats: &RunStats) {
             );
         }
     }
-    println!(
+    outln!(
         "  {:<40} {:<28} {:>6} {:>12.4}",
         "total",
         "",
@@ -459,7 +462,7 @@ fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
     let mut failures = Vec::new();
     for path in graphs {
         match plan::validate_file(registry, path) {
-            Ok(summary) => println!("{}: ok ({summary})", path.display()),
+            Ok(summary) => outln!("{}: ok ({summary})", path.display()),
             Err(e) => failures.push(e.to_string()),
         }
     }
@@ -530,9 +533,9 @@ fn inspect(
     };
     let p: Plan = plan::plan(&g, &opts, &caps).map_err(|e| CliError::Input(e.to_string()))?;
     if dot {
-        print!("{}", plan::to_dot(&g, &p));
+        out!("{}", plan::to_dot(&g, &p));
     } else {
-        print!("{}", plan::to_text(&g, &p));
+        out!("{}", plan::to_text(&g, &p));
     }
     Ok(())
 }
@@ -544,9 +547,9 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
             continue;
         }
         shown += 1;
-        println!("{}: {}", k.name(), k.doc());
+        outln!("{}: {}", k.name(), k.doc());
         for p in k.inputs() {
-            println!(
+            outln!(
                 "  in   {:<14} {}{} - {}",
                 p.name,
                 p.ty,
@@ -555,7 +558,7 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
             );
         }
         for p in k.outputs() {
-            println!(
+            outln!(
                 "  out  {:<14} {}{} - {}",
                 p.name,
                 p.ty,
@@ -564,14 +567,14 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
             );
         }
         for p in k.params() {
-            println!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);
+            outln!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);
         }
-        println!();
+        outln!();
     }
     if only.is_none() {
-        println!("Host functions for param expressions (planning in f64 on the host):");
+        outln!("Host functions for param expressions (planning in f64 on the host):");
         for f in registry.functions().iter() {
-            println!("  {}", f.doc);
+            outln!("  {}", f.doc);
         }
     }
     if shown == 0 {

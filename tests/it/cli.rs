@@ -331,3 +331,68 @@ fn bench_tables_give_the_end_to_end_time_beside_the_launch_sum() {
         &["--nodes and --reps must be positive"],
     );
 }
+/// Runs mesoflow with its stdout a pipe whose reading end is already closed (as `| head`
+/// leaves it once it has read enough): every write to stdout fails with a broken pipe.
+fn mesoflow_into_closed_pipe(args: &[&str]) -> Output {
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+        .args(args)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .stdout(writer)
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .expect("run mesoflow")
+}
+
+#[test]
+fn a_closed_stdout_ends_every_command_quietly_with_its_own_exit_code() {
+    let bad = root()
+        .join("graphs/fixtures/invalid/bad_ref.json")
+        .display()
+        .to_string();
+    let mut cases: Vec<(Vec<String>, i32)> = vec![
+        (vec!["nodes".into()], 0),
+        (vec!["nodes".into(), "scale".into()], 0),
+        (vec!["validate".into(), relax()], 0),
+        // The failure is still reported by its exit code when nobody reads stdout.
+        (vec!["validate".into(), relax(), bad], 2),
+        (vec!["inspect".into(), relax()], 0),
+        (vec!["inspect".into(), relax(), "--dot".into()], 0),
+        (vec!["--help".into()], 0),
+    ];
+    let dir = tmpdir("cli-closed-stdout");
+    if gpu().is_some() {
+        let input = format!("positions={}", positions(&dir, "x.npy", vec![0.5; 12], 4));
+        let written = format!("positions={}", dir.join("out.npy").display());
+        cases.push((
+            vec!["run".into(), relax(), "--input".into(), input.clone()],
+            0,
+        ));
+        cases.push((
+            vec![
+                "run".into(),
+                relax(),
+                "--input".into(),
+                input,
+                "--output".into(),
+                written,
+                "--profile".into(),
+            ],
+            0,
+        ));
+        cases.push((vec!["info".into()], 0));
+    }
+    for (args, code) in &cases {
+        let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+        let o = mesoflow_into_closed_pipe(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
+        assert_eq!(o.status.code(), Some(*code), "{args:?}:\n{err}");
+        assert!(!err.contains("Broken pipe"), "{args:?}:\n{err}");
+    }
+    if gpu().is_some() {
+        // Outputs are written whether or not anyone reads the report.
+        assert!(dir.join("out.npy").exists());
+    }
+}
