@@ -396,3 +396,122 @@ fn a_closed_stdout_ends_every_command_quietly_with_its_own_exit_code() {
         assert!(dir.join("out.npy").exists());
     }
 }
+
+/// Number of problems a report announces on its first line (`N problems:`).
+fn problem_count(report: &str) -> usize {
+    let line = report
+        .lines()
+        .find(|l| l.contains(" problem"))
+        .unwrap_or_else(|| panic!("no problem count in:\n{report}"));
+    line.split_whitespace()
+        .find_map(|w| w.parse().ok())
+        .unwrap_or_else(|| panic!("no problem count in `{line}`"))
+}
+
+#[test]
+fn one_bad_set_is_reported_as_its_root_cause_with_the_consequences_once() {
+    let fcm = root().join("graphs/fcm.json").display().to_string();
+    let bd = root().join("graphs/bd_fcm.json").display().to_string();
+    for (graph, set, root_cause, dependant) in [
+        (
+            &fcm,
+            "kernel=gauss",
+            "bad value \"gauss\" for param `kernel`",
+            "grid",
+        ),
+        (
+            &fcm,
+            "box=64",
+            "bad value 64 for param `box`: expected an array of numbers",
+            "grid",
+        ),
+        (
+            &fcm,
+            "tolerance=abc",
+            "bad value \"abc\" for param `tolerance`",
+            "beta",
+        ),
+        (
+            &fcm,
+            "radius=-1",
+            "bad value -1 for param `radius`",
+            "width",
+        ),
+        // Through a subgraph: the parent's param feeds fcm.json's.
+        (
+            &bd,
+            "kernel=gauss",
+            "bad value \"gauss\" for param `kernel`",
+            "mobility",
+        ),
+    ] {
+        let o = mesoflow(&["inspect", graph, "--set", set]);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{set}:\n{t}");
+        assert_eq!(problem_count(&t), 1, "--set {set}:\n{t}");
+        let first = t.lines().nth(1).unwrap_or_default();
+        assert!(
+            first.contains(root_cause),
+            "--set {set}: root cause first:\n{t}"
+        );
+        assert!(
+            first.contains(dependant),
+            "--set {set}: its dependants named:\n{t}"
+        );
+        assert!(!t.contains("unknown param"), "--set {set}:\n{t}");
+    }
+    // The nearest name or choice is suggested.
+    fails_with(
+        &["inspect", &fcm, "--set", "viscosty=2"],
+        &["unknown param `viscosty`", "did you mean `viscosity`?"],
+    );
+    fails_with(
+        &["inspect", &fcm, "--set", "kernel=gauss"],
+        &["did you mean \"gaussian\"?"],
+    );
+    // Independent problems are still each reported.
+    let o = mesoflow(&[
+        "inspect",
+        &fcm,
+        "--set",
+        "kernel=gauss",
+        "--set",
+        "viscosity=-1",
+    ]);
+    assert_eq!(problem_count(&text(&o)), 2, "{}", text(&o));
+}
+
+#[test]
+fn nodes_prints_ranges_as_people_write_them() {
+    let o = mesoflow(&["nodes"]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    for unreadable in ["e-308", "[-inf, inf]", ", inf]", "17976931348623157"] {
+        assert!(!t.contains(unreadable), "`{unreadable}` in:\n{t}");
+    }
+    let line = |kind: &str, param: &str| -> String {
+        let o = mesoflow(&["nodes", kind]);
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .find(|l| l.starts_with(&format!("  prm  {param} ")))
+            .unwrap_or_else(|| panic!("{kind} has no param {param}"))
+            .to_string()
+    };
+    assert!(line("all_pairs", "radius").contains("number > 0"));
+    assert!(line("all_pairs", "split").contains("number >= 0"));
+    assert!(line("affine", "scale").contains("number, default 1"));
+    // A bad node param value is told against the same readable range.
+    let dir = tmpdir("cli-ranges");
+    let g = crate::util::write_graph(
+        &dir,
+        "g.json",
+        r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}},
+            "nodes": [{"id": "p", "kind": "all_pairs", "params": {"radius": -1}, "inputs": {"positions": "inputs.x", "values": "inputs.x"}}],
+            "outputs": {"u": "p.out"}}"#,
+    );
+    let o = mesoflow(&["validate", &g.display().to_string()]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(2), "{t}");
+    assert!(t.contains("-1 is not > 0"), "{t}");
+    assert!(!t.contains("e-308") && !t.contains("0.0000000"), "{t}");
+}
