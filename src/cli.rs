@@ -42,7 +42,8 @@ pub enum Command {
         #[arg(long = "input", value_name = "NAME=FILE")]
         inputs: Vec<String>,
         /// Request an output, and write it to an NPY file when =FILE is given: NAME[=FILE.npy].
-        /// Without any --output, every output is computed and summarised.
+        /// Without any --output, every output the inputs and params allow is computed and
+        /// summarised (the others are named, with why).
         #[arg(long = "output", value_name = "NAME[=FILE]")]
         outputs: Vec<String>,
         /// Number of time steps.
@@ -285,52 +286,15 @@ fn run(
         )));
     }
     // Requested outputs and where they go; checked before any GPU work.
-    let mut requested = Vec::new();
-    let mut files: BTreeMap<String, PathBuf> = BTreeMap::new();
-    for o in output_args {
-        let (name, file) = match o.split_once('=') {
-            Some((n, f)) if !n.is_empty() && !f.is_empty() => (n, Some(PathBuf::from(f))),
-            Some(_) => {
-                return Err(CliError::Input(format!(
-                    "--output `{o}`: expected NAME or NAME=FILE.npy"
-                )));
-            }
-            None => (o.as_str(), None),
-        };
-        if g.output(name).is_none() {
-            let known: Vec<&str> = g.outputs.iter().map(|o| o.name.as_str()).collect();
-            return Err(CliError::Input(format!(
-                "--output {name}: the graph has no output `{name}` (outputs: {})",
-                known.join(", ")
-            )));
-        }
-        if let Some(f) = file {
-            let dir = f
-                .parent()
-                .filter(|p| !p.as_os_str().is_empty())
-                .unwrap_or(Path::new("."));
-            if !dir.is_dir() {
-                return Err(CliError::Input(format!(
-                    "--output {name}: folder {} does not exist",
-                    dir.display()
-                )));
-            }
-            files.insert(name.to_string(), f);
-        }
-        requested.push(name.to_string());
-    }
+    let requested = output_requests(&g, output_args)?;
     let gpu = GpuContext::new()?;
     note!("mesoflow: {}", gpu.caps.summary());
     let opts = PlanOptions {
-        outputs: if requested.is_empty() {
-            None
-        } else {
-            Some(requested)
-        },
+        outputs: Some(requested.iter().map(|(name, _)| name.clone()).collect()),
         inputs: data.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse,
     };
-    let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
+    let p = plan_requested(&g, &opts, requested.is_empty(), &gpu.caps)?;
     let mut cache = KernelCache::default();
     let mut program = Program::compile(&gpu, &g, &p, &mut cache)?;
     program.upload(&data)?;
@@ -356,19 +320,131 @@ fn run(
             note!("mesoflow: loop `{node}`: {mean:.1} iterations per step (min {lo}, max {hi})");
         }
     }
+    // Every file first, all or none; then the report.
+    let files: BTreeMap<&str, &Path> = requested
+        .iter()
+        .filter_map(|(name, file)| Some((name.as_str(), file.as_deref()?)))
+        .collect();
+    let to_write: Vec<(&str, &Path, &HostArray)> = results
+        .iter()
+        .filter_map(|(name, arr)| Some((name.as_str(), *files.get(name.as_str())?, arr)))
+        .collect();
+    let pairs: Vec<(&Path, &HostArray)> = to_write.iter().map(|&(_, f, a)| (f, a)).collect();
+    if let Err(e) = mesoflow::npy::write_all(&pairs) {
+        let name = to_write[e.index].0;
+        let written: Vec<&str> = to_write[..e.in_place].iter().map(|w| w.0).collect();
+        return Err(CliError::Runtime(format!(
+            "--output {name}: {}; {}",
+            e.source,
+            if written.is_empty() {
+                "no output was written".to_string()
+            } else {
+                format!("only {} were written", written.join(", "))
+            }
+        )));
+    }
     if profile != Profile::Off {
         print_profile(&stats);
     }
     for (name, arr) in &results {
-        match files.get(name) {
-            Some(f) => {
-                mesoflow::npy::write(f, arr).map_err(|e| CliError::Runtime(e.to_string()))?;
-                outln!("{name}: {} -> {}", arr.ty, f.display());
-            }
+        match files.get(name.as_str()) {
+            Some(f) => outln!("{name}: {} -> {}", arr.ty, f.display()),
             None => outln!("{name}: {}", summary(arr)),
         }
     }
     Ok(())
+}
+
+/// The `--output NAME[=FILE.npy]` arguments: each output at most once, each file for one
+/// output, in a folder that exists (checked before any GPU work).
+fn output_requests(
+    g: &Graph,
+    output_args: &[String],
+) -> Result<Vec<(String, Option<PathBuf>)>, CliError> {
+    let mut requested: Vec<(String, Option<PathBuf>)> = Vec::new();
+    // Each file as its folder's canonical path and its name, to tell `a.npy` and
+    // `./a.npy` for one file.
+    let mut targets: Vec<(PathBuf, &str)> = Vec::new();
+    for o in output_args {
+        let (name, file) = match o.split_once('=') {
+            Some((n, f)) if !n.is_empty() && !f.is_empty() => (n, Some(PathBuf::from(f))),
+            Some(_) => {
+                return Err(CliError::Input(format!(
+                    "--output `{o}`: expected NAME or NAME=FILE.npy"
+                )));
+            }
+            None => (o.as_str(), None),
+        };
+        if g.output(name).is_none() {
+            let known: Vec<&str> = g.outputs.iter().map(|o| o.name.as_str()).collect();
+            return Err(CliError::Input(format!(
+                "--output {name}: the graph has no output `{name}` (outputs: {})",
+                known.join(", ")
+            )));
+        }
+        if requested.iter().any(|(n, _)| n == name) {
+            return Err(CliError::Input(format!("--output {name} is given twice")));
+        }
+        if let Some(f) = &file {
+            let dir = f
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new("."));
+            let Ok(canonical_dir) = dir
+                .canonicalize()
+                .map(|d| d.join(f.file_name().unwrap_or_default()))
+            else {
+                return Err(CliError::Input(format!(
+                    "--output {name}: folder {} does not exist",
+                    dir.display()
+                )));
+            };
+            if !dir.is_dir() {
+                return Err(CliError::Input(format!(
+                    "--output {name}: {} is not a folder",
+                    dir.display()
+                )));
+            }
+            if f.is_dir() {
+                return Err(CliError::Input(format!(
+                    "--output {name}: {} is a folder",
+                    f.display()
+                )));
+            }
+            if let Some((_, other)) = targets.iter().find(|(t, _)| *t == canonical_dir) {
+                return Err(CliError::Input(format!(
+                    "--output {name}: {} is also the file of --output {other}",
+                    f.display()
+                )));
+            }
+            targets.push((canonical_dir, name));
+        }
+        requested.push((name.to_string(), file));
+    }
+    Ok(requested)
+}
+
+/// The plan for the outputs asked for; with none asked for (`every`), for every output the
+/// inputs and params allow, the others named on stderr with why (asked for by name, an
+/// output that does not plan is an error).
+fn plan_requested(
+    g: &Graph,
+    opts: &PlanOptions,
+    every: bool,
+    caps: &DeviceCaps,
+) -> Result<Plan, CliError> {
+    if !every {
+        return plan::plan(g, opts, caps).map_err(|e| CliError::Input(e.to_string()));
+    }
+    let available =
+        plan::plan_available(g, opts, caps).map_err(|e| CliError::Input(e.to_string()))?;
+    for (name, problems) in &available.left_out {
+        note!(
+            "mesoflow: output `{name}` is left out (these inputs and params do not give it; --output {name} asks for it): {}",
+            problems.to_string().trim_end()
+        );
+    }
+    Ok(available.plan)
 }
 
 /// Shape and statistics of an array, with its first values.
@@ -523,15 +599,11 @@ fn inspect(
         Err(_) => DeviceCaps::baseline(),
     };
     let opts = PlanOptions {
-        outputs: if outputs.is_empty() {
-            None
-        } else {
-            Some(outputs.to_vec())
-        },
+        outputs: Some(outputs.to_vec()),
         inputs,
         fuse,
     };
-    let p: Plan = plan::plan(&g, &opts, &caps).map_err(|e| CliError::Input(e.to_string()))?;
+    let p = plan_requested(&g, &opts, outputs.is_empty(), &caps)?;
     if dot {
         out!("{}", plan::to_dot(&g, &p));
     } else {

@@ -12,6 +12,9 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+/// The exit code of an interrupted command (128 + SIGINT, as shells report it).
+const INTERRUPTED: i32 = 130;
+
 fn main() -> ExitCode {
     let args = match cli::Cli::try_parse() {
         Ok(args) => args,
@@ -20,6 +23,15 @@ fn main() -> ExitCode {
             return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
         }
     };
+    // An interrupt (SIGINT, SIGTERM, SIGHUP) removes the outputs being written, whose
+    // temporaries would otherwise be left behind, and exits as interrupted.
+    if let Err(e) = ctrlc::set_handler(|| {
+        mesoflow::npy::abandon_writes();
+        note!("mesoflow: interrupted");
+        std::process::exit(INTERRUPTED);
+    }) {
+        note!("mesoflow: no interrupt handler ({e}): an interrupt may leave temporary files");
+    }
     let result = cli::execute(args.command);
     // A report that could not be written is a failure of its own (a closed pipe is not:
     // its reader has all it wanted).

@@ -223,6 +223,12 @@ impl<'r> Loader<'r> {
             ));
         }
         self.nodes(path, scope, &file.nodes, &scope_values);
+        if is_root && file.outputs.is_empty() {
+            self.problems.push(Problem::file(
+                path,
+                "the graph declares no outputs, so running it would compute nothing (name what it gives under \"outputs\")",
+            ));
+        }
         for (name, decl) in &file.outputs {
             let r = PendingRef {
                 scope: scope.into(),

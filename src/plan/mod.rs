@@ -259,6 +259,56 @@ pub fn plan(graph: &Graph, opts: &PlanOptions, caps: &DeviceCaps) -> Result<Plan
     Ok(plan)
 }
 
+/// What [`plan_available`] planned, and the outputs it left out with their problems.
+pub struct Available {
+    pub plan: Plan,
+    /// Outputs that do not plan for these inputs and params, in declaration order.
+    pub left_out: Vec<(String, Problems)>,
+}
+
+/// Plans every output of the graph that plans for these inputs and params (an output may
+/// need an optional input not given, or other params than these): all of them when they
+/// plan together, else those that plan each on their own, the others left out with their
+/// problems. An error (the problems of planning them all) when none plans.
+/// `opts.outputs` is ignored.
+pub fn plan_available(
+    graph: &Graph,
+    opts: &PlanOptions,
+    caps: &DeviceCaps,
+) -> Result<Available, Problems> {
+    let with = |outputs: Option<Vec<String>>| {
+        let opts = PlanOptions {
+            outputs,
+            ..opts.clone()
+        };
+        plan(graph, &opts, caps)
+    };
+    let all_problems = match with(None) {
+        Ok(plan) => {
+            return Ok(Available {
+                plan,
+                left_out: Vec::new(),
+            });
+        }
+        Err(e) => e,
+    };
+    let mut planned = Vec::new();
+    let mut left_out = Vec::new();
+    for o in &graph.outputs {
+        match with(Some(vec![o.name.clone()])) {
+            Ok(_) => planned.push(o.name.clone()),
+            Err(e) => left_out.push((o.name.clone(), e)),
+        }
+    }
+    if planned.is_empty() {
+        return Err(all_problems);
+    }
+    Ok(Available {
+        plan: with(Some(planned))?,
+        left_out,
+    })
+}
+
 impl Launch {
     /// Values the launch reads.
     pub fn reads(&self) -> Vec<ValueId> {

@@ -21,7 +21,15 @@ pub(super) fn resolve(g: &Graph, opts: &PlanOptions) -> Result<Request, Problems
         None => (0..g.outputs.len()).collect(),
         Some(names) => names
             .iter()
-            .filter_map(|n| {
+            .enumerate()
+            .filter_map(|(i, n)| {
+                if names[..i].contains(n) {
+                    problems.push(Problem::file(
+                        &g.file,
+                        format!("output `{n}` is asked for twice"),
+                    ));
+                    return None;
+                }
                 let found = g.output(n);
                 if found.is_none() {
                     let known: Vec<&str> = g.outputs.iter().map(|o| o.name.as_str()).collect();

@@ -515,3 +515,232 @@ fn nodes_prints_ranges_as_people_write_them() {
     assert!(t.contains("-1 is not > 0"), "{t}");
     assert!(!t.contains("e-308") && !t.contains("0.0000000"), "{t}");
 }
+
+/// The files in a folder whose names show a temporary output (`.NAME.PID.tmp`).
+fn temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().to_string())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect()
+}
+
+#[test]
+fn outputs_are_named_once_and_go_to_distinct_files() {
+    let dir = tmpdir("cli-output-names");
+    let input = format!("positions={}", positions(&dir, "x.npy", vec![0.5; 12], 4));
+    let a = dir.join("a.npy").display().to_string();
+    fails_with(
+        &[
+            "run",
+            &relax(),
+            "--input",
+            &input,
+            "--output",
+            &format!("positions={a}"),
+            "--output",
+            "positions",
+        ],
+        &["--output positions is given twice"],
+    );
+    fails_with(
+        &[
+            "run",
+            &relax(),
+            "--input",
+            &input,
+            "--output",
+            &format!("positions={a}"),
+            "--output",
+            &format!("force={}", dir.join(".").join("a.npy").display()),
+        ],
+        &[
+            "--output force",
+            "a.npy",
+            "also the file of --output positions",
+        ],
+    );
+    fails_with(
+        &[
+            "inspect",
+            &relax(),
+            "--output",
+            "force",
+            "--output",
+            "force",
+        ],
+        &["output `force` is asked for twice"],
+    );
+    assert!(!dir.join("a.npy").exists());
+}
+
+#[test]
+fn a_graph_without_outputs_is_an_error() {
+    let dir = tmpdir("cli-no-outputs");
+    let g = crate::util::write_graph(
+        &dir,
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": [{"id": "c", "kind": "constant", "params": {"value": 1}}]}"#,
+    )
+    .display()
+    .to_string();
+    for cmd in ["validate", "inspect", "run"] {
+        fails_with(&[cmd, &g], &["g.json", "declares no outputs"]);
+    }
+}
+
+#[test]
+fn when_one_output_cannot_be_written_none_is() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-all-or-nothing");
+    let input = format!("positions={}", positions(&dir, "x.npy", vec![0.5; 12], 4));
+    let first = dir.join("first.npy");
+    // A file name that is valid but leaves no room for the temporary's longer name.
+    let long = dir.join(format!("{}.npy", "f".repeat(246)));
+    let o = mesoflow(&[
+        "run",
+        &relax(),
+        "--input",
+        &input,
+        "--output",
+        &format!("positions={}", first.display()),
+        "--output",
+        &format!("force={}", long.display()),
+    ]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("--output force") && t.contains("no output was written"),
+        "{t}"
+    );
+    assert!(
+        !first.exists(),
+        "an output was written although another failed:\n{t}"
+    );
+    assert!(!long.exists());
+    assert!(temporaries(&dir).is_empty(), "{:?}", temporaries(&dir));
+}
+
+#[test]
+fn an_interrupted_run_leaves_no_temporary_and_no_partial_set_of_outputs() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-interrupt");
+    // Four outputs of 16 MB each: writing them (each synced to disk) takes long enough
+    // for the interrupt to arrive while a temporary exists.
+    let g = crate::util::write_graph(
+        &dir,
+        "big.json",
+        r#"{"mesoflow": 1,
+            "nodes": [{"id": "c", "kind": "constant", "params": {"value": 1, "rows": 4000000}},
+                      {"id": "d", "kind": "scale", "params": {"factor": 2}, "inputs": {"x": "c.out"}}],
+            "outputs": {"a": "c.out", "b": "d.out", "c": "c.out", "d": "d.out"}}"#,
+    )
+    .display()
+    .to_string();
+    let outs: Vec<std::path::PathBuf> = ["a", "b", "c", "d"]
+        .iter()
+        .map(|n| dir.join(format!("{n}.npy")))
+        .collect();
+    let mut caught = 0;
+    for _attempt in 0..5 {
+        for o in &outs {
+            let _ = std::fs::remove_file(o);
+        }
+        let mut args = vec!["run".to_string(), g.clone()];
+        for (n, o) in ["a", "b", "c", "d"].iter().zip(&outs) {
+            args.push("--output".into());
+            args.push(format!("{n}={}", o.display()));
+        }
+        let mut child = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+            .args(&args)
+            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Interrupt as soon as a temporary output appears.
+        let seen = loop {
+            if !temporaries(&dir).is_empty() {
+                break true;
+            }
+            if child.try_wait().unwrap().is_some() {
+                break false;
+            }
+        };
+        if seen {
+            let _ = Command::new("kill")
+                .args(["-INT", &child.id().to_string()])
+                .status();
+        }
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(
+            temporaries(&dir).is_empty(),
+            "left behind: {:?}",
+            temporaries(&dir)
+        );
+        let written = outs.iter().filter(|o| o.exists()).count();
+        assert!(
+            written == 0 || written == outs.len(),
+            "{written} of 4 outputs written:\n{err}"
+        );
+        if seen {
+            caught += 1;
+            if written == 0 {
+                assert_ne!(o.status.code(), Some(0), "interrupted but exit 0:\n{err}");
+            }
+        }
+    }
+    assert!(caught > 0, "no attempt was interrupted while writing");
+}
+
+#[test]
+fn run_without_output_computes_every_output_the_inputs_and_params_allow() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-no-output-arg");
+    let x = positions(&dir, "x.npy", vec![0.5, 1.0, 1.5, -2.0, 3.0, 4.0], 2);
+    let fcm = root().join("graphs/fcm.json").display().to_string();
+    let o = mesoflow(&[
+        "run",
+        &fcm,
+        "--input",
+        &format!("positions={x}"),
+        "--input",
+        &format!("forces={x}"),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    let out = String::from_utf8_lossy(&o.stdout);
+    for name in ["velocities:", "noise:", "fluctuating_velocities:"] {
+        assert!(out.contains(name), "{name} not summarised:\n{t}");
+    }
+    // The one output these inputs and params cannot give is named, with the reason.
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!out.contains("angular_velocities:"), "{t}");
+    assert!(
+        err.contains("output `angular_velocities` is left out") && err.contains("too coarse"),
+        "{t}"
+    );
+    // Asked for by name, it is an error, for the same reason.
+    fails_with(
+        &[
+            "run",
+            &fcm,
+            "--input",
+            &format!("positions={x}"),
+            "--input",
+            &format!("forces={x}"),
+            "--output",
+            "angular_velocities",
+        ],
+        &["too coarse"],
+    );
+}
