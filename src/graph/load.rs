@@ -185,6 +185,10 @@ impl<'r> Loader<'r> {
                 return false;
             }
         };
+        if let Err(e) = super::schema::check_unique_keys(&text) {
+            self.problems.push(Problem::file(path, e.to_string()));
+            return false;
+        }
         let file: GraphFile = match serde_json::from_str(&text) {
             Ok(f) => f,
             Err(e) => {
