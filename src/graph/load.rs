@@ -895,6 +895,7 @@ impl<'r> Loader<'r> {
             nodes: nodes.into(),
             outputs,
         };
+        self.check_state_inits(&graph);
         self.check_loops(&graph);
         if !self.problems.is_empty() {
             return Err(self.report());
@@ -931,6 +932,57 @@ impl<'r> Loader<'r> {
             ));
         }
         Problems(problems)
+    }
+
+    /// A state's initial value is computed once, before the first step: from inputs and
+    /// from nodes that read no state (a state has no value yet then). Checked here, for
+    /// every state, rather than only for the states a plan needs, so that `validate`
+    /// (which accepts a file some of whose outputs plan) and `run` agree.
+    fn check_state_inits(&mut self, g: &Graph) {
+        for st in &g.states {
+            let mut seen = BTreeSet::new();
+            let mut stack = vec![st.init];
+            let mut read = None;
+            let mut iterative = None;
+            while let Some(s) = stack.pop() {
+                match s {
+                    Source::State(i) => {
+                        read = Some(i);
+                        break;
+                    }
+                    Source::Node { node, .. } if seen.insert(node) => {
+                        let inst = &g.nodes[node];
+                        if inst.input_ports.iter().any(|p| p.iterate) {
+                            iterative.get_or_insert(node);
+                        }
+                        stack.extend(inst.inputs.iter().copied());
+                    }
+                    _ => {}
+                }
+            }
+            if let (None, Some(n)) = (read, iterative) {
+                self.problems.push(Problem::file(
+                    &g.file,
+                    format!(
+                        "state `{}`, init: `{}` needs the iterative node `{}`, which runs in the steps only (an initial value is computed before them)",
+                        st.name,
+                        g.source_name(st.init),
+                        g.nodes[n].id
+                    ),
+                ));
+            }
+            if let Some(i) = read {
+                self.problems.push(Problem::file(
+                    &g.file,
+                    format!(
+                        "state `{}`, init: `{}` depends on state `{}`; an initial value must come from inputs or from nodes that read no state",
+                        st.name,
+                        g.source_name(st.init),
+                        g.states[i].name
+                    ),
+                ));
+            }
+        }
     }
 
     /// An iterative node's loop body (the nodes that depend on its `iterate` outputs) may
