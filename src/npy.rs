@@ -67,7 +67,10 @@ fn read_numbers(path: &Path) -> Result<(Vec<u64>, Numbers, bool), NpyError> {
         other => {
             return Err(content(
                 path,
-                format!("unsupported dtype {other:?}: use float32 or float64"),
+                format!(
+                    "unsupported dtype {} (a record or array dtype): use float32 or float64",
+                    other.descr()
+                ),
             ));
         }
     };
@@ -167,6 +170,16 @@ fn shape_text(s: &[u64]) -> String {
 fn type_for(shape: &[u64], complex: bool, decl: &InputShape) -> Result<ValueType, String> {
     let to_u32 = |x: u64| u32::try_from(x).map_err(|_| format!("dimension {x} is too large"));
     let total: u64 = shape.iter().product();
+    let complex_input = matches!(
+        decl,
+        InputShape::Fixed(ValueType::ComplexGrid { .. } | ValueType::HalfComplexGrid { .. })
+    );
+    if complex && !complex_input {
+        return Err(format!(
+            "complex values do not fit {}, a real input: give float32 or float64 values",
+            decl.describe()
+        ));
+    }
     match decl {
         InputShape::Particles { cols, .. } => match shape {
             [n, k] if *k == *cols as u64 => Ok(ValueType::Particles {
@@ -513,5 +526,24 @@ mod tests {
             ValueType::Scalar
         );
         assert!(type_for(&[2], false, &InputShape::Fixed(ValueType::Scalar)).is_err());
+        // Complex values fit complex inputs only.
+        assert!(
+            type_for(&[2, 3], true, &p)
+                .unwrap_err()
+                .contains("complex values")
+        );
+        assert!(
+            type_for(&[], true, &InputShape::Fixed(ValueType::Scalar))
+                .unwrap_err()
+                .contains("a real input")
+        );
+        let spectrum = ValueType::ComplexGrid {
+            dims: [2, 1, 1],
+            comps: 1,
+        };
+        assert_eq!(
+            type_for(&[1, 1, 1, 2], true, &InputShape::Fixed(spectrum)).unwrap(),
+            spectrum
+        );
     }
 }

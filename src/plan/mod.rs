@@ -243,7 +243,7 @@ impl Plan {
 /// asked, inputs given), demand (what they need), type inference, forwarding (nodes read
 /// through), scheduling, lowering to launches, and buffer assignment.
 pub fn plan(graph: &Graph, opts: &PlanOptions, caps: &DeviceCaps) -> Result<Plan, Problems> {
-    let request = request::resolve(graph, opts)?;
+    let request = request::resolve(graph, opts, caps)?;
     let demand = demand::of(graph, &request.outputs)?;
     let types = infer::infer(graph, &demand, &request.input_types, &request.outputs, caps)?;
     let (graph, forwarded) = forward::read_through(graph, &demand, &types);
@@ -306,6 +306,19 @@ pub fn plan_available(
     Ok(Available {
         plan: with(Some(planned))?,
         left_out,
+    })
+}
+
+/// Why a value of `bytes` cannot live in one buffer of the device, if it cannot: the
+/// host says so by name (the input, the node's port) before wgpu refuses a binding.
+pub(super) fn too_large_for(caps: &DeviceCaps, bytes: u64) -> Option<String> {
+    let limit = caps.max_binding.min(caps.max_buffer);
+    (bytes > limit).then(|| {
+        format!(
+            "{bytes} bytes ({}): more than this device binds in one buffer ({limit} bytes, {})",
+            human_bytes(bytes),
+            human_bytes(limit)
+        )
     })
 }
 

@@ -744,3 +744,40 @@ fn run_without_output_computes_every_output_the_inputs_and_params_allow() {
         &["too coarse"],
     );
 }
+
+#[test]
+fn npy_inputs_of_an_unsupported_dtype_are_refused_with_the_file_named() {
+    use npyz::WriterBuilder;
+    let dir = tmpdir("cli-dtypes");
+    let complex = dir.join("complex.npy");
+    {
+        let mut f = std::io::BufWriter::new(std::fs::File::create(&complex).unwrap());
+        let mut w = npyz::WriteOptions::<num_complex::Complex<f32>>::new()
+            .default_dtype()
+            .shape(&[4, 3])
+            .writer(&mut f)
+            .begin_nd()
+            .unwrap();
+        w.extend((0..12).map(|i| num_complex::Complex::new(i as f32, 1.0)))
+            .unwrap();
+        w.finish().unwrap();
+    }
+    fails_with(
+        &[
+            "run",
+            &relax(),
+            "--input",
+            &format!("positions={}", complex.display()),
+        ],
+        &["complex.npy", "complex", "particles(nx3)"],
+    );
+    fails_with(
+        &[
+            "inspect",
+            &relax(),
+            "--input",
+            &format!("positions={}", complex.display()),
+        ],
+        &["complex.npy", "complex"],
+    );
+}
