@@ -42,7 +42,8 @@ pub enum Command {
         #[arg(long = "input", value_name = "NAME=FILE")]
         inputs: Vec<String>,
         /// Request an output, and write it to an NPY file when =FILE is given: NAME[=FILE.npy].
-        /// Without any --output, every output is computed and summarised.
+        /// Without any --output, every output the inputs and params allow is computed and
+        /// summarised (the others are named, with why).
         #[arg(long = "output", value_name = "NAME[=FILE]")]
         outputs: Vec<String>,
         /// Number of time steps.
@@ -183,7 +184,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
         Command::Nodes { kind } => nodes(&registry, kind.as_deref()),
         Command::Info => {
             let gpu = GpuContext::new()?;
-            println!("{}", gpu.caps.summary());
+            outln!("{}", gpu.caps.summary());
             Ok(())
         }
         Command::Bench { which } => Ok(crate::bench::run(which)?),
@@ -285,8 +286,85 @@ fn run(
         )));
     }
     // Requested outputs and where they go; checked before any GPU work.
-    let mut requested = Vec::new();
-    let mut files: BTreeMap<String, PathBuf> = BTreeMap::new();
+    let requested = output_requests(&g, output_args)?;
+    let gpu = GpuContext::new()?;
+    note!("mesoflow: {}", gpu.caps.summary());
+    let opts = PlanOptions {
+        outputs: Some(requested.iter().map(|(name, _)| name.clone()).collect()),
+        inputs: data.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
+        fuse,
+    };
+    let p = plan_requested(&g, &opts, requested.is_empty(), &gpu.caps)?;
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(&gpu, &g, &p, &mut cache)?;
+    program.upload(&data)?;
+    let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
+    let stats = program.run(&RunOptions {
+        steps,
+        profile,
+        progress,
+    })?;
+    let results = program.read_outputs()?;
+    note!(
+        "mesoflow: {} step{} in {:.3} s ({} dispatches per step, GPU memory {} planned + {} tables)",
+        stats.steps,
+        if stats.steps == 1 { "" } else { "s" },
+        stats.wall.as_secs_f64(),
+        program.dispatches_per_step(),
+        plan::human_bytes(p.memory.total()),
+        plan::human_bytes(program.table_bytes),
+    );
+    for (node, counts) in program.loop_iterations() {
+        if let (Some(lo), Some(hi)) = (counts.iter().min(), counts.iter().max()) {
+            let mean = counts.iter().map(|&k| k as f64).sum::<f64>() / counts.len() as f64;
+            note!("mesoflow: loop `{node}`: {mean:.1} iterations per step (min {lo}, max {hi})");
+        }
+    }
+    // Every file first, all or none; then the report.
+    let files: BTreeMap<&str, &Path> = requested
+        .iter()
+        .filter_map(|(name, file)| Some((name.as_str(), file.as_deref()?)))
+        .collect();
+    let to_write: Vec<(&str, &Path, &HostArray)> = results
+        .iter()
+        .filter_map(|(name, arr)| Some((name.as_str(), *files.get(name.as_str())?, arr)))
+        .collect();
+    let pairs: Vec<(&Path, &HostArray)> = to_write.iter().map(|&(_, f, a)| (f, a)).collect();
+    if let Err(e) = mesoflow::npy::write_all(&pairs) {
+        let name = to_write[e.index].0;
+        let written: Vec<&str> = to_write[..e.in_place].iter().map(|w| w.0).collect();
+        return Err(CliError::Runtime(format!(
+            "--output {name}: {}; {}",
+            e.source,
+            if written.is_empty() {
+                "no output was written".to_string()
+            } else {
+                format!("only {} were written", written.join(", "))
+            }
+        )));
+    }
+    if profile != Profile::Off {
+        print_profile(&stats);
+    }
+    for (name, arr) in &results {
+        match files.get(name.as_str()) {
+            Some(f) => outln!("{name}: {} -> {}", arr.ty, f.display()),
+            None => outln!("{name}: {}", summary(arr)),
+        }
+    }
+    Ok(())
+}
+
+/// The `--output NAME[=FILE.npy]` arguments: each output at most once, each file for one
+/// output, in a folder that exists (checked before any GPU work).
+fn output_requests(
+    g: &Graph,
+    output_args: &[String],
+) -> Result<Vec<(String, Option<PathBuf>)>, CliError> {
+    let mut requested: Vec<(String, Option<PathBuf>)> = Vec::new();
+    // Each file as its folder's canonical path and its name, to tell `a.npy` and
+    // `./a.npy` for one file.
+    let mut targets: Vec<(PathBuf, &str)> = Vec::new();
     for o in output_args {
         let (name, file) = match o.split_once('=') {
             Some((n, f)) if !n.is_empty() && !f.is_empty() => (n, Some(PathBuf::from(f))),
@@ -304,73 +382,69 @@ fn run(
                 known.join(", ")
             )));
         }
-        if let Some(f) = file {
+        if requested.iter().any(|(n, _)| n == name) {
+            return Err(CliError::Input(format!("--output {name} is given twice")));
+        }
+        if let Some(f) = &file {
             let dir = f
                 .parent()
                 .filter(|p| !p.as_os_str().is_empty())
                 .unwrap_or(Path::new("."));
-            if !dir.is_dir() {
+            let Ok(canonical_dir) = dir
+                .canonicalize()
+                .map(|d| d.join(f.file_name().unwrap_or_default()))
+            else {
                 return Err(CliError::Input(format!(
                     "--output {name}: folder {} does not exist",
                     dir.display()
                 )));
+            };
+            if !dir.is_dir() {
+                return Err(CliError::Input(format!(
+                    "--output {name}: {} is not a folder",
+                    dir.display()
+                )));
             }
-            files.insert(name.to_string(), f);
-        }
-        requested.push(name.to_string());
-    }
-    let gpu = GpuContext::new()?;
-    eprintln!("mesoflow: {}", gpu.caps.summary());
-    let opts = PlanOptions {
-        outputs: if requested.is_empty() {
-            None
-        } else {
-            Some(requested)
-        },
-        inputs: data.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
-        fuse,
-    };
-    let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| CliError::Input(e.to_string()))?;
-    let mut cache = KernelCache::default();
-    let mut program = Program::compile(&gpu, &g, &p, &mut cache)?;
-    program.upload(&data)?;
-    let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
-    let stats = program.run(&RunOptions {
-        steps,
-        profile,
-        progress,
-    })?;
-    let results = program.read_outputs()?;
-    eprintln!(
-        "mesoflow: {} step{} in {:.3} s ({} dispatches per step, GPU memory {} planned + {} tables)",
-        stats.steps,
-        if stats.steps == 1 { "" } else { "s" },
-        stats.wall.as_secs_f64(),
-        program.dispatches_per_step(),
-        plan::human_bytes(p.memory.total()),
-        plan::human_bytes(program.table_bytes),
-    );
-    for (node, counts) in program.loop_iterations() {
-        if let (Some(lo), Some(hi)) = (counts.iter().min(), counts.iter().max()) {
-            let mean = counts.iter().map(|&k| k as f64).sum::<f64>() / counts.len() as f64;
-            eprintln!(
-                "mesoflow: loop `{node}`: {mean:.1} iterations per step (min {lo}, max {hi})"
-            );
-        }
-    }
-    if profile != Profile::Off {
-        print_profile(&stats);
-    }
-    for (name, arr) in &results {
-        match files.get(name) {
-            Some(f) => {
-                mesoflow::npy::write(f, arr).map_err(|e| CliError::Runtime(e.to_string()))?;
-                println!("{name}: {} -> {}", arr.ty, f.display());
+            if f.is_dir() {
+                return Err(CliError::Input(format!(
+                    "--output {name}: {} is a folder",
+                    f.display()
+                )));
             }
-            None => println!("{name}: {}", summary(arr)),
+            if let Some((_, other)) = targets.iter().find(|(t, _)| *t == canonical_dir) {
+                return Err(CliError::Input(format!(
+                    "--output {name}: {} is also the file of --output {other}",
+                    f.display()
+                )));
+            }
+            targets.push((canonical_dir, name));
         }
+        requested.push((name.to_string(), file));
     }
-    Ok(())
+    Ok(requested)
+}
+
+/// The plan for the outputs asked for; with none asked for (`every`), for every output the
+/// inputs and params allow, the others named on stderr with why (asked for by name, an
+/// output that does not plan is an error).
+fn plan_requested(
+    g: &Graph,
+    opts: &PlanOptions,
+    every: bool,
+    caps: &DeviceCaps,
+) -> Result<Plan, CliError> {
+    if !every {
+        return plan::plan(g, opts, caps).map_err(|e| CliError::Input(e.to_string()));
+    }
+    let available =
+        plan::plan_available(g, opts, caps).map_err(|e| CliError::Input(e.to_string()))?;
+    for (name, problems) in &available.left_out {
+        note!(
+            "mesoflow: output `{name}` is left out (these inputs and params do not give it; --output {name} asks for it): {}",
+            problems.to_string().trim_end()
+        );
+    }
+    Ok(available.plan)
 }
 
 /// Shape and statistics of an array, with its first values.
@@ -400,7 +474,7 @@ fn summary(a: &HostArray) -> String {
 
 fn print_profile(stats: &RunStats) {
     let total: f64 = stats.profile.iter().map(|r| r.total.as_secs_f64()).sum();
-    println!(
+    outln!(
         "profile: GPU time per launch over {} step{} ({})",
         stats.steps,
         if stats.steps == 1 { "" } else { "s" },
@@ -410,15 +484,20 @@ fn print_profile(stats: &RunStats) {
             "wall clock with a wait per launch: no timestamp queries on this device"
         }
     );
-    println!(
+    outln!(
         "  {:<40} {:<28} {:>6} {:>12} {:>12} {:>6}",
-        "launch", "kinds", "calls", "total ms", "mean us", "%"
+        "launch",
+        "kinds",
+        "calls",
+        "total ms",
+        "mean us",
+        "%"
     );
     let mut rows = stats.profile.clone();
     rows.sort_by_key(|r| std::cmp::Reverse(r.total));
     for r in rows {
         let t = r.total.as_secs_f64();
-        println!(
+        outln!(
             "  {:<40} {:<28} {:>6} {:>12.4} {:>12.2} {:>6.1}",
             r.label,
             r.kinds,
@@ -436,7 +515,7 @@ fn print_profile(stats: &RunStats) {
                 continue;
             }
             let d: f64 = samples.iter().map(|d| d.as_secs_f64()).sum();
-            println!(
+            outln!(
                 "    {:<38} {:<28} {:>6} {:>12.4} {:>12.2}",
                 "",
                 kernel,
@@ -446,7 +525,7 @@ fn print_profile(stats: &RunStats) {
             );
         }
     }
-    println!(
+    outln!(
         "  {:<40} {:<28} {:>6} {:>12.4}",
         "total",
         "",
@@ -459,7 +538,7 @@ fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
     let mut failures = Vec::new();
     for path in graphs {
         match plan::validate_file(registry, path) {
-            Ok(summary) => println!("{}: ok ({summary})", path.display()),
+            Ok(summary) => outln!("{}: ok ({summary})", path.display()),
             Err(e) => failures.push(e.to_string()),
         }
     }
@@ -520,19 +599,15 @@ fn inspect(
         Err(_) => DeviceCaps::baseline(),
     };
     let opts = PlanOptions {
-        outputs: if outputs.is_empty() {
-            None
-        } else {
-            Some(outputs.to_vec())
-        },
+        outputs: Some(outputs.to_vec()),
         inputs,
         fuse,
     };
-    let p: Plan = plan::plan(&g, &opts, &caps).map_err(|e| CliError::Input(e.to_string()))?;
+    let p = plan_requested(&g, &opts, outputs.is_empty(), &caps)?;
     if dot {
-        print!("{}", plan::to_dot(&g, &p));
+        out!("{}", plan::to_dot(&g, &p));
     } else {
-        print!("{}", plan::to_text(&g, &p));
+        out!("{}", plan::to_text(&g, &p));
     }
     Ok(())
 }
@@ -544,9 +619,9 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
             continue;
         }
         shown += 1;
-        println!("{}: {}", k.name(), k.doc());
+        outln!("{}: {}", k.name(), k.doc());
         for p in k.inputs() {
-            println!(
+            outln!(
                 "  in   {:<14} {}{} - {}",
                 p.name,
                 p.ty,
@@ -555,7 +630,7 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
             );
         }
         for p in k.outputs() {
-            println!(
+            outln!(
                 "  out  {:<14} {}{} - {}",
                 p.name,
                 p.ty,
@@ -564,14 +639,14 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
             );
         }
         for p in k.params() {
-            println!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);
+            outln!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);
         }
-        println!();
+        outln!();
     }
     if only.is_none() {
-        println!("Host functions for param expressions (planning in f64 on the host):");
+        outln!("Host functions for param expressions (planning in f64 on the host):");
         for f in registry.functions().iter() {
-            println!("  {}", f.doc);
+            outln!("  {}", f.doc);
         }
     }
     if shown == 0 {

@@ -7,7 +7,7 @@
 //! Written here rather than taken from a crate: the well-known evaluators either divide
 //! integers as integers (`2/3 = 0`, a silent trap in physics formulas) or are AGPL.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 
 use thiserror::Error;
@@ -176,6 +176,10 @@ pub enum ExprError {
         /// The expression it appears in (none for a `$name` reference).
         expr: Option<String>,
     },
+    /// A graph param that has a problem of its own (a bad value, a default that does not
+    /// evaluate): what reads it is not evaluated, and its problem is the one to report.
+    #[error("param `{name}` has no value (it has a problem of its own)")]
+    Unresolved { name: String },
     #[error("unknown function `{name}` in expression `{expr}`")]
     UnknownFunction { name: String, expr: String },
     /// A host function refused its arguments.
@@ -191,6 +195,10 @@ pub enum ExprError {
 #[derive(Clone)]
 pub struct Scope<'f> {
     values: BTreeMap<String, ParamValue>,
+    /// Declared names without a value: a param whose own value has a problem. Reading
+    /// one is [`ExprError::Unresolved`], so that one bad value is one problem, not one
+    /// more for everything computed from it.
+    unresolved: BTreeSet<String>,
     functions: &'f HostFunctions,
 }
 
@@ -199,20 +207,50 @@ impl<'f> Scope<'f> {
     pub fn new(functions: &'f HostFunctions) -> Self {
         Scope {
             values: BTreeMap::new(),
+            unresolved: BTreeSet::new(),
             functions,
         }
     }
 
     pub fn insert(&mut self, name: String, value: ParamValue) {
+        self.unresolved.remove(&name);
         self.values.insert(name, value);
+    }
+
+    /// Declares `name` without a value: its own value has a problem (reported by the
+    /// caller), and what reads it gives [`ExprError::Unresolved`].
+    pub fn insert_unresolved(&mut self, name: String) {
+        self.values.remove(&name);
+        self.unresolved.insert(name);
+    }
+
+    /// The error of reading `name` when it has no value: unresolved or unknown.
+    fn missing(&self, name: &str, expr: Option<&str>) -> ExprError {
+        if self.unresolved.contains(name) {
+            ExprError::Unresolved { name: name.into() }
+        } else {
+            ExprError::UnknownName {
+                name: name.into(),
+                known: known_names(self),
+                expr: expr.map(|e| e.trim().into()),
+            }
+        }
     }
 
     pub fn get(&self, name: &str) -> Option<&ParamValue> {
         self.values.get(name)
     }
 
+    /// Every declared name, with a value or not, in order.
     pub fn names(&self) -> impl Iterator<Item = &str> {
-        self.values.keys().map(|s| s.as_str())
+        let mut names: Vec<&str> = self
+            .values
+            .keys()
+            .chain(&self.unresolved)
+            .map(|s| s.as_str())
+            .collect();
+        names.sort_unstable();
+        names.into_iter()
     }
 }
 
@@ -225,11 +263,7 @@ pub fn resolve(v: &serde_json::Value, scope: &Scope) -> Result<ParamValue, ExprE
             return scope
                 .get(name)
                 .cloned()
-                .ok_or_else(|| ExprError::UnknownName {
-                    name: name.into(),
-                    known: known_names(scope),
-                    expr: None,
-                });
+                .ok_or_else(|| scope.missing(name, None));
         }
         if let Some(expr) = s.strip_prefix('=') {
             return evaluate(expr, scope);
@@ -298,9 +332,22 @@ pub fn eval(text: &str, scope: &Scope) -> Result<f64, ExprError> {
 
 /// Evaluates an expression to a number or an array of numbers.
 pub fn evaluate(text: &str, scope: &Scope) -> Result<ParamValue, ExprError> {
+    let toks = lex(text)?;
+    // An unknown name is a problem of the expression itself, to be reported even where
+    // it also reads an unresolved param (whose problem is reported on its own).
+    for (i, t) in toks.iter().enumerate() {
+        if let Tok::Name(name) = t
+            && toks.get(i + 1) != Some(&Tok::Op('('))
+            && name != "pi"
+            && scope.get(name).is_none()
+            && !scope.unresolved.contains(name)
+        {
+            return Err(scope.missing(name, Some(text)));
+        }
+    }
     let mut p = Parser {
         src: text,
-        toks: lex(text)?,
+        toks,
         pos: 0,
         scope,
         depth: 0,
@@ -656,11 +703,7 @@ impl Parser<'_> {
                 if name == "pi" {
                     return Ok(V::Num(std::f64::consts::PI));
                 }
-                Err(ExprError::UnknownName {
-                    name,
-                    known: known_names(self.scope),
-                    expr: Some(self.src.trim().into()),
-                })
+                Err(self.scope.missing(&name, Some(self.src)))
             }
             Tok::Op(c) => Err(ExprError::Syntax {
                 problem: format!("unexpected `{c}`"),
@@ -816,6 +859,26 @@ mod tests {
         assert_eq!(eval("2^3^2", &s).unwrap(), 512.0); // right-associative
         assert_eq!(eval("-2^2", &s).unwrap(), -4.0);
         assert_eq!(eval("1e-3 * 2E+2", &s).unwrap(), 0.2);
+    }
+
+    #[test]
+    fn a_param_without_a_value_is_unresolved_but_unknown_names_come_first() {
+        let mut s = scope();
+        s.insert_unresolved("grid".into());
+        let unresolved = ExprError::Unresolved {
+            name: "grid".into(),
+        };
+        assert_eq!(eval("prod(grid) * dt", &s).unwrap_err(), unresolved);
+        let json = serde_json::json!("$grid");
+        assert_eq!(resolve(&json, &s).unwrap_err(), unresolved);
+        // An unknown name is the expression's own problem, reported even beside one.
+        assert!(matches!(
+            eval("grid[0] * gird", &s).unwrap_err(),
+            ExprError::UnknownName { name, known, .. } if name == "gird" && known.contains("grid")
+        ));
+        // A value given later resolves it.
+        s.insert("grid".into(), ParamValue::Numbers(vec![2.0, 3.0]));
+        assert_eq!(eval("prod(grid)", &s).unwrap(), 6.0);
     }
 
     #[test]

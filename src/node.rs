@@ -164,7 +164,7 @@ impl ParamSpec {
                     return Err(format!("{x} is not an integer"));
                 }
                 if x < min || x > max {
-                    return Err(format!("{x} is outside [{min}, {max}]"));
+                    return Err(format!("{x} {}", out_of_range(*min, *max)));
                 }
                 Ok(())
             }
@@ -176,7 +176,7 @@ impl ParamSpec {
                 }
                 for x in xs {
                     if !x.is_finite() || x < min || x > max {
-                        return Err(format!("element {x} is outside [{min}, {max}]"));
+                        return Err(format!("element {x} {}", out_of_range(*min, *max)));
                     }
                 }
                 Ok(())
@@ -185,7 +185,13 @@ impl ParamSpec {
                 if choices.contains(&s.as_str()) {
                     Ok(())
                 } else {
-                    Err(format!("\"{s}\" is not one of {}", choices.join(", ")))
+                    let hint = nearest(s, choices.iter().copied())
+                        .map(|c| format!(" (did you mean \"{c}\"?)"))
+                        .unwrap_or_default();
+                    Err(format!(
+                        "\"{s}\" is not one of {}{hint}",
+                        choices.join(", ")
+                    ))
                 }
             }
             (ParamKind::Bool, ParamValue::Bool(_)) => Ok(()),
@@ -199,41 +205,73 @@ impl ParamSpec {
 
     /// The spec as `mesoflow nodes` prints it.
     pub fn describe(&self) -> String {
-        let range = match &self.kind {
-            ParamKind::Number { min, max, integer } => {
-                format!(
-                    "{} in [{}, {}]",
-                    if *integer { "integer" } else { "number" },
-                    fmt_bound(*min),
-                    fmt_bound(*max)
-                )
-            }
-            ParamKind::Numbers { len, min, max } => format!(
-                "{} numbers in [{}, {}]",
-                len.map(|n| n.to_string())
-                    .unwrap_or_else(|| "any count of".into()),
-                fmt_bound(*min),
-                fmt_bound(*max)
+        let with_range = |what: String, min: f64, max: f64| match range(min, max) {
+            Some(r) => format!("{what} {r}"),
+            None => what,
+        };
+        let kind = match &self.kind {
+            ParamKind::Number { min, max, integer } => with_range(
+                if *integer { "integer" } else { "number" }.into(),
+                *min,
+                *max,
+            ),
+            ParamKind::Numbers { len, min, max } => with_range(
+                match len {
+                    Some(n) => format!("{n} numbers"),
+                    None => "any count of numbers".into(),
+                },
+                *min,
+                *max,
             ),
             ParamKind::Choice(c) => format!("one of {}", c.join(" | ")),
             ParamKind::Bool => "true | false".into(),
         };
         match &self.default {
-            Some(d) => format!("{range}, default {d}"),
-            None => format!("{range}, required"),
+            Some(ParamValue::Number(x)) => format!("{kind}, default {}", fmt_number(*x)),
+            Some(d) => format!("{kind}, default {d}"),
+            None => format!("{kind}, required"),
         }
     }
 }
 
-/// A range bound as people read it: beyond 1e300 in magnitude (f64::MAX, used as "no
-/// bound") it prints as inf; beyond 1e15 (2^53 - 1, the largest exact seed) or below 1e-6
-/// (f64::MIN_POSITIVE, "positive") in exponent form.
-fn fmt_bound(x: f64) -> String {
-    if x >= 1e300 {
-        "inf".into()
-    } else if x <= -1e300 {
-        "-inf".into()
-    } else if x.abs() >= 1e15 || (x != 0.0 && x.abs() < 1e-6) {
+/// Whether a bound stands for "no bound": f64::MAX and beyond.
+fn unbounded(x: f64) -> bool {
+    x.abs() >= 1e300
+}
+
+/// Whether a lower bound stands for "positive": above 0 by less than any value a
+/// param takes (f64::MIN_POSITIVE).
+fn positive(x: f64) -> bool {
+    x > 0.0 && x < 1e-300
+}
+
+/// A range as people write it: `> 0`, `>= 0`, `<= 1`, `in [1, 10]`; `None` for no bound.
+fn range(min: f64, max: f64) -> Option<String> {
+    match (unbounded(min), unbounded(max)) {
+        (true, true) => None,
+        (false, true) if positive(min) => Some("> 0".into()),
+        (false, true) => Some(format!(">= {}", fmt_number(min))),
+        (true, false) => Some(format!("<= {}", fmt_number(max))),
+        (false, false) if positive(min) => Some(format!("in (0, {}]", fmt_number(max))),
+        (false, false) => Some(format!("in [{}, {}]", fmt_number(min), fmt_number(max))),
+    }
+}
+
+/// What is wrong with a value outside `[min, max]`, said with the range as `range` says it.
+fn out_of_range(min: f64, max: f64) -> String {
+    match (unbounded(min), unbounded(max)) {
+        (false, true) if positive(min) => "is not > 0".into(),
+        (false, true) => format!("is below the minimum {}", fmt_number(min)),
+        (true, false) => format!("is above the maximum {}", fmt_number(max)),
+        (false, false) if positive(min) => format!("is outside (0, {}]", fmt_number(max)),
+        _ => format!("is outside [{}, {}]", fmt_number(min), fmt_number(max)),
+    }
+}
+
+/// A number as people read it: in exponent form beyond 1e15 (2^53 - 1, the largest exact
+/// seed, and f64::MAX, a default meaning "no limit") or below 1e-6.
+fn fmt_number(x: f64) -> String {
+    if x.abs() >= 1e15 || (x != 0.0 && x.abs() < 1e-6) {
         format!("{x:e}")
     } else {
         x.to_string()
@@ -684,12 +722,21 @@ impl Registry {
 
     /// Known names closest to `name`, for "did you mean" hints.
     pub fn suggest(&self, name: &str) -> Option<&'static str> {
-        self.kinds
-            .keys()
-            .copied()
-            .min_by_key(|k| edit_distance(k, name))
-            .filter(|k| edit_distance(k, name) <= 3)
+        nearest(name, self.kinds.keys().copied())
     }
+}
+
+/// The candidate closest to a mistyped `name`, for a "did you mean" in an error: within
+/// 3 edits (and fewer edits than `name` has letters, so that a short name does not
+/// match everything), or one that starts with what was typed (`gauss` for `gaussian`).
+pub fn nearest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+    let prefix_of = |c: &str| name.len() >= 3 && c.starts_with(name);
+    candidates
+        .into_iter()
+        .map(|c| (edit_distance(c, name), c))
+        .filter(|&(d, c)| (d <= 3 && d < name.chars().count()) || prefix_of(c))
+        .min_by_key(|&(d, c)| (!prefix_of(c), d))
+        .map(|(_, c)| c)
 }
 
 /// Levenshtein distance, for suggestions in error messages.
@@ -711,6 +758,30 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ranges_read_as_people_write_them() {
+        let cases = [
+            (f64::MIN_POSITIVE, f64::MAX, "number > 0", "-1 is not > 0"),
+            (0.0, f64::MAX, "number >= 0", "-1 is below the minimum 0"),
+            (f64::MIN, 2.0, "number <= 2", "3 is above the maximum 2"),
+            (1.0, 10.0, "number in [1, 10]", "11 is outside [1, 10]"),
+            (
+                f64::MIN_POSITIVE,
+                0.5,
+                "number in (0, 0.5]",
+                "1 is outside (0, 0.5]",
+            ),
+        ];
+        for (min, max, shown, refused) in cases {
+            let s = ParamSpec::number("x", None, min, max, "");
+            assert_eq!(s.describe(), format!("{shown}, required"));
+            let bad: f64 = refused.split(' ').next().unwrap().parse().unwrap();
+            assert_eq!(s.check(&ParamValue::Number(bad)).unwrap_err(), refused);
+        }
+        let free = ParamSpec::number("x", Some(f64::MAX), f64::MIN, f64::MAX, "");
+        assert_eq!(free.describe(), "number, default 1.7976931348623157e308");
+    }
 
     #[test]
     fn param_checks() {
@@ -801,5 +872,14 @@ mod tests {
     fn suggestions() {
         assert_eq!(edit_distance("kitten", "sitting"), 3);
         assert_eq!(edit_distance("", "abc"), 3);
+        let kernels = ["gaussian", "es", "peskin3", "peskin4", "peskin6"];
+        assert_eq!(nearest("gauss", kernels), Some("gaussian"));
+        assert_eq!(nearest("peskin5", kernels), Some("peskin3"));
+        assert_eq!(nearest("ex", kernels), Some("es"));
+        assert_eq!(nearest("x", ["dt", "n"]), None);
+        assert_eq!(
+            nearest("viscosty", ["viscosity", "radius"]),
+            Some("viscosity")
+        );
     }
 }

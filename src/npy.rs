@@ -2,11 +2,15 @@
 //!
 //! Reading checks everything a run relies on (dtype, shape against the graph input's
 //! declaration, finite values) and says which file and element are wrong. Writing goes to
-//! a temporary file in the same folder, then renames it, so no partial output is left.
+//! temporary files in the same folders, renamed once all are complete, so no partial
+//! output and no partial set of outputs is left; an interrupt removes the temporaries
+//! ([`abandon_writes`]).
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Mutex, MutexGuard};
 
 use npyz::WriterBuilder;
 use thiserror::Error;
@@ -63,7 +67,10 @@ fn read_numbers(path: &Path) -> Result<(Vec<u64>, Numbers, bool), NpyError> {
         other => {
             return Err(content(
                 path,
-                format!("unsupported dtype {other:?}: use float32 or float64"),
+                format!(
+                    "unsupported dtype {} (a record or array dtype): use float32 or float64",
+                    other.descr()
+                ),
             ));
         }
     };
@@ -163,6 +170,16 @@ fn shape_text(s: &[u64]) -> String {
 fn type_for(shape: &[u64], complex: bool, decl: &InputShape) -> Result<ValueType, String> {
     let to_u32 = |x: u64| u32::try_from(x).map_err(|_| format!("dimension {x} is too large"));
     let total: u64 = shape.iter().product();
+    let complex_input = matches!(
+        decl,
+        InputShape::Fixed(ValueType::ComplexGrid { .. } | ValueType::HalfComplexGrid { .. })
+    );
+    if complex && !complex_input {
+        return Err(format!(
+            "complex values do not fit {}, a real input: give float32 or float64 values",
+            decl.describe()
+        ));
+    }
     match decl {
         InputShape::Particles { cols, .. } => match shape {
             [n, k] if *k == *cols as u64 => Ok(ValueType::Particles {
@@ -273,8 +290,43 @@ pub fn read_input(path: &Path, decl: &InputShape) -> Result<HostArray, NpyError>
     }
 }
 
-/// Writes an array (float32 or uint32) atomically: temporary file, then rename.
-pub fn write(path: &Path, a: &HostArray) -> Result<(), NpyError> {
+/// Temporary files that [`write_all`] has created and not yet renamed or removed, for
+/// [`abandon_writes`] to remove. Its lock is also held while a set of outputs is renamed,
+/// so that an interrupt lands before the first rename or after the last.
+static PENDING: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+/// Set by [`abandon_writes`]: no temporary is created after it.
+static ABANDONED: AtomicBool = AtomicBool::new(false);
+
+fn pending() -> MutexGuard<'static, Vec<PathBuf>> {
+    PENDING.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Removes every temporary output being written and keeps new ones from being created:
+/// for a signal handler, before the process exits (an interrupted run leaves no
+/// `.NAME.PID.tmp` behind). Where a set of outputs is being renamed it waits for the
+/// renames, so the set is in place whole or not at all.
+pub fn abandon_writes() {
+    let mut files = pending();
+    ABANDONED.store(true, Ordering::SeqCst);
+    for f in files.drain(..) {
+        let _ = std::fs::remove_file(f);
+    }
+}
+
+/// A failure of [`write_all`]: which output (its index) and why.
+#[derive(Debug, Error)]
+#[error("{source}")]
+pub struct WriteAllError {
+    pub index: usize,
+    pub source: NpyError,
+    /// Outputs already renamed into place when a rename failed (0 otherwise: a failure
+    /// while writing, or a target that cannot be replaced, leaves none).
+    pub in_place: usize,
+}
+
+/// The temporary a file is written to before it is renamed: in the same folder (a
+/// rename does not cross file systems), hidden, named after the process.
+fn temporary(path: &Path) -> PathBuf {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -283,47 +335,110 @@ pub fn write(path: &Path, a: &HostArray) -> Result<(), NpyError> {
         .file_name()
         .map(|n| n.to_string_lossy().to_string())
         .unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    let werr = |source: std::io::Error| NpyError::Write {
-        path: path.into(),
-        source,
+    dir.join(format!(".{name}.{}.tmp", std::process::id()))
+}
+
+/// Writes arrays (float32 or uint32) to NPY files, all or none: each to a temporary file
+/// first (synced to disk), and only when every one is complete are they renamed over
+/// their files, one after another. When one fails to write, every temporary is removed
+/// and no file is touched. A rename can still fail (a file system that fails between
+/// renames); the error then says how many outputs were already in place.
+pub fn write_all(outputs: &[(&Path, &HostArray)]) -> Result<(), WriteAllError> {
+    let fail = |index: usize, path: &Path, source: std::io::Error| WriteAllError {
+        index,
+        source: NpyError::Write {
+            path: path.into(),
+            source,
+        },
+        in_place: 0,
     };
-    let result = (|| -> std::io::Result<()> {
-        let file = File::create(&tmp)?;
-        let mut w = BufWriter::new(file);
-        let shape = a.ty.npy_shape();
-        match &a.data {
-            HostData::F32(v) => {
-                let mut npy = npyz::WriteOptions::<f32>::new()
-                    .default_dtype()
-                    .shape(&shape)
-                    .writer(&mut w)
-                    .begin_nd()?;
-                npy.extend(v.iter().copied())?;
-                npy.finish()?;
+    let mut temps: Vec<PathBuf> = Vec::with_capacity(outputs.len());
+    let written = (|| {
+        for (i, (path, a)) in outputs.iter().enumerate() {
+            if outputs[..i].iter().any(|(p, _)| p == path) {
+                return Err(fail(
+                    i,
+                    path,
+                    std::io::Error::other("the same file is written twice"),
+                ));
             }
-            HostData::U32(v) => {
-                let mut npy = npyz::WriteOptions::<u32>::new()
-                    .default_dtype()
-                    .shape(&shape)
-                    .writer(&mut w)
-                    .begin_nd()?;
-                npy.extend(v.iter().copied())?;
-                npy.finish()?;
+            let tmp = temporary(path);
+            let file = {
+                let mut files = pending();
+                if ABANDONED.load(Ordering::SeqCst) {
+                    return Err(fail(i, path, std::io::Error::other("interrupted")));
+                }
+                let file = File::create(&tmp).map_err(|e| fail(i, path, e))?;
+                files.push(tmp.clone());
+                file
+            };
+            temps.push(tmp);
+            write_npy(file, a).map_err(|e| fail(i, path, e))?;
+        }
+        // A folder in an output's place would refuse its rename: refuse before any.
+        for (i, (path, _)) in outputs.iter().enumerate() {
+            if path.is_dir() {
+                return Err(fail(i, path, std::io::Error::other("it is a folder")));
             }
         }
-        w.flush()?;
-        w.get_ref().sync_all()?;
         Ok(())
     })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(werr(e));
+    let mut files = pending();
+    let result = match written {
+        Err(e) => Err(e),
+        Ok(()) => {
+            let mut result = Ok(());
+            for (i, ((path, _), tmp)) in outputs.iter().zip(&temps).enumerate() {
+                if let Err(e) = std::fs::rename(tmp, path) {
+                    result = Err(WriteAllError {
+                        in_place: i,
+                        ..fail(i, path, e)
+                    });
+                    break;
+                }
+            }
+            result
+        }
+    };
+    // What was not renamed is removed (a renamed temporary no longer exists).
+    for tmp in &temps {
+        let _ = std::fs::remove_file(tmp);
+        files.retain(|f| f != tmp);
     }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        werr(e)
-    })
+    result
+}
+
+/// Writes one array atomically: a temporary file, then a rename (see [`write_all`]).
+pub fn write(path: &Path, a: &HostArray) -> Result<(), NpyError> {
+    write_all(&[(path, a)]).map_err(|e| e.source)
+}
+
+/// The NPY form of an array into a new file, synced to disk.
+fn write_npy(file: File, a: &HostArray) -> std::io::Result<()> {
+    let mut w = BufWriter::new(file);
+    let shape = a.ty.npy_shape();
+    match &a.data {
+        HostData::F32(v) => {
+            let mut npy = npyz::WriteOptions::<f32>::new()
+                .default_dtype()
+                .shape(&shape)
+                .writer(&mut w)
+                .begin_nd()?;
+            npy.extend(v.iter().copied())?;
+            npy.finish()?;
+        }
+        HostData::U32(v) => {
+            let mut npy = npyz::WriteOptions::<u32>::new()
+                .default_dtype()
+                .shape(&shape)
+                .writer(&mut w)
+                .begin_nd()?;
+            npy.extend(v.iter().copied())?;
+            npy.finish()?;
+        }
+    }
+    w.flush()?;
+    w.get_ref().sync_all()
 }
 
 #[cfg(test)]
@@ -365,6 +480,32 @@ mod tests {
     }
 
     #[test]
+    fn a_set_of_outputs_is_written_whole_or_not_at_all() {
+        let d = tmpdir("all-or-none");
+        let a = HostArray::f32(ValueType::Particles { n: 1, k: 3 }, vec![1.0, 2.0, 3.0]);
+        let (first, second) = (d.join("first.npy"), d.join("second.npy"));
+        // The second output's place is taken by a folder: neither is written.
+        std::fs::create_dir_all(&second).unwrap();
+        let e = write_all(&[(&first, &a), (&second, &a)]).unwrap_err();
+        assert_eq!((e.index, e.in_place), (1, 0));
+        assert!(e.to_string().contains("second.npy"), "{e}");
+        assert!(!first.exists());
+        // The same file twice is refused.
+        let e = write_all(&[(&first, &a), (&first, &a)]).unwrap_err();
+        assert_eq!(e.index, 1);
+        assert!(!first.exists());
+        std::fs::remove_dir(&second).unwrap();
+        write_all(&[(&first, &a), (&second, &a)]).unwrap();
+        assert!(first.exists() && second.exists());
+        let names: Vec<_> = std::fs::read_dir(&d)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().to_string())
+            .collect();
+        assert!(names.iter().all(|n| !n.ends_with(".tmp")), "{names:?}");
+    }
+
+    #[test]
     fn shape_rules() {
         let p = InputShape::Particles {
             rows: Dim::Free,
@@ -385,5 +526,24 @@ mod tests {
             ValueType::Scalar
         );
         assert!(type_for(&[2], false, &InputShape::Fixed(ValueType::Scalar)).is_err());
+        // Complex values fit complex inputs only.
+        assert!(
+            type_for(&[2, 3], true, &p)
+                .unwrap_err()
+                .contains("complex values")
+        );
+        assert!(
+            type_for(&[], true, &InputShape::Fixed(ValueType::Scalar))
+                .unwrap_err()
+                .contains("a real input")
+        );
+        let spectrum = ValueType::ComplexGrid {
+            dims: [2, 1, 1],
+            comps: 1,
+        };
+        assert_eq!(
+            type_for(&[1, 1, 1, 2], true, &InputShape::Fixed(spectrum)).unwrap(),
+            spectrum
+        );
     }
 }

@@ -272,7 +272,7 @@ pub(super) fn timed(
     let run = time_loaded(gpu, g, &inputs, Some(vec![output.into()]), reps, true)?;
     if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
         for t in &run.timings {
-            print!("{}", t.breakdown());
+            out!("{}", t.breakdown());
         }
     }
     Ok(run)
@@ -296,8 +296,8 @@ pub fn run(bench: &FcmBench) -> Result<(), BenchError> {
     }
     let gpu = GpuContext::new()?;
     let registry = mesoflow::nodes::registry();
-    println!("adapter: {}", gpu.caps.summary());
-    println!(
+    outln!("adapter: {}", gpu.caps.summary());
+    outln!(
         "graph {}; a = 1, eta = 1; time: median of one evaluation over {} runs, e2e: end to end ({}), \
          ns/part and the ratio to UAMMD from it; launches: sum of its launches' medians; errors \
          measured in a box of side {} at {} random positions (self) and 4 pairs at 2a and 4a (pair, \
@@ -308,7 +308,7 @@ pub fn run(bench: &FcmBench) -> Result<(), BenchError> {
         bench.error_box,
         bench.error_samples
     );
-    println!(
+    outln!(
         "{:<8} {:>6} {:>6} {:>8} {:>5} {:>4} {:>9} {:>11} {:>8} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>9} {:>7}",
         "kernel",
         "tol",
@@ -392,7 +392,7 @@ pub fn run(bench: &FcmBench) -> Result<(), BenchError> {
                     Some((e2e, launches)) => (format!("{e2e:.4}"), format!("{launches:.4}")),
                     None => ("-".into(), "-".into()),
                 };
-                println!(
+                outln!(
                     "{:<8} {:>6.0e} {:>6} {:>8} {:>5} {:>4} {:>9.4} {:>11.4} {:>8.2} {:>9} {:>11} {:>9.2e} {:>9.2e} {:>9} {:>8.0} {:>9} {:>7}",
                     row.kernel,
                     row.tolerance,
@@ -423,7 +423,7 @@ pub fn run(bench: &FcmBench) -> Result<(), BenchError> {
             path: path.clone(),
             message,
         })?;
-        println!("plot: {}", path.display());
+        outln!("plot: {}", path.display());
     }
     Ok(())
 }

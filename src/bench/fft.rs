@@ -108,8 +108,8 @@ pub fn run(
         }
     }
     let gpu = GpuContext::new()?;
-    println!("adapter: {}", gpu.caps.summary());
-    println!(
+    outln!("adapter: {}", gpu.caps.summary());
+    outln!(
         "rfft + irfft over x, y, z of {comps} components (f32), median of {reps} runs{}; e2e: the \
          pair end to end ({}); launches: sum of the per-launch medians (rfft, irfft); GB/s from e2e",
         if filter {
@@ -119,7 +119,7 @@ pub fn run(
         },
         end_to_end_clock(&gpu)
     );
-    println!(
+    outln!(
         "{:>6} {:>10} {:>12} {:>10} {:>10} {:>10} {:>14} {:>12}",
         "size",
         "e2e ms",
@@ -165,7 +165,7 @@ pub fn run(
                 rel_l2(y.data.to_f64().into_iter(), x.iter().map(|&v| v as f64))
             )
         };
-        println!(
+        outln!(
             "{n:>6} {e2e:>10.4} {:>12.4} {:>10.4} {:>10.4} {:>10.1} {error:>14} {round_trip:>12}",
             ms(timed.launch_sum()),
             launch_ms("f"),
@@ -173,10 +173,10 @@ pub fn run(
             bytes_moved(n, comps) / (e2e * 1e-3) / 1e9,
         );
         for t in &timed.timings {
-            print!("{}", t.breakdown());
+            out!("{}", t.breakdown());
         }
     }
-    println!(
+    outln!(
         "GB/s: bytes a pass-per-axis scheme moves (each pass reads and writes the grid once) over the time"
     );
     Ok(())

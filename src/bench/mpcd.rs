@@ -31,8 +31,8 @@ pub fn run(bench: &MpcdBench) -> Result<(), BenchError> {
     }
     let gpu = GpuContext::new()?;
     let registry = mesoflow::nodes::registry();
-    println!("adapter: {}", gpu.caps.summary());
-    println!(
+    outln!("adapter: {}", gpu.caps.summary());
+    outln!(
         "graph {}; 3D SRD, periodic cubic box, cell 1, {} particles per cell, angle 130, dt 0.1; \
          time of one step over {} steps: e2e, the step end to end ({}), median and mean; \
          launches: sum of its launches' medians and means; the rate from e2e",
@@ -41,7 +41,7 @@ pub fn run(bench: &MpcdBench) -> Result<(), BenchError> {
         bench.reps,
         end_to_end_clock(&gpu)
     );
-    println!(
+    outln!(
         "{:>10} {:>6} {:>10} {:>5} {:>10} {:>10} {:>12} {:>12} {:>16} {:>9}",
         "N",
         "L",
@@ -54,7 +54,7 @@ pub fn run(bench: &MpcdBench) -> Result<(), BenchError> {
         "particle-steps/s",
         "ns/part."
     );
-    println!(
+    outln!(
         "(sort: the graph's sort_every; where it is set the rate comes from the mean step, the reordering amortised)"
     );
     for &target in &bench.sizes {
@@ -85,7 +85,7 @@ pub fn run(bench: &MpcdBench) -> Result<(), BenchError> {
         )?;
         if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
             for t in &run.timings {
-                print!("{}", t.breakdown());
+                out!("{}", t.breakdown());
             }
         }
         // With a reordering every few steps, the rate comes from the mean step (the
@@ -96,7 +96,7 @@ pub fn run(bench: &MpcdBench) -> Result<(), BenchError> {
             run.end_to_end()
         }
         .as_secs_f64();
-        println!(
+        outln!(
             "{:>10} {:>6} {:>10} {:>5} {:>10.4} {:>10.4} {:>12.4} {:>12.4} {:>16.3e} {:>9.3}",
             n,
             side,

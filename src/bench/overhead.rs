@@ -84,38 +84,41 @@ pub fn run(nodes: usize, elements: u32, reps: u64) -> Result<(), BenchError> {
     let roundtrip = raw.round_trip()?;
 
     let per_node = |d: Duration| d.as_secs_f64() * 1e6 / nodes as f64;
-    println!("adapter: {}", gpu.caps.summary());
-    println!(
+    outln!("adapter: {}", gpu.caps.summary());
+    outln!(
         "chain of {nodes} unfused pointwise nodes, {elements} elements each, {reps} repetitions; \
          wall: median of 5 batched runs; end to end: median chain on the GPU, one compute pass \
          ({}); launches: sum of per-launch medians",
         end_to_end_clock(&gpu)
     );
-    println!(
+    outln!(
         "{:<44} {:>12} {:>16} {:>16}",
-        "us per node", "wall", "end to end", "launches"
+        "us per node",
+        "wall",
+        "end to end",
+        "launches"
     );
-    println!(
+    outln!(
         "{:<44} {:>12.3} {:>16.3} {:>16.3}",
         "mesoflow executor (graph file, planned)",
         exec * 1e6,
         per_node(timed.end_to_end()),
         per_node(timed.launch_sum())
     );
-    println!(
+    outln!(
         "{:<44} {:>12.3} {:>16.3} {:>16}",
         "raw wgpu (same kernel, one pass per submit)",
         raw_wall * 1e6,
         per_node(raw_gpu),
         "-"
     );
-    println!(
+    outln!(
         "{:<44} {:>12.3} {:>16.3}",
         "ratio executor / raw",
         exec / raw_wall,
         timed.end_to_end().as_secs_f64() / raw_gpu.as_secs_f64()
     );
-    println!(
+    outln!(
         "{:<44} {:>12.1}",
         "submit-and-wait round trip (us)",
         roundtrip.as_secs_f64() * 1e6

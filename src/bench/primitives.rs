@@ -54,22 +54,29 @@ fn u32s<'a>(run: &'a TimedRun, name: &str) -> Result<&'a [u32], BenchError> {
 /// per-launch sum and the rate of the traffic the kernels themselves move): header, then
 /// one row per call.
 fn header(gpu: &GpuContext, reps: u64) {
-    println!("adapter: {}", gpu.caps.summary());
-    println!(
+    outln!("adapter: {}", gpu.caps.summary());
+    outln!(
         "ms, min ms: the whole call end to end ({}), median and fastest of {reps}; launches ms: \
          sum of per-launch medians; rates from the end-to-end median",
         end_to_end_clock(gpu)
     );
-    println!(
+    outln!(
         "{:<30} {:>11} {:>9} {:>9} {:>12} {:>9} {:>9} {:>11}",
-        "op", "n", "ms", "min ms", "launches ms", "G/s", "GB/s", "moved GB/s"
+        "op",
+        "n",
+        "ms",
+        "min ms",
+        "launches ms",
+        "G/s",
+        "GB/s",
+        "moved GB/s"
     );
 }
 
 fn row(what: &str, n: u32, run: &TimedRun, bytes_per_elem: f64, moved_per_elem: f64) {
     let t = run.end_to_end().as_secs_f64();
     let min = run.steps.iter().min().copied().unwrap_or_default();
-    println!(
+    outln!(
         "{:<30} {:>11} {:>9.4} {:>9.4} {:>12.4} {:>9.2} {:>9.1} {:>11.1}",
         what,
         n,
@@ -166,10 +173,10 @@ pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), BenchError> {
         );
         let run = time_graph(&gpu, &graph, &inputs, reps, true)?;
         if run.timings.iter().any(|t| !t.dispatches.is_empty()) {
-            println!("{v}:");
+            outln!("{v}:");
         }
         for t in &run.timings {
-            print!("{}", t.breakdown());
+            out!("{}", t.breakdown());
         }
         match check_sort(&keys, &run, v) {
             Ok(()) => {
@@ -189,7 +196,7 @@ pub fn sort(n: u32, reps: u64, variant: &str) -> Result<(), BenchError> {
             *traffic,
         );
     }
-    println!(
+    outln!(
         "(checked: sorted, stable, a permutation; GB/s: 12 B/key, key in, key and index \
          out; moved: what the passes move, {})",
         notes.join(", ")
@@ -241,6 +248,6 @@ pub fn scan(n: u32, reps: u64, variant: &str) -> Result<(), BenchError> {
         8.0,
         12.0,
     );
-    println!("(checked: every element; moved: reduce-then-scan traffic, 12 B/element)");
+    outln!("(checked: every element; moved: reduce-then-scan traffic, 12 B/element)");
     Ok(())
 }

@@ -107,8 +107,8 @@ pub fn run(bench: &PseBench) -> Result<(), BenchError> {
     }
     let gpu = GpuContext::new()?;
     let registry = mesoflow::nodes::registry();
-    println!("adapter: {}", gpu.caps.summary());
-    println!(
+    outln!("adapter: {}", gpu.caps.summary());
+    outln!(
         "graph {}; a = 1, eta = 1, tolerance {:e}; time: median of one evaluation over {} runs, \
          e2e: end to end ({}; with noise, kT = 1: the Lanczos loop makes host round trips inside \
          the step, so on the host clock, round trips included), launches: sum of its launches' \
@@ -121,7 +121,7 @@ pub fn run(bench: &PseBench) -> Result<(), BenchError> {
         end_to_end_clock(&gpu),
         bench.error_box
     );
-    println!(
+    outln!(
         "{:>5} {:>6} {:>8} {:>5} {:>4} {:>7} {:>7} {:>9} {:>11} {:>9} {:>11} {:>9} {:>9} {:>8} {:>10}",
         "split",
         "L",
@@ -156,7 +156,7 @@ pub fn run(bench: &PseBench) -> Result<(), BenchError> {
             let g = match load(&bench.graph, &sets, &registry) {
                 Ok(g) => g,
                 Err(e) => {
-                    println!("{split:>5} {l:>6} {n:>8}  not run: {e}");
+                    outln!("{split:>5} {l:>6} {n:>8}  not run: {e}");
                     continue;
                 }
             };
@@ -188,7 +188,7 @@ pub fn run(bench: &PseBench) -> Result<(), BenchError> {
                     }
                 })
                 .unwrap_or_else(|| "-".into());
-            println!(
+            outln!(
                 "{:>5} {:>6} {:>8} {:>5} {:>4} {:>7.3} {:>7} {:>9.4} {:>11.4} {:>9} {:>11} {:>9.2e} {:>9.2e} {:>8.0} {:>10}",
                 split,
                 l,

@@ -43,14 +43,18 @@ pub fn run(n: u32, reps: u64) -> Result<(), BenchError> {
     let inputs: BTreeMap<String, HostArray> = [("x".to_string(), HostArray::f32(ty, x))]
         .into_iter()
         .collect();
-    println!("adapter: {}", gpu.caps.summary());
-    println!(
+    outln!("adapter: {}", gpu.caps.summary());
+    outln!(
         "reductions of n = {n} f32 (mixed magnitudes 1e-3..1e3, random signs), median of {reps}; \
          e2e: the whole call, one graph per operation; launches: per-launch sum; GB/s from e2e"
     );
-    println!(
+    outln!(
         "{:<18} {:>10} {:>12} {:>10} {:>14}",
-        "node", "e2e ms", "launches ms", "GB/s", "rel. error"
+        "node",
+        "e2e ms",
+        "launches ms",
+        "GB/s",
+        "rel. error"
     );
     for (label, kind, params, bytes) in OPERATIONS {
         let inputs_of_kind = if kind == "dot" {
@@ -71,7 +75,7 @@ pub fn run(n: u32, reps: u64) -> Result<(), BenchError> {
             _ => "-".into(),
         };
         let e2e = run.end_to_end();
-        println!(
+        outln!(
             "{:<18} {:>10.4} {:>12.4} {:>10.1} {:>14}",
             label,
             ms(e2e),
@@ -80,7 +84,7 @@ pub fn run(n: u32, reps: u64) -> Result<(), BenchError> {
             err
         );
     }
-    println!(
+    outln!(
         "(error of a sum: |sum - f64 sum| / sum |x|; sum = {exact:.6e}, sum |x| = {abs:.6e}; \
          e2e by {})",
         end_to_end_clock(&gpu)

@@ -51,14 +51,14 @@ pub fn run(n_cells: u32, reps: u64, workgroups: &[u32], cases: &[usize]) -> Resu
         )));
     }
     let gpu = GpuContext::new()?;
-    println!("adapter: {}", gpu.caps.summary());
-    println!(
+    outln!("adapter: {}", gpu.caps.summary());
+    outln!(
         "{n_cells}^3 grid (h = 1); support 8: Gaussian, support 4: Peskin 4-point; median of {reps} \
          runs; e2e: the operation's graph end to end ({}), ns/part. from it; launches: sum of \
          per-launch medians",
         end_to_end_clock(&gpu)
     );
-    println!(
+    outln!(
         "{:>7} {:>7} {:>9} {:>6} {:>5} {:>9} {:>10} {:>11} {:>9} {:>10} {:>11} {:>9}",
         "support",
         "density",
@@ -323,7 +323,7 @@ fn time_variant(
     if err > 1e-4 {
         mass = "  INTERPOLATION MISMATCH";
     }
-    println!(
+    outln!(
         "{support:>7} {density:>7} {n:>9} {sorted:>6} {comps:>5} {wg:>9} {:>10.4} {:>11.4} {:>9.3} {:>10.4} {:>11.4} {:>9.3}{mass}",
         ms(ts),
         ms(spread_run.launch_sum()),
@@ -333,7 +333,7 @@ fn time_variant(
         ti.as_secs_f64() * 1e9 / n as f64
     );
     for timing in spread_run.timings.iter().chain(&interp_run.timings) {
-        print!("{}", timing.breakdown());
+        out!("{}", timing.breakdown());
     }
     Ok(())
 }

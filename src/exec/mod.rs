@@ -45,6 +45,19 @@ pub enum ExecError {
         #[source]
         source: LoopError,
     },
+    /// The device refused a launch's buffers or dispatches (wgpu validation), said as the
+    /// launch's nodes and the values it binds rather than wgpu's own buffer labels.
+    #[error("{launch}: the device refused it: {reason} (it binds {binds})")]
+    Refused {
+        launch: String,
+        reason: String,
+        binds: String,
+    },
+    /// The device could not allocate the plan's buffers.
+    #[error(
+        "the device cannot hold this plan's buffers ({planned} in all; `mesoflow inspect` lists them): {reason}"
+    )]
+    Memory { planned: String, reason: String },
     #[error("{0}")]
     Run(String),
     /// A buffer of the plan is larger than the adapter allows; found before allocating.
@@ -203,6 +216,10 @@ impl<'a> Program<'a> {
     ) -> Result<Self, ExecError> {
         check_buffer_sizes(gpu, graph, plan)?;
         let built_before = cache.built;
+        // The plan's buffers, with what the device refuses (memory it lacks) said as the
+        // plan's memory rather than as a buffer label.
+        let out_of_memory = gpu.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let invalid = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let input_buffers = plan
             .inputs
             .iter()
@@ -230,6 +247,16 @@ impl<'a> Program<'a> {
             .map(|(i, b)| storage_buffer(gpu, &format!("buf {i}"), b.bytes))
             .collect();
         let clock = storage_buffer(gpu, "clock", 16);
+        let refused = [
+            pollster::block_on(invalid.pop()),
+            pollster::block_on(out_of_memory.pop()),
+        ];
+        if let Some(e) = refused.into_iter().flatten().next() {
+            return Err(ExecError::Memory {
+                planned: crate::plan::human_bytes(plan.memory.total()),
+                reason: reason(&e),
+            });
+        }
         let mut cx = CompileCtx {
             gpu,
             kernels: cache,
@@ -262,19 +289,19 @@ impl<'a> Program<'a> {
         };
         let mut prologue = Vec::new();
         for l in &plan.prologue {
-            prologue.push(program.compile_launch(&mut cx, l, 0)?);
+            prologue.push(program.compile_checked(&mut cx, l, 0)?);
         }
         let mut even = Vec::new();
         let mut odd = Vec::new();
         for l in &plan.step {
-            let c0 = program.compile_launch(&mut cx, l, 0)?;
+            let c0 = program.compile_checked(&mut cx, l, 0)?;
             let touches_state = l
                 .reads()
                 .into_iter()
                 .chain(l.writes())
                 .any(|v| matches!(plan.values[v].storage, Storage::State { .. }));
             let c1 = if touches_state {
-                program.compile_launch(&mut cx, l, 1)?
+                program.compile_checked(&mut cx, l, 1)?
             } else {
                 Compiled {
                     label: c0.label.clone(),
@@ -293,6 +320,76 @@ impl<'a> Program<'a> {
         program.kernels_built = cache.built - built_before;
         gpu.take_errors()?;
         Ok(program)
+    }
+
+    /// Compiles a launch with the device's validation errors caught: its buffers, bind
+    /// groups and pipelines, and its dispatches recorded once into a pass that is never
+    /// submitted (what wgpu checks when a pass is encoded: workgroup counts, bindings).
+    /// A launch the device refuses is reported as its nodes and the values it binds, not
+    /// as wgpu's internal labels (`fill4`, `sum partial`).
+    fn compile_checked(
+        &self,
+        cx: &mut CompileCtx,
+        l: &crate::plan::Launch,
+        parity: usize,
+    ) -> Result<Compiled, ExecError> {
+        let scope = self
+            .gpu
+            .device
+            .push_error_scope(wgpu::ErrorFilter::Validation);
+        let compiled = self.compile_launch(cx, l, parity);
+        if let Ok(c) = &compiled {
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                c.record_all(&mut pass);
+            }
+            drop(enc.finish());
+        }
+        let refused = pollster::block_on(scope.pop());
+        let compiled = compiled?;
+        match refused {
+            None => Ok(compiled),
+            Some(e) => Err(ExecError::Refused {
+                launch: self.describe_launch(l),
+                reason: reason(&e),
+                binds: self.describe_bindings(l),
+            }),
+        }
+    }
+
+    /// A launch as users know it: its node, or its nodes.
+    fn describe_launch(&self, l: &crate::plan::Launch) -> String {
+        let nodes: Vec<String> = l
+            .nodes()
+            .iter()
+            .map(|&n| {
+                let inst = &self.graph.nodes[n];
+                format!("`{}` ({})", inst.id, inst.kind)
+            })
+            .collect();
+        match nodes.len() {
+            0 => "the engine's state copy".into(),
+            1 => format!("node {}", nodes[0]),
+            _ => format!("nodes {}", nodes.join(", ")),
+        }
+    }
+
+    /// The values a launch binds, with their types and sizes.
+    fn describe_bindings(&self, l: &crate::plan::Launch) -> String {
+        let mut seen = Vec::new();
+        for v in l.reads().into_iter().chain(l.writes()) {
+            if !seen.contains(&v) {
+                seen.push(v);
+            }
+        }
+        seen.iter()
+            .map(|&v| {
+                let value = &self.plan.values[v];
+                format!("{} {}, {} bytes", value.name, value.ty, value.ty.bytes())
+            })
+            .collect::<Vec<_>>()
+            .join("; ")
     }
 
     /// The buffer of a value for a step of the given parity.
@@ -364,6 +461,49 @@ impl<'a> Program<'a> {
             .chain(self.step[0].iter().map(|c| (Phase::Step, c.label.clone())))
             .collect()
     }
+}
+
+impl Compiled {
+    /// Records every dispatch, whatever its step schedule, with a loop's body and its
+    /// start, iteration and finish (for validation: never submitted).
+    fn record_all(&self, pass: &mut wgpu::ComputePass) {
+        let mut all: Vec<&Dispatch> = self.dispatches.iter().collect();
+        if let Some(lp) = &self.looped {
+            all.extend(&lp.kernels.start);
+            for c in &lp.body {
+                c.record_all(pass);
+            }
+            all.extend(&lp.kernels.iterate);
+            all.extend(&lp.kernels.finish);
+        }
+        for d in all {
+            if d.workgroups.contains(&0) {
+                continue;
+            }
+            pass.set_pipeline(&d.kernel.pipeline);
+            pass.set_bind_group(0, &d.bind_group, &[]);
+            pass.dispatch_workgroups(d.workgroups[0], d.workgroups[1], d.workgroups[2]);
+        }
+    }
+}
+
+/// What wgpu says is wrong, without where it says it happened: the innermost error of its
+/// chain (`Buffer binding 0 range ... exceeds ... limit ...`), without the labels of the
+/// engine's buffers and kernels, which name nothing a user wrote.
+fn reason(e: &wgpu::Error) -> String {
+    let mut inner: &dyn std::error::Error = e;
+    while let Some(next) = inner.source() {
+        inner = next;
+    }
+    let mut text = inner.to_string();
+    // wgpu names resources as "Buffer with 'LABEL' label".
+    while let Some(start) = text.find(" with '") {
+        let Some(len) = text[start + 7..].find("' label") else {
+            break;
+        };
+        text.replace_range(start..start + 7 + len + 7, "");
+    }
+    text.trim().to_string()
 }
 
 fn engine_err(source: CompileError) -> ExecError {

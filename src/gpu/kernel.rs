@@ -3,6 +3,7 @@
 //! through [`CompileCtx`]; only the executor puts them into passes and submits.
 
 use std::collections::HashMap;
+use std::io::Write;
 use std::sync::Arc;
 
 use thiserror::Error;
@@ -149,7 +150,8 @@ fn dump(spec: &KernelSpec) {
     );
     let file = dir.join(format!("{:016x}.wgsl", h.finish()));
     if let Err(e) = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&file, text)) {
-        eprintln!(
+        let _ = writeln!(
+            std::io::stderr(),
             "mesoflow: MESOFLOW_KERNEL_DUMP: cannot write {}: {e}",
             file.display()
         );
@@ -530,7 +532,9 @@ fn runtime_checks() -> Option<wgpu::ShaderRuntimeChecks> {
             "none" => checks = wgpu::ShaderRuntimeChecks::unchecked(),
             other => {
                 if !other.is_empty() && other != "trusted" {
-                    eprintln!(
+                    // Best effort: `eprintln!` would panic on a closed stderr.
+                    let _ = writeln!(
+                        std::io::stderr(),
                         "MESOFLOW_RUNTIME_CHECKS={other} is none of all, noloop, noloopdiv, none, trusted: using trusted"
                     );
                 }

@@ -4,6 +4,8 @@
 //! `#import common/index.wgsl`; [`source`] replaces each with that file's text (each file
 //! once, recursively). Everything else is plain WGSL.
 
+use std::io::Write;
+
 use super::DeviceCaps;
 
 mod files {
@@ -49,7 +51,11 @@ fn overridden(path: &str) -> Option<&'static str> {
     }
     let file = dir.join(path);
     let text = std::fs::read_to_string(&file).ok().map(|t| {
-        eprintln!("mesoflow: shader {path} overridden by {}", file.display());
+        let _ = writeln!(
+            std::io::stderr(),
+            "mesoflow: shader {path} overridden by {}",
+            file.display()
+        );
         &*Box::leak(t.into_boxed_str())
     });
     cache.insert(path.to_string(), text);

@@ -10,9 +10,9 @@ use super::{
     Dim, Graph, GraphParam, InputDef, InputShape, NodeId, NodeInst, OutputDef, Problem, Problems,
     SizeDef, Source, StateDef,
 };
-use crate::expr::{self, ParamValue, Scope};
+use crate::expr::{self, ExprError, ParamValue, Scope};
 use crate::ids::Id;
-use crate::node::{Registry, check_params, edit_distance};
+use crate::node::{Registry, check_params, edit_distance, nearest};
 use crate::value::ValueType;
 
 /// Names every graph sees without declaring them.
@@ -56,6 +56,8 @@ pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Grap
         expanded_nodes: 0,
         folders: SubgraphFolders::new(path),
         root: RootParts::default(),
+        param_roots: HashMap::new(),
+        consequences: BTreeMap::new(),
     };
     let overrides: IndexMap<String, ParamValue> = opts.overrides.clone().into_iter().collect();
     l.load_file(path, "", &overrides, None);
@@ -136,6 +138,12 @@ struct Loader<'r> {
     expanded_nodes: usize,
     folders: SubgraphFolders,
     root: RootParts,
+    /// Params left without a value, by (file scope, name): the problem (an index into
+    /// `problems`) that leaves them so, their own or that of a param they read.
+    param_roots: HashMap<(String, String), usize>,
+    /// What each such problem leaves unresolved (params, nodes, inputs), reported with
+    /// it once rather than as a problem each.
+    consequences: BTreeMap<usize, Vec<(&'static str, String)>>,
 }
 
 /// The largest graph file read (a graph of the 20,000 nodes [`MAX_EXPANDED_NODES`]
@@ -305,6 +313,10 @@ impl<'r> Loader<'r> {
                 return false;
             }
         };
+        if let Err(e) = super::schema::check_unique_keys(&text) {
+            self.problems.push(Problem::file(path, e.to_string()));
+            return false;
+        }
         let file: GraphFile = match serde_json::from_str(&text) {
             Ok(f) => f,
             Err(e) => {
@@ -332,7 +344,7 @@ impl<'r> Loader<'r> {
         }
         self.stack.push(canonical);
 
-        let scope_values = self.params(path, &file.params, overrides, &parent);
+        let scope_values = self.params(path, scope, &file.params, overrides, &parent);
         let size_names = self.sizes(path, &file, is_root);
         self.inputs(
             path,
@@ -351,6 +363,12 @@ impl<'r> Loader<'r> {
             ));
         }
         self.nodes(path, scope, &file.nodes, &scope_values);
+        if is_root && file.outputs.is_empty() {
+            self.problems.push(Problem::file(
+                path,
+                "the graph declares no outputs, so running it would compute nothing (name what it gives under \"outputs\")",
+            ));
+        }
         for (name, decl) in &file.outputs {
             let r = PendingRef {
                 scope: scope.into(),
@@ -389,10 +407,14 @@ impl<'r> Loader<'r> {
     }
 
     /// Resolves graph params: defaults in order (a default may be an expression over the
-    /// params above it), then overrides. Returns the expression scope of the file.
+    /// params above it), then overrides. Returns the expression scope of the file. A
+    /// param with a problem (a bad value, a default that does not evaluate) is left
+    /// without a value: what is computed from it follows from that problem
+    /// ([`Loader::follows`]) instead of being one more.
     fn params(
         &mut self,
         path: &Path,
+        file_scope: &str,
         decls: &IndexMap<String, ParamDecl>,
         overrides: &IndexMap<String, ParamValue>,
         parent: &Option<Binding>,
@@ -402,8 +424,11 @@ impl<'r> Loader<'r> {
         for name in overrides.keys() {
             if !(decls.contains_key(name) || is_root && BUILTIN_PARAMS.contains(&name.as_str())) {
                 let known: Vec<&str> = decls.keys().map(|s| s.as_str()).collect();
+                let hint = nearest(name, known.iter().copied())
+                    .map(|n| format!(" (did you mean `{n}`?)"))
+                    .unwrap_or_default();
                 let msg = format!(
-                    "unknown param `{name}` (this graph's params: {})",
+                    "unknown param `{name}`{hint} (this graph's params: {})",
                     if known.is_empty() {
                         "none".to_string()
                     } else {
@@ -431,44 +456,35 @@ impl<'r> Loader<'r> {
                 ));
                 continue;
             }
-            let default = match expr::resolve(&decl.default, &scope) {
-                Ok(v) => v,
-                Err(e) => {
-                    self.problems
-                        .push(Problem::file(path, format!("param `{name}`: default: {e}")));
-                    continue;
-                }
-            };
-            let constraint = describe_constraint(decl);
-            if let Err(e) = check_param(decl, &default, &default) {
-                self.problems.push(Problem::file(
-                    path,
-                    format!("param `{name}`: default {default}: {e}"),
-                ));
-            }
-            let value = match overrides.get(name) {
-                Some(v) => {
-                    if let Err(e) = check_param(decl, &default, v) {
-                        let msg = format!("bad value {v} for param `{name}`: {e}");
-                        self.problems.push(match parent {
-                            Some(b) => Problem::port(b.file, b.node, name, msg),
-                            None => Problem::file(path, msg),
+            match self.param_value(
+                path,
+                file_scope,
+                name,
+                decl,
+                &scope,
+                overrides.get(name),
+                parent,
+            ) {
+                Ok((default, value)) => {
+                    if is_root {
+                        self.root.params.push(GraphParam {
+                            name: name.clone(),
+                            value: value.clone(),
+                            default,
+                            doc: decl.doc.clone(),
+                            constraint: describe_constraint(decl),
                         });
                     }
-                    v.clone()
+                    scope.insert(name.clone(), value);
                 }
-                None => default.clone(),
-            };
-            if is_root {
-                self.root.params.push(GraphParam {
-                    name: name.clone(),
-                    value: value.clone(),
-                    default,
-                    doc: decl.doc.clone(),
-                    constraint,
-                });
+                Err(root) => {
+                    if let Some(root) = root {
+                        self.param_roots
+                            .insert((file_scope.to_string(), name.clone()), root);
+                    }
+                    scope.insert_unresolved(name.clone());
+                }
             }
-            scope.insert(name.clone(), value);
         }
         if is_root {
             if let Some(v) = overrides.get("seed") {
@@ -490,6 +506,77 @@ impl<'r> Loader<'r> {
             }
         }
         scope
+    }
+
+    /// A graph param's default and value (the override when given), or the problem that
+    /// leaves it without one: an index into `self.problems`, `None` for none of its own
+    /// (the param it reads has the problem).
+    #[allow(clippy::too_many_arguments)]
+    fn param_value(
+        &mut self,
+        path: &Path,
+        file_scope: &str,
+        name: &str,
+        decl: &ParamDecl,
+        scope: &Scope,
+        given: Option<&ParamValue>,
+        parent: &Option<Binding>,
+    ) -> Result<(ParamValue, ParamValue), Option<usize>> {
+        let default = match expr::resolve(&decl.default, scope) {
+            Ok(v) => v,
+            Err(ExprError::Unresolved { name: from }) => {
+                self.follows(file_scope, &from, ("param", format!("{file_scope}{name}")));
+                return Err(self.root_of(file_scope, &from));
+            }
+            Err(e) => {
+                return Err(Some(self.push(Problem::file(
+                    path,
+                    format!("param `{name}`: default: {e}"),
+                ))));
+            }
+        };
+        if let Err(e) = check_param(decl, &default, &default) {
+            return Err(Some(self.push(Problem::file(
+                path,
+                format!("param `{name}`: default {default}: {e}"),
+            ))));
+        }
+        let Some(v) = given else {
+            return Ok((default.clone(), default));
+        };
+        if let Err(e) = check_param(decl, &default, v) {
+            let msg = format!("bad value {v} for param `{name}`: {e}");
+            return Err(Some(self.push(match parent {
+                Some(b) => Problem::port(b.file, b.node, name, msg),
+                None => Problem::file(path, msg),
+            })));
+        }
+        Ok((default, v.clone()))
+    }
+
+    /// Adds a problem; returns its index.
+    fn push(&mut self, p: Problem) -> usize {
+        self.problems.push(p);
+        self.problems.len() - 1
+    }
+
+    /// The problem that leaves param `name` of the file loaded as `file_scope` without a
+    /// value.
+    fn root_of(&self, file_scope: &str, name: &str) -> Option<usize> {
+        self.param_roots
+            .get(&(file_scope.to_string(), name.to_string()))
+            .copied()
+    }
+
+    /// Records `what` (a `param`, `node` or `input`, by its full name) as following from
+    /// the problem of param `name` (which has no value): reported once, with that problem.
+    fn follows(&mut self, file_scope: &str, name: &str, what: (&'static str, String)) {
+        if let Some(root) = self.root_of(file_scope, name) {
+            let list = self.consequences.entry(root).or_default();
+            if !list.contains(&what) {
+                list.push(what);
+            }
+        }
     }
 
     fn sizes(&mut self, path: &Path, file: &GraphFile, is_root: bool) -> Vec<String> {
@@ -541,15 +628,34 @@ impl<'r> Loader<'r> {
             }
         }
         for (name, decl) in decls {
-            let shape = match input_shape(decl, size_names, values) {
-                Ok(s) => s,
-                Err(e) => {
-                    self.problems
-                        .push(Problem::node(path, &format!("inputs.{name}"), e));
-                    continue;
-                }
-            };
             let key = (scope.to_string(), name.clone());
+            // Counts read from a param without a value follow from that param's problem.
+            let unresolved = [&decl.rows, &decl.dims]
+                .into_iter()
+                .flatten()
+                .find_map(|v| match expr::resolve(v, values) {
+                    Err(ExprError::Unresolved { name }) => Some(name),
+                    _ => None,
+                });
+            let shape = match unresolved {
+                Some(from) => {
+                    self.follows(scope, &from, ("input", format!("{scope}{name}")));
+                    None
+                }
+                None => match input_shape(decl, size_names, values) {
+                    Ok(shape) => Some(shape),
+                    Err(e) => {
+                        self.problems
+                            .push(Problem::node(path, &format!("inputs.{name}"), e));
+                        None
+                    }
+                },
+            };
+            let Some(shape) = shape else {
+                // Reported; what reads it adds no problem of its own.
+                self.input_alias.insert(key, Alias::Absent);
+                continue;
+            };
             match parent {
                 None => {
                     self.input_alias
@@ -630,6 +736,10 @@ impl<'r> Loader<'r> {
                 match expr::resolve(v, values) {
                     Ok(pv) => {
                         raw_params.insert(pname.clone(), pv);
+                    }
+                    Err(ExprError::Unresolved { name }) => {
+                        bad = true;
+                        self.follows(scope, &name, ("node", format!("{scope}{id}")));
                     }
                     Err(e) => {
                         bad = true;
@@ -919,7 +1029,7 @@ impl<'r> Loader<'r> {
         let root = std::mem::take(&mut self.root);
         self.check_cycles(&nodes);
         if !self.problems.is_empty() {
-            return Err(Problems(self.problems));
+            return Err(self.report());
         }
         let graph = Graph {
             file: path.to_path_buf(),
@@ -931,11 +1041,94 @@ impl<'r> Loader<'r> {
             nodes: nodes.into(),
             outputs,
         };
+        self.check_state_inits(&graph);
         self.check_loops(&graph);
         if !self.problems.is_empty() {
-            return Err(Problems(self.problems));
+            return Err(self.report());
         }
         Ok(graph)
+    }
+
+    /// The problems, each with what follows from it said once, after it: one bad value
+    /// is one problem, however much is computed from it.
+    fn report(&mut self) -> Problems {
+        let mut problems = std::mem::take(&mut self.problems);
+        for (&root, follows) in &self.consequences {
+            let n = follows.len();
+            let groups: Vec<String> = ["param", "input", "node"]
+                .iter()
+                .filter_map(|&kind| {
+                    let names: Vec<String> = follows
+                        .iter()
+                        .filter(|(k, _)| *k == kind)
+                        .map(|(_, name)| format!("`{name}`"))
+                        .collect();
+                    match names.len() {
+                        0 => None,
+                        1 => Some(format!("{kind} {}", names[0])),
+                        _ => Some(format!("{kind}s {}", names.join(", "))),
+                    }
+                })
+                .collect();
+            problems[root].message.push_str(&format!(
+                "; {n} problem{} follow{} from it, reported here once: {}",
+                if n == 1 { "" } else { "s" },
+                if n == 1 { "s" } else { "" },
+                groups.join("; ")
+            ));
+        }
+        Problems(problems)
+    }
+
+    /// A state's initial value is computed once, before the first step: from inputs and
+    /// from nodes that read no state (a state has no value yet then). Checked here, for
+    /// every state, rather than only for the states a plan needs, so that `validate`
+    /// (which accepts a file some of whose outputs plan) and `run` agree.
+    fn check_state_inits(&mut self, g: &Graph) {
+        for st in &g.states {
+            let mut seen = BTreeSet::new();
+            let mut stack = vec![st.init];
+            let mut read = None;
+            let mut iterative = None;
+            while let Some(s) = stack.pop() {
+                match s {
+                    Source::State(i) => {
+                        read = Some(i);
+                        break;
+                    }
+                    Source::Node { node, .. } if seen.insert(node) => {
+                        let inst = &g.nodes[node];
+                        if inst.input_ports.iter().any(|p| p.iterate) {
+                            iterative.get_or_insert(node);
+                        }
+                        stack.extend(inst.inputs.iter().copied());
+                    }
+                    _ => {}
+                }
+            }
+            if let (None, Some(n)) = (read, iterative) {
+                self.problems.push(Problem::file(
+                    &g.file,
+                    format!(
+                        "state `{}`, init: `{}` needs the iterative node `{}`, which runs in the steps only (an initial value is computed before them)",
+                        st.name,
+                        g.source_name(st.init),
+                        g.nodes[n].id
+                    ),
+                ));
+            }
+            if let Some(i) = read {
+                self.problems.push(Problem::file(
+                    &g.file,
+                    format!(
+                        "state `{}`, init: `{}` depends on state `{}`; an initial value must come from inputs or from nodes that read no state",
+                        st.name,
+                        g.source_name(st.init),
+                        g.states[i].name
+                    ),
+                ));
+            }
+        }
     }
 
     /// An iterative node's loop body (the nodes that depend on its `iterate` outputs) may
@@ -1128,7 +1321,10 @@ fn check_param(decl: &ParamDecl, default: &ParamValue, v: &ParamValue) -> Result
     if let (Some(c), ParamValue::Text(s)) = (&decl.choices, v)
         && !c.contains(s)
     {
-        return Err(format!("\"{s}\" is not one of {}", c.join(", ")));
+        let hint = nearest(s, c.iter().map(|c| c.as_str()))
+            .map(|c| format!(" (did you mean \"{c}\"?)"))
+            .unwrap_or_default();
+        return Err(format!("\"{s}\" is not one of {}{hint}", c.join(", ")));
     }
     if let (ParamValue::Numbers(d), ParamValue::Numbers(x)) = (default, v)
         && d.len() != x.len()

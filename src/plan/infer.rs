@@ -4,6 +4,7 @@
 //! An absent optional input makes the nodes that require it absent, and so on downstream.
 
 use super::demand::Demand;
+use super::too_large_for;
 use crate::gpu::{DeviceCaps, NodePlan};
 use crate::graph::{Graph, NodeId, Problem, Problems, Source};
 use crate::ids::IdVec;
@@ -219,16 +220,21 @@ impl Inference<'_> {
                     inst.kind
                 );
                 for (port, t) in inst.output_ports.iter().zip(&sig.outputs) {
-                    if t.bytes() > self.caps.max_binding {
+                    if let Some(why) = too_large_for(self.caps, t.bytes()) {
                         self.problems.push(Problem::port(
                             &inst.file,
                             &inst.id,
                             port.name,
-                            format!(
-                                "output {t} takes {} MiB; this device binds at most {} MiB per buffer",
-                                t.bytes() >> 20,
-                                self.caps.max_binding >> 20
-                            ),
+                            format!("output {t} takes {why}"),
+                        ));
+                    }
+                }
+                for (i, &bytes) in sig.scratch.iter().enumerate() {
+                    if let Some(why) = too_large_for(self.caps, bytes) {
+                        self.problems.push(Problem::node(
+                            &inst.file,
+                            &inst.id,
+                            format!("its working buffer {i} takes {why}"),
                         ));
                     }
                 }

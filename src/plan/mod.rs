@@ -243,7 +243,7 @@ impl Plan {
 /// asked, inputs given), demand (what they need), type inference, forwarding (nodes read
 /// through), scheduling, lowering to launches, and buffer assignment.
 pub fn plan(graph: &Graph, opts: &PlanOptions, caps: &DeviceCaps) -> Result<Plan, Problems> {
-    let request = request::resolve(graph, opts)?;
+    let request = request::resolve(graph, opts, caps)?;
     let demand = demand::of(graph, &request.outputs)?;
     let types = infer::infer(graph, &demand, &request.input_types, &request.outputs, caps)?;
     let (graph, forwarded) = forward::read_through(graph, &demand, &types);
@@ -257,6 +257,69 @@ pub fn plan(graph: &Graph, opts: &PlanOptions, caps: &DeviceCaps) -> Result<Plan
     plan.forwarded = forwarded;
     memory::assign(&mut plan);
     Ok(plan)
+}
+
+/// What [`plan_available`] planned, and the outputs it left out with their problems.
+pub struct Available {
+    pub plan: Plan,
+    /// Outputs that do not plan for these inputs and params, in declaration order.
+    pub left_out: Vec<(String, Problems)>,
+}
+
+/// Plans every output of the graph that plans for these inputs and params (an output may
+/// need an optional input not given, or other params than these): all of them when they
+/// plan together, else those that plan each on their own, the others left out with their
+/// problems. An error (the problems of planning them all) when none plans.
+/// `opts.outputs` is ignored.
+pub fn plan_available(
+    graph: &Graph,
+    opts: &PlanOptions,
+    caps: &DeviceCaps,
+) -> Result<Available, Problems> {
+    let with = |outputs: Option<Vec<String>>| {
+        let opts = PlanOptions {
+            outputs,
+            ..opts.clone()
+        };
+        plan(graph, &opts, caps)
+    };
+    let all_problems = match with(None) {
+        Ok(plan) => {
+            return Ok(Available {
+                plan,
+                left_out: Vec::new(),
+            });
+        }
+        Err(e) => e,
+    };
+    let mut planned = Vec::new();
+    let mut left_out = Vec::new();
+    for o in &graph.outputs {
+        match with(Some(vec![o.name.clone()])) {
+            Ok(_) => planned.push(o.name.clone()),
+            Err(e) => left_out.push((o.name.clone(), e)),
+        }
+    }
+    if planned.is_empty() {
+        return Err(all_problems);
+    }
+    Ok(Available {
+        plan: with(Some(planned))?,
+        left_out,
+    })
+}
+
+/// Why a value of `bytes` cannot live in one buffer of the device, if it cannot: the
+/// host says so by name (the input, the node's port) before wgpu refuses a binding.
+pub(super) fn too_large_for(caps: &DeviceCaps, bytes: u64) -> Option<String> {
+    let limit = caps.max_binding.min(caps.max_buffer);
+    (bytes > limit).then(|| {
+        format!(
+            "{bytes} bytes ({}): more than this device binds in one buffer ({limit} bytes, {})",
+            human_bytes(bytes),
+            human_bytes(limit)
+        )
+    })
 }
 
 impl Launch {

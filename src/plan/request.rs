@@ -3,7 +3,8 @@
 
 use std::collections::HashMap;
 
-use super::PlanOptions;
+use super::{PlanOptions, too_large_for};
+use crate::gpu::DeviceCaps;
 use crate::graph::{Dim, Graph, InputShape, Problem, Problems};
 use crate::value::ValueType;
 
@@ -15,13 +16,25 @@ pub(super) struct Request {
     pub input_types: Vec<Option<ValueType>>,
 }
 
-pub(super) fn resolve(g: &Graph, opts: &PlanOptions) -> Result<Request, Problems> {
+pub(super) fn resolve(
+    g: &Graph,
+    opts: &PlanOptions,
+    caps: &DeviceCaps,
+) -> Result<Request, Problems> {
     let mut problems = Vec::new();
     let outputs = match &opts.outputs {
         None => (0..g.outputs.len()).collect(),
         Some(names) => names
             .iter()
-            .filter_map(|n| {
+            .enumerate()
+            .filter_map(|(i, n)| {
+                if names[..i].contains(n) {
+                    problems.push(Problem::file(
+                        &g.file,
+                        format!("output `{n}` is asked for twice"),
+                    ));
+                    return None;
+                }
                 let found = g.output(n);
                 if found.is_none() {
                     let known: Vec<&str> = g.outputs.iter().map(|o| o.name.as_str()).collect();
@@ -40,6 +53,12 @@ pub(super) fn resolve(g: &Graph, opts: &PlanOptions) -> Result<Request, Problems
             Some(i) => {
                 if let Err(e) = g.inputs[i].shape.check(ty) {
                     problems.push(Problem::file(&g.file, format!("input `{name}`: {e}")));
+                }
+                if let Some(why) = too_large_for(caps, ty.bytes()) {
+                    problems.push(Problem::file(
+                        &g.file,
+                        format!("input `{name}` is {ty}, {why}"),
+                    ));
                 }
                 input_types[i] = Some(*ty);
             }

@@ -331,3 +331,455 @@ fn bench_tables_give_the_end_to_end_time_beside_the_launch_sum() {
         &["--nodes and --reps must be positive"],
     );
 }
+/// Runs mesoflow with its stdout a pipe whose reading end is already closed (as `| head`
+/// leaves it once it has read enough): every write to stdout fails with a broken pipe.
+fn mesoflow_into_closed_pipe(args: &[&str]) -> Output {
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+        .args(args)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .stdout(writer)
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .expect("run mesoflow")
+}
+
+#[test]
+fn a_closed_stdout_ends_every_command_quietly_with_its_own_exit_code() {
+    let bad = root()
+        .join("graphs/fixtures/invalid/bad_ref.json")
+        .display()
+        .to_string();
+    let mut cases: Vec<(Vec<String>, i32)> = vec![
+        (vec!["nodes".into()], 0),
+        (vec!["nodes".into(), "scale".into()], 0),
+        (vec!["validate".into(), relax()], 0),
+        // The failure is still reported by its exit code when nobody reads stdout.
+        (vec!["validate".into(), relax(), bad], 2),
+        (vec!["inspect".into(), relax()], 0),
+        (vec!["inspect".into(), relax(), "--dot".into()], 0),
+        (vec!["--help".into()], 0),
+    ];
+    let dir = tmpdir("cli-closed-stdout");
+    if gpu().is_some() {
+        let input = format!("positions={}", positions(&dir, "x.npy", vec![0.5; 12], 4));
+        let written = format!("positions={}", dir.join("out.npy").display());
+        cases.push((
+            vec!["run".into(), relax(), "--input".into(), input.clone()],
+            0,
+        ));
+        cases.push((
+            vec![
+                "run".into(),
+                relax(),
+                "--input".into(),
+                input,
+                "--output".into(),
+                written,
+                "--profile".into(),
+            ],
+            0,
+        ));
+        cases.push((vec!["info".into()], 0));
+    }
+    for (args, code) in &cases {
+        let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+        let o = mesoflow_into_closed_pipe(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
+        assert_eq!(o.status.code(), Some(*code), "{args:?}:\n{err}");
+        assert!(!err.contains("Broken pipe"), "{args:?}:\n{err}");
+    }
+    if gpu().is_some() {
+        // Outputs are written whether or not anyone reads the report.
+        assert!(dir.join("out.npy").exists());
+    }
+}
+
+/// Number of problems a report announces on its first line (`N problems:`).
+fn problem_count(report: &str) -> usize {
+    let line = report
+        .lines()
+        .find(|l| l.contains(" problem"))
+        .unwrap_or_else(|| panic!("no problem count in:\n{report}"));
+    line.split_whitespace()
+        .find_map(|w| w.parse().ok())
+        .unwrap_or_else(|| panic!("no problem count in `{line}`"))
+}
+
+#[test]
+fn one_bad_set_is_reported_as_its_root_cause_with_the_consequences_once() {
+    let fcm = root().join("graphs/fcm.json").display().to_string();
+    let bd = root().join("graphs/bd_fcm.json").display().to_string();
+    for (graph, set, root_cause, dependant) in [
+        (
+            &fcm,
+            "kernel=gauss",
+            "bad value \"gauss\" for param `kernel`",
+            "grid",
+        ),
+        (
+            &fcm,
+            "box=64",
+            "bad value 64 for param `box`: expected an array of numbers",
+            "grid",
+        ),
+        (
+            &fcm,
+            "tolerance=abc",
+            "bad value \"abc\" for param `tolerance`",
+            "beta",
+        ),
+        (
+            &fcm,
+            "radius=-1",
+            "bad value -1 for param `radius`",
+            "width",
+        ),
+        // Through a subgraph: the parent's param feeds fcm.json's.
+        (
+            &bd,
+            "kernel=gauss",
+            "bad value \"gauss\" for param `kernel`",
+            "mobility",
+        ),
+    ] {
+        let o = mesoflow(&["inspect", graph, "--set", set]);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{set}:\n{t}");
+        assert_eq!(problem_count(&t), 1, "--set {set}:\n{t}");
+        let first = t.lines().nth(1).unwrap_or_default();
+        assert!(
+            first.contains(root_cause),
+            "--set {set}: root cause first:\n{t}"
+        );
+        assert!(
+            first.contains(dependant),
+            "--set {set}: its dependants named:\n{t}"
+        );
+        assert!(!t.contains("unknown param"), "--set {set}:\n{t}");
+    }
+    // The nearest name or choice is suggested.
+    fails_with(
+        &["inspect", &fcm, "--set", "viscosty=2"],
+        &["unknown param `viscosty`", "did you mean `viscosity`?"],
+    );
+    fails_with(
+        &["inspect", &fcm, "--set", "kernel=gauss"],
+        &["did you mean \"gaussian\"?"],
+    );
+    // Independent problems are still each reported.
+    let o = mesoflow(&[
+        "inspect",
+        &fcm,
+        "--set",
+        "kernel=gauss",
+        "--set",
+        "viscosity=-1",
+    ]);
+    assert_eq!(problem_count(&text(&o)), 2, "{}", text(&o));
+}
+
+#[test]
+fn nodes_prints_ranges_as_people_write_them() {
+    let o = mesoflow(&["nodes"]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    for unreadable in ["e-308", "[-inf, inf]", ", inf]", "17976931348623157"] {
+        assert!(!t.contains(unreadable), "`{unreadable}` in:\n{t}");
+    }
+    let line = |kind: &str, param: &str| -> String {
+        let o = mesoflow(&["nodes", kind]);
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .find(|l| l.starts_with(&format!("  prm  {param} ")))
+            .unwrap_or_else(|| panic!("{kind} has no param {param}"))
+            .to_string()
+    };
+    assert!(line("all_pairs", "radius").contains("number > 0"));
+    assert!(line("all_pairs", "split").contains("number >= 0"));
+    assert!(line("affine", "scale").contains("number, default 1"));
+    // A bad node param value is told against the same readable range.
+    let dir = tmpdir("cli-ranges");
+    let g = crate::util::write_graph(
+        &dir,
+        "g.json",
+        r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}},
+            "nodes": [{"id": "p", "kind": "all_pairs", "params": {"radius": -1}, "inputs": {"positions": "inputs.x", "values": "inputs.x"}}],
+            "outputs": {"u": "p.out"}}"#,
+    );
+    let o = mesoflow(&["validate", &g.display().to_string()]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(2), "{t}");
+    assert!(t.contains("-1 is not > 0"), "{t}");
+    assert!(!t.contains("e-308") && !t.contains("0.0000000"), "{t}");
+}
+
+/// The files in a folder whose names show a temporary output (`.NAME.PID.tmp`).
+fn temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().to_string())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect()
+}
+
+#[test]
+fn outputs_are_named_once_and_go_to_distinct_files() {
+    let dir = tmpdir("cli-output-names");
+    let input = format!("positions={}", positions(&dir, "x.npy", vec![0.5; 12], 4));
+    let a = dir.join("a.npy").display().to_string();
+    fails_with(
+        &[
+            "run",
+            &relax(),
+            "--input",
+            &input,
+            "--output",
+            &format!("positions={a}"),
+            "--output",
+            "positions",
+        ],
+        &["--output positions is given twice"],
+    );
+    fails_with(
+        &[
+            "run",
+            &relax(),
+            "--input",
+            &input,
+            "--output",
+            &format!("positions={a}"),
+            "--output",
+            &format!("force={}", dir.join(".").join("a.npy").display()),
+        ],
+        &[
+            "--output force",
+            "a.npy",
+            "also the file of --output positions",
+        ],
+    );
+    fails_with(
+        &[
+            "inspect",
+            &relax(),
+            "--output",
+            "force",
+            "--output",
+            "force",
+        ],
+        &["output `force` is asked for twice"],
+    );
+    assert!(!dir.join("a.npy").exists());
+}
+
+#[test]
+fn a_graph_without_outputs_is_an_error() {
+    let dir = tmpdir("cli-no-outputs");
+    let g = crate::util::write_graph(
+        &dir,
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": [{"id": "c", "kind": "constant", "params": {"value": 1}}]}"#,
+    )
+    .display()
+    .to_string();
+    for cmd in ["validate", "inspect", "run"] {
+        fails_with(&[cmd, &g], &["g.json", "declares no outputs"]);
+    }
+}
+
+#[test]
+fn when_one_output_cannot_be_written_none_is() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-all-or-nothing");
+    let input = format!("positions={}", positions(&dir, "x.npy", vec![0.5; 12], 4));
+    let first = dir.join("first.npy");
+    // A file name that is valid but leaves no room for the temporary's longer name.
+    let long = dir.join(format!("{}.npy", "f".repeat(246)));
+    let o = mesoflow(&[
+        "run",
+        &relax(),
+        "--input",
+        &input,
+        "--output",
+        &format!("positions={}", first.display()),
+        "--output",
+        &format!("force={}", long.display()),
+    ]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("--output force") && t.contains("no output was written"),
+        "{t}"
+    );
+    assert!(
+        !first.exists(),
+        "an output was written although another failed:\n{t}"
+    );
+    assert!(!long.exists());
+    assert!(temporaries(&dir).is_empty(), "{:?}", temporaries(&dir));
+}
+
+#[test]
+fn an_interrupted_run_leaves_no_temporary_and_no_partial_set_of_outputs() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-interrupt");
+    // Four outputs of 16 MB each: writing them (each synced to disk) takes long enough
+    // for the interrupt to arrive while a temporary exists.
+    let g = crate::util::write_graph(
+        &dir,
+        "big.json",
+        r#"{"mesoflow": 1,
+            "nodes": [{"id": "c", "kind": "constant", "params": {"value": 1, "rows": 4000000}},
+                      {"id": "d", "kind": "scale", "params": {"factor": 2}, "inputs": {"x": "c.out"}}],
+            "outputs": {"a": "c.out", "b": "d.out", "c": "c.out", "d": "d.out"}}"#,
+    )
+    .display()
+    .to_string();
+    let outs: Vec<std::path::PathBuf> = ["a", "b", "c", "d"]
+        .iter()
+        .map(|n| dir.join(format!("{n}.npy")))
+        .collect();
+    let mut caught = 0;
+    for _attempt in 0..5 {
+        for o in &outs {
+            let _ = std::fs::remove_file(o);
+        }
+        let mut args = vec!["run".to_string(), g.clone()];
+        for (n, o) in ["a", "b", "c", "d"].iter().zip(&outs) {
+            args.push("--output".into());
+            args.push(format!("{n}={}", o.display()));
+        }
+        let mut child = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+            .args(&args)
+            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Interrupt as soon as a temporary output appears.
+        let seen = loop {
+            if !temporaries(&dir).is_empty() {
+                break true;
+            }
+            if child.try_wait().unwrap().is_some() {
+                break false;
+            }
+        };
+        if seen {
+            let _ = Command::new("kill")
+                .args(["-INT", &child.id().to_string()])
+                .status();
+        }
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(
+            temporaries(&dir).is_empty(),
+            "left behind: {:?}",
+            temporaries(&dir)
+        );
+        let written = outs.iter().filter(|o| o.exists()).count();
+        assert!(
+            written == 0 || written == outs.len(),
+            "{written} of 4 outputs written:\n{err}"
+        );
+        if seen {
+            caught += 1;
+            if written == 0 {
+                assert_ne!(o.status.code(), Some(0), "interrupted but exit 0:\n{err}");
+            }
+        }
+    }
+    assert!(caught > 0, "no attempt was interrupted while writing");
+    // 64 MB of outputs when the last attempt finished writing.
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn run_without_output_computes_every_output_the_inputs_and_params_allow() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-no-output-arg");
+    let x = positions(&dir, "x.npy", vec![0.5, 1.0, 1.5, -2.0, 3.0, 4.0], 2);
+    let fcm = root().join("graphs/fcm.json").display().to_string();
+    let o = mesoflow(&[
+        "run",
+        &fcm,
+        "--input",
+        &format!("positions={x}"),
+        "--input",
+        &format!("forces={x}"),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    let out = String::from_utf8_lossy(&o.stdout);
+    for name in ["velocities:", "noise:", "fluctuating_velocities:"] {
+        assert!(out.contains(name), "{name} not summarised:\n{t}");
+    }
+    // The one output these inputs and params cannot give is named, with the reason.
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!out.contains("angular_velocities:"), "{t}");
+    assert!(
+        err.contains("output `angular_velocities` is left out") && err.contains("too coarse"),
+        "{t}"
+    );
+    // Asked for by name, it is an error, for the same reason.
+    fails_with(
+        &[
+            "run",
+            &fcm,
+            "--input",
+            &format!("positions={x}"),
+            "--input",
+            &format!("forces={x}"),
+            "--output",
+            "angular_velocities",
+        ],
+        &["too coarse"],
+    );
+}
+
+#[test]
+fn npy_inputs_of_an_unsupported_dtype_are_refused_with_the_file_named() {
+    use npyz::WriterBuilder;
+    let dir = tmpdir("cli-dtypes");
+    let complex = dir.join("complex.npy");
+    {
+        let mut f = std::io::BufWriter::new(std::fs::File::create(&complex).unwrap());
+        let mut w = npyz::WriteOptions::<num_complex::Complex<f32>>::new()
+            .default_dtype()
+            .shape(&[4, 3])
+            .writer(&mut f)
+            .begin_nd()
+            .unwrap();
+        w.extend((0..12).map(|i| num_complex::Complex::new(i as f32, 1.0)))
+            .unwrap();
+        w.finish().unwrap();
+    }
+    fails_with(
+        &[
+            "run",
+            &relax(),
+            "--input",
+            &format!("positions={}", complex.display()),
+        ],
+        &["complex.npy", "complex", "particles(nx3)"],
+    );
+    fails_with(
+        &[
+            "inspect",
+            &relax(),
+            "--input",
+            &format!("positions={}", complex.display()),
+        ],
+        &["complex.npy", "complex"],
+    );
+}

@@ -70,3 +70,92 @@ fn every_invalid_fixture_reports_its_problems() {
         }
     }
 }
+
+#[test]
+fn a_duplicated_key_is_an_error_at_every_level() {
+    use crate::util::{tmpdir, write_graph};
+    let dir = tmpdir("duplicate-keys");
+    std::fs::write(
+        dir.join("sub.json"),
+        r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}},
+            "nodes": [{"id": "s", "kind": "scale", "params": {"factor": 2}, "inputs": {"x": "inputs.x"}}],
+            "outputs": {"y": "s.out", "y": "inputs.x"}}"#,
+    )
+    .unwrap();
+    // (the graph, the key repeated, where it is); every file is valid without the repeat.
+    let cases = [
+        (
+            r#"{"mesoflow": 1, "mesoflow": 1, "outputs": {"y": "c.out"},
+                "nodes": [{"id": "c", "kind": "constant", "params": {"value": 1}}]}"#,
+            "mesoflow",
+            "the top level",
+        ),
+        (
+            r#"{"mesoflow": 1, "params": {"k": {"default": 1}, "k": {"default": 2}},
+                "nodes": [{"id": "c", "kind": "constant", "params": {"value": "$k"}}], "outputs": {"y": "c.out"}}"#,
+            "k",
+            "`params`",
+        ),
+        (
+            r#"{"mesoflow": 1, "params": {"k": {"default": 1, "min": 0, "min": 2}},
+                "nodes": [{"id": "c", "kind": "constant", "params": {"value": "$k"}}], "outputs": {"y": "c.out"}}"#,
+            "min",
+            "`params.k`",
+        ),
+        (
+            r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}, "x": {"type": "scalar"}},
+                "nodes": [{"id": "s", "kind": "scale", "params": {"factor": 2}, "inputs": {"x": "inputs.x"}}], "outputs": {"y": "s.out"}}"#,
+            "x",
+            "`inputs`",
+        ),
+        (
+            r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}},
+                "nodes": [{"id": "s", "kind": "scale", "kind": "affine", "params": {"factor": 2}, "inputs": {"x": "inputs.x"}}], "outputs": {"y": "s.out"}}"#,
+            "kind",
+            "`nodes[0]`",
+        ),
+        (
+            r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}, "z": {"type": "particles", "cols": 3}},
+                "nodes": [{"id": "s", "kind": "add", "inputs": {"a": "inputs.x", "b": "inputs.x", "a": "inputs.z"}}], "outputs": {"y": "s.out"}}"#,
+            "a",
+            "`nodes[0].inputs`",
+        ),
+        (
+            r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}},
+                "state": {"p": {"init": "inputs.x", "next": "state.p", "next": "inputs.x"}},
+                "outputs": {"y": "state.p"}}"#,
+            "next",
+            "`state.p`",
+        ),
+        (
+            r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}},
+                "outputs": {"y": "inputs.x", "y": {"from": "inputs.x", "doc": "again"}}}"#,
+            "y",
+            "`outputs`",
+        ),
+        // In a subgraph file: reported with that file.
+        (
+            r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}},
+                "nodes": [{"id": "m", "graph": "sub.json", "inputs": {"x": "inputs.x"}}], "outputs": {"y": "m.y"}}"#,
+            "y",
+            "`outputs`",
+        ),
+    ];
+    for (i, (json, key, place)) in cases.iter().enumerate() {
+        let path = write_graph(&dir, &format!("g{i}.json"), json);
+        let err = match validate_file(registry(), &path) {
+            Ok(_) => panic!("case {i}: a repeated `{key}` was accepted:\n{json}"),
+            Err(e) => e.to_string(),
+        };
+        assert!(
+            err.contains(&format!("duplicate key `{key}` in {place}")) && err.contains("line"),
+            "case {i}: {err}"
+        );
+        let file = if i == cases.len() - 1 {
+            "sub.json"
+        } else {
+            ".json"
+        };
+        assert!(err.contains(file), "case {i}: {err}");
+    }
+}

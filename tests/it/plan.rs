@@ -236,8 +236,34 @@ fn values_larger_than_a_binding_are_plan_errors() {
     )
     .unwrap_err()
     .to_string();
+    // The input itself is refused, by name, before any node meets it.
     assert!(
-        e.contains("node `a1`, port `out`") && e.contains("binds at most 128 MiB"),
+        e.contains("input `x` is particles(20000000x3), 240000000 bytes")
+            && e.contains("more than this device binds in one buffer (134217728 bytes"),
+        "{e}"
+    );
+    // A node output past the limit is refused at its port.
+    let dir = tmpdir("plan-output-limit");
+    let g = load(&write_graph(
+        &dir,
+        "big.json",
+        r#"{"mesoflow": 1,
+            "nodes": [{"id": "c", "kind": "constant", "params": {"value": 1, "rows": 40000000}}],
+            "outputs": {"c": "c.out"}}"#,
+    ));
+    let e = plan::plan(
+        &g,
+        &PlanOptions {
+            outputs: None,
+            inputs: BTreeMap::new(),
+            fuse: true,
+        },
+        &caps,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("node `c`, port `out`: output particles(40000000x1) takes 160000000 bytes"),
         "{e}"
     );
 }
@@ -262,5 +288,36 @@ fn states_swap_buffers_and_outputs_read_the_final_state() {
     assert!(
         dot.starts_with("digraph") && dot.contains("cluster_"),
         "{dot}"
+    );
+}
+
+/// A graph reducing an input of any length to one number per column.
+const REDUCE_INPUT: &str = r#"{"mesoflow": 1,
+    "inputs": {"x": {"type": "particles", "cols": 3}},
+    "nodes": [{"id": "total", "kind": "sum", "inputs": {"x": "inputs.x"}}],
+    "outputs": {"total": "total.out"}}"#;
+
+#[test]
+fn an_input_larger_than_the_device_binds_is_refused_by_name() {
+    let dir = tmpdir("plan-input-limit");
+    let g = load(&write_graph(&dir, "sum.json", REDUCE_INPUT));
+    let caps = DeviceCaps {
+        max_binding: 1024,
+        ..DeviceCaps::baseline()
+    };
+    let plan_for = |n: u32| {
+        let opts = PlanOptions {
+            outputs: None,
+            inputs: [("x".to_string(), ValueType::Particles { n, k: 3 })].into(),
+            fuse: true,
+        };
+        plan::plan(&g, &opts, &caps)
+    };
+    // 85 rows of 3 floats: 1020 bytes, bound whole; 86 rows: 1032.
+    assert!(plan_for(85).is_ok());
+    let e = plan_for(86).unwrap_err().to_string();
+    assert!(
+        e.contains("input `x`") && e.contains("1032 bytes") && e.contains("1024"),
+        "{e}"
     );
 }

@@ -232,3 +232,77 @@ fn whole_steps_are_timed_end_to_end_and_compute_what_unprofiled_runs_do() {
     }
     assert_eq!(outputs[0], outputs[1]);
 }
+
+#[test]
+fn a_launch_the_device_refuses_is_reported_as_its_node_not_as_a_buffer_label() {
+    let Some(gpu) = gpu() else { return };
+    use mesoflow::exec::Program;
+    use mesoflow::gpu::KernelCache;
+    use mesoflow::plan::{self, PlanOptions};
+    let dir = tmpdir("refused-launch");
+    let g = load(&write_graph(
+        &dir,
+        "sum.json",
+        r#"{"mesoflow": 1,
+            "inputs": {"x": {"type": "particles", "cols": 1}},
+            "nodes": [{"id": "total", "kind": "sum", "inputs": {"x": "inputs.x"}}],
+            "outputs": {"total": "total.out"}}"#,
+    ));
+    // Planned for a device without binding limits, then compiled on this one: the
+    // input's binding is past what it allows, which only the device can tell.
+    let n = u32::try_from(gpu.caps.max_binding / 4 + 4).unwrap();
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: [("x".to_string(), ValueType::Particles { n, k: 1 })].into(),
+        fuse: true,
+    };
+    let caps = mesoflow::gpu::DeviceCaps {
+        max_binding: u64::MAX,
+        max_buffer: u64::MAX,
+        ..gpu.caps.clone()
+    };
+    let p = plan::plan(&g, &opts, &caps).unwrap();
+    let e = match Program::compile(&gpu, &g, &p, &mut KernelCache::default()) {
+        Ok(_) => panic!("a binding past the device's limit compiled"),
+        Err(e) => e.to_string(),
+    };
+    eprintln!("refused as: {e}");
+    assert!(e.contains("node `total`") && e.contains("inputs.x"), "{e}");
+    assert!(!e.contains("label") && !e.contains("partial"), "{e}");
+}
+
+#[test]
+fn buffers_the_device_cannot_hold_are_reported_as_the_plan_s_memory() {
+    let Some(gpu) = gpu() else { return };
+    use mesoflow::exec::Program;
+    use mesoflow::gpu::KernelCache;
+    use mesoflow::plan::{self, PlanOptions};
+    let dir = tmpdir("unheld-buffers");
+    let g = load(&write_graph(
+        &dir,
+        "sum.json",
+        r#"{"mesoflow": 1,
+            "inputs": {"x": {"type": "particles", "cols": 4}},
+            "nodes": [{"id": "total", "kind": "sum", "inputs": {"x": "inputs.x"}}],
+            "outputs": {"total": "total.out"}}"#,
+    ));
+    // 64 GiB of input, planned for a device without limits: no device creates the buffer.
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: [("x".to_string(), ValueType::Particles { n: u32::MAX, k: 4 })].into(),
+        fuse: true,
+    };
+    let caps = mesoflow::gpu::DeviceCaps {
+        max_binding: u64::MAX,
+        max_buffer: u64::MAX,
+        ..gpu.caps.clone()
+    };
+    let p = plan::plan(&g, &opts, &caps).unwrap();
+    let e = match Program::compile(&gpu, &g, &p, &mut KernelCache::default()) {
+        Ok(_) => panic!("a 64 GiB buffer was created"),
+        Err(e) => e.to_string(),
+    };
+    eprintln!("refused as: {e}");
+    assert!(e.contains("cannot hold this plan's buffers"), "{e}");
+    assert!(!e.contains("label"), "{e}");
+}
