@@ -234,7 +234,7 @@ fn whole_steps_are_timed_end_to_end_and_compute_what_unprofiled_runs_do() {
 }
 
 #[test]
-fn a_launch_the_device_refuses_is_reported_as_its_node_not_as_a_buffer_label() {
+fn a_binding_past_the_device_limit_is_refused_by_name_before_anything_is_built() {
     let Some(gpu) = gpu() else { return };
     use mesoflow::exec::Program;
     use mesoflow::gpu::KernelCache;
@@ -249,7 +249,8 @@ fn a_launch_the_device_refuses_is_reported_as_its_node_not_as_a_buffer_label() {
             "outputs": {"total": "total.out"}}"#,
     ));
     // Planned for a device without binding limits, then compiled on this one: the
-    // input's binding is past what it allows, which only the device can tell.
+    // executor checks every buffer against the device's limits before allocating (once
+    // the device itself refused the bind group, under an internal buffer label).
     let n = u32::try_from(gpu.caps.max_binding / 4 + 4).unwrap();
     let opts = PlanOptions {
         outputs: None,
@@ -267,12 +268,16 @@ fn a_launch_the_device_refuses_is_reported_as_its_node_not_as_a_buffer_label() {
         Err(e) => e.to_string(),
     };
     eprintln!("refused as: {e}");
-    assert!(e.contains("node `total`") && e.contains("inputs.x"), "{e}");
+    assert!(
+        e.contains("input `x`") && e.contains("max_storage_buffer_binding_size"),
+        "{e}"
+    );
+    assert!(e.contains("nothing was allocated"), "{e}");
     assert!(!e.contains("label") && !e.contains("partial"), "{e}");
 }
 
 #[test]
-fn buffers_the_device_cannot_hold_are_reported_as_the_plan_s_memory() {
+fn a_buffer_past_the_device_limit_is_refused_by_name_before_anything_is_allocated() {
     let Some(gpu) = gpu() else { return };
     use mesoflow::exec::Program;
     use mesoflow::gpu::KernelCache;
@@ -303,6 +308,10 @@ fn buffers_the_device_cannot_hold_are_reported_as_the_plan_s_memory() {
         Err(e) => e.to_string(),
     };
     eprintln!("refused as: {e}");
-    assert!(e.contains("cannot hold this plan's buffers"), "{e}");
+    assert!(
+        e.contains("input `x`") && e.contains("max_buffer_size"),
+        "{e}"
+    );
+    assert!(e.contains("nothing was allocated"), "{e}");
     assert!(!e.contains("label"), "{e}");
 }
