@@ -68,6 +68,21 @@ fn text<'a>(args: &'a [ParamValue], i: usize, what: &str) -> Result<&'a str, Str
     }
 }
 
+/// Argument `i` as whole positive cell counts per axis.
+fn cell_counts(args: &[ParamValue], i: usize) -> Result<Vec<u32>, String> {
+    let cells = numbers(args, i, "grid")?;
+    if let Some(bad) = cells
+        .iter()
+        .find(|&&n| !(1.0..=65536.0).contains(&n) || n.fract() != 0.0)
+    {
+        return Err(format!(
+            "argument {} (grid) must be whole numbers of cells from 1 to 65536, got {bad}",
+            i + 1
+        ));
+    }
+    Ok(cells.iter().map(|&n| n as u32).collect())
+}
+
 fn arity(args: &[ParamValue], n: usize) -> Result<(), String> {
     if args.len() == n {
         Ok(())
@@ -293,13 +308,14 @@ static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "pse_cutoff",
-        doc: "pse_cutoff(radius, split, tolerance): the PSE near-field cutoff, where the near field falls below tolerance / 2 of the self-mobility (computed in f64)",
+        doc: "pse_cutoff(radius, split, tolerance, box): the PSE near-field cutoff, where the near field falls below a quarter of the tolerance times the periodic self-mobility (computed in f64)",
         call: |a| {
-            arity(a, 3)?;
+            arity(a, 4)?;
             Ok(ParamValue::Number(pse::cutoff(
                 positive(a, 0, "radius")?,
                 positive(a, 1, "split")?,
                 positive(a, 2, "tolerance")?,
+                numbers(a, 3, "box")?,
             )))
         },
     },
@@ -322,47 +338,33 @@ static FUNCTIONS: &[HostFunction] = &[
         },
     },
     HostFunction {
-        name: "pse_shape",
-        doc: "pse_shape(tolerance, grid): the Lindbo-Tornberg support (odd) whose shape sets the far-field Gaussian's width",
+        name: "pse_width",
+        doc: "pse_width(radius, split, tolerance, box, grid): standard deviation of the far-field Gaussian: of the cheapest Gaussian whose error bound (aliasing and truncation, every placement and pair, computed in f64) is within three quarters of the tolerance",
         call: |a| {
-            arity(a, 2)?;
-            let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
-            Ok(ParamValue::Number(
-                pse::shape_support(number(a, 0, "tolerance")?, &cells) as f64,
-            ))
+            arity(a, 5)?;
+            let w = pse::far_window(
+                positive(a, 0, "radius")?,
+                positive(a, 1, "split")?,
+                positive(a, 2, "tolerance")?,
+                numbers(a, 3, "box")?,
+                &cell_counts(a, 4)?,
+            )?;
+            Ok(ParamValue::Number(w.width))
         },
     },
     HostFunction {
         name: "pse_support",
-        doc: "pse_support(tolerance, box, grid, width): support in cells of the far-field Gaussian of that width, cut where the tolerance allows (erfc(m / sqrt 2) <= tol / 10)",
+        doc: "pse_support(radius, split, tolerance, box, grid, width): support in cells of the far-field Gaussian of that width: the fewest whose error bound is within three quarters of the tolerance",
         call: |a| {
-            arity(a, 4)?;
-            let cells: Vec<u32> = numbers(a, 2, "grid")?.iter().map(|&n| n as u32).collect();
+            arity(a, 6)?;
             Ok(ParamValue::Number(pse::support(
-                number(a, 0, "tolerance")?,
-                numbers(a, 1, "box")?,
-                &cells,
-                positive(a, 3, "width")?,
-            ) as f64))
-        },
-    },
-    HostFunction {
-        name: "pse_width",
-        doc: "pse_width(box, grid, support): standard deviation of the far-field Gaussian for that support (half the support over 0.976 sqrt(pi support), Lindbo-Tornberg)",
-        call: |a| {
-            arity(a, 3)?;
-            let cells: Vec<u32> = numbers(a, 1, "grid")?.iter().map(|&n| n as u32).collect();
-            let support = number(a, 2, "support")?;
-            if !(1.0..=64.0).contains(&support) || support.fract() != 0.0 {
-                return Err(format!(
-                    "support {support} must be a whole number of cells from 1 to 64"
-                ));
-            }
-            Ok(ParamValue::Number(pse::width(
-                numbers(a, 0, "box")?,
-                &cells,
-                support as u32,
-            )))
+                positive(a, 0, "radius")?,
+                positive(a, 1, "split")?,
+                positive(a, 2, "tolerance")?,
+                numbers(a, 3, "box")?,
+                &cell_counts(a, 4)?,
+                positive(a, 5, "width")?,
+            )? as f64))
         },
     },
     HostFunction {
