@@ -328,13 +328,14 @@ static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "pse_cutoff",
-        doc: "pse_cutoff(radius, split, tolerance): the PSE near-field cutoff, where the near field falls below tolerance / 2 of the self-mobility (computed in f64)",
+        doc: "pse_cutoff(radius, split, tolerance, box): the PSE near-field cutoff, where the near field falls below a quarter of the tolerance times the periodic self-mobility (computed in f64)",
         call: |a| {
-            arity(a, 3)?;
+            arity(a, 4)?;
             Ok(ParamValue::Number(pse::cutoff(
                 positive(a, 0, "radius")?,
                 positive(a, 1, "split")?,
                 tolerance(a, 2)?,
+                box_lengths(a, 3)?,
             )?))
         },
     },
@@ -353,47 +354,33 @@ static FUNCTIONS: &[HostFunction] = &[
         },
     },
     HostFunction {
-        name: "pse_shape",
-        doc: "pse_shape(tolerance, grid): the Lindbo-Tornberg support (odd) whose shape sets the far-field Gaussian's width",
+        name: "pse_width",
+        doc: "pse_width(radius, split, tolerance, box, grid): standard deviation of the far-field Gaussian: of the cheapest Gaussian whose error bound (aliasing and truncation, every placement and pair, computed in f64) is within three quarters of the tolerance",
         call: |a| {
-            arity(a, 2)?;
-            let cells = grid_cells(a, 1)?;
-            Ok(ParamValue::Number(
-                pse::shape_support(tolerance(a, 0)?, &cells) as f64,
-            ))
+            arity(a, 5)?;
+            let w = pse::far_window(
+                positive(a, 0, "radius")?,
+                positive(a, 1, "split")?,
+                tolerance(a, 2)?,
+                box_lengths(a, 3)?,
+                &grid_cells(a, 4)?,
+            )?;
+            Ok(ParamValue::Number(w.width))
         },
     },
     HostFunction {
         name: "pse_support",
-        doc: "pse_support(tolerance, box, grid, width): support in cells of the far-field Gaussian of that width, cut where the tolerance allows (erfc(m / sqrt 2) <= tol / 10)",
+        doc: "pse_support(radius, split, tolerance, box, grid, width): support in cells of the far-field Gaussian of that width: the fewest whose error bound is within three quarters of the tolerance",
         call: |a| {
-            arity(a, 4)?;
-            let cells = grid_cells(a, 2)?;
+            arity(a, 6)?;
             Ok(ParamValue::Number(pse::support(
-                tolerance(a, 0)?,
-                box_lengths(a, 1)?,
-                &cells,
-                positive(a, 3, "width")?,
-            ) as f64))
-        },
-    },
-    HostFunction {
-        name: "pse_width",
-        doc: "pse_width(box, grid, support): standard deviation of the far-field Gaussian for that support (half the support over 0.976 sqrt(pi support), Lindbo-Tornberg)",
-        call: |a| {
-            arity(a, 3)?;
-            let cells = grid_cells(a, 1)?;
-            let support = number(a, 2, "support")?;
-            if !(1.0..=64.0).contains(&support) || support.fract() != 0.0 {
-                return Err(format!(
-                    "support {support} must be a whole number of cells from 1 to 64"
-                ));
-            }
-            Ok(ParamValue::Number(pse::width(
-                box_lengths(a, 0)?,
-                &cells,
-                support as u32,
-            )))
+                positive(a, 0, "radius")?,
+                positive(a, 1, "split")?,
+                tolerance(a, 2)?,
+                box_lengths(a, 3)?,
+                &grid_cells(a, 4)?,
+                positive(a, 5, "width")?,
+            )? as f64))
         },
     },
     HostFunction {
@@ -521,7 +508,7 @@ mod tests {
             // PSE's near field: a split of 1e6 used to run the quadrature for minutes.
             (
                 "pse_cutoff",
-                vec![n(1.0), n(1e6), n(1e-3)],
+                vec![n(1.0), n(1e6), n(1e-3), v(&[8.0; 3])],
                 "MAX_FAR_PANELS",
             ),
             (

@@ -3,5 +3,6 @@
 //! against. The operators themselves are generic nodes (spread, rfft, `stokes`, `curl`,
 //! `stokes_noise`, irfft, interpolate) composed by graphs/fcm.json.
 
+pub mod bound;
 pub mod plan;
 pub mod reference;

@@ -258,6 +258,110 @@ fn pair_mobility_matches_the_ewald_sum_overlapping_or_not() {
     }
 }
 
+/// A number or the first of the numbers of a loaded graph's param.
+fn param_number(g: &mesoflow::graph::Graph, name: &str) -> f64 {
+    match g.params.iter().find(|p| p.name == name).map(|p| &p.value) {
+        Some(mesoflow::expr::ParamValue::Number(x)) => *x,
+        Some(mesoflow::expr::ParamValue::Numbers(v)) => v[0],
+        other => panic!("param {name}: {other:?}"),
+    }
+}
+
+/// The worst self and pair errors of M F, relative to the periodic self-mobility, over the
+/// placements where the discretisation's error peaks: on a far-field grid point, at a far
+/// cell's corner, its faces and edges (the window's aliasing and truncation peak where a
+/// particle sits on a grid point or midway, per axis), at a corner of the near field's
+/// cell list; pairs from overlapping to just past the near cutoff. Every tolerance from
+/// 1e-2 to 1e-6, boxes of side 12 and 16 at the default split and one larger split. The
+/// Lindbo-Tornberg window (the rule before) gave 4.4e-4 at 1e-4 (L = 16).
+#[test]
+fn mobility_is_within_the_tolerance_at_the_worst_placements() {
+    let Some(gpu) = gpu() else { return };
+    let mut cases: Vec<(f64, f64, Option<&str>)> = Vec::new();
+    for tol in [1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 1e-6] {
+        cases.push((16.0, tol, None));
+        cases.push((12.0, tol, None));
+    }
+    for tol in [1e-2, 1e-4, 1e-6] {
+        cases.push((16.0, tol, Some("1.3")));
+    }
+    let mut failures = Vec::new();
+    for (l, tol, split) in cases {
+        let edge = format!("[{l}, {l}, {l}]");
+        let tol_text = tol.to_string();
+        let mut sets = vec![("box", edge.as_str()), ("tolerance", tol_text.as_str())];
+        if let Some(s) = split {
+            sets.push(("split", s));
+        }
+        let g = load_with("pse.json", &sets, 1, 0);
+        let h = l / param_number(&g, "grid");
+        let cell = l / param_number(&g, "cells");
+        let cutoff = param_number(&g, "cutoff");
+        // The reference splits elsewhere than any case.
+        let reference = |r: [f64; 3]| ewald_rpy(r, l, 1.0, 0.83);
+        let m_self = reference([0.0; 3])[0][0];
+        let grid_point = -0.5 * l + 2.5 * h;
+        let mut placements: Vec<[f64; 3]> = [
+            [0.0, 0.0, 0.0],
+            [0.5, 0.5, 0.5],
+            [0.5, 0.0, 0.0],
+            [0.5, 0.5, 0.0],
+        ]
+        .iter()
+        .map(|o| o.map(|c| grid_point + c * h))
+        .collect();
+        placements.push([-0.5 * l + cell, -0.5 * l + cell, 0.5 * l - cell]);
+        let mut worst_self: f64 = 0.0;
+        {
+            let plan = mobility_plan(&gpu, &g, 1, false, &["velocities"]);
+            let mut program = compile_cached(&gpu, &g, &plan);
+            for x in &placements {
+                for axis in [0, 2] {
+                    let mut f = [[0.0; 3]];
+                    f[0][axis] = 1.0;
+                    let v = eval(&mut program, &[*x], &f, None)["velocities"][0];
+                    for (b, vb) in v.iter().enumerate() {
+                        let want = if b == axis { m_self } else { 0.0 };
+                        worst_self = worst_self.max((vb - want).abs() / m_self);
+                    }
+                }
+            }
+        }
+        let mut worst_pair: f64 = 0.0;
+        {
+            let plan = mobility_plan(&gpu, &g, 2, false, &["velocities"]);
+            let mut program = compile_cached(&gpu, &g, &plan);
+            let direction = [0.48, 0.6, 0.64];
+            let x0 = [grid_point + 0.5 * h; 3];
+            for r in [0.6, 1.7, 2.0, 3.3, cutoff - 0.05, cutoff + 0.05] {
+                let x1 = [0, 1, 2].map(|c| x0[c] + r * direction[c]);
+                let want = reference([0, 1, 2].map(|c| x1[c] - x0[c]));
+                for axis in [0, 2] {
+                    let mut f = [[0.0; 3]; 2];
+                    f[0][axis] = 1.0;
+                    let v = &eval(&mut program, &[x0, x1], &f, None)["velocities"];
+                    for b in 0..3 {
+                        worst_pair = worst_pair.max((v[1][b] - want[b][axis]).abs() / m_self);
+                    }
+                }
+            }
+        }
+        eprintln!(
+            "L {l} tolerance {tol:e} split {}: grid {}, support {}, cutoff {cutoff:.3}: worst self {worst_self:.2e}, pair {worst_pair:.2e}",
+            split.unwrap_or("default"),
+            param_number(&g, "grid"),
+            param_number(&g, "support"),
+        );
+        if worst_self.max(worst_pair) > tol {
+            failures.push(format!(
+                "L {l}, tolerance {tol:e}, split {}: self {worst_self:.2e}, pair {worst_pair:.2e}",
+                split.unwrap_or("default")
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "beyond the tolerance: {failures:#?}");
+}
+
 #[test]
 fn mobility_matrix_is_symmetric_and_positive_definite() {
     let Some(gpu) = gpu() else { return };
