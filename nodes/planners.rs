@@ -482,13 +482,20 @@ mod tests {
             ),
             (
                 "pse_width",
-                vec![v(&[8.0; 3]), v(&[1e30; 3]), n(7.0)],
+                vec![n(1.0), n(0.5), n(1e-3), v(&[8.0; 3]), v(&[1e30; 3])],
                 "MAX_LENGTH",
             ),
             (
                 "pse_support",
-                vec![n(1e-3), v(&[8.0; 3]), v(&[f64::NAN; 3]), n(1.0)],
-                "argument 3 (grid)",
+                vec![
+                    n(1.0),
+                    n(0.5),
+                    n(1e-3),
+                    v(&[8.0; 3]),
+                    v(&[f64::NAN; 3]),
+                    n(1.0),
+                ],
+                "argument 5 (grid)",
             ),
             (
                 "fcm_sort_bins",
