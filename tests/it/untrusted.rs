@@ -37,7 +37,10 @@ fn planners_refuse_hostile_sizes_naming_the_limit() {
             "MAX_GRID_CELLS",
         ),
         ("pse_grid([1e30, 1e30, 1e30], 0.5, 1e-3)", "MAX_LENGTH"),
-        ("pse_width([8, 8, 8], [1e30, 1e30, 1e30], 7)", "MAX_LENGTH"),
+        (
+            "pse_width(1, 0.5, 1e-3, [8, 8, 8], [1e30, 1e30, 1e30])",
+            "MAX_LENGTH",
+        ),
         ("fcm_sort_bins([0, 0, 0])", "MAX_LENGTH"),
         ("fcm_support(0, 'es', 1, [8, 8, 8], [8, 8, 8])", "tolerance"),
     ] {
