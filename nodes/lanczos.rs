@@ -146,14 +146,10 @@ impl Node for Lanczos {
             ));
         }
         let layout = Layout::new(z.words(), self.max_iterations);
-        Ok(Signature {
-            plan: None,
-            outputs: vec![z, z],
-            scratch: vec![
-                (self.max_iterations as u64 + 3) * z.bytes(),
-                4 * layout.words() as u64,
-            ],
-        })
+        Ok(Signature::outputs(vec![z, z]).with_scratch(vec![
+            (self.max_iterations as u64 + 3) * z.bytes(),
+            4 * layout.words() as u64,
+        ]))
     }
 
     fn lowering(&self) -> Lowering<'_> {

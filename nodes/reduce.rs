@@ -180,11 +180,8 @@ impl Node for FlatReduce {
                 ));
             }
         }
-        Ok(Signature {
-            plan: None,
-            outputs: vec![ValueType::Scalar],
-            scratch: vec![8 * groups_for(a.words()) as u64],
-        })
+        Ok(Signature::outputs(vec![ValueType::Scalar])
+            .with_scratch(vec![8 * groups_for(a.words()) as u64]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -309,11 +306,8 @@ impl Node for ColumnReduce {
                 format!("has {k} columns; column_reduce handles at most 4"),
             ));
         }
-        Ok(Signature {
-            plan: None,
-            outputs: vec![ValueType::Particles { n: 1, k }],
-            scratch: vec![32 * groups_for(n as u64 * 4) as u64],
-        })
+        Ok(Signature::outputs(vec![ValueType::Particles { n: 1, k }])
+            .with_scratch(vec![32 * groups_for(n as u64 * 4) as u64]))
     }
 
     fn lowering(&self) -> Lowering<'_> {

@@ -413,29 +413,27 @@ pub fn write(path: &Path, a: &HostArray) -> Result<(), NpyError> {
     write_all(&[(path, a)]).map_err(|e| e.source)
 }
 
+/// The elements of one array as an NPY body of `shape`, in their own dtype.
+fn write_elements<T>(w: &mut impl Write, shape: &[u64], v: &[T]) -> std::io::Result<()>
+where
+    T: npyz::Serialize + npyz::AutoSerialize + Copy,
+{
+    let mut npy = npyz::WriteOptions::<T>::new()
+        .default_dtype()
+        .shape(shape)
+        .writer(w)
+        .begin_nd()?;
+    npy.extend(v.iter().copied())?;
+    npy.finish()
+}
+
 /// The NPY form of an array into a new file, synced to disk.
 fn write_npy(file: File, a: &HostArray) -> std::io::Result<()> {
     let mut w = BufWriter::new(file);
     let shape = a.ty.npy_shape();
     match &a.data {
-        HostData::F32(v) => {
-            let mut npy = npyz::WriteOptions::<f32>::new()
-                .default_dtype()
-                .shape(&shape)
-                .writer(&mut w)
-                .begin_nd()?;
-            npy.extend(v.iter().copied())?;
-            npy.finish()?;
-        }
-        HostData::U32(v) => {
-            let mut npy = npyz::WriteOptions::<u32>::new()
-                .default_dtype()
-                .shape(&shape)
-                .writer(&mut w)
-                .begin_nd()?;
-            npy.extend(v.iter().copied())?;
-            npy.finish()?;
-        }
+        HostData::F32(v) => write_elements(&mut w, &shape, v)?,
+        HostData::U32(v) => write_elements(&mut w, &shape, v)?,
     }
     w.flush()?;
     w.get_ref().sync_all()

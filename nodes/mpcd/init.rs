@@ -124,11 +124,7 @@ impl Node for MpcdInit {
             n: self.u.n,
             k: self.geo.dims() as u32,
         };
-        Ok(Signature {
-            plan: None,
-            outputs: vec![t, t],
-            scratch: vec![32],
-        })
+        Ok(Signature::outputs(vec![t, t]).with_scratch(vec![32]))
     }
 
     fn lowering(&self) -> Lowering<'_> {

@@ -233,28 +233,33 @@ fn whole_steps_are_timed_end_to_end_and_compute_what_unprofiled_runs_do() {
     assert_eq!(outputs[0], outputs[1]);
 }
 
-#[test]
-fn a_binding_past_the_device_limit_is_refused_by_name_before_anything_is_built() {
-    let Some(gpu) = gpu() else { return };
+/// The error of compiling, on this device, a one-node `sum` graph over an input of `n`
+/// rows of `k` planned for a device without size limits: the executor checks every
+/// buffer against the device's limits before allocating (once the device itself refused
+/// the bind group, under an internal buffer label).
+fn refused_past_the_device_limits(
+    gpu: &mesoflow::gpu::GpuContext,
+    name: &str,
+    n: u32,
+    k: u32,
+) -> String {
     use mesoflow::exec::Program;
     use mesoflow::gpu::KernelCache;
     use mesoflow::plan::{self, PlanOptions};
-    let dir = tmpdir("refused-launch");
+    let dir = tmpdir(name);
     let g = load(&write_graph(
         &dir,
         "sum.json",
-        r#"{"mesoflow": 1,
-            "inputs": {"x": {"type": "particles", "cols": 1}},
-            "nodes": [{"id": "total", "kind": "sum", "inputs": {"x": "inputs.x"}}],
-            "outputs": {"total": "total.out"}}"#,
+        &format!(
+            r#"{{"mesoflow": 1,
+            "inputs": {{"x": {{"type": "particles", "cols": {k}}}}},
+            "nodes": [{{"id": "total", "kind": "sum", "inputs": {{"x": "inputs.x"}}}}],
+            "outputs": {{"total": "total.out"}}}}"#
+        ),
     ));
-    // Planned for a device without binding limits, then compiled on this one: the
-    // executor checks every buffer against the device's limits before allocating (once
-    // the device itself refused the bind group, under an internal buffer label).
-    let n = u32::try_from(gpu.caps.max_binding / 4 + 4).unwrap();
     let opts = PlanOptions {
         outputs: None,
-        inputs: [("x".to_string(), ValueType::Particles { n, k: 1 })].into(),
+        inputs: [("x".to_string(), ValueType::Particles { n, k })].into(),
         fuse: true,
     };
     let caps = mesoflow::gpu::DeviceCaps {
@@ -263,11 +268,20 @@ fn a_binding_past_the_device_limit_is_refused_by_name_before_anything_is_built()
         ..gpu.caps.clone()
     };
     let p = plan::plan(&g, &opts, &caps).unwrap();
-    let e = match Program::compile(&gpu, &g, &p, &mut KernelCache::default()) {
-        Ok(_) => panic!("a binding past the device's limit compiled"),
+    let e = match Program::compile(gpu, &g, &p, &mut KernelCache::default()) {
+        Ok(_) => panic!("a buffer past the device's limits compiled"),
         Err(e) => e.to_string(),
     };
     eprintln!("refused as: {e}");
+    e
+}
+
+#[test]
+fn a_binding_past_the_device_limit_is_refused_by_name_before_anything_is_built() {
+    let Some(gpu) = gpu() else { return };
+    // The input's binding is past what the device allows.
+    let n = u32::try_from(gpu.caps.max_binding / 4 + 4).unwrap();
+    let e = refused_past_the_device_limits(&gpu, "refused-launch", n, 1);
     assert!(
         e.contains("input `x`") && e.contains("max_storage_buffer_binding_size"),
         "{e}"
@@ -279,35 +293,8 @@ fn a_binding_past_the_device_limit_is_refused_by_name_before_anything_is_built()
 #[test]
 fn a_buffer_past_the_device_limit_is_refused_by_name_before_anything_is_allocated() {
     let Some(gpu) = gpu() else { return };
-    use mesoflow::exec::Program;
-    use mesoflow::gpu::KernelCache;
-    use mesoflow::plan::{self, PlanOptions};
-    let dir = tmpdir("unheld-buffers");
-    let g = load(&write_graph(
-        &dir,
-        "sum.json",
-        r#"{"mesoflow": 1,
-            "inputs": {"x": {"type": "particles", "cols": 4}},
-            "nodes": [{"id": "total", "kind": "sum", "inputs": {"x": "inputs.x"}}],
-            "outputs": {"total": "total.out"}}"#,
-    ));
-    // 64 GiB of input, planned for a device without limits: no device creates the buffer.
-    let opts = PlanOptions {
-        outputs: None,
-        inputs: [("x".to_string(), ValueType::Particles { n: u32::MAX, k: 4 })].into(),
-        fuse: true,
-    };
-    let caps = mesoflow::gpu::DeviceCaps {
-        max_binding: u64::MAX,
-        max_buffer: u64::MAX,
-        ..gpu.caps.clone()
-    };
-    let p = plan::plan(&g, &opts, &caps).unwrap();
-    let e = match Program::compile(&gpu, &g, &p, &mut KernelCache::default()) {
-        Ok(_) => panic!("a 64 GiB buffer was created"),
-        Err(e) => e.to_string(),
-    };
-    eprintln!("refused as: {e}");
+    // 64 GiB of input: no device creates the buffer.
+    let e = refused_past_the_device_limits(&gpu, "unheld-buffers", u32::MAX, 4);
     assert!(
         e.contains("input `x`") && e.contains("max_buffer_size"),
         "{e}"

@@ -142,21 +142,26 @@ fn include_file(dir: &Path, level: usize, next: Option<&str>, twice: bool) -> Pa
     write_graph(dir, &format!("f{level}.json"), &json)
 }
 
+/// Files f0.json to f{levels - 1}.json, each including the next (twice with `twice`).
+fn include_chain(dir: &Path, levels: usize, twice: bool) {
+    for level in 0..levels {
+        let next = format!("f{}.json", level + 1);
+        include_file(
+            dir,
+            level,
+            (level + 1 < levels).then_some(next.as_str()),
+            twice,
+        );
+    }
+}
+
 /// A chain of 2,000 files each including the next is an error naming the depth limit
 /// (before: a stack overflow of the loader, SIGABRT, at 20,000); 30 levels still load.
 #[test]
 fn include_chains_are_bounded_in_depth() {
     let dir = tmpdir("untrusted-chain");
     let levels = 2_000;
-    for level in 0..levels {
-        let next = format!("f{}.json", level + 1);
-        include_file(
-            &dir,
-            level,
-            (level + 1 < levels).then_some(next.as_str()),
-            false,
-        );
-    }
+    include_chain(&dir, levels, false);
     let e = load_file_error(&dir.join("f0.json"));
     assert!(e.contains("MAX_SUBGRAPH_DEPTH"), "{e}");
     mesoflow::graph::load(
@@ -182,15 +187,7 @@ fn a_file_including_itself_is_an_error() {
 fn exponential_include_fan_out_is_bounded() {
     let dir = tmpdir("untrusted-fan-out");
     let levels = 17;
-    for level in 0..levels {
-        let next = format!("f{}.json", level + 1);
-        include_file(
-            &dir,
-            level,
-            (level + 1 < levels).then_some(next.as_str()),
-            true,
-        );
-    }
+    include_chain(&dir, levels, true);
     let e = load_file_error(&dir.join("f0.json"));
     assert!(e.contains("MAX_EXPANDED_NODES"), "{e}");
     assert_eq!(
