@@ -15,7 +15,7 @@ use mesoflow::gpu::{DeviceCaps, GpuContext, GpuError, KernelCache};
 use mesoflow::graph::{self, Graph, LoadOptions};
 use mesoflow::node::Registry;
 use mesoflow::plan::{self, Plan, PlanOptions};
-use mesoflow::value::{HostArray, HostData};
+use mesoflow::value::{HostArray, HostData, ValueType};
 
 use crate::bench::{BenchCommand, BenchError};
 
@@ -72,12 +72,14 @@ pub enum Command {
         graph: PathBuf,
         #[arg(long = "set", value_name = "NAME=VALUE")]
         sets: Vec<String>,
-        /// Take an input's shape from an NPY file (otherwise the declared sizes' defaults).
+        /// Take an input's shape from an NPY file (otherwise its declared shape, with sizes
+        /// from the inputs given or the sizes' defaults).
         #[arg(long = "input", value_name = "NAME=FILE")]
         inputs: Vec<String>,
-        /// Plan without this optional input (as a run that does not give it).
-        #[arg(long = "without", value_name = "NAME")]
-        without: Vec<String>,
+        /// Plan with this optional input at its declared shape (optional inputs not given
+        /// are absent, as in a run).
+        #[arg(long = "with", value_name = "NAME")]
+        with: Vec<String>,
         /// Plan for these outputs only.
         #[arg(long = "output", value_name = "NAME")]
         outputs: Vec<String>,
@@ -173,13 +175,13 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             graph,
             sets,
             inputs,
-            without,
+            with,
             outputs,
             steps,
             no_fuse,
             dot,
         } => inspect(
-            &registry, &graph, &sets, &inputs, &without, &outputs, steps, !no_fuse, dot,
+            &registry, &graph, &sets, &inputs, &with, &outputs, steps, !no_fuse, dot,
         ),
         Command::Nodes { kind } => nodes(&registry, kind.as_deref()),
         Command::Info => {
@@ -555,7 +557,7 @@ fn inspect(
     path: &Path,
     sets: &[String],
     input_args: &[String],
-    without: &[String],
+    with: &[String],
     outputs: &[String],
     steps: u64,
     fuse: bool,
@@ -571,29 +573,29 @@ fn inspect(
             seed: 0,
         },
     )?;
-    let mut inputs = g.declared_input_types();
-    for (name, arr) in read_inputs(&g, input_args)? {
-        inputs.insert(name, arr.ty);
-    }
-    for name in without {
+    let given: BTreeMap<String, ValueType> = read_inputs(&g, input_args)?
+        .into_iter()
+        .map(|(name, arr)| (name, arr.ty))
+        .collect();
+    for name in with {
         match g.inputs.iter().find(|i| &i.name == name) {
-            Some(i) if i.optional => {
-                inputs.remove(name);
-            }
+            Some(i) if i.optional => {}
             Some(_) => {
                 return Err(CliError::Input(format!(
-                    "--without {name}: input `{name}` is required"
+                    "--with {name}: input `{name}` is required (planned in any case)"
                 )));
             }
             None => {
                 let known: Vec<&str> = g.inputs.iter().map(|i| i.name.as_str()).collect();
                 return Err(CliError::Input(format!(
-                    "--without {name}: no such input (inputs: {})",
+                    "--with {name}: no such input (inputs: {})",
                     known.join(", ")
                 )));
             }
         }
     }
+    let with: Vec<&str> = with.iter().map(String::as_str).collect();
+    let inputs = g.assumed_input_types(&given, &with);
     let caps = match GpuContext::new() {
         Ok(gpu) => gpu.caps.clone(),
         Err(_) => DeviceCaps::baseline(),

@@ -191,6 +191,16 @@ pub enum ExprError {
     },
 }
 
+impl ExprError {
+    /// Whether the problem is with the values the expression was given rather than with
+    /// its text: a host function refusing its arguments (a planner outside its domain).
+    /// A node's params with such a problem are as wrong as an out-of-range value, and
+    /// only matter where the node runs.
+    pub fn depends_on_values(&self) -> bool {
+        matches!(self, ExprError::Function { .. })
+    }
+}
+
 /// Names visible to expressions, with the host functions they may call.
 #[derive(Clone)]
 pub struct Scope<'f> {

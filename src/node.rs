@@ -338,11 +338,37 @@ impl Params {
 }
 
 /// Checks raw values against a kind's specs and fills defaults. Returns every problem
-/// as (param name, message).
+/// as (param name, message): those of [`check_param_names`] and the values' own.
 pub fn check_params(
     specs: &[ParamSpec],
     raw: &BTreeMap<String, ParamValue>,
 ) -> Result<Params, Vec<(String, String)>> {
+    let mut problems = check_param_names(specs, raw);
+    let mut values = BTreeMap::new();
+    for spec in specs {
+        if let Some(v) = raw.get(spec.name).or(spec.default.as_ref()) {
+            match spec.check(v) {
+                Ok(()) => {
+                    values.insert(spec.name.to_string(), v.clone());
+                }
+                Err(e) => problems.push((spec.name.to_string(), format!("bad value: {e}"))),
+            }
+        }
+    }
+    if problems.is_empty() {
+        Ok(Params::new(values))
+    } else {
+        Err(problems)
+    }
+}
+
+/// The problems of a node's params that do not depend on their values: names the kind
+/// does not take, required params not given. (Whether a value suits its param is the
+/// rest of [`check_params`].)
+pub fn check_param_names(
+    specs: &[ParamSpec],
+    raw: &BTreeMap<String, ParamValue>,
+) -> Vec<(String, String)> {
     let mut problems = Vec::new();
     for name in raw.keys() {
         if !specs.iter().any(|s| s.name == name) {
@@ -360,23 +386,12 @@ pub fn check_params(
             ));
         }
     }
-    let mut values = BTreeMap::new();
     for spec in specs {
-        match raw.get(spec.name).or(spec.default.as_ref()) {
-            Some(v) => match spec.check(v) {
-                Ok(()) => {
-                    values.insert(spec.name.to_string(), v.clone());
-                }
-                Err(e) => problems.push((spec.name.to_string(), format!("bad value: {e}"))),
-            },
-            None => problems.push((spec.name.to_string(), "missing required param".into())),
+        if spec.default.is_none() && !raw.contains_key(spec.name) {
+            problems.push((spec.name.to_string(), "missing required param".into()));
         }
     }
-    if problems.is_empty() {
-        Ok(Params::new(values))
-    } else {
-        Err(problems)
-    }
+    problems
 }
 
 /// A type error at one port, found while inferring shapes.

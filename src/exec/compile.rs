@@ -96,7 +96,7 @@ impl<'a> Program<'a> {
             node: inst.id.clone(),
             source,
         };
-        let dispatches = match inst.node.lowering() {
+        let dispatches = match inst.node().lowering() {
             Lowering::Kernels(k) => k.compile(cx, io).map_err(err)?,
             Lowering::Spectral(body) => {
                 let input = io.inputs[0].ok_or_else(|| {
@@ -137,7 +137,7 @@ impl<'a> Program<'a> {
     ) -> Result<Compiled, ExecError> {
         let g = self.graph;
         let inst = &g.nodes[node];
-        let Lowering::Transform(t) = inst.node.lowering() else {
+        let Lowering::Transform(t) = inst.node().lowering() else {
             panic!("node `{}` scheduled as a transform is not one", inst.id)
         };
         let err = |source| ExecError::Compile {
@@ -153,7 +153,7 @@ impl<'a> Program<'a> {
             ));
         };
         let s = &g.nodes[f.node];
-        let Lowering::Spectral(body) = s.node.lowering() else {
+        let Lowering::Spectral(body) = s.node().lowering() else {
             panic!("folded node `{}` is not spectral", s.id)
         };
         Ok(Compiled::plain(
@@ -245,7 +245,7 @@ impl<'a> Program<'a> {
         parity: usize,
     ) -> Result<Compiled, ExecError> {
         let inst = &self.graph.nodes[node];
-        let Lowering::Iterative(it) = inst.node.lowering() else {
+        let Lowering::Iterative(it) = inst.node().lowering() else {
             panic!("node `{}` scheduled as a loop does not iterate", inst.id)
         };
         let kernels = it.compile(cx, io).map_err(|source| ExecError::Compile {

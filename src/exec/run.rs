@@ -70,7 +70,7 @@ impl Program<'_> {
         step: u64,
     ) -> Result<u32, ExecError> {
         let inst = &self.graph.nodes[lp.node];
-        let Lowering::Iterative(it) = inst.node.lowering() else {
+        let Lowering::Iterative(it) = inst.node().lowering() else {
             unreachable!("compiled as a loop")
         };
         // Iteration k goes out with a copy of the status after it. While the host reads

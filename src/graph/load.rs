@@ -7,12 +7,12 @@ use indexmap::IndexMap;
 
 use super::schema::{GraphFile, InputDecl, NodeDecl, ParamDecl, SCHEMA_VERSION};
 use super::{
-    Dim, Graph, GraphParam, InputDef, InputShape, NodeId, NodeInst, OutputDef, Problem, Problems,
-    SizeDef, Source, StateDef,
+    BuiltNode, Dim, Graph, GraphParam, InputDef, InputShape, NodeId, NodeInst, OutputDef, Problem,
+    Problems, SizeDef, Source, StateDef,
 };
 use crate::expr::{self, ExprError, ParamValue, Scope};
 use crate::ids::Id;
-use crate::node::{Registry, check_params, edit_distance, nearest};
+use crate::node::{Registry, check_param_names, check_params, edit_distance, nearest};
 use crate::value::ValueType;
 
 /// Names every graph sees without declaring them.
@@ -729,8 +729,13 @@ impl<'r> Loader<'r> {
                     .push(Problem::node(path, id, "duplicate node id"));
                 continue;
             }
-            // Param values: literals, `$name` references or `= expressions`.
+            // Param values: literals, `$name` references or `= expressions`. A value a
+            // host function refuses for these params (a planner's domain) is a problem of
+            // the value, like one out of range: a kind node keeps it for the planner to
+            // report where the node runs. Anything else wrong with an expression is wrong
+            // with the file.
             let mut raw_params = BTreeMap::new();
+            let mut value_problems = Vec::new();
             let mut bad = false;
             for (pname, v) in &decl.params {
                 match expr::resolve(v, values) {
@@ -740,6 +745,9 @@ impl<'r> Loader<'r> {
                     Err(ExprError::Unresolved { name }) => {
                         bad = true;
                         self.follows(scope, &name, ("node", format!("{scope}{id}")));
+                    }
+                    Err(e) if decl.kind.is_some() && e.depends_on_values() => {
+                        value_problems.push(format!("param `{pname}`: {e}"));
                     }
                     Err(e) => {
                         bad = true;
@@ -753,7 +761,8 @@ impl<'r> Loader<'r> {
             }
             match (&decl.kind, &decl.graph) {
                 (Some(kind), None) => {
-                    let built = !bad && self.kind_node(path, scope, &decl, kind, raw_params);
+                    let built = !bad
+                        && self.kind_node(path, scope, &decl, kind, raw_params, value_problems);
                     if !built {
                         self.node_ids.insert(key, NodeEntry::Failed);
                     }
@@ -816,6 +825,7 @@ impl<'r> Loader<'r> {
         decl: &NodeDecl,
         kind_name: &str,
         raw_params: BTreeMap<String, ParamValue>,
+        value_problems: Vec<String>,
     ) -> bool {
         let id = decl.id.as_str();
         let Some(kind) = self.registry.get(kind_name) else {
@@ -866,22 +876,33 @@ impl<'r> Loader<'r> {
                 }
             }
         }
-        let params = match check_params(kind.params(), &raw_params) {
-            Ok(p) => p,
-            Err(errs) => {
-                for (pname, msg) in errs {
-                    self.problems
-                        .push(Problem::node(path, id, format!("param `{pname}`: {msg}")));
-                }
-                return false;
+        // Param names the kind does not take, or required ones not given, are wrong with
+        // the file. Whether the values suit the kind is checked here and reported by the
+        // planner, for the nodes the requested outputs run (`NodeInst::built`).
+        let misnamed = check_param_names(kind.params(), &raw_params);
+        if !misnamed.is_empty() {
+            for (pname, msg) in misnamed {
+                self.problems
+                    .push(Problem::node(path, id, format!("param `{pname}`: {msg}")));
             }
-        };
-        let node = match kind.build(&params) {
-            Ok(n) => n,
-            Err(e) => {
-                self.problems.push(Problem::node(path, id, e));
-                return false;
+            return false;
+        }
+        let built = if value_problems.is_empty() {
+            match check_params(kind.params(), &raw_params) {
+                Ok(params) => kind
+                    .build(&params)
+                    .map(|node| BuiltNode {
+                        params,
+                        node: node.into(),
+                    })
+                    .map_err(|e| vec![e]),
+                Err(errs) => Err(errs
+                    .into_iter()
+                    .map(|(pname, msg)| format!("param `{pname}`: {msg}"))
+                    .collect()),
             }
+        } else {
+            Err(value_problems)
         };
         let index = self.pending_nodes.len();
         self.node_ids
@@ -891,11 +912,10 @@ impl<'r> Loader<'r> {
                 id: format!("{scope}{id}"),
                 kind: kind.name(),
                 file: path.into(),
-                params,
                 input_ports,
                 output_ports,
                 inputs: Vec::new(),
-                node: node.into(),
+                built,
             },
             refs,
         });

@@ -249,12 +249,36 @@ pub struct NodeInst {
     pub kind: &'static str,
     /// The graph file that declared it.
     pub file: PathBuf,
-    pub params: Params,
     pub input_ports: Vec<PortSpec>,
     pub output_ports: Vec<PortSpec>,
     /// One source per input port; [`Source::Absent`] for an unconnected optional port.
     pub inputs: Vec<Source>,
+    /// The node built from its checked params, or what is wrong with its params (out of
+    /// range, refused by the kind's build): a graph file may hold nodes its requested
+    /// outputs never run (fcm.json's torque path when no torques are given), so these
+    /// problems are the planner's to report, for the nodes it would run (`plan::infer`).
+    pub built: Result<BuiltNode, Vec<String>>,
+}
+
+/// A node built from params its kind accepted.
+#[derive(Clone)]
+pub struct BuiltNode {
+    pub params: Params,
     pub node: Arc<dyn Node>,
+}
+
+impl NodeInst {
+    /// The built node. Only the nodes a plan runs are asked for it, and planning stops
+    /// at any of them that could not be built, with its problems.
+    pub fn node(&self) -> &dyn Node {
+        match &self.built {
+            Ok(b) => b.node.as_ref(),
+            Err(_) => panic!(
+                "node `{}` was not built; the planner reports its problems before anything uses it",
+                self.id
+            ),
+        }
+    }
 }
 
 /// A loaded, validated, flattened graph.
@@ -279,30 +303,77 @@ impl Graph {
         self.outputs.iter().position(|o| o.name == name)
     }
 
-    /// Every input's type from its declaration, with the declared sizes' defaults and
-    /// one row where the count is free: the inputs a plan assumes when no data is given
-    /// (`validate`, `inspect`).
+    /// The required inputs' types from their declarations, with the declared sizes'
+    /// defaults and one row where the count is free: the inputs a plan assumes when no
+    /// data is given (`validate`, `inspect`). Optional inputs are absent, as in a run that
+    /// does not give them.
     pub fn declared_input_types(&self) -> BTreeMap<String, ValueType> {
-        let size = |s: &str| self.sizes.iter().find(|d| d.name == s).map(|d| d.default);
-        self.inputs
+        self.assumed_input_types(&BTreeMap::new(), &[])
+    }
+
+    /// [`Graph::declared_input_types`] with the optional inputs given too.
+    pub fn declared_input_types_with_optional(&self) -> BTreeMap<String, ValueType> {
+        let optional: Vec<&str> = self
+            .inputs
             .iter()
-            .filter_map(|i| {
-                let shape = match &i.shape {
-                    InputShape::Particles {
-                        rows: Dim::Free,
-                        cols,
-                    } => InputShape::Particles {
-                        rows: Dim::Fixed(1),
-                        cols: *cols,
-                    },
-                    InputShape::Indices { rows: Dim::Free } => InputShape::Indices {
-                        rows: Dim::Fixed(1),
-                    },
-                    other => other.clone(),
-                };
-                shape.with_sizes(size).map(|t| (i.name.clone(), t))
-            })
-            .collect()
+            .filter(|i| i.optional)
+            .map(|i| i.name.as_str())
+            .collect();
+        self.assumed_input_types(&BTreeMap::new(), &optional)
+    }
+
+    /// The inputs a plan assumes when only some are given (`inspect`): those `given`, and
+    /// every other required input, and the optional inputs named in `optional`, at their
+    /// declared shapes, a size taken from a given input that fixes it, else from its
+    /// default (one row where the count is free). Other optional inputs are absent, as
+    /// in a run that does not give them.
+    pub fn assumed_input_types(
+        &self,
+        given: &BTreeMap<String, ValueType>,
+        optional: &[&str],
+    ) -> BTreeMap<String, ValueType> {
+        let mut fixed: BTreeMap<&str, u32> = BTreeMap::new();
+        for decl in &self.inputs {
+            let rows = match (&decl.shape, given.get(&decl.name)) {
+                (InputShape::Particles { rows, .. }, Some(ValueType::Particles { n, .. }))
+                | (InputShape::Indices { rows }, Some(ValueType::Indices { n })) => {
+                    Some((rows, *n))
+                }
+                _ => None,
+            };
+            if let Some((Dim::Size(s), n)) = rows {
+                fixed.entry(s.as_str()).or_insert(n);
+            }
+        }
+        let size = |s: &str| {
+            fixed
+                .get(s)
+                .copied()
+                .or_else(|| self.sizes.iter().find(|d| d.name == s).map(|d| d.default))
+        };
+        let mut types = given.clone();
+        for i in &self.inputs {
+            if types.contains_key(&i.name) || (i.optional && !optional.contains(&i.name.as_str())) {
+                continue;
+            }
+            let shape = match &i.shape {
+                InputShape::Particles {
+                    rows: Dim::Free,
+                    cols,
+                } => InputShape::Particles {
+                    rows: Dim::Fixed(1),
+                    cols: *cols,
+                },
+                InputShape::Indices { rows: Dim::Free } => InputShape::Indices {
+                    rows: Dim::Fixed(1),
+                },
+                other => other.clone(),
+            };
+            if let Some(t) = shape.with_sizes(size) {
+                types.insert(i.name.clone(), t);
+            }
+        }
+        types
     }
 
     /// A value's name as users write it: `inputs.x`, `state.x`, `node.port`.

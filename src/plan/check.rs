@@ -53,15 +53,16 @@ fn structural_caps() -> DeviceCaps {
     }
 }
 
-/// Loads a graph file with its defaults and plans all its outputs with the declared
-/// inputs ([`graph::Graph::declared_input_types`]). Some outputs or optional inputs may
-/// need other params than the defaults (FCM's rotation needs its finer grid): the file
-/// is valid when some output plans, with the optional inputs or without them, and the
-/// others are reported as notes; otherwise the error is the problems of planning
-/// everything.
+/// Loads a graph file with its defaults and plans its outputs as `run` does when given
+/// its required inputs only ([`graph::Graph::declared_input_types`]: optional inputs
+/// absent). Some outputs or optional inputs may need other params than the defaults
+/// (FCM's rotation needs its finer grid): the file is valid when some output plans, and
+/// the outputs that do not, or that do not with the optional inputs given as well, are
+/// reported as notes; otherwise the error is the problems of planning everything.
 pub fn validate_file(registry: &Registry, path: &Path) -> Result<Validation, Problems> {
     let g = graph::load(path, registry, &LoadOptions::default())?;
-    let all = g.declared_input_types();
+    let required = g.declared_input_types();
+    let all = g.declared_input_types_with_optional();
     let caps = structural_caps();
     let plan_with = |inputs: &BTreeMap<String, ValueType>, outputs: Option<Vec<String>>| {
         let opts = PlanOptions {
@@ -71,43 +72,40 @@ pub fn validate_file(registry: &Registry, path: &Path) -> Result<Validation, Pro
         };
         plan(&g, &opts, &caps)
     };
-    let first_error = match plan_with(&all, None) {
-        Ok(p) => {
+    let first_error = match (plan_with(&required, None), plan_with(&all, None)) {
+        (Ok(p), Ok(q)) => {
             return Ok(Validation {
                 nodes: g.nodes.len(),
-                launches: p.step.len(),
+                launches: p.step.len().max(q.step.len()),
                 notes: Vec::new(),
             });
         }
-        Err(e) => e,
+        (Err(e), _) | (_, Err(e)) => e,
     };
-    let required: BTreeMap<String, ValueType> = all
-        .iter()
-        .filter(|(name, _)| g.inputs.iter().any(|i| &i.name == *name && !i.optional))
-        .map(|(k, v)| (k.clone(), *v))
-        .collect();
     let mut notes = Vec::new();
     let mut launches = 0;
+    let mut planned = 0;
     for out in &g.outputs {
         let only = Some(vec![out.name.clone()]);
-        match plan_with(&all, only.clone()) {
-            Ok(p) => launches = launches.max(p.step.len()),
-            Err(e_all) => match plan_with(&required, only) {
-                Ok(p) => {
-                    launches = launches.max(p.step.len());
-                    notes.push(format!(
+        match plan_with(&required, only.clone()) {
+            Ok(p) => {
+                planned += 1;
+                launches = launches.max(p.step.len());
+                match plan_with(&all, only) {
+                    Ok(q) => launches = launches.max(q.step.len()),
+                    Err(e_all) => notes.push(format!(
                         "output `{}` plans without the optional inputs only (with the defaults):\n{e_all}",
                         out.name
-                    ));
+                    )),
                 }
-                Err(_) => notes.push(format!(
-                    "output `{}` does not plan with the default params:\n{e_all}",
-                    out.name
-                )),
-            },
+            }
+            Err(e) => notes.push(format!(
+                "output `{}` does not plan with the default params:\n{e}",
+                out.name
+            )),
         }
     }
-    if notes.len() == g.outputs.len() {
+    if planned == 0 {
         return Err(first_error);
     }
     Ok(Validation {

@@ -50,14 +50,14 @@ pub fn fold(
     let mut folds: BTreeMap<NodeId, (NodeId, Option<NodeId>)> = BTreeMap::new();
     for &b in ctx.order {
         let inst = &ctx.g.nodes[b];
-        if !matches!(inst.node.lowering(), Lowering::Spectral(_)) || !single(b) {
+        if !matches!(inst.node().lowering(), Lowering::Spectral(_)) || !single(b) {
             continue;
         }
         let [src @ Source::Node { node: a, port: 0 }] = inst.inputs[..] else {
             continue;
         };
         let producer = &ctx.g.nodes[a];
-        let Lowering::Transform(k) = producer.node.lowering() else {
+        let Lowering::Transform(k) = producer.node().lowering() else {
             continue;
         };
         if single(a)
@@ -79,7 +79,7 @@ pub fn fold(
                     && !(ctx.escapes)(out)
                     && single(c)
                     && ctx.g.nodes[c].inputs.len() == 1
-                    && match ctx.g.nodes[c].node.lowering() {
+                    && match ctx.g.nodes[c].node().lowering() {
                         Lowering::Transform(kc) => kc
                             .first_pass(&input_types(c), caps)
                             .is_some_and(|f| k.hosts_inverse(&input_types(a), caps, &f)),

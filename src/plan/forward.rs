@@ -27,7 +27,7 @@ pub(super) fn read_through<'g>(
                 return None;
             }
             let inputs = types.inputs_of(g, n);
-            let i = g.nodes[n].node.forwards(&inputs)?;
+            let i = g.nodes[n].node().forwards(&inputs)?;
             debug_assert_eq!(
                 types.nodes[n].outputs().and_then(|o| o.first().copied()),
                 inputs[i],

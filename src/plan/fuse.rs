@@ -92,7 +92,7 @@ fn real_array(t: &ValueType) -> bool {
 
 fn is_pointwise(ctx: &FuseCtx, n: NodeId) -> bool {
     let inst = &ctx.g.nodes[n];
-    matches!(inst.node.lowering(), Lowering::Pointwise(_))
+    matches!(inst.node().lowering(), Lowering::Pointwise(_))
         && inst.output_ports.len() == 1
         && out_type(ctx, n).is_some_and(|t| real_array(&t))
 }
@@ -282,7 +282,7 @@ fn split_for_bindings(
             }
         }
         let clock = chunk.iter().any(
-            |&m| matches!(ctx.g.nodes[m].node.lowering(), Lowering::Pointwise(b) if b.uses_step),
+            |&m| matches!(ctx.g.nodes[m].node().lowering(), Lowering::Pointwise(b) if b.uses_step),
         );
         1 + usize::from(clock) + ext.len() + outs
     };
@@ -342,7 +342,7 @@ pub fn generate(
 
     for (j, &(n, escapes)) in members.iter().enumerate() {
         let inst = &g.nodes[n];
-        let Lowering::Pointwise(body) = inst.node.lowering() else {
+        let Lowering::Pointwise(body) = inst.node().lowering() else {
             unreachable!("members are pointwise")
         };
         let mut sig = String::new();

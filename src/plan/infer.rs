@@ -18,6 +18,9 @@ pub(super) enum Inferred {
     Unknown,
     /// It needs a value that is absent: it drops out, with what depends on it.
     Absent,
+    /// It would run, but a problem was reported for it or for a value it needs: what
+    /// depends on it reports its own problems only, none that follow from this one.
+    Failed,
     Present {
         outputs: Vec<ValueType>,
         /// Scratch buffers in bytes.
@@ -45,9 +48,21 @@ pub(super) struct Types {
     pub nodes: IdVec<NodeId, Inferred>,
     pub inputs: Vec<Option<ValueType>>,
     pub states: Vec<Option<ValueType>>,
+    /// States whose initial value failed (reported where it failed).
+    pub failed_states: Vec<bool>,
 }
 
 impl Types {
+    /// Whether a value is missing because of a problem already reported (not because an
+    /// optional input was not given).
+    pub fn failed(&self, s: Source) -> bool {
+        match s {
+            Source::Node { node, .. } => matches!(self.nodes[node], Inferred::Failed),
+            Source::State(i) => self.failed_states[i],
+            Source::Input(_) | Source::Absent => false,
+        }
+    }
+
     pub fn of(&self, s: Source) -> Option<ValueType> {
         match s {
             Source::Input(i) => self.inputs[i],
@@ -93,6 +108,7 @@ pub(super) fn infer(
             nodes: g.nodes.iter().map(|_| Inferred::Unknown).collect(),
             inputs: input_types.to_vec(),
             states: vec![None; g.states.len()],
+            failed_states: vec![false; g.states.len()],
         },
     };
     for &n in &demand.prologue {
@@ -101,7 +117,9 @@ pub(super) fn infer(
     for &s in &demand.states {
         let init = g.states[s].init;
         let t = cx.types.of(init);
-        if t.is_none() {
+        if cx.types.failed(init) {
+            cx.types.failed_states[s] = true;
+        } else if t.is_none() {
             cx.fail(format!(
                 "state `{}` has no initial value: `{}` is absent (an optional input not given?)",
                 g.states[s].name,
@@ -181,6 +199,7 @@ impl Inference<'_> {
         let inst = &g.nodes[n];
         let mut types = Vec::new();
         let mut absent = false;
+        let mut upstream_failed = false;
         let mut ok = true;
         for (port, src) in inst.input_ports.iter().zip(&inst.inputs) {
             if without_loop_input && port.iterate {
@@ -189,6 +208,7 @@ impl Inference<'_> {
             }
             let t = self.types.of(*src);
             match t {
+                None if self.types.failed(*src) => upstream_failed = true,
                 None if !port.optional => absent = true,
                 Some(t) if !port.ty.accepts(&t) => {
                     ok = false;
@@ -207,11 +227,25 @@ impl Inference<'_> {
             }
             types.push(t);
         }
-        if absent || !ok {
+        if absent {
             self.types.nodes[n] = Inferred::Absent;
             return;
         }
-        match inst.node.infer(&types, self.caps) {
+        // A node whose params its kind refused is a problem only here, where it would run
+        // (also when a value it needs failed: it would run once that is fixed).
+        if let Err(problems) = &inst.built {
+            for message in problems {
+                self.problems
+                    .push(Problem::node(&inst.file, &inst.id, message.clone()));
+            }
+            self.types.nodes[n] = Inferred::Failed;
+            return;
+        }
+        if upstream_failed || !ok {
+            self.types.nodes[n] = Inferred::Failed;
+            return;
+        }
+        match inst.node().infer(&types, self.caps) {
             Ok(sig) => {
                 assert_eq!(
                     sig.outputs.len(),
@@ -247,7 +281,7 @@ impl Inference<'_> {
             Err(e) => {
                 self.problems
                     .push(Problem::port(&inst.file, &inst.id, &e.port, e.message));
-                self.types.nodes[n] = Inferred::Absent;
+                self.types.nodes[n] = Inferred::Failed;
             }
         }
     }
@@ -263,7 +297,7 @@ impl Inference<'_> {
                     st.name,
                     g.source_name(st.next)
                 )),
-                (Some(_), None) => self.fail(format!(
+                (Some(_), None) if !self.types.failed(st.next) => self.fail(format!(
                     "state `{}`: next value `{}` is absent",
                     st.name,
                     g.source_name(st.next)
@@ -278,7 +312,7 @@ impl Inference<'_> {
         let g = self.g;
         for &o in outputs {
             let out = &g.outputs[o];
-            if self.types.of(out.source).is_some() {
+            if self.types.of(out.source).is_some() || self.types.failed(out.source) {
                 continue;
             }
             let missing: Vec<&str> = g

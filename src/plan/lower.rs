@@ -324,10 +324,10 @@ impl Lowerer<'_> {
         let scratch = self.scratch(phase, n);
         let input_types = self.types.inputs_of(g, n);
         let inst = &g.nodes[n];
-        let mut notes = inst.node.notes(&input_types);
+        let mut notes = inst.node().notes(&input_types);
         let plan = self.types.plan(n).cloned();
         notes.extend(plan.as_ref().map(|p| p.to_string()));
-        match inst.node.lowering() {
+        match inst.node().lowering() {
             Lowering::Transform(t) => {
                 notes.extend(t.device_notes(&input_types, self.caps, fold.folding()));
                 notes.extend(fold_notes(g, &fold));

@@ -106,6 +106,59 @@ fn inspect_prints_the_plan_and_dot() {
     );
 }
 
+/// `inspect` plans what `run` would: optional inputs absent unless given (fcm.json's
+/// torque path at L = 64, which needs `rotation`, then never runs), the inputs not given
+/// with the sizes the given ones fix (4 particles, not the size's default of 1000), and
+/// `--with` to plan an optional input at its declared shape. Before, both first commands
+/// exited with 2 (a torque-grid error; "input `torques` has 1000 rows").
+#[test]
+fn inspect_assumes_the_inputs_a_run_would_have() {
+    let fcm = root().join("graphs/fcm.json").display().to_string();
+    let o = mesoflow(&[
+        "inspect",
+        &fcm,
+        "--set",
+        "box=[64,64,64]",
+        "--output",
+        "velocities",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let dir = tmpdir("cli-inspect-inputs");
+    let x = positions(&dir, "x.npy", vec![0.5; 12], 4);
+    let f = positions(&dir, "f.npy", vec![1.0; 12], 4);
+    let (xs, fs) = (format!("positions={x}"), format!("forces={f}"));
+    let o = mesoflow(&[
+        "inspect",
+        &fcm,
+        "--input",
+        &xs,
+        "--input",
+        &fs,
+        "--output",
+        "velocities",
+    ]);
+    let t = text(&o);
+    assert!(o.status.success() && t.contains("particles(4x3)"), "{t}");
+    fails_with(
+        &[
+            "inspect",
+            &fcm,
+            "--input",
+            &xs,
+            "--with",
+            "torques",
+            "--output",
+            "velocities",
+        ],
+        &["spread_torques"],
+    );
+    fails_with(
+        &["inspect", &fcm, "--with", "positions"],
+        &["--with positions: input `positions` is required"],
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn bad_input_is_a_clear_error_and_leaves_no_output() {
     let dir = tmpdir("cli-bad");

@@ -321,3 +321,92 @@ fn an_input_larger_than_the_device_binds_is_refused_by_name() {
         "{e}"
     );
 }
+
+/// The problems planning `outputs` of a loaded graph with these inputs reports, or none.
+fn plan_problems(
+    g: &mesoflow::graph::Graph,
+    inputs: BTreeMap<String, ValueType>,
+    outputs: &[&str],
+) -> Option<String> {
+    let caps = DeviceCaps {
+        max_binding: u64::MAX,
+        max_buffer: u64::MAX,
+        ..DeviceCaps::baseline()
+    };
+    let opts = PlanOptions {
+        outputs: Some(outputs.iter().map(|s| s.to_string()).collect()),
+        inputs,
+        fuse: true,
+    };
+    plan::plan(g, &opts, &caps).err().map(|e| e.to_string())
+}
+
+/// A node's param values are checked where the node runs: a graph with a node whose op
+/// its kind refuses loads, plans every output that does not need that node, and names
+/// node and param when an output does. Before, loading refused the file.
+#[test]
+fn param_values_are_checked_only_where_the_node_runs() {
+    let dir = tmpdir("plan-unused-params");
+    let path = write_graph(
+        &dir,
+        "unused.json",
+        r#"{"mesoflow": 1,
+          "inputs": {"x": {"type": "particles", "cols": 3}},
+          "nodes": [
+            {"id": "s", "kind": "scale", "params": {"factor": 2}, "inputs": {"x": "inputs.x"}},
+            {"id": "r", "kind": "column_reduce", "params": {"op": "average"}, "inputs": {"x": "s.out"}}
+          ],
+          "outputs": {"y": "s.out", "z": "r.out"}}"#,
+    );
+    let g = load(&path);
+    assert_eq!(plan_problems(&g, g.declared_input_types(), &["y"]), None);
+    let e = plan_problems(&g, g.declared_input_types(), &["y", "z"]).expect("z needs r");
+    assert!(
+        e.contains("node `r`: param `op`: bad value") && e.contains("average"),
+        "{e}"
+    );
+    assert!(!e.contains("node `s`"), "{e}");
+    // `validate` agrees: the file is valid, with a note on `z`.
+    let v = mesoflow::plan::validate_file(crate::util::registry(), &path).unwrap();
+    assert!(
+        v.notes.len() == 1 && v.notes[0].contains("output `z`") && v.notes[0].contains("`op`"),
+        "{v}"
+    );
+}
+
+/// The issue's cases: PSE in a box of 4 at 1e-4, whose fcm.json torque path (never run:
+/// PSE gives no torques) gets a torque support of 96 cells, past the spreading's 32, loads
+/// and plans; fcm.json at L = 64 plans its velocities with its declared inputs (the
+/// optional torques absent, as in a run), and with 4 particles given, the absent optional
+/// torques do not take the size's default of 1000 rows.
+#[test]
+fn nodes_the_plan_does_not_run_never_reject_it() {
+    let g = crate::util::load_with(
+        "pse.json",
+        &[("box", "[4, 4, 4]"), ("tolerance", "1e-4")],
+        1,
+        0,
+    );
+    assert_eq!(
+        plan_problems(&g, g.declared_input_types(), &["velocities"]),
+        None
+    );
+    let g = crate::util::load_with("fcm.json", &[("box", "[64, 64, 64]")], 1, 0);
+    assert!(!g.declared_input_types().contains_key("torques"));
+    assert_eq!(
+        plan_problems(&g, g.declared_input_types(), &["velocities", "noise"]),
+        None
+    );
+    // The torque path where torques are given: its guard names the nodes.
+    let e = plan_problems(&g, g.declared_input_types_with_optional(), &["velocities"])
+        .expect("torques need rotation");
+    assert!(e.contains("spread_torques"), "{e}");
+    let four = ValueType::Particles { n: 4, k: 3 };
+    let given: BTreeMap<String, ValueType> = [("positions".to_string(), four)].into();
+    let assumed = g.assumed_input_types(&given, &[]);
+    assert_eq!(assumed.get("forces"), Some(&four));
+    assert!(!assumed.contains_key("torques"));
+    assert_eq!(plan_problems(&g, assumed, &["velocities"]), None);
+    let with = g.assumed_input_types(&given, &["torques"]);
+    assert_eq!(with.get("torques"), Some(&four));
+}

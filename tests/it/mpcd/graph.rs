@@ -293,19 +293,12 @@ fn a_given_initial_state_is_used() {
 #[test]
 fn bad_mpcd_input_gets_messages_naming_file_node_and_port() {
     let load = |sets: &[(&str, ParamValue)]| {
-        graph::load(
+        crate::util::load_or_plan_error(
             &root().join("graphs/mpcd.json"),
-            registry(),
-            &LoadOptions {
-                overrides: sets
-                    .iter()
-                    .map(|(k, v)| (k.to_string(), v.clone()))
-                    .collect(),
-                ..Default::default()
-            },
+            sets.iter()
+                .map(|(k, v)| (k.to_string(), v.clone()))
+                .collect(),
         )
-        .err()
-        .map(|e| e.to_string())
         .unwrap_or_default()
     };
     let e = load(&[("box", ParamValue::Numbers(vec![10.5, 10.0, 10.0]))]);

@@ -46,16 +46,40 @@ pub fn load_with(name: &str, sets: &[(&str, &str)], steps: u64, seed: u64) -> Gr
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// The report of loading `graphs/<name>` with these `--set` values, which must fail.
+/// The report of loading `graphs/<name>` with these `--set` values and planning every
+/// output for the declared inputs, as `mesoflow validate` plans (a node's param values
+/// are checked where it runs, so their problems come from planning); one of the two
+/// must fail.
 pub fn load_error(name: &str, sets: &[(&str, &str)]) -> String {
+    load_or_plan_error(&root().join("graphs").join(name), overrides(sets))
+        .unwrap_or_else(|| panic!("{name} with {sets:?} loaded and planned"))
+}
+
+/// The problems of loading a graph file with these param values and planning every
+/// output for its declared inputs, on device-independent capabilities; `None` when it
+/// loads and plans.
+pub fn load_or_plan_error(path: &Path, overrides: BTreeMap<String, ParamValue>) -> Option<String> {
     let opts = LoadOptions {
-        overrides: overrides(sets),
+        overrides,
         ..Default::default()
     };
-    match graph::load(&root().join("graphs").join(name), registry(), &opts) {
-        Ok(_) => panic!("{name} with {sets:?} loaded"),
-        Err(e) => e.to_string(),
-    }
+    let g = match graph::load(path, registry(), &opts) {
+        Ok(g) => g,
+        Err(e) => return Some(e.to_string()),
+    };
+    let caps = mesoflow::gpu::DeviceCaps {
+        max_binding: u64::MAX,
+        max_buffer: u64::MAX,
+        ..mesoflow::gpu::DeviceCaps::baseline()
+    };
+    let opts = mesoflow::plan::PlanOptions {
+        outputs: None,
+        inputs: g.declared_input_types(),
+        fuse: true,
+    };
+    mesoflow::plan::plan(&g, &opts, &caps)
+        .err()
+        .map(|e| e.to_string())
 }
 
 /// How a graph-file input declares a value type.
