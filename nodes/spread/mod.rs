@@ -190,7 +190,7 @@ fn grid_params() -> Vec<ParamSpec> {
             Some(0.0),
             0.0,
             window::MAX_SUPPORT as f64,
-            "cells per axis (0: from the tolerance; fixed for Peskin windows)",
+            "cells per axis (0: from the tolerance; fixed for Peskin windows); may exceed the grid's cells, the window then wraps around the periodic grid",
         ),
         ParamSpec::number(
             "beta",
@@ -269,13 +269,9 @@ fn grid_window(p: &Params) -> Result<GridWindow, String> {
         p.number("tolerance"),
         h_min,
     )?;
-    if let Some(a) = (0..cells.len()).find(|&a| cells[a] < window.support()) {
-        return Err(format!(
-            "{} cells along axis {a} are fewer than the window's support of {} cells",
-            cells[a],
-            window.support()
-        ));
-    }
+    // A support wider than the grid is legal arithmetic: the window wraps around the
+    // periodic grid more than once, every kernel path wraps each support cell on its own
+    // (`wrap_cell`, as `GridWindow::support` does with rem_euclid) and adds with atomics.
     Ok(GridWindow {
         lengths,
         cells,

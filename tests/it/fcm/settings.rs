@@ -139,9 +139,6 @@ fn bad_settings_get_clear_errors() {
         &[("rotation", "true"), ("kernel", "\"peskin4\"")],
     );
     assert!(e.contains("rotation") && e.contains("gaussian"), "{e}");
-    // A box too thin for the window.
-    let e = load_error("fcm.json", &[("box", "[24, 24, 3]")]);
-    assert!(e.contains("support"), "{e}");
 
     // Torques without the rotation grid: the torque window says it is too coarse.
     let g = load_with("fcm.json", &[], 1, 0);

@@ -154,11 +154,6 @@ fn bad_spread_params_are_plan_errors() {
             "needs `width`",
         ),
         (
-            r#"{"box": [4, 4, 4], "grid": [4, 4, 4], "window": "peskin6"}"#,
-            [("positions", pos), ("values", pos)],
-            "fewer than the window's support",
-        ),
-        (
             r#"{"box": [4, 4], "grid": [8, 8], "window": "peskin4"}"#,
             [("positions", pos), ("values", pos)],
             "has 3 columns but the box has 2 axes",

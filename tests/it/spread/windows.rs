@@ -353,3 +353,76 @@ fn interpolation_reductions_agree_on_every_segment_width() {
         }
     }
 }
+
+/// A support wider than the grid (a box of 3a under FCM's Gaussian: 5 cells, support 9)
+/// wraps the window around the periodic grid more than once: every kernel path (lanes,
+/// workgroup tables, boxes for dense sorted input, tiles; float atomics and
+/// compare-and-swap) and interpolation agree with the f64 reference, which wraps each
+/// support cell on its own. Before, the node refused such a grid ("cells along axis 0
+/// are fewer than the window's support").
+#[test]
+fn supports_wider_than_the_grid_wrap_like_the_reference() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(91);
+    for (lengths, cells) in [
+        (vec![3.0, 3.5, 2.2], vec![5u32, 4, 3]),
+        (vec![2.0, 3.0], vec![3u32, 4]),
+        (vec![1.0, 1.0, 1.0], vec![1u32, 2, 1]),
+    ] {
+        let n = 200;
+        let random = positions(&mut rng, n, &lengths);
+        let sorted = morton_sorted(&random, &lengths, &cells);
+        let vals = rng.array(ValueType::Particles { n, k: 3 }, -1.0, 1.0);
+        let mut dims = [1u32; 3];
+        dims[..cells.len()].copy_from_slice(&cells);
+        let field = rng.array(ValueType::RealGrid { dims, comps: 3 }, -1.0, 1.0);
+        for (w, extra) in [
+            ("gaussian", r#""width": 0.56, "support": 9"#),
+            ("gaussian", r#""width": 0.3, "support": 4"#),
+            ("es", r#""support": 6"#),
+            ("peskin6", ""),
+        ] {
+            let mut spreads = vec![
+                with(extra, r#""lanes": "auto""#),
+                with(extra, r#""lanes": "off""#),
+                with(extra, r#""sorted_input": true"#),
+            ];
+            if lengths.len() == 3 && !extra.contains("\"support\": 9") {
+                // Tiles take subgroups as wide as the support (8 lanes on lavapipe).
+                spreads.push(with(extra, r#""tiles": "on""#));
+            }
+            for spread in &spreads {
+                for variant in ["atomic", "portable"] {
+                    let p = params(w, spread, &lengths, &cells, variant);
+                    for pos in [&random, &sorted] {
+                        assert_like_reference(
+                            "spread",
+                            &p,
+                            &[("positions", pos.clone()), ("values", vals.clone())],
+                            1e-5,
+                            &format!("spread {w} {spread} {variant} on {cells:?}"),
+                        );
+                    }
+                }
+            }
+            for lanes in ["auto", "off"] {
+                let p = params(
+                    w,
+                    &with(extra, &format!(r#""lanes": "{lanes}""#)),
+                    &lengths,
+                    &cells,
+                    "auto",
+                );
+                assert_like_reference(
+                    "interpolate",
+                    &p,
+                    &[("grid", field.clone()), ("positions", random.clone())],
+                    1e-5,
+                    &format!("interpolate {w} {extra} lanes {lanes} on {cells:?}"),
+                );
+            }
+        }
+    }
+}
