@@ -68,6 +68,15 @@ fn text<'a>(args: &'a [ParamValue], i: usize, what: &str) -> Result<&'a str, Str
     }
 }
 
+/// The smallest cell size over the axes.
+fn finest_cell(lengths: &[f64], cells: &[u32]) -> f64 {
+    lengths
+        .iter()
+        .zip(cells)
+        .map(|(l, &n)| l / n as f64)
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// A grid argument (cells per axis) as u32s: each a whole number from 1 to the longest
 /// FFT axis, and the grid within `MAX_GRID_CELLS`, checked before any conversion.
 fn grid_cells(args: &[ParamValue], i: usize) -> Result<Vec<u32>, String> {
@@ -129,19 +138,28 @@ static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "fcm_grid",
-        doc: "fcm_grid(box, radius, tolerance, kernel[, rotation]): FFT-friendly cells per axis for FCM; with rotation true, fine enough for the torque Gaussian too (Gaussian kernel only)",
+        doc: "fcm_grid(box, radius, tolerance, kernel[, rotation[, split]]): FFT-friendly cells per axis for FCM; for the Gaussian, refined until some support keeps the self-mobility within the tolerance at the worst placement; with rotation true, fine enough for the torque Gaussian too (Gaussian kernel only); with split > 0 (PSE's far field, which plans its own grid) without the refinement",
         call: |a| {
-            if !(4..=5).contains(&a.len()) {
-                return Err(format!("takes 4 or 5 arguments, got {}", a.len()));
+            if !(4..=6).contains(&a.len()) {
+                return Err(format!("takes 4 to 6 arguments, got {}", a.len()));
             }
-            let rotation = a.len() == 5 && flag(a, 4, "rotation")?;
-            let g = plan::grid_for(
+            let rotation = a.len() >= 5 && flag(a, 4, "rotation")?;
+            let split = if a.len() == 6 {
+                number(a, 5, "split")?
+            } else {
+                0.0
+            };
+            let args = (
                 box_lengths(a, 0)?,
                 number(a, 1, "radius")?,
                 tolerance(a, 2)?,
                 text(a, 3, "kernel")?,
-                rotation,
-            )?;
+            );
+            let g = if split > 0.0 {
+                plan::nominal_grid_for(args.0, args.1, args.2, args.3, rotation)?
+            } else {
+                plan::grid_for(args.0, args.1, args.2, args.3, rotation)?
+            };
             Ok(ParamValue::Numbers(g.into_iter().map(f64::from).collect()))
         },
     },
@@ -159,13 +177,20 @@ static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "fcm_support",
-        doc: "fcm_support(tolerance, kernel, width, box, grid): the window support in cells FCM uses: ES by its tolerance rule, the Gaussian (standard deviation width) cut at the same number of standard deviations as on its nominal grid, 0 (the window's own) for Peskin",
+        doc: "fcm_support(tolerance, kernel, width, box, grid[, split]): the window support in cells FCM uses: ES by its tolerance rule; the Gaussian (standard deviation width) the fewest cells that keep the self-mobility within the tolerance at the worst placement (computed in f64; refused on a grid too coarse for it); 0 (the window's own) for Peskin; with split > 0 (PSE's far field, whose planner sets its support) the Gaussian's erfc rule",
         call: |a| {
-            arity(a, 5)?;
+            if !(5..=6).contains(&a.len()) {
+                return Err(format!("takes 5 or 6 arguments, got {}", a.len()));
+            }
             let t = tolerance(a, 0)?;
-            let sigma = number(a, 2, "width")?;
+            let sigma = positive(a, 2, "width")?;
             let lengths = box_lengths(a, 3)?;
             let cells = grid_cells(a, 4)?;
+            let split = if a.len() == 6 {
+                number(a, 5, "split")?
+            } else {
+                0.0
+            };
             if lengths.len() != cells.len() {
                 return Err(format!(
                     "box and grid have {} and {} values",
@@ -173,16 +198,35 @@ static FUNCTIONS: &[HostFunction] = &[
                     cells.len()
                 ));
             }
-            let h = lengths
-                .iter()
-                .zip(cells)
-                .map(|(l, n)| l / n as f64)
-                .fold(f64::INFINITY, f64::min);
             Ok(ParamValue::Number(match text(a, 1, "kernel")? {
                 "es" => plan::es_support(t) as f64,
-                "gaussian" => plan::gaussian_support(t, sigma / h) as f64,
+                "gaussian" if split > 0.0 => {
+                    plan::gaussian_support(t, sigma / finest_cell(lengths, &cells)) as f64
+                }
+                "gaussian" => plan::force_support(t, sigma, lengths, &cells)? as f64,
                 _ => 0.0,
             }))
+        },
+    },
+    HostFunction {
+        name: "fcm_torque_support",
+        doc: "fcm_torque_support(tolerance, width, box, grid): support in cells of FCM's torque Gaussian (standard deviation width): cut where the tail past the nearest edge is at most 2 tol per axis, S = ceil(1 + 2 sqrt(2) (width / h) erfc^-1(2 tol))",
+        call: |a| {
+            arity(a, 4)?;
+            let t = tolerance(a, 0)?;
+            let sigma = positive(a, 1, "width")?;
+            let lengths = box_lengths(a, 2)?;
+            let cells = grid_cells(a, 3)?;
+            if lengths.len() != cells.len() {
+                return Err(format!(
+                    "box and grid have {} and {} values",
+                    lengths.len(),
+                    cells.len()
+                ));
+            }
+            Ok(ParamValue::Number(
+                plan::gaussian_support(t, sigma / finest_cell(lengths, &cells)) as f64,
+            ))
         },
     },
     HostFunction {

@@ -215,12 +215,8 @@ fn search_far_window(
     // screening's exp(-k^2 / 4 xi^2)) outgrows the aliasing it removes as the width nears
     // 1 / (2 xi), where nothing is left to undo.
     let (lo, hi) = ((0.8 * narrowest).max(0.3 * h_min), 0.5 / split);
-    let largest = cells
-        .iter()
-        .copied()
-        .min()
-        .unwrap_or(3)
-        .min(MAX_FAR_SUPPORT);
+    // A support wider than the grid wraps around it.
+    let largest = MAX_FAR_SUPPORT;
     for support in 3..=largest {
         // A tail past half the support of more than the budget (one side of one axis)
         // at the narrowest width: this support is too short for any width.
@@ -274,12 +270,7 @@ pub fn support(
     }
     let bound = far_bound(radius, split, cell_sizes(lengths, cells)?);
     let budget = far_budget(radius, tolerance, lengths);
-    let largest = cells
-        .iter()
-        .copied()
-        .min()
-        .unwrap_or(3)
-        .min(MAX_FAR_SUPPORT);
+    let largest = MAX_FAR_SUPPORT;
     (3..=largest)
         .find(|&p| bound(width, p) <= budget)
         .ok_or_else(|| {

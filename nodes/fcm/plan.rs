@@ -153,6 +153,25 @@ pub fn grid_for(
     kernel: &str,
     rotation: bool,
 ) -> Result<Vec<u32>, String> {
+    let cells = nominal_grid_for(lengths, radius, tolerance, kernel, rotation)?;
+    if kernel == "gaussian" {
+        refine_for_accuracy(lengths, cells, radius, tolerance)
+            .and_then(|cells| checked_grid("the FCM grid", cells))
+    } else {
+        Ok(cells)
+    }
+}
+
+/// [`grid_for`] before the Gaussian's refinement for the worst placement: the spacing
+/// of UAMMD's upsampling rule (and the rotation's), rounded to FFT-friendly sizes. PSE's
+/// far field, which plans its own grid, takes this as fcm.json's (unused) default.
+pub fn nominal_grid_for(
+    lengths: &[f64],
+    radius: f64,
+    tolerance: f64,
+    kernel: &str,
+    rotation: bool,
+) -> Result<Vec<u32>, String> {
     if !(radius > 0.0 && radius.is_finite()) {
         return Err(format!(
             "the radius must be positive and finite, got {radius}"
@@ -177,6 +196,14 @@ pub fn grid_for(
         .map(|&l| {
             if !(l > 0.0 && l.is_finite()) {
                 return Err(format!("box lengths must be positive and finite, got {l}"));
+            }
+            if l < 2.0 * radius {
+                return Err(format!(
+                    "a box side of {l} is shorter than the spheres' diameter 2a = {}: each sphere would overlap its own periodic images (make `box` at least {} per side, or `radius` at most {})",
+                    2.0 * radius,
+                    2.0 * radius,
+                    0.5 * l
+                ));
             }
             // Bounded before any conversion to u32 (1e30 / h saturates it).
             let what = format!("a box length of {l} for radius {radius}");
@@ -219,6 +246,74 @@ pub fn check_tolerance(tolerance: f64) -> Result<(), String> {
             "the tolerance must lie strictly between 0 and 1, got {tolerance}"
         ))
     }
+}
+
+/// The Gaussian's grid: the nominal one ([`nominal_grid_for`]: UAMMD's upsampling g_u(tol),
+/// fitted to mean errors) or a finer one (every axis to its next FFT-friendly sizes),
+/// whichever is cheapest ([`fcm_cost`]) among those on which some support keeps the
+/// self-mobility within the tolerance at the worst placement ([`force_support`]): the
+/// first such grid and the [`REFINEMENTS`] after it. At a cell corner UAMMD's grid can
+/// fall short with any support (L = 12 a at 1e-4: 20 cells, 1.15e-4), or need a wide one
+/// (L = 130 a at 1e-4: 216 cells need support 10; 224 take 9, for less in all).
+fn refine_for_accuracy(
+    lengths: &[f64],
+    mut cells: Vec<u32>,
+    radius: f64,
+    tolerance: f64,
+) -> Result<Vec<u32>, String> {
+    let sigma = gaussian_width(radius);
+    let mut best: Option<(f64, Vec<u32>)> = None;
+    let mut after_first = 0;
+    let mut first_problem = None;
+    loop {
+        match force_support(tolerance, sigma, lengths, &cells) {
+            Ok(support) => {
+                let cost = fcm_cost(lengths, &cells, support, radius);
+                if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                    best = Some((cost, cells.clone()));
+                }
+            }
+            Err(e) => {
+                first_problem.get_or_insert(e);
+            }
+        }
+        if best.is_some() {
+            if after_first == REFINEMENTS {
+                break;
+            }
+            after_first += 1;
+        }
+        let finer: Vec<u32> = cells.iter().map(|&n| next_friendly(n + 1)).collect();
+        if finer.iter().any(|&n| n > 4096) {
+            break;
+        }
+        cells = finer;
+    }
+    best.map(|(_, cells)| cells).ok_or_else(|| {
+        format!(
+            "{}; a finer grid would take more than the 4096 cells an FFT axis takes",
+            first_problem.unwrap_or_default()
+        )
+    })
+}
+
+/// Finer grids than the first accurate one that [`refine_for_accuracy`] weighs.
+const REFINEMENTS: u32 = 2;
+
+/// Particles per a^3 FCM's grid choice assumes: UAMMD's benchmarks (10^4 in 64^3 a^3 to
+/// 10^6 in 264^3 a^3, 0.038 to 0.057).
+pub const NOMINAL_DENSITY: f64 = 0.045;
+
+/// GPU time of one M F per unit volume, in ps per a^3 (an H200's, BENCHMARKS.md, 1e-2 at
+/// 10^5: 0.33 ms of transforms on 162^3 cells, 78 ps a cell; 0.2 ms of spreading and
+/// interpolation for 10^5 particles of 5^3 support cells, 16 ps each): what the grid
+/// choice weighs, cells against support.
+pub fn fcm_cost(lengths: &[f64], cells: &[u32], support: u32, radius: f64) -> f64 {
+    let volume: f64 = lengths.iter().product();
+    let cell_count: f64 = cells.iter().map(|&n| n as f64).product();
+    let per_volume = radius.powi(3) / volume;
+    78.0 * cell_count * per_volume
+        + 16.0 * NOMINAL_DENSITY * (support as f64).powi(lengths.len() as i32)
 }
 
 /// How much finer than the FFT-friendly size a fast size may make the grid.
@@ -278,6 +373,243 @@ pub fn gaussian_support(tolerance: f64, sigma_cells: f64) -> u32 {
     let s = 1.0 + 2.0 * std::f64::consts::SQRT_2 * sigma_cells * erfc_inverse(2.0 * tolerance);
     // Round down what is a cell above a whole number only by rounding error.
     ((s - 1e-9).ceil() as u32).max(3)
+}
+
+/// The share of the tolerance FCM's Gaussian may take at the worst placement, as
+/// [`gaussian_self_error`] computes it: the rest covers the difference between its
+/// reference box and larger boxes (below 1 % from 48 cells per axis up).
+pub const SELF_ERROR_SHARE: f64 = 0.98;
+
+/// Cells per axis of the periodic box [`gaussian_self_error`] evaluates the
+/// discretisation in: the grid's own where it has fewer; a larger box's error differs
+/// by less than 1 % (the finite-size part of the aliasing falls as 1 / L: at a cell
+/// corner, sigma = 0.72 h, support 5: 9.95e-3 at 32 cells, 9.88e-3 at 48, 9.85e-3 at 64,
+/// 9.83e-3 at 81).
+pub const REFERENCE_CELLS: u32 = 48;
+
+/// The worst self-mobility error of FCM's Gaussian pipeline (spread, Stokes Green
+/// function, interpolate) for a Gaussian of standard deviation `sigma` cut at `support`
+/// cells on a grid of these cells, relative to the exact periodic mobility of the
+/// Gaussian, over the placements where it peaks: on a grid point (a cell's centre) or
+/// midway between two, per axis (the aliased images and the cut tail both oscillate
+/// with the offset from a cell centre, extreme at these; a particle at a cell corner,
+/// midway on every axis, or on a grid point gives the worst). Computed in f64 exactly as
+/// the pipeline sums it (the same stencil, the projection without unpaired Nyquist wave
+/// numbers), in a periodic box of the grid's cells, at most [`REFERENCE_CELLS`] per
+/// axis; the exact mobility is the same sum with the continuous Gaussian over the
+/// grid's wave numbers plus the integral past them.
+pub fn gaussian_self_error(sigma: f64, lengths: &[f64], cells: &[u32], support: u32) -> f64 {
+    use std::f64::consts::PI;
+    let n: Vec<u32> = cells.iter().map(|&c| c.min(REFERENCE_CELLS)).collect();
+    let h: Vec<f64> = lengths
+        .iter()
+        .zip(cells)
+        .map(|(l, &c)| l / c as f64)
+        .collect();
+    let box_lengths: Vec<f64> = h.iter().zip(&n).map(|(h, &n)| h * n as f64).collect();
+    let wave = |i: u32, n: u32| -> i64 {
+        if i <= n / 2 {
+            i as i64
+        } else {
+            i as i64 - n as i64
+        }
+    };
+    // h^2 |sum_j w_j e^{-ik x_j}|^2 per axis, wave number and offset (0: on a grid point,
+    // 1: midway), w the stencil's weights per unit length (`GridWindow::stencil`): the
+    // continuous Gaussian's e^{-sigma^2 k^2} where the grid resolves it.
+    let power: Vec<[Vec<f64>; 2]> = (0..3)
+        .map(|a| {
+            [0.0, 0.5].map(|offset: f64| {
+                let first = (offset - 0.5 * support as f64).floor() + 1.0;
+                let weights: Vec<(f64, f64)> = (0..support)
+                    .map(|j| {
+                        let d = (first + j as f64 - offset) * h[a];
+                        let w = h[a] * (-0.5 * d * d / (sigma * sigma)).exp()
+                            / ((2.0 * PI).sqrt() * sigma);
+                        (d, w)
+                    })
+                    .collect();
+                (0..n[a])
+                    .map(|i| {
+                        let k = 2.0 * PI * wave(i, n[a]) as f64 / box_lengths[a];
+                        let (re, im) = weights.iter().fold((0.0, 0.0), |(re, im), &(d, w)| {
+                            let (s, c) = (k * d).sin_cos();
+                            (re + w * c, im - w * s)
+                        });
+                        re * re + im * im
+                    })
+                    .collect()
+            })
+        })
+        .collect();
+    // Per axis: the pipeline's self-mobility times the volume for each of the 8
+    // placements, and the exact one over the grid's wave numbers.
+    let mut grid_mobility = [[0.0f64; 3]; 8];
+    let mut exact = [0.0f64; 3];
+    for iz in 0..n[2] {
+        for iy in 0..n[1] {
+            for ix in 0..n[0] {
+                let idx = [ix, iy, iz];
+                let w = [0, 1, 2].map(|a| wave(idx[a], n[a]));
+                if w == [0, 0, 0] {
+                    continue;
+                }
+                let k = [0, 1, 2].map(|a| 2.0 * PI * w[a] as f64 / box_lengths[a]);
+                let k2: f64 = k.iter().map(|x| x * x).sum();
+                let gaussian = (-sigma * sigma * k2).exp() / k2;
+                for (a, e) in exact.iter_mut().enumerate() {
+                    *e += gaussian * (1.0 - k[a] * k[a] / k2);
+                }
+                // The projection leaves out unpaired Nyquist wave numbers (`stokes`).
+                let kp = [0, 1, 2].map(|a| {
+                    if n[a].is_multiple_of(2) && w[a].unsigned_abs() * 2 == n[a] as u64 {
+                        0.0
+                    } else {
+                        k[a]
+                    }
+                });
+                let kp2: f64 = kp.iter().map(|x| x * x).sum();
+                let projection = [0, 1, 2].map(|a| {
+                    if kp2 > 0.0 {
+                        1.0 - kp[a] * kp[a] / kp2
+                    } else {
+                        1.0
+                    }
+                });
+                for (p, m) in grid_mobility.iter_mut().enumerate() {
+                    let s = [p & 1, (p >> 1) & 1, (p >> 2) & 1];
+                    let weight = power[0][s[0]][ix as usize]
+                        * power[1][s[1]][iy as usize]
+                        * power[2][s[2]][iz as usize]
+                        / k2;
+                    for a in 0..3 {
+                        m[a] += weight * projection[a];
+                    }
+                }
+            }
+        }
+    }
+    let volume: f64 = box_lengths.iter().product();
+    let zone = [0, 1, 2].map(|a| PI / h[a]);
+    let past = past_the_zone(sigma, zone);
+    let exact = [0, 1, 2].map(|a| exact[a] / volume + past[a]);
+    grid_mobility
+        .iter()
+        .flat_map(|m| (0..3).map(move |a| (m[a] / volume / exact[a] - 1.0).abs()))
+        .fold(0.0, f64::max)
+}
+
+/// (2 pi)^-3 int e^{-sigma^2 k^2} (1 - k_a^2 / k^2) / k^2 d^3k over the wave vectors
+/// outside the zone |k_b| <= zone[b] (the exact mobility's part the grid cannot hold), per
+/// axis a: by inclusion and exclusion over the slabs |k_b| > zone[b], each a product
+/// domain away from k = 0, by Gauss-Legendre in the positive octant.
+fn past_the_zone(sigma: f64, zone: [f64; 3]) -> [f64; 3] {
+    use std::f64::consts::PI;
+    // e^{-sigma^2 k^2} < 2e-21 past 7 / sigma from where the slab starts.
+    let reach = 7.0 / sigma;
+    let rule = |lo: f64| -> Vec<(f64, f64)> {
+        let panels = 4;
+        let width = reach / panels as f64;
+        let mut out = Vec::with_capacity(8 * panels);
+        for p in 0..panels {
+            let mid = lo + (p as f64 + 0.5) * width;
+            for &(x, w) in &crate::nodes::pairs::rpy::GL8 {
+                out.push((mid - 0.5 * width * x, 0.5 * width * w));
+                out.push((mid + 0.5 * width * x, 0.5 * width * w));
+            }
+        }
+        out
+    };
+    let free = rule(0.0);
+    let cut: Vec<Vec<(f64, f64)>> = zone.iter().map(|&z| rule(z)).collect();
+    let mut total = [0.0; 3];
+    for slabs in 1..8usize {
+        let sign = if slabs.count_ones() % 2 == 1 {
+            1.0
+        } else {
+            -1.0
+        };
+        let axis = |b: usize| if slabs >> b & 1 == 1 { &cut[b] } else { &free };
+        for &(kz, wz) in axis(2) {
+            for &(ky, wy) in axis(1) {
+                for &(kx, wx) in axis(0) {
+                    let k2 = kx * kx + ky * ky + kz * kz;
+                    let f = sign * 8.0 * wx * wy * wz * (-sigma * sigma * k2).exp() / k2;
+                    total[0] += f * (1.0 - kx * kx / k2);
+                    total[1] += f * (1.0 - ky * ky / k2);
+                    total[2] += f * (1.0 - kz * kz / k2);
+                }
+            }
+        }
+    }
+    total.map(|t| t / (2.0 * PI).powi(3))
+}
+
+/// The support FCM's force Gaussian (standard deviation `sigma`) needs on this grid: the
+/// fewest cells whose [`gaussian_self_error`] is within [`SELF_ERROR_SHARE`] of the
+/// tolerance at the worst placement, memoised. Refused when no support reaches it
+/// (the grid's aliasing alone is too large: the grid is too coarse for the tolerance).
+/// Grids of other than 3 axes take the erfc rule ([`gaussian_support`]).
+pub fn force_support(
+    tolerance: f64,
+    sigma: f64,
+    lengths: &[f64],
+    cells: &[u32],
+) -> Result<u32, String> {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    let h_min = lengths
+        .iter()
+        .zip(cells)
+        .map(|(l, &n)| l / n as f64)
+        .fold(f64::INFINITY, f64::min);
+    let nominal = gaussian_support(tolerance, sigma / h_min);
+    if lengths.len() != 3 || cells.len() != 3 {
+        return Ok(nominal);
+    }
+    type Key = (Vec<u64>, Vec<u32>);
+    static SUPPORTS: OnceLock<Mutex<HashMap<Key, Result<u32, String>>>> = OnceLock::new();
+    let key = (
+        [tolerance, sigma]
+            .iter()
+            .chain(lengths)
+            .map(|x| x.to_bits())
+            .collect(),
+        cells.to_vec(),
+    );
+    let supports = SUPPORTS.get_or_init(Default::default);
+    if let Some(s) = supports.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+        return s.clone();
+    }
+    let budget = SELF_ERROR_SHARE * tolerance;
+    // A support wider than the grid wraps around it (small boxes: 3a takes 9 cells on 5).
+    let largest = crate::nodes::spread::window::MAX_SUPPORT;
+    let mut found = None;
+    let mut previous = f64::INFINITY;
+    let mut least = f64::INFINITY;
+    for support in nominal.saturating_sub(2).max(3)..=largest {
+        let error = gaussian_self_error(sigma, lengths, cells, support);
+        least = least.min(error);
+        if error <= budget {
+            found = Some(support);
+            break;
+        }
+        // A wider support no longer helps: what is left is the grid's aliasing.
+        if error > 0.97 * previous {
+            break;
+        }
+        previous = error;
+    }
+    let result = found.ok_or_else(|| {
+        format!(
+            "the grid {cells:?} is too coarse for FCM's Gaussian (sigma = {sigma}) at tolerance {tolerance:e}: its self-mobility error at the worst placement stays at {least:.2e} with any support (set a finer `grid` or a looser `tolerance`)"
+        )
+    });
+    supports
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .insert(key, result.clone());
+    result
 }
 
 /// The hydrodynamic radius the window has on the actual grid (cubic cells for the
@@ -401,6 +733,55 @@ mod tests {
         }
         // Twice as many cells per sigma, about twice the support.
         assert_eq!(gaussian_support(1e-3, 2.0 * gaussian_upsampling(1e-3)), 12);
+    }
+
+    /// The exact periodic self-mobility split at the grid's zone (the sum over the grid's
+    /// wave numbers plus the integral past them) against the direct Fourier sum.
+    #[test]
+    fn the_exact_mobility_splits_at_the_zone() {
+        use std::f64::consts::PI;
+        let (l, n) = (12.0, 20i64);
+        let sigma = gaussian_width(1.0);
+        let mut inside = 0.0;
+        for mx in -n / 2 + 1..=n / 2 {
+            for my in -n / 2 + 1..=n / 2 {
+                for mz in -n / 2 + 1..=n / 2 {
+                    let k = [mx, my, mz].map(|m| 2.0 * PI * m as f64 / l);
+                    let k2: f64 = k.iter().map(|x| x * x).sum();
+                    if k2 > 0.0 {
+                        inside += (-sigma * sigma * k2).exp() / k2 * (1.0 - k[0] * k[0] / k2);
+                    }
+                }
+            }
+        }
+        let split = inside / l.powi(3) + past_the_zone(sigma, [PI * n as f64 / l; 3])[0];
+        let direct =
+            crate::nodes::fcm::reference::periodic_gaussian_mobility([0.0; 3], [l; 3], 1.0, sigma)
+                [0][0];
+        assert!(
+            (split / direct - 1.0).abs() < 2e-5,
+            "{split} against {direct}"
+        );
+    }
+
+    /// UAMMD's discretisation at 1e-4 (sigma = 0.9375 h, support 8) misses at a cell
+    /// corner; the planner's grid and support do not.
+    #[test]
+    fn the_gaussian_meets_the_tolerance_at_the_worst_placement() {
+        let sigma = gaussian_width(1.0);
+        let h = sigma / 0.9375;
+        let e = gaussian_self_error(sigma, &[48.0 * h; 3], &[48; 3], 8);
+        assert!(e > 1.05e-4, "{e}");
+        for (l, tol) in [(12.0, 1e-4), (16.0, 3e-4), (20.0, 1e-2), (32.0, 1e-5)] {
+            let cells = grid_for(&[l; 3], 1.0, tol, "gaussian", false).unwrap();
+            let support = force_support(tol, sigma, &[l; 3], &cells).unwrap();
+            let e = gaussian_self_error(sigma, &[l; 3], &cells, support);
+            assert!(e <= SELF_ERROR_SHARE * tol, "L = {l}, {tol}: {e}");
+            assert!(
+                gaussian_self_error(sigma, &[l; 3], &cells, support - 1) > SELF_ERROR_SHARE * tol,
+                "L = {l}, {tol}: support {support} is not the least"
+            );
+        }
     }
 
     /// The radius integral: sqrt(pi) sigma for a Gaussian; the ES values the self-mobility

@@ -63,8 +63,19 @@ fn accuracy(
     {
         let p = plan_for(gpu, &g, 1)?;
         let mut program = Program::compile(gpu, &g, &p, &mut cache)?;
-        for _ in 0..4 {
-            let x = [0, 1, 2].map(|_| (rng.uniform() - 0.5) * l);
+        // 4 random positions, and the 8 placements where the far field's error peaks: on a
+        // grid point or midway between two, per axis.
+        let h = match param(&g, "grid") {
+            Some(ParamValue::Numbers(cells)) => l / cells[0],
+            _ => l,
+        };
+        let peaks = (0..8).map(|corner: usize| {
+            [0, 1, 2].map(|a| -0.5 * l + (2.5 + 0.5 * ((corner >> a) & 1) as f64) * h)
+        });
+        let random: Vec<[f64; 3]> = (0..4)
+            .map(|_| [0, 1, 2].map(|_| (rng.uniform() - 0.5) * l))
+            .collect();
+        for x in random.into_iter().chain(peaks) {
             for axis in 0..3 {
                 let mut f = [0.0; 3];
                 f[axis] = 1.0;
@@ -113,8 +124,9 @@ pub fn run(bench: &PseBench) -> Result<(), BenchError> {
          e2e: end to end ({}; with noise, kT = 1: the Lanczos loop makes host round trips inside \
          the step, so on the host clock, round trips included), launches: sum of its launches' \
          medians (the loop timed on the host); errors in a box of side {}: self-mobility against \
-         Hasimoto at 4 positions, pairs at 1.2a, 2a, 3a, 5a against an f64 Ewald sum, relative to \
-         the self-mobility",
+         Hasimoto at 4 random positions and the 8 where the far field's error peaks (on a far \
+         grid point or midway between two, per axis), pairs at 1.2a, 2a, 3a, 5a against an f64 \
+         Ewald sum, relative to the self-mobility",
         bench.graph.display(),
         bench.tolerance,
         bench.reps,

@@ -139,6 +139,9 @@ fn bad_settings_get_clear_errors() {
         &[("rotation", "true"), ("kernel", "\"peskin4\"")],
     );
     assert!(e.contains("rotation") && e.contains("gaussian"), "{e}");
+    // A box thinner than the spheres' diameter (3a is planned: the window wraps).
+    let e = load_error("fcm.json", &[("box", "[24, 24, 1.5]")]);
+    assert!(e.contains("diameter") && e.contains("`box`"), "{e}");
 
     // Torques without the rotation grid: the torque window says it is too coarse.
     let g = load_with("fcm.json", &[], 1, 0);
