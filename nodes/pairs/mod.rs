@@ -369,23 +369,23 @@ fn neighbour_sum_kind() -> NodeKind {
     .input(PortSpec::new(
         "cells",
         PortType::Indices,
-        "linear cell index of each (sorted) particle: cell_hash keys after the sort",
+        "linear cell index of each (sorted) particle: cell_hash keys after the sort (a key past the cells counts as the last cell)",
     ))
     .input(PortSpec::new(
         "cell_start",
         PortType::Indices,
-        "first particle of each cell (exclusive scan of the counts)",
+        "first particle of each cell (exclusive scan of the counts; clamped to N)",
     ))
     .input(PortSpec::new(
         "cell_count",
         PortType::Indices,
-        "particles in each cell",
+        "particles in each cell (clamped to N - first: no slot past the particles)",
     ))
     .input(
         PortSpec::new(
             "list",
             PortType::Indices,
-            "neighbour list from neighbour_list (same positions and cutoff): read instead of the cells for particles it holds whole",
+            "neighbour list from neighbour_list (same positions and cutoff): read instead of the cells for particles it holds whole (an entry past the particles counts as the last particle)",
         )
         .optional(),
     )

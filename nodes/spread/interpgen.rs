@@ -47,7 +47,7 @@ const SEG: u32 = {seg}u;
 // Window weight (per unit length, as bits) and wrapped cell offset (times the axis
 // stride) of support index k on axis a for the particle at coordinate x.
 fn stencil_entry(x: f32, a: u32, k: u32) -> vec2<u32> {{
-    let t = centre_units(x, a, geo);
+    let t = centre_units(x, a);
     let j0 = floor(t - 0.5 * f32(NS)) + 1.0;
     let w = window_phi(j0 + f32(k) - t, geo.win[a]) * geo.inv_h[a];
     var stride = 1u;

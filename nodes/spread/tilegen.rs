@@ -106,7 +106,7 @@ var<workgroup> direct_flag: u32;
 // particle at coordinate x, and the padded-tile offset (times the axis stride) of that
 // support cell, the particle's anchor being at `anchor` inside the tile.
 fn stencil_entry(x: f32, a: u32, k: u32, anchor: u32) -> vec2<u32> {{
-    let t = centre_units(x, a, geo);
+    let t = centre_units(x, a);
     let j0 = first_cell(t);
     let w = window_phi(f32(j0 + i32(k)) - t, geo.win[a]) * geo.inv_h[a];
     var stride = 1u;
@@ -123,7 +123,7 @@ fn direct_add(p: u32, q: u32) {{
     var stride = 1u;
     for (var a = 0u; a < 3u; a = a + 1u) {{
         let k = (q / select(select(1u, NS, a >= 1u), NS * NS, a == 2u)) % NS;
-        let t = centre_units(pos[p * 3u + a], a, geo);
+        let t = centre_units(pos[p * 3u + a], a);
         let j = first_cell(t) + i32(k);
         w = w * window_phi(f32(j) - t, geo.win[a]) * geo.inv_h[a];
         cell = cell + wrap_cell(j, geo.n[a]) * stride;

@@ -40,7 +40,7 @@ fn box_setup(p0: u32, count: u32, lid: u32) -> Box {
     if (lid < count * DIMS) {
         let s = lid / DIMS;
         let a = lid % DIMS;
-        let t = centre_units(pos[(p0 + s) * DIMS + a], a, geo);
+        let t = centre_units(pos[(p0 + s) * DIMS + a], a);
         box_t[s * 3u + a] = t;
         box_first[s * 3u + a] = first_cell(t);
     }

@@ -1,5 +1,7 @@
-// Grid geometry and window params shared by spreading and interpolation. Cells are
-// centred at -L/2 + (j + 1/2) h per axis (boxes centred at the origin, periodic).
+// template: imported by kernels that declare the uniform `geo: Geometry` (spread/*.wgsl,
+// nodes/spread/*gen.rs). Grid geometry and window params shared by spreading and
+// interpolation. Cells are centred at -L/2 + (j + 1/2) h per axis (boxes centred at the
+// origin, periodic).
 struct Geometry {
     n: vec4<u32>,          // cells per axis (nz = 1 in 2D); w: all cells
     inv_h: vec4<f32>,      // 1 / cell size per axis
@@ -19,7 +21,10 @@ fn wrap_cell(i: i32, n: u32) -> u32 {
 
 // Position of particle coordinate x along axis a in cell-centre units (cell j's centre is
 // at j), after folding x into the box (keeps f32 precision for unwrapped trajectories).
-fn centre_units(x: f32, a: u32, g: Geometry) -> f32 {
-    let folded = x - g.box_len[a] * floor(x * g.inv_box[a] + 0.5);
-    return (folded + 0.5 * g.box_len[a]) * g.inv_h[a] - 0.5;
+// Reads the kernel's `geo` uniform itself: a Geometry passed by value and indexed by the
+// axis is the construct that makes lavapipe recompile a kernel at every dispatch
+// (mpcd/common.wgsl, cell_of).
+fn centre_units(x: f32, a: u32) -> f32 {
+    let folded = x - geo.box_len[a] * floor(x * geo.inv_box[a] + 0.5);
+    return (folded + 0.5 * geo.box_len[a]) * geo.inv_h[a] - 0.5;
 }

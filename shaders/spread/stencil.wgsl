@@ -47,7 +47,7 @@ fn stencil_setup(first_slot: u32, lid: u32, ppw: u32) {
         var w = 0.0;
         var off = 0u;
         if (p < geo.count) {
-            let t = centre_units(pos[p * DIMS + a], a, geo);
+            let t = centre_units(pos[p * DIMS + a], a);
             let j0 = floor(t - 0.5 * f32(NS)) + 1.0;
             w = window_phi(j0 + f32(k) - t, geo.win[a]) * geo.inv_h[a];
             var stride = 1u;

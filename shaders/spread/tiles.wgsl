@@ -42,7 +42,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     for (var a = 0u; a < 3u; a = a + 1u) {
         // The same arithmetic as the tile kernel's weights (first_cell), so a particle's
         // weights start at its anchor.
-        let anchor = wrap_cell(first_cell(centre_units(pos[p * 3u + a], a, geo)), geo.n[a]);
+        let anchor = wrap_cell(first_cell(centre_units(pos[p * 3u + a], a)), geo.n[a]);
         tile = tile + (anchor / TILE) * stride;
         stride = stride * tiles.nt[a];
         packed = packed | ((anchor % TILE) << (8u * a));

@@ -244,6 +244,107 @@ fn neighbour_sums_survive_any_cell_list() {
     }
 }
 
+/// Hostile cell arrays and lists mean what the port docs of `neighbour_sum` say: a key past
+/// the cells is the last cell, a cell's slots are cut to the particles (first = min(start,
+/// N), count = min(count, N - first)), a list entry past the particles is the last
+/// particle. So they give exactly the sums of those clamped arrays, written out on the
+/// host. The Lennard-Jones kernel reads positions only, and particles sit within its
+/// cutoff of the origin: a slot or entry read past the particles (zeros under lavapipe's
+/// robust access, a phantom particle at the origin) or a key taken modulo the cells changes
+/// the sums, so without the clamps of shaders/pairs/*.wgsl this fails (the test above only
+/// checks that the sums stay finite, which zeros from out-of-range reads also give).
+#[test]
+fn hostile_cell_lists_sum_like_their_clamped_equivalents() {
+    use crate::util::{flat_particles, gpu, indices, named, run_node};
+    let Some(gpu) = gpu() else { return };
+    let n = 8u32;
+    // Pairs 0.9 apart (inside the WCA cutoff 1.12), and every particle within 1.12 of the
+    // origin, none on it.
+    let pos: Vec<f64> = (0..n)
+        .flat_map(|i| {
+            let a = i as f64 * 0.785;
+            [
+                0.6 * a.cos(),
+                0.6 * a.sin(),
+                if i % 2 == 0 { 0.3 } else { -0.3 },
+            ]
+        })
+        .collect();
+    let vals = vec![1.0; 3 * n as usize];
+    // 4 x 4 x 4 cells of width 2: a cell's 27 neighbours are not all cells, so a key taken
+    // modulo the grid (1 << 30: cell 0, z = 2^26; 100: z = 6) visits other cells than the
+    // last one (63).
+    let ncells = 64u32;
+    let keys = [u32::MAX, 0, 5, 63, 1 << 30, 3, 100, 2];
+    // Slots past the particles and across their end.
+    let starts: Vec<u32> = (0..ncells)
+        .map(|c| [0, 6, 10, 3_000_000_000, 7, 8, 0, 2][c as usize % 8])
+        .collect();
+    let counts: Vec<u32> = (0..ncells)
+        .map(|c| [3, 5, 3, 5, 4, 0, 2, 9][c as usize % 8])
+        .collect();
+    let clamped_keys: Vec<u32> = keys.iter().map(|&k| k.min(ncells - 1)).collect();
+    let clamped_starts: Vec<u32> = starts.iter().map(|&s| s.min(n)).collect();
+    let clamped_counts: Vec<u32> = counts
+        .iter()
+        .zip(&clamped_starts)
+        .map(|(&c, &s)| c.min(n - s))
+        .collect();
+    // Four entries per particle (list[k n + i]), never i itself (no pair at r = 0), some
+    // past the particles (not for the last particle, which they mean).
+    let list: Vec<u32> = (0..4 * n)
+        .map(|e| {
+            let (k, i) = (e / n, e % n);
+            if (k + i) % 2 == 0 && i != n - 1 {
+                100 + e
+            } else {
+                (i + 1 + k) % n
+            }
+        })
+        .collect();
+    let clamped_list: Vec<u32> = list.iter().map(|&j| j.min(n - 1)).collect();
+    let list_count = [0, 1, 2, 3, 4, 4, 2, 1];
+    let mut lanes = vec![1, 0];
+    if gpu.caps.subgroups.is_none() {
+        lanes.pop();
+    }
+    for lane in lanes {
+        for with_list in [false, true] {
+            let sums = |keys: &[u32], starts: &[u32], counts: &[u32], list: &[u32]| {
+                let mut inputs = vec![
+                    ("positions", flat_particles(&pos, 3)),
+                    ("values", flat_particles(&vals, 3)),
+                    ("cells", indices(keys)),
+                    ("cell_start", indices(starts)),
+                    ("cell_count", indices(counts)),
+                ];
+                if with_list {
+                    inputs.push(("list", indices(list)));
+                    inputs.push(("list_count", indices(&list_count)));
+                }
+                let params = format!(
+                    r#"{{"box": [8, 8, 8], "cells": [4, 4, 4], "periodic": [1, 1, 1], "kernel": "lj", "sigma": 0.8, "cutoff": 1.5, "lanes": {lane}}}"#
+                );
+                run_node(&gpu, "neighbour_sum", &params, &named(&inputs))["out"]
+                    .data
+                    .to_f64()
+            };
+            let hostile = sums(&keys, &starts, &counts, &list);
+            let clamped = sums(
+                &clamped_keys,
+                &clamped_starts,
+                &clamped_counts,
+                &clamped_list,
+            );
+            assert!(
+                clamped.iter().any(|x| *x != 0.0),
+                "lanes {lane}, list {with_list}: the clamped arrays find no pairs"
+            );
+            assert_eq!(hostile, clamped, "lanes {lane}, list {with_list}");
+        }
+    }
+}
+
 /// A plan whose buffers exceed what the adapter allows (planned for other limits, as
 /// `validate` plans) fails in `Program::compile` with the limit named, before any
 /// buffer is created (before: wgpu's `create_buffer` validation panicked).
