@@ -2,16 +2,18 @@
 //! SRD rotation with the cell thermostat and virtual particles in wall-cut cells).
 
 use super::{
-    CellSums, Geometry, SUM_V, SumsLayout, check_rule, fx_round, geometry_params, grid_shift,
-    key_into, key_of, particle_ports, rule_param, thermal_params, value_of,
+    CellSums, Geometry, Rows, SUM_V, SumsLayout, check_rows, check_rule, fx_round, geometry_params,
+    grid_shift, key_into, key_of, particle_ports, rule_param, thermal_params, value_of,
+    velocity_unit,
 };
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D, shaders};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, RowError,
+    Signature,
 };
 use crate::nodes::random::{self, philox4x32_10};
-use crate::value::{PortType, RefArray, ValueType};
+use crate::value::{HostArray, PortType, RefArray, ValueType};
 
 fn key_params() -> [ParamSpec; 2] {
     [random::seed_param(), random::stream_param()]
@@ -75,6 +77,8 @@ pub(crate) struct MpcdBin {
     stream: u32,
     /// Some(true): native 64-bit atomics required; Some(false): 32-bit pairs; None: auto.
     atomics: Option<bool>,
+    /// The fixed-point unit v_th of the sums.
+    unit: f64,
 }
 
 impl MpcdBin {
@@ -100,6 +104,7 @@ impl MpcdBin {
             seed,
             stream,
             atomics,
+            unit: velocity_unit(p.number("temperature"), p.number("mass")),
         })
     }
 
@@ -167,6 +172,14 @@ impl Node for MpcdBin {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        let rows = match port {
+            0 => Rows::Positions,
+            _ => Rows::Velocities(Some(self.unit)),
+        };
+        check_rows(&self.geo, rows, data)
     }
 
     fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
@@ -579,6 +592,14 @@ impl Node for MpcdCollide {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        // The velocities only (`cell` and `sums` come from mpcd_bin): finite.
+        match port {
+            0 => check_rows(&self.geo, Rows::Velocities(None), data),
+            _ => Ok(()),
+        }
     }
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {

@@ -43,8 +43,8 @@ mod solute;
 mod stream;
 mod stream_bin;
 
-use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry};
-use crate::value::{PortType, ValueType};
+use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry, RowError};
+use crate::value::{HostArray, HostData, PortType, ValueType};
 
 pub use collide::srd_rotation;
 
@@ -334,6 +334,119 @@ impl Geometry {
     }
 }
 
+/// How far from the box a given position on a periodic axis may be, in box lengths: the
+/// kernels wrap it in f32, and an image farther out loses more than 2^-13 L of its place
+/// to rounding (an f32 carries 24 bits).
+pub const FAR_IMAGES: f64 = 1024.0;
+
+/// The largest velocity component the fixed point of the cell sums carries, in units of
+/// v_th: round(v 2^24 / v_th) must fit an i32.
+pub const MAX_VELOCITY: f64 = 128.0;
+
+/// What a per-particle MPCD port holds, for the host-side check of given data
+/// ([`check_rows`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Rows {
+    /// Positions: finite, inside the plates on the walled axis, within [`FAR_IMAGES`] box
+    /// lengths of the box on periodic ones.
+    Positions,
+    /// Velocities: finite; with `Some(v_th)` (a node that sums them in fixed point) each
+    /// component below [`MAX_VELOCITY`] v_th in magnitude.
+    Velocities(Option<f64>),
+}
+
+/// A number as messages print it: plainly from 1e-4 to 1e6, else in exponent form.
+pub(crate) fn num(x: f64) -> String {
+    if x == 0.0 || (1e-4..1e6).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
+/// The name of axis `a` in messages.
+fn axis_name(a: usize) -> &'static str {
+    ["x", "y", "z"][a]
+}
+
+/// Checks the rows of given per-particle data (N x d f32, as uploaded) against the
+/// geometry: the first row refused, with the coordinate, its value and the bound. Data of
+/// another type is left to planning, which refuses it.
+pub(crate) fn check_rows(geo: &Geometry, rows: Rows, data: &HostArray) -> Result<(), RowError> {
+    let d = geo.dims();
+    let (ValueType::Particles { k, .. }, HostData::F32(values)) = (data.ty, &data.data) else {
+        return Ok(());
+    };
+    if k as usize != d {
+        return Ok(());
+    }
+    let walled = geo.walls.then_some(d - 1);
+    for (row, r) in values.chunks_exact(d).enumerate() {
+        for (a, &x) in r.iter().enumerate() {
+            let name = match rows {
+                Rows::Positions => axis_name(a).to_string(),
+                Rows::Velocities(_) => format!("v_{}", axis_name(a)),
+            };
+            if !x.is_finite() {
+                return Err(RowError::new(row, format!("{name} = {x} is not finite")));
+            }
+            let l = geo.lengths[a];
+            let h = 0.5 * l;
+            let x64 = x as f64;
+            match rows {
+                // As the kernels compare: with the f32 half length.
+                Rows::Positions if walled == Some(a) => {
+                    if x.abs() > 0.5 * l as f32 {
+                        return Err(RowError::new(
+                            row,
+                            format!(
+                                "{name} = {x} is outside the plates [{}, {}] (walls = plates: at {name} = +-L/2, L = {})",
+                                num(-h),
+                                num(h),
+                                num(l)
+                            ),
+                        ));
+                    }
+                }
+                Rows::Positions => {
+                    if x64.abs() > h + FAR_IMAGES * l {
+                        return Err(RowError::new(
+                            row,
+                            format!(
+                                "{name} = {x} is more than {FAR_IMAGES} box lengths (L = {}) outside the periodic box [{}, {}): so far out an image loses its place to f32 rounding; give positions inside the box",
+                                num(l),
+                                num(-h),
+                                num(h)
+                            ),
+                        ));
+                    }
+                }
+                Rows::Velocities(Some(vth)) => {
+                    let max = MAX_VELOCITY * vth;
+                    if x64.abs() >= max {
+                        return Err(RowError::new(
+                            row,
+                            format!(
+                                "|{name}| = {} is not below {MAX_VELOCITY} v_th = {}, the range of the cell sums' fixed point (v_th = sqrt(temperature / mass) = {}; 1 at temperature 0)",
+                                x.abs(),
+                                num(max),
+                                num(vth)
+                            ),
+                        ));
+                    }
+                }
+                Rows::Velocities(None) => {}
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The velocity unit of the cell sums' fixed point, v_th = sqrt(kT / m) (1 at kT = 0).
+pub(crate) fn velocity_unit(kt: f64, mass: f64) -> f64 {
+    if kt > 0.0 { (kt / mass).sqrt() } else { 1.0 }
+}
+
 pub(crate) fn geometry_params() -> Vec<ParamSpec> {
     vec![
         ParamSpec {
@@ -383,7 +496,7 @@ pub(crate) fn thermal_params() -> Vec<ParamSpec> {
 
 /// The fixed-point scales (fix_v, fix_e) for (kT, m), as f32 (the GPU's values).
 fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
-    let vth = if kt > 0.0 { (kt / mass).sqrt() } else { 1.0 };
+    let vth = velocity_unit(kt, mass);
     ((16_777_216.0 / vth) as f32, (65_536.0 / (vth * vth)) as f32)
 }
 

@@ -1,13 +1,14 @@
 //! `mpcd_stream`: ballistic streaming for one step under a body force along x, with
 //! plates (bounce-back or specular) perpendicular to the last axis and a periodic wrap.
 
-use super::{Geometry, geometry_params, particle_ports};
+use super::{Geometry, Rows, check_rows, geometry_params, particle_ports};
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, RowError,
+    Signature,
 };
-use crate::value::{PortType, RefArray, ValueType};
+use crate::value::{HostArray, PortType, RefArray, ValueType};
 
 pub(super) fn mpcd_stream_kind() -> NodeKind {
     NodeKind::declare(
@@ -162,6 +163,14 @@ impl Node for MpcdStream {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        let rows = match port {
+            0 => Rows::Positions,
+            _ => Rows::Velocities(None),
+        };
+        check_rows(&self.geo, rows, data)
     }
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {

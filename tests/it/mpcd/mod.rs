@@ -2,10 +2,12 @@
 //! event schedule, binning with exact cell sums and the collisions' per-cell conservation
 //! laws and f64 references, the whole graph (initial state, measurement, momentum over
 //! many steps, bad input), the thermostats, viscosity against kinetic theory and measured
-//! values, and solute coupling. Shared helpers: `crate::util::mpcd`.
+//! values, solute coupling, and given data checked on the host before it runs. Shared
+//! helpers: `crate::util::mpcd`.
 
 mod collide;
 mod graph;
+mod inputs;
 mod solute;
 mod streaming;
 mod thermostats;
