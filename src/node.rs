@@ -270,7 +270,7 @@ fn out_of_range(min: f64, max: f64) -> String {
 
 /// A number as people read it: in exponent form beyond 1e15 (2^53 - 1, the largest exact
 /// seed, and f64::MAX, a default meaning "no limit") or below 1e-6.
-fn fmt_number(x: f64) -> String {
+pub fn fmt_number(x: f64) -> String {
     if x.abs() >= 1e15 || (x != 0.0 && x.abs() < 1e-6) {
         format!("{x:e}")
     } else {

@@ -3,8 +3,8 @@
 
 use super::{
     CellSums, Geometry, Rows, SUM_V, SumsLayout, check_rows, check_rule, fx_round, geometry_params,
-    grid_shift, key_into, key_of, particle_ports, rule_param, thermal_params, value_of,
-    velocity_unit,
+    grid_shift, key_into, key_of, particle_ports, rule_param, thermal_params, thermal_unit,
+    value_of,
 };
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D, shaders};
@@ -91,6 +91,7 @@ impl MpcdBin {
             _ => None,
         };
         let geo = Geometry::from_params(p)?;
+        let unit = thermal_unit(p)?;
         let biased = p.text("rule") == "biased";
         check_rule(&geo, biased)?;
         let mut u = geo.thermal_uniform(p);
@@ -104,7 +105,7 @@ impl MpcdBin {
             seed,
             stream,
             atomics,
-            unit: velocity_unit(p.number("temperature"), p.number("mass")),
+            unit,
         })
     }
 
@@ -320,8 +321,8 @@ pub(super) fn mpcd_collide_kind() -> NodeKind {
         "acceptance",
         Some(0.01),
         0.0,
-        f64::MAX,
-        "MPCD-BC acceptance parameter A: a cell pair collides with probability tanh(A du n1 n2)",
+        super::F32_SCALE,
+        "MPCD-BC acceptance parameter A: a cell pair collides with probability tanh(A du n1 n2); at most 1e30 (f32)",
     ))
     .param(ParamSpec::number(
         "angle",
@@ -334,8 +335,8 @@ pub(super) fn mpcd_collide_kind() -> NodeKind {
         "density",
         Some(10.0),
         f64::MIN_POSITIVE,
-        f64::MAX,
-        "mean particles per cell M (the fill level of virtual particles)",
+        16_777_216.0,
+        "mean particles per cell M (the fill level of virtual particles); at most 2^24 (the kernel compares it with cell counts in f32, exact to 2^24)",
     ))
     .param(ParamSpec::flag(
         "ghosts",
@@ -355,6 +356,7 @@ pub(super) fn mpcd_collide_kind() -> NodeKind {
     .params(key_params())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
+        thermal_unit(p)?;
         let thermostat = match p.text("thermostat") {
             "none" => 0,
             "rescale" => 1,

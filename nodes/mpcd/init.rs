@@ -3,7 +3,7 @@
 //! Maxwell-Boltzmann at kT with the mean velocity (summed in exact fixed point) removed.
 
 use super::{
-    Geometry, Rows, check_rows, geometry_params, key_into, key_of, thermal_params, velocity_unit,
+    Geometry, Rows, check_rows, geometry_params, key_into, key_of, thermal_params, thermal_unit,
 };
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
@@ -58,12 +58,14 @@ pub(super) fn mpcd_init_kind() -> NodeKind {
     .param(random::stream_param())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
+        let unit = thermal_unit(p)?;
         let volume_cells: f64 = geo.lengths.iter().map(|l| (l / geo.cell).round()).product();
         let n = (p.number("density") * volume_cells).round();
         if !(1.0..=u32::MAX as f64 / 3.0).contains(&n) {
             return Err(format!(
-                "density {} x {volume_cells} cells gives {n} particles (1 to 2^32/3 allowed)",
-                p.number("density")
+                "density {} x {volume_cells} cells gives {} particles (1 to 2^32/3 allowed)",
+                super::num(p.number("density")),
+                super::num(n)
             ));
         }
         let mut u = geo.thermal_uniform(p);
@@ -78,7 +80,7 @@ pub(super) fn mpcd_init_kind() -> NodeKind {
             seed,
             stream,
             vth: (p.number("temperature") / p.number("mass")).sqrt(),
-            unit: velocity_unit(p.number("temperature"), p.number("mass")),
+            unit,
         }))
     })
 }

@@ -3,7 +3,7 @@
 
 use super::{
     Geometry, Rows, SUM_V, SumsLayout, check_rows, fx_round, geometry_params, thermal_params,
-    value_of, velocity_unit, words_of,
+    thermal_unit, value_of, words_of,
 };
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
@@ -92,7 +92,7 @@ pub(super) fn mpcd_measure_kind() -> NodeKind {
         Ok(Box::new(MpcdMeasure {
             geo,
             u,
-            unit: velocity_unit(p.number("temperature"), p.number("mass")),
+            unit: thermal_unit(p)?,
         }))
     })
 }
@@ -283,6 +283,7 @@ pub(super) fn mpcd_average_kind() -> NodeKind {
     .param(bins_param())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
+        thermal_unit(p)?;
         let mut u = geo.thermal_uniform(p);
         u.mass = p.number("mass") as f32;
         u.bins = p.number("bins") as u32;
@@ -340,13 +341,13 @@ impl Node for MpcdAverage {
         let d = self.geo.dims();
         let dof = pair(9);
         outputs[1].data[0] = if dof > 0.0 {
-            mass * pair(7) / (fix_e * d as f64 * dof)
+            mass * (pair(7) / fix_e / (d as f64 * dof))
         } else {
             f64::NAN
         };
         for a in 0..d {
             outputs[2].data[a] = if acc[0] > 0.0 {
-                mass * pair(1 + 2 * a) / (fix_v * acc[0])
+                mass * (pair(1 + 2 * a) / fix_v / acc[0])
             } else {
                 f64::NAN
             };

@@ -241,6 +241,12 @@ impl Geometry {
                     "box length {l} along axis {a} is not a whole number of cells of size {cell}"
                 ));
             }
+            if r.round() > MAX_AXIS_CELLS {
+                return Err(format!(
+                    "box length {l} along axis {a} is {} cells of size {cell}, more than {MAX_AXIS_CELLS}: f32 positions at the box edge would not resolve 1/256 of a cell; use larger cells or a smaller box",
+                    r.round()
+                ));
+            }
             cells.push(r.round() as u32 + u32::from(walls && a == lengths.len() - 1));
         }
         let total: f64 = cells.iter().map(|&c| c as f64).product();
@@ -355,12 +361,14 @@ pub(crate) enum Rows {
     Velocities(Option<f64>),
 }
 
-/// A number as messages print it: plainly from 1e-4 to 1e6, else in exponent form.
+/// A number as messages print it: to 7 significant digits (1e-30 read from a file, not
+/// 9.999999999999999e-31), plainly from 1e-4 to 1e6, else in exponent form.
 pub(crate) fn num(x: f64) -> String {
-    if x == 0.0 || (1e-4..1e6).contains(&x.abs()) {
-        format!("{x}")
+    let rounded: f64 = format!("{x:.6e}").parse().unwrap_or(x);
+    if rounded == 0.0 || (1e-4..1e6).contains(&rounded.abs()) {
+        format!("{rounded}")
     } else {
-        format!("{x:e}")
+        format!("{rounded:e}")
     }
 }
 
@@ -447,24 +455,46 @@ pub(crate) fn velocity_unit(kt: f64, mass: f64) -> f64 {
     if kt > 0.0 { (kt / mass).sqrt() } else { 1.0 }
 }
 
+/// The magnitude bound of MPCD's dimensional params (lengths, kT, masses, dt, forces):
+/// from 1e-30 to 1e30 an f32 (normal from 1.2e-38 to 3.4e38) carries each of them, and
+/// their products with the counts and ratios the kernels form, with 8 decades to spare.
+pub const F32_SCALE: f64 = 1e30;
+
+/// The range of v_th^2 = kT / m: the cell sums' units 2^24 / v_th and 2^16 / v_th^2, and
+/// sums of |v|^2 over 10^12 particle-samples (up to 3 10^12 v_th^2), stay finite in f32.
+pub const VTH2_RANGE: (f64, f64) = (1e-20, 1e20);
+
+/// The most cells along one axis: positions at the box edge, +-2^15 cells from the
+/// centre, still resolve 1/256 of a cell in f32.
+pub const MAX_AXIS_CELLS: f64 = 65_536.0;
+
+/// The passes of the streaming kernel's wall loop: each ends at a plate or the end of the
+/// step, so a particle may cross the gap at most PASSES - 2 times in one step.
+pub const WALL_PASSES: f64 = 16.0;
+
+/// The smallest mean free path dt v_th, relative to the largest box length, that the f32
+/// positions resolve: the step moves a particle by at least 2^4 ulps at the box edge
+/// (2^-20 L; an f32 carries 24 bits), so rounding takes at most 1/16 of it.
+pub const MIN_FREE_PATH: f64 = 1.0 / 1_048_576.0;
+
 pub(crate) fn geometry_params() -> Vec<ParamSpec> {
     vec![
         ParamSpec {
             name: "box",
             kind: ParamKind::Numbers {
                 len: None,
-                min: f64::MIN_POSITIVE,
-                max: f64::MAX,
+                min: 1.0 / F32_SCALE,
+                max: F32_SCALE,
             },
             default: None,
-            doc: "box lengths per axis (2 or 3 values), centred at the origin",
+            doc: "box lengths per axis (2 or 3 values), centred at the origin; from 1e-30 to 1e30 (f32 carries them and their sums with the grid shift), at most 65536 cells along an axis (positions at the box edge then resolve 1/256 of a cell in f32)",
         },
         ParamSpec::number(
             "cell",
             Some(1.0),
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            "collision cell size a (box lengths are whole numbers of cells)",
+            1.0 / F32_SCALE,
+            F32_SCALE,
+            "collision cell size a (box lengths are whole numbers of cells); from 1e-30 to 1e30 (f32)",
         ),
         ParamSpec::choice(
             "walls",
@@ -475,23 +505,55 @@ pub(crate) fn geometry_params() -> Vec<ParamSpec> {
     ]
 }
 
+/// `temperature` of the kinds that take a thermal scale.
+pub(crate) fn temperature_param() -> ParamSpec {
+    ParamSpec::number(
+        "temperature",
+        Some(1.0),
+        0.0,
+        F32_SCALE,
+        "kT (sets the fixed-point unit v_th = sqrt(kT/m) of the cell sums; 1 at kT = 0): 0 or from 1e-30 to 1e30, with kT/m from 1e-20 to 1e20 (the f32 kernels form kT/m, m/kT, 2^24/v_th, 2^16/v_th^2 and sums of |v|^2 over 10^12 particle-samples)",
+    )
+}
+
+/// `mass` of the MPCD kinds.
+pub(crate) fn mass_param() -> ParamSpec {
+    ParamSpec::number(
+        "mass",
+        Some(1.0),
+        1.0 / F32_SCALE,
+        F32_SCALE,
+        "particle mass m: from 1e-30 to 1e30 (f32; see temperature for kT/m)",
+    )
+}
+
 pub(crate) fn thermal_params() -> Vec<ParamSpec> {
-    vec![
-        ParamSpec::number(
-            "temperature",
-            Some(1.0),
-            0.0,
-            f64::MAX,
-            "kT (sets the fixed-point unit v_th = sqrt(kT/m) of the cell sums)",
-        ),
-        ParamSpec::number(
-            "mass",
-            Some(1.0),
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            "particle mass m",
-        ),
-    ]
+    vec![temperature_param(), mass_param()]
+}
+
+/// The fixed-point unit v_th of checked `temperature` and `mass` params, or why the f32
+/// kernels cannot carry them (`temperature_param`'s range).
+pub(crate) fn thermal_unit(p: &Params) -> Result<f64, String> {
+    let (kt, mass) = (p.number("temperature"), p.number("mass"));
+    if kt == 0.0 {
+        return Ok(1.0);
+    }
+    if kt < 1.0 / F32_SCALE {
+        return Err(format!(
+            "temperature {} is below 1e-30 (give 0 or from 1e-30 to 1e30: the f32 kernels carry kT)",
+            num(kt)
+        ));
+    }
+    let vth2 = kt / mass;
+    if !(VTH2_RANGE.0..=VTH2_RANGE.1).contains(&vth2) {
+        return Err(format!(
+            "temperature / mass = {} / {} = {} is outside [1e-20, 1e20]: v_th^2 = kT/m must be there for the f32 kernels (the cell sums' units 2^24/v_th and 2^16/v_th^2, sums of |v|^2); change temperature or mass",
+            num(kt),
+            num(mass),
+            num(vth2)
+        ));
+    }
+    Ok(vth2.sqrt())
 }
 
 /// The fixed-point scales (fix_v, fix_e) for (kT, m), as f32 (the GPU's values).

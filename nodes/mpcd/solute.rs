@@ -6,7 +6,7 @@
 
 use super::{
     Geometry, Rows, SumsLayout, check_rows, geometry_params, grid_shift, key_into, key_of,
-    thermal_params,
+    thermal_params, thermal_unit,
 };
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
@@ -52,9 +52,9 @@ pub(super) fn mpcd_bin_solute_kind() -> NodeKind {
     .param(ParamSpec::number(
         "solute_mass",
         Some(1.0),
-        f64::MIN_POSITIVE,
-        f64::MAX,
-        "solute particle mass M",
+        1.0 / super::F32_SCALE,
+        super::F32_SCALE,
+        "solute particle mass M: from 1e-30 to 1e30 (f32), and M / m an f32 too",
     ))
     .param(ParamSpec::flag(
         "shift",
@@ -65,6 +65,7 @@ pub(super) fn mpcd_bin_solute_kind() -> NodeKind {
     .param(random::stream_param())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
+        thermal_unit(p)?;
         let ratio = p.number("solute_mass") / p.number("mass");
         let r32 = ratio as f32;
         if !(r32.is_finite() && r32 > 0.0) {
