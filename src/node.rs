@@ -13,7 +13,7 @@ use crate::expr::{HostFunction, HostFunctions, ParamValue};
 use crate::gpu::{CompileCtx, CompileError, DeviceCaps, Dispatch, NodeIo};
 pub use crate::gpu::{NodeDecision, NodePlan};
 use crate::transform::{SpectralBody, Transform};
-use crate::value::{PortType, RefArray, ValueType};
+use crate::value::{HostArray, PortType, RefArray, ValueType};
 
 /// One input or output port of a node kind.
 #[derive(Clone, Debug)]
@@ -270,7 +270,7 @@ fn out_of_range(min: f64, max: f64) -> String {
 
 /// A number as people read it: in exponent form beyond 1e15 (2^53 - 1, the largest exact
 /// seed, and f64::MAX, a default meaning "no limit") or below 1e-6.
-fn fmt_number(x: f64) -> String {
+pub fn fmt_number(x: f64) -> String {
     if x.abs() >= 1e15 || (x != 0.0 && x.abs() < 1e-6) {
         format!("{x:e}")
     } else {
@@ -553,6 +553,23 @@ pub struct RefCtx {
     pub step: u64,
 }
 
+/// A row of host data that a node refuses ([`Node::check_input`]): its index and what is
+/// wrong with it, the value and the bound it breaks named.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RowError {
+    pub row: usize,
+    pub message: String,
+}
+
+impl RowError {
+    pub fn new(row: usize, message: impl Into<String>) -> Self {
+        RowError {
+            row,
+            message: message.into(),
+        }
+    }
+}
+
 /// A node instance with checked params.
 pub trait Node: Send + Sync {
     /// Output types for the given input types (`None`: an absent optional input) on an
@@ -580,6 +597,17 @@ pub trait Node: Send + Sync {
     fn forwards(&self, inputs: &[Option<ValueType>]) -> Option<usize> {
         let _ = inputs;
         None
+    }
+
+    /// Checks data given from the host for input `port` before it is uploaded: a graph
+    /// input wired to the port, or the initial value of a state the port reads
+    /// (`Graph::check_input_data`). For what the node's kernels cannot take and no type
+    /// says (a particle outside the walls, a NaN velocity): the first row refused. Values
+    /// other nodes compute on the GPU are not checked here; those nodes' own contracts
+    /// keep them in range. Default: any data.
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        let _ = (port, data);
+        Ok(())
     }
 
     /// The f64 CPU reference of one evaluation; `outputs` holds the previous contents of

@@ -2,16 +2,18 @@
 //! SRD rotation with the cell thermostat and virtual particles in wall-cut cells).
 
 use super::{
-    CellSums, Geometry, SUM_V, SumsLayout, check_rule, fx_round, geometry_params, grid_shift,
-    key_into, key_of, particle_ports, rule_param, thermal_params, value_of,
+    CellSums, Geometry, Rows, SUM_V, SumsLayout, check_rows, check_rule, fx_round, geometry_params,
+    grid_shift, key_into, key_of, particle_ports, rule_param, thermal_params, thermal_unit,
+    value_of,
 };
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D, shaders};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, RowError,
+    Signature,
 };
 use crate::nodes::random::{self, philox4x32_10};
-use crate::value::{PortType, RefArray, ValueType};
+use crate::value::{HostArray, PortType, RefArray, ValueType};
 
 fn key_params() -> [ParamSpec; 2] {
     [random::seed_param(), random::stream_param()]
@@ -75,6 +77,8 @@ pub(crate) struct MpcdBin {
     stream: u32,
     /// Some(true): native 64-bit atomics required; Some(false): 32-bit pairs; None: auto.
     atomics: Option<bool>,
+    /// The fixed-point unit v_th of the sums.
+    unit: f64,
 }
 
 impl MpcdBin {
@@ -87,6 +91,7 @@ impl MpcdBin {
             _ => None,
         };
         let geo = Geometry::from_params(p)?;
+        let unit = thermal_unit(p)?;
         let biased = p.text("rule") == "biased";
         check_rule(&geo, biased)?;
         let mut u = geo.thermal_uniform(p);
@@ -100,6 +105,7 @@ impl MpcdBin {
             seed,
             stream,
             atomics,
+            unit,
         })
     }
 
@@ -167,6 +173,14 @@ impl Node for MpcdBin {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        let rows = match port {
+            0 => Rows::Positions,
+            _ => Rows::Velocities(Some(self.unit)),
+        };
+        check_rows(&self.geo, rows, data)
     }
 
     fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
@@ -307,8 +321,8 @@ pub(super) fn mpcd_collide_kind() -> NodeKind {
         "acceptance",
         Some(0.01),
         0.0,
-        f64::MAX,
-        "MPCD-BC acceptance parameter A: a cell pair collides with probability tanh(A du n1 n2)",
+        super::F32_SCALE,
+        "MPCD-BC acceptance parameter A: a cell pair collides with probability tanh(A du n1 n2); at most 1e30 (f32)",
     ))
     .param(ParamSpec::number(
         "angle",
@@ -321,8 +335,8 @@ pub(super) fn mpcd_collide_kind() -> NodeKind {
         "density",
         Some(10.0),
         f64::MIN_POSITIVE,
-        f64::MAX,
-        "mean particles per cell M (the fill level of virtual particles)",
+        16_777_216.0,
+        "mean particles per cell M (the fill level of virtual particles); at most 2^24 (the kernel compares it with cell counts in f32, exact to 2^24)",
     ))
     .param(ParamSpec::flag(
         "ghosts",
@@ -342,6 +356,7 @@ pub(super) fn mpcd_collide_kind() -> NodeKind {
     .params(key_params())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
+        thermal_unit(p)?;
         let thermostat = match p.text("thermostat") {
             "none" => 0,
             "rescale" => 1,
@@ -579,6 +594,14 @@ impl Node for MpcdCollide {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        // The velocities only (`cell` and `sums` come from mpcd_bin): finite.
+        match port {
+            0 => check_rows(&self.geo, Rows::Velocities(None), data),
+            _ => Ok(()),
+        }
     }
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {

@@ -2,14 +2,17 @@
 //! can start from it): round(density x cells) particles uniform in the box, velocities
 //! Maxwell-Boltzmann at kT with the mean velocity (summed in exact fixed point) removed.
 
-use super::{Geometry, geometry_params, key_into, key_of, thermal_params};
+use super::{
+    Geometry, Rows, check_rows, geometry_params, key_into, key_of, thermal_params, thermal_unit,
+};
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, RowError,
+    Signature,
 };
 use crate::nodes::random;
-use crate::value::{PortType, RefArray, ValueType};
+use crate::value::{HostArray, PortType, RefArray, ValueType};
 
 pub(super) fn mpcd_init_kind() -> NodeKind {
     NodeKind::declare(
@@ -55,12 +58,14 @@ pub(super) fn mpcd_init_kind() -> NodeKind {
     .param(random::stream_param())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
+        let unit = thermal_unit(p)?;
         let volume_cells: f64 = geo.lengths.iter().map(|l| (l / geo.cell).round()).product();
         let n = (p.number("density") * volume_cells).round();
         if !(1.0..=u32::MAX as f64 / 3.0).contains(&n) {
             return Err(format!(
-                "density {} x {volume_cells} cells gives {n} particles (1 to 2^32/3 allowed)",
-                p.number("density")
+                "density {} x {volume_cells} cells gives {} particles (1 to 2^32/3 allowed)",
+                super::num(p.number("density")),
+                super::num(n)
             ));
         }
         let mut u = geo.thermal_uniform(p);
@@ -75,6 +80,7 @@ pub(super) fn mpcd_init_kind() -> NodeKind {
             seed,
             stream,
             vth: (p.number("temperature") / p.number("mass")).sqrt(),
+            unit,
         }))
     })
 }
@@ -85,6 +91,8 @@ struct MpcdInit {
     seed: u64,
     stream: u32,
     vth: f64,
+    /// The fixed-point unit of the cell sums the given velocities will enter.
+    unit: f64,
 }
 
 impl MpcdInit {
@@ -129,6 +137,14 @@ impl Node for MpcdInit {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        let rows = match port {
+            0 => Rows::Positions,
+            _ => Rows::Velocities(Some(self.unit)),
+        };
+        check_rows(&self.geo, rows, data)
     }
 
     fn notes(&self, inputs: &[Option<ValueType>]) -> Vec<String> {

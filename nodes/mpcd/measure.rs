@@ -2,14 +2,16 @@
 //! block of exact 64-bit fixed-point sums) and `mpcd_average` (their means).
 
 use super::{
-    Geometry, SUM_V, SumsLayout, fx_round, geometry_params, thermal_params, value_of, words_of,
+    Geometry, Rows, SUM_V, SumsLayout, check_rows, fx_round, geometry_params, thermal_params,
+    thermal_unit, value_of, words_of,
 };
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, RowError,
+    Signature,
 };
-use crate::value::{PortType, RefArray, ValueType};
+use crate::value::{HostArray, PortType, RefArray, ValueType};
 
 /// Words of the accumulator before the profile bins.
 const HEAD: usize = 11;
@@ -87,13 +89,19 @@ pub(super) fn mpcd_measure_kind() -> NodeKind {
         u.bins = p.number("bins") as u32;
         u.warmup = p.number("warmup") as u32;
         u.every = p.number("every") as u32;
-        Ok(Box::new(MpcdMeasure { geo, u }))
+        Ok(Box::new(MpcdMeasure {
+            geo,
+            u,
+            unit: thermal_unit(p)?,
+        }))
     })
 }
 
 struct MpcdMeasure {
     geo: Geometry,
     u: super::Uniform,
+    /// The fixed-point unit v_th of the sums.
+    unit: f64,
 }
 
 fn add(acc: &mut [f64], i: usize, v: i64) {
@@ -135,6 +143,16 @@ impl Node for MpcdMeasure {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        // The velocities are summed in fixed point here, those before the collision
+        // were in the cell sums.
+        match port {
+            0 => check_rows(&self.geo, Rows::Positions, data),
+            1 | 4 => check_rows(&self.geo, Rows::Velocities(Some(self.unit)), data),
+            _ => Ok(()),
+        }
     }
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
@@ -265,6 +283,7 @@ pub(super) fn mpcd_average_kind() -> NodeKind {
     .param(bins_param())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
+        thermal_unit(p)?;
         let mut u = geo.thermal_uniform(p);
         u.mass = p.number("mass") as f32;
         u.bins = p.number("bins") as u32;
@@ -322,13 +341,13 @@ impl Node for MpcdAverage {
         let d = self.geo.dims();
         let dof = pair(9);
         outputs[1].data[0] = if dof > 0.0 {
-            mass * pair(7) / (fix_e * d as f64 * dof)
+            mass * (pair(7) / fix_e / (d as f64 * dof))
         } else {
             f64::NAN
         };
         for a in 0..d {
             outputs[2].data[a] = if acc[0] > 0.0 {
-                mass * pair(1 + 2 * a) / (fix_v * acc[0])
+                mass * (pair(1 + 2 * a) / fix_v / acc[0])
             } else {
                 f64::NAN
             };

@@ -43,8 +43,8 @@ mod solute;
 mod stream;
 mod stream_bin;
 
-use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry};
-use crate::value::{PortType, ValueType};
+use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry, RowError};
+use crate::value::{HostArray, HostData, PortType, ValueType};
 
 pub use collide::srd_rotation;
 
@@ -241,6 +241,12 @@ impl Geometry {
                     "box length {l} along axis {a} is not a whole number of cells of size {cell}"
                 ));
             }
+            if r.round() > MAX_AXIS_CELLS {
+                return Err(format!(
+                    "box length {l} along axis {a} is {} cells of size {cell}, more than {MAX_AXIS_CELLS}: f32 positions at the box edge would not resolve 1/256 of a cell; use larger cells or a smaller box",
+                    r.round()
+                ));
+            }
             cells.push(r.round() as u32 + u32::from(walls && a == lengths.len() - 1));
         }
         let total: f64 = cells.iter().map(|&c| c as f64).product();
@@ -334,24 +340,161 @@ impl Geometry {
     }
 }
 
+/// How far from the box a given position on a periodic axis may be, in box lengths: the
+/// kernels wrap it in f32, and an image farther out loses more than 2^-13 L of its place
+/// to rounding (an f32 carries 24 bits).
+pub const FAR_IMAGES: f64 = 1024.0;
+
+/// The largest velocity component the fixed point of the cell sums carries, in units of
+/// v_th: round(v 2^24 / v_th) must fit an i32.
+pub const MAX_VELOCITY: f64 = 128.0;
+
+/// What a per-particle MPCD port holds, for the host-side check of given data
+/// ([`check_rows`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Rows {
+    /// Positions: finite, inside the plates on the walled axis, within [`FAR_IMAGES`] box
+    /// lengths of the box on periodic ones.
+    Positions,
+    /// Velocities: finite; with `Some(v_th)` (a node that sums them in fixed point) each
+    /// component below [`MAX_VELOCITY`] v_th in magnitude.
+    Velocities(Option<f64>),
+}
+
+/// A number as messages print it: to 7 significant digits (1e-30 read from a file, not
+/// 9.999999999999999e-31), plainly from 1e-4 to 1e6, else in exponent form.
+pub(crate) fn num(x: f64) -> String {
+    let rounded: f64 = format!("{x:.6e}").parse().unwrap_or(x);
+    if rounded == 0.0 || (1e-4..1e6).contains(&rounded.abs()) {
+        format!("{rounded}")
+    } else {
+        format!("{rounded:e}")
+    }
+}
+
+/// The name of axis `a` in messages.
+fn axis_name(a: usize) -> &'static str {
+    ["x", "y", "z"][a]
+}
+
+/// Checks the rows of given per-particle data (N x d f32, as uploaded) against the
+/// geometry: the first row refused, with the coordinate, its value and the bound. Data of
+/// another type is left to planning, which refuses it.
+pub(crate) fn check_rows(geo: &Geometry, rows: Rows, data: &HostArray) -> Result<(), RowError> {
+    let d = geo.dims();
+    let (ValueType::Particles { k, .. }, HostData::F32(values)) = (data.ty, &data.data) else {
+        return Ok(());
+    };
+    if k as usize != d {
+        return Ok(());
+    }
+    let walled = geo.walls.then_some(d - 1);
+    for (row, r) in values.chunks_exact(d).enumerate() {
+        for (a, &x) in r.iter().enumerate() {
+            let name = match rows {
+                Rows::Positions => axis_name(a).to_string(),
+                Rows::Velocities(_) => format!("v_{}", axis_name(a)),
+            };
+            if !x.is_finite() {
+                return Err(RowError::new(row, format!("{name} = {x} is not finite")));
+            }
+            let l = geo.lengths[a];
+            let h = 0.5 * l;
+            let x64 = x as f64;
+            match rows {
+                // As the kernels compare: with the f32 half length.
+                Rows::Positions if walled == Some(a) => {
+                    if x.abs() > 0.5 * l as f32 {
+                        return Err(RowError::new(
+                            row,
+                            format!(
+                                "{name} = {x} is outside the plates [{}, {}] (walls = plates: at {name} = +-L/2, L = {})",
+                                num(-h),
+                                num(h),
+                                num(l)
+                            ),
+                        ));
+                    }
+                }
+                Rows::Positions => {
+                    if x64.abs() > h + FAR_IMAGES * l {
+                        return Err(RowError::new(
+                            row,
+                            format!(
+                                "{name} = {x} is more than {FAR_IMAGES} box lengths (L = {}) outside the periodic box [{}, {}): so far out an image loses its place to f32 rounding; give positions inside the box",
+                                num(l),
+                                num(-h),
+                                num(h)
+                            ),
+                        ));
+                    }
+                }
+                Rows::Velocities(Some(vth)) => {
+                    let max = MAX_VELOCITY * vth;
+                    if x64.abs() >= max {
+                        return Err(RowError::new(
+                            row,
+                            format!(
+                                "|{name}| = {} is not below {MAX_VELOCITY} v_th = {}, the range of the cell sums' fixed point (v_th = sqrt(temperature / mass) = {}; 1 at temperature 0)",
+                                x.abs(),
+                                num(max),
+                                num(vth)
+                            ),
+                        ));
+                    }
+                }
+                Rows::Velocities(None) => {}
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The velocity unit of the cell sums' fixed point, v_th = sqrt(kT / m) (1 at kT = 0).
+pub(crate) fn velocity_unit(kt: f64, mass: f64) -> f64 {
+    if kt > 0.0 { (kt / mass).sqrt() } else { 1.0 }
+}
+
+/// The magnitude bound of MPCD's dimensional params (lengths, kT, masses, dt, forces):
+/// from 1e-30 to 1e30 an f32 (normal from 1.2e-38 to 3.4e38) carries each of them, and
+/// their products with the counts and ratios the kernels form, with 8 decades to spare.
+pub const F32_SCALE: f64 = 1e30;
+
+/// The range of v_th^2 = kT / m: the cell sums' units 2^24 / v_th and 2^16 / v_th^2, and
+/// sums of |v|^2 over 10^12 particle-samples (up to 3 10^12 v_th^2), stay finite in f32.
+pub const VTH2_RANGE: (f64, f64) = (1e-20, 1e20);
+
+/// The most cells along one axis: positions at the box edge, +-2^15 cells from the
+/// centre, still resolve 1/256 of a cell in f32.
+pub const MAX_AXIS_CELLS: f64 = 65_536.0;
+
+/// The passes of the streaming kernel's wall loop: each ends at a plate or the end of the
+/// step, so a particle may cross the gap at most PASSES - 2 times in one step.
+pub const WALL_PASSES: f64 = 16.0;
+
+/// The smallest mean free path dt v_th, relative to the largest box length, that the f32
+/// positions resolve: the step moves a particle by at least 2^4 ulps at the box edge
+/// (2^-20 L; an f32 carries 24 bits), so rounding takes at most 1/16 of it.
+pub const MIN_FREE_PATH: f64 = 1.0 / 1_048_576.0;
+
 pub(crate) fn geometry_params() -> Vec<ParamSpec> {
     vec![
         ParamSpec {
             name: "box",
             kind: ParamKind::Numbers {
                 len: None,
-                min: f64::MIN_POSITIVE,
-                max: f64::MAX,
+                min: 1.0 / F32_SCALE,
+                max: F32_SCALE,
             },
             default: None,
-            doc: "box lengths per axis (2 or 3 values), centred at the origin",
+            doc: "box lengths per axis (2 or 3 values), centred at the origin; from 1e-30 to 1e30 (f32 carries them and their sums with the grid shift), at most 65536 cells along an axis (positions at the box edge then resolve 1/256 of a cell in f32)",
         },
         ParamSpec::number(
             "cell",
             Some(1.0),
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            "collision cell size a (box lengths are whole numbers of cells)",
+            1.0 / F32_SCALE,
+            F32_SCALE,
+            "collision cell size a (box lengths are whole numbers of cells); from 1e-30 to 1e30 (f32)",
         ),
         ParamSpec::choice(
             "walls",
@@ -362,28 +505,60 @@ pub(crate) fn geometry_params() -> Vec<ParamSpec> {
     ]
 }
 
+/// `temperature` of the kinds that take a thermal scale.
+pub(crate) fn temperature_param() -> ParamSpec {
+    ParamSpec::number(
+        "temperature",
+        Some(1.0),
+        0.0,
+        F32_SCALE,
+        "kT (sets the fixed-point unit v_th = sqrt(kT/m) of the cell sums; 1 at kT = 0): 0 or from 1e-30 to 1e30, with kT/m from 1e-20 to 1e20 (the f32 kernels form kT/m, m/kT, 2^24/v_th, 2^16/v_th^2 and sums of |v|^2 over 10^12 particle-samples)",
+    )
+}
+
+/// `mass` of the MPCD kinds.
+pub(crate) fn mass_param() -> ParamSpec {
+    ParamSpec::number(
+        "mass",
+        Some(1.0),
+        1.0 / F32_SCALE,
+        F32_SCALE,
+        "particle mass m: from 1e-30 to 1e30 (f32; see temperature for kT/m)",
+    )
+}
+
 pub(crate) fn thermal_params() -> Vec<ParamSpec> {
-    vec![
-        ParamSpec::number(
-            "temperature",
-            Some(1.0),
-            0.0,
-            f64::MAX,
-            "kT (sets the fixed-point unit v_th = sqrt(kT/m) of the cell sums)",
-        ),
-        ParamSpec::number(
-            "mass",
-            Some(1.0),
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            "particle mass m",
-        ),
-    ]
+    vec![temperature_param(), mass_param()]
+}
+
+/// The fixed-point unit v_th of checked `temperature` and `mass` params, or why the f32
+/// kernels cannot carry them (`temperature_param`'s range).
+pub(crate) fn thermal_unit(p: &Params) -> Result<f64, String> {
+    let (kt, mass) = (p.number("temperature"), p.number("mass"));
+    if kt == 0.0 {
+        return Ok(1.0);
+    }
+    if kt < 1.0 / F32_SCALE {
+        return Err(format!(
+            "temperature {} is below 1e-30 (give 0 or from 1e-30 to 1e30: the f32 kernels carry kT)",
+            num(kt)
+        ));
+    }
+    let vth2 = kt / mass;
+    if !(VTH2_RANGE.0..=VTH2_RANGE.1).contains(&vth2) {
+        return Err(format!(
+            "temperature / mass = {} / {} = {} is outside [1e-20, 1e20]: v_th^2 = kT/m must be there for the f32 kernels (the cell sums' units 2^24/v_th and 2^16/v_th^2, sums of |v|^2); change temperature or mass",
+            num(kt),
+            num(mass),
+            num(vth2)
+        ));
+    }
+    Ok(vth2.sqrt())
 }
 
 /// The fixed-point scales (fix_v, fix_e) for (kT, m), as f32 (the GPU's values).
 fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
-    let vth = if kt > 0.0 { (kt / mass).sqrt() } else { 1.0 };
+    let vth = velocity_unit(kt, mass);
     ((16_777_216.0 / vth) as f32, (65_536.0 / (vth * vth)) as f32)
 }
 

@@ -4,14 +4,18 @@
 //! cells with the same params, rotates both species by the same rotation of each cell:
 //! v' = u + R (v - u), V' = u + R (V - u), conserving each cell's momentum and energy.
 
-use super::{Geometry, SumsLayout, geometry_params, grid_shift, key_into, key_of, thermal_params};
+use super::{
+    Geometry, Rows, SumsLayout, check_rows, geometry_params, grid_shift, key_into, key_of,
+    thermal_params, thermal_unit,
+};
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, RowError,
+    Signature,
 };
 use crate::nodes::random;
-use crate::value::{PortType, RefArray, ValueType};
+use crate::value::{HostArray, PortType, RefArray, ValueType};
 
 pub(super) fn mpcd_bin_solute_kind() -> NodeKind {
     NodeKind::declare(
@@ -48,9 +52,9 @@ pub(super) fn mpcd_bin_solute_kind() -> NodeKind {
     .param(ParamSpec::number(
         "solute_mass",
         Some(1.0),
-        f64::MIN_POSITIVE,
-        f64::MAX,
-        "solute particle mass M",
+        1.0 / super::F32_SCALE,
+        super::F32_SCALE,
+        "solute particle mass M: from 1e-30 to 1e30 (f32), and M / m an f32 too",
     ))
     .param(ParamSpec::flag(
         "shift",
@@ -61,6 +65,7 @@ pub(super) fn mpcd_bin_solute_kind() -> NodeKind {
     .param(random::stream_param())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
+        thermal_unit(p)?;
         let ratio = p.number("solute_mass") / p.number("mass");
         let r32 = ratio as f32;
         if !(r32.is_finite() && r32 > 0.0) {
@@ -141,6 +146,16 @@ impl Node for MpcdBinSolute {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        // Solute velocities enter the sums scaled by M / m as 64-bit fixed point (no
+        // tighter range than f32's): finite.
+        match port {
+            1 => check_rows(&self.geo, Rows::Positions, data),
+            2 => check_rows(&self.geo, Rows::Velocities(None), data),
+            _ => Ok(()),
+        }
     }
 
     fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {

@@ -1,13 +1,17 @@
 //! `mpcd_stream`: ballistic streaming for one step under a body force along x, with
 //! plates (bounce-back or specular) perpendicular to the last axis and a periodic wrap.
 
-use super::{Geometry, geometry_params, particle_ports};
+use super::{
+    F32_SCALE, FAR_IMAGES, Geometry, MAX_VELOCITY, MIN_FREE_PATH, Rows, WALL_PASSES, check_rows,
+    geometry_params, mass_param, num, particle_ports, temperature_param, thermal_unit,
+};
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, RowError,
+    Signature,
 };
-use crate::value::{PortType, RefArray, ValueType};
+use crate::value::{HostArray, PortType, RefArray, ValueType};
 
 pub(super) fn mpcd_stream_kind() -> NodeKind {
     NodeKind::declare(
@@ -32,20 +36,20 @@ pub(super) fn mpcd_stream_kind() -> NodeKind {
         &["no_slip", "slip"],
         "no_slip: bounce-back (v -> -v); slip: specular reflection (v_z -> -v_z)",
     ))
-    .param(ParamSpec::number("dt", None, 0.0, f64::MAX, "time step"))
     .param(ParamSpec::number(
-        "mass",
-        Some(1.0),
-        f64::MIN_POSITIVE,
-        f64::MAX,
-        "particle mass m",
+        "dt",
+        None,
+        0.0,
+        F32_SCALE,
+        "time step: 0 (no streaming), or a mean free path dt v_th (v_th = sqrt(temperature / mass), 1 at temperature 0) that the f32 streaming carries: at least 2^-20 of the largest box length (a step moves a particle by 16 ulps of its position or more), and at most 1024 / 128 = 8 periodic box lengths and, with plates, 14 / 128 of the gap (a particle at 128 v_th, the cell sums' limit, then moves at most 1024 box lengths, where f32 wrapping keeps its place to 2^-13 L, and crosses the gap at most 14 times, within the kernel's 16 passes)",
     ))
+    .param(mass_param())
     .param(ParamSpec::number(
         "force",
         Some(0.0),
-        f64::MIN,
-        f64::MAX,
-        "body force per particle along x",
+        -F32_SCALE,
+        F32_SCALE,
+        "body force per particle along x: from -1e30 to 1e30, and |force| / mass x dt (a step's velocity gain) below 128 v_th, the cell sums' range",
     ))
     .param(ParamSpec::choice(
         "force_shape",
@@ -53,6 +57,7 @@ pub(super) fn mpcd_stream_kind() -> NodeKind {
         &["constant", "sine"],
         "constant, or force * sin(2 pi z / L_z) (z the last axis; taken at the start of the step)",
     ))
+    .param(temperature_param())
     .build(|p| Ok(Box::new(MpcdStream::from_params(p)?)))
 }
 
@@ -62,6 +67,51 @@ pub(crate) struct MpcdStream {
     dt: f64,
     accel: f64,
     sine: bool,
+}
+
+/// Whether the mean free path dt v_th is one the f32 streaming carries (`dt`'s doc): the
+/// error names dt, temperature and mass, which set it.
+fn check_streaming(geo: &Geometry, dt: f64, vth: f64) -> Result<(), String> {
+    if dt == 0.0 {
+        return Ok(());
+    }
+    let free = dt * vth;
+    let path = format!(
+        "the mean free path dt x v_th = {} x {} = {} (v_th = sqrt(temperature / mass), 1 at temperature 0)",
+        num(dt),
+        num(vth),
+        num(free)
+    );
+    let longest = geo.lengths.iter().cloned().fold(0.0, f64::max);
+    if free < MIN_FREE_PATH * longest {
+        return Err(format!(
+            "{path} is below 2^-20 of the box length {}: f32 positions would not resolve a step; give a larger dt or temperature, or a smaller mass (or dt 0: no streaming)",
+            num(longest)
+        ));
+    }
+    let d = geo.dims();
+    for (a, &l) in geo.lengths.iter().enumerate() {
+        let walled = geo.walls && a == d - 1;
+        let (most, why) = if walled {
+            (
+                (WALL_PASSES - 2.0) * l / MAX_VELOCITY,
+                "a particle at 128 v_th (the cell sums' limit) would cross the gap between the plates more than 14 times in a step, past the streaming kernel's 16 passes",
+            )
+        } else {
+            (
+                FAR_IMAGES * l / MAX_VELOCITY,
+                "a particle at 128 v_th (the cell sums' limit) would move more than 1024 box lengths in a step, where f32 wrapping loses its place",
+            )
+        };
+        if free > most {
+            return Err(format!(
+                "{path} is more than {} for the box length {} along axis {a}: {why}; give a smaller dt or temperature, or a larger mass",
+                num(most),
+                num(l)
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn advance(x: &mut [f64], v: &mut [f64], g: f64, t: f64) {
@@ -74,11 +124,27 @@ fn advance(x: &mut [f64], v: &mut [f64], g: f64, t: f64) {
 
 impl MpcdStream {
     pub(crate) fn from_params(p: &Params) -> Result<Self, String> {
+        let geo = Geometry::from_params(p)?;
+        let vth = thermal_unit(p)?;
+        let (dt, force, mass) = (p.number("dt"), p.number("force"), p.number("mass"));
+        check_streaming(&geo, dt, vth)?;
+        let accel = force / mass;
+        if accel.abs() > F32_SCALE || accel.abs() * dt >= MAX_VELOCITY * vth {
+            return Err(format!(
+                "force / mass = {} / {} = {} gives a velocity gain of {} per step dt = {}, not below 128 v_th = {} (v_th = sqrt(temperature / mass), 1 at temperature 0; the cell sums carry velocities below 128 v_th) or past 1e30: change force, mass or dt",
+                num(force),
+                num(mass),
+                num(accel),
+                num(accel.abs() * dt),
+                num(dt),
+                num(MAX_VELOCITY * vth)
+            ));
+        }
         Ok(MpcdStream {
-            geo: Geometry::from_params(p)?,
+            geo,
             slip: p.text("wall_bc") == "slip",
-            dt: p.number("dt"),
-            accel: p.number("force") / p.number("mass"),
+            dt,
+            accel,
             sine: p.text("force_shape") == "sine",
         })
     }
@@ -162,6 +228,14 @@ impl Node for MpcdStream {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        let rows = match port {
+            0 => Rows::Positions,
+            _ => Rows::Velocities(None),
+        };
+        check_rows(&self.geo, rows, data)
     }
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {

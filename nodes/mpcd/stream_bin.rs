@@ -20,9 +20,11 @@ use crate::gpu::DeviceCaps;
 use crate::gpu::{
     Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Period, Slot, WG_1D,
 };
-use crate::node::{GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, RefCtx, Signature};
+use crate::node::{
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, RefCtx, RowError, Signature,
+};
 use crate::nodes::sort::SortNode;
-use crate::value::{RefArray, ValueType};
+use crate::value::{HostArray, RefArray, ValueType};
 
 pub(super) fn mpcd_stream_bin_kind() -> NodeKind {
     let (stream, bin) = (mpcd_stream_kind(), mpcd_bin_kind());
@@ -100,6 +102,15 @@ impl Node for MpcdStreamBin {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        // The positions as the streaming takes them, the velocities as the binning sums
+        // them (in the fixed point's range).
+        match port {
+            0 => self.stream.check_input(port, data),
+            _ => self.bin.check_input(port, data),
+        }
     }
 
     fn notes(&self, inputs: &[Option<ValueType>]) -> Vec<String> {

@@ -26,10 +26,12 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     if (b == 0u) {
         let dof = pair(9u);
-        temperature[0] = select(nan, m.mass * pair(7u) / (m.fix_e * f32(DIMS) * dof), dof > 0.0);
+        // The sums over the particles in real units first, then the mean, then m: each
+        // intermediate within f32 for m and kT/m in their ranges (nodes/mpcd/mod.rs).
+        temperature[0] = select(nan, m.mass * (pair(7u) / m.fix_e / (f32(DIMS) * dof)), dof > 0.0);
         let samples = f32(acc[0]);
         for (var a = 0u; a < DIMS; a = a + 1u) {
-            momentum[a] = select(nan, m.mass * pair(1u + 2u * a) / (m.fix_v * samples), samples > 0.0);
+            momentum[a] = select(nan, m.mass * (pair(1u + 2u * a) / m.fix_v / samples), samples > 0.0);
         }
     }
 }

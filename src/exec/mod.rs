@@ -406,8 +406,11 @@ impl<'a> Program<'a> {
         }
     }
 
-    /// Uploads the given graph inputs; their types must be the planned ones.
+    /// Uploads the given graph inputs; their types must be the planned ones, and the
+    /// nodes that read them check their data first (`Graph::check_input_data`): nothing is
+    /// written unless every input passes.
     pub fn upload(&self, inputs: &BTreeMap<String, HostArray>) -> Result<(), ExecError> {
+        let mut given = Vec::new();
         for (i, t) in &self.plan.inputs {
             let name = &self.graph.inputs[*i].name;
             let a = inputs.get(name).ok_or_else(|| ExecError::Input {
@@ -420,6 +423,15 @@ impl<'a> Program<'a> {
                     message: format!("planned as {t}, given {}", a.ty),
                 });
             }
+            self.graph
+                .check_input_data(*i, a, &self.plan.pruned)
+                .map_err(|e| ExecError::Input {
+                    name: name.clone(),
+                    message: e.to_string(),
+                })?;
+            given.push((i, a));
+        }
+        for (i, a) in given {
             if !a.data.is_empty() {
                 self.gpu
                     .queue

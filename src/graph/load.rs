@@ -12,7 +12,7 @@ use super::{
 };
 use crate::expr::{self, ExprError, ParamValue, Scope};
 use crate::ids::Id;
-use crate::node::{Registry, check_param_names, check_params, edit_distance, nearest};
+use crate::node::{Registry, check_param_names, check_params, edit_distance, fmt_number, nearest};
 use crate::value::ValueType;
 
 /// Names every graph sees without declaring them.
@@ -895,10 +895,16 @@ impl<'r> Loader<'r> {
                         params,
                         node: node.into(),
                     })
-                    .map_err(|e| vec![e]),
+                    .map_err(|e| {
+                        let from = computed_from(decl, |name| names_word(&e, name));
+                        vec![format!("{e}{from}")]
+                    }),
                 Err(errs) => Err(errs
                     .into_iter()
-                    .map(|(pname, msg)| format!("param `{pname}`: {msg}"))
+                    .map(|(pname, msg)| {
+                        let from = computed_from(decl, |name| name == pname);
+                        format!("param `{pname}`: {msg}{from}")
+                    })
                     .collect()),
             }
         } else {
@@ -1310,6 +1316,37 @@ impl<'r> Loader<'r> {
     }
 }
 
+/// Where a node's params come from when it is not a graph param of the same name, for the
+/// params `named` picks: "(in this graph `mass` is `$solute_mass`)", so that a problem a
+/// node finds in its params names what the user sets. Empty when there is none.
+fn computed_from(decl: &NodeDecl, named: impl Fn(&str) -> bool) -> String {
+    let sources: Vec<String> = decl
+        .params
+        .iter()
+        .filter(|(name, _)| named(name))
+        .filter_map(|(name, v)| {
+            let text = v.as_str()?;
+            let is_reference = text.starts_with('$') || text.starts_with('=');
+            (is_reference && text != format!("${name}")).then(|| format!("`{name}` is `{text}`"))
+        })
+        .collect();
+    if sources.is_empty() {
+        String::new()
+    } else {
+        format!(" (in this graph {})", sources.join(", "))
+    }
+}
+
+/// Whether `text` has `word` as a whole word (not inside a longer name).
+fn names_word(text: &str, word: &str) -> bool {
+    let is_name = |c: char| c.is_alphanumeric() || c == '_';
+    text.match_indices(word).any(|(i, _)| {
+        let before = text[..i].chars().next_back();
+        let after = text[i + word.len()..].chars().next();
+        !before.is_some_and(is_name) && !after.is_some_and(is_name)
+    })
+}
+
 fn check_param(decl: &ParamDecl, default: &ParamValue, v: &ParamValue) -> Result<(), String> {
     if std::mem::discriminant(default) != std::mem::discriminant(v) {
         return Err(format!(
@@ -1330,12 +1367,20 @@ fn check_param(decl: &ParamDecl, default: &ParamValue, v: &ParamValue) -> Result
         if let Some(m) = decl.min
             && x < m
         {
-            return Err(format!("{x} is below the minimum {m}"));
+            return Err(format!(
+                "{} is below the minimum {}",
+                fmt_number(x),
+                fmt_number(m)
+            ));
         }
         if let Some(m) = decl.max
             && x > m
         {
-            return Err(format!("{x} is above the maximum {m}"));
+            return Err(format!(
+                "{} is above the maximum {}",
+                fmt_number(x),
+                fmt_number(m)
+            ));
         }
     }
     if let (Some(c), ParamValue::Text(s)) = (&decl.choices, v)
@@ -1363,7 +1408,7 @@ fn describe_constraint(decl: &ParamDecl) -> String {
     if decl.integer {
         parts.push("integer".to_string());
     }
-    match (decl.min, decl.max) {
+    match (decl.min.map(fmt_number), decl.max.map(fmt_number)) {
         (Some(a), Some(b)) => parts.push(format!("in [{a}, {b}]")),
         (Some(a), None) => parts.push(format!(">= {a}")),
         (None, Some(b)) => parts.push(format!("<= {b}")),

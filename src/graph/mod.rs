@@ -6,6 +6,7 @@
 //! result, [`Graph`], is flat: subgraph nodes are gone, their nodes carry ids like
 //! `mobility/spread`.
 
+mod data;
 mod load;
 mod schema;
 
@@ -14,6 +15,7 @@ use std::fmt;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+pub use data::InputDataError;
 pub use load::{LoadOptions, MAX_EXPANDED_NODES, MAX_SUBGRAPH_DEPTH, load};
 pub use schema::SCHEMA_VERSION;
 
