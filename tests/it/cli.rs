@@ -783,3 +783,82 @@ fn npy_inputs_of_an_unsupported_dtype_are_refused_with_the_file_named() {
         &["complex.npy", "complex"],
     );
 }
+
+#[test]
+fn outputs_with_nan_or_infinity_from_finite_inputs_exit_3_and_are_written() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-nonfinite");
+    let graph = root().join("graphs/fixtures/divide_by_zero.json");
+    let graph = graph.display().to_string();
+    // x / 0: 0 / 0 is NaN (element 0), the rest infinite.
+    let mut v = vec![1.5; 12];
+    v[0] = 0.0;
+    let x = positions(&dir, "x.npy", v, 4);
+    let (ratio, doubled) = (dir.join("ratio.npy"), dir.join("doubled.npy"));
+    let o = mesoflow(&[
+        "run",
+        &graph,
+        "--input",
+        &format!("x={x}"),
+        "--output",
+        &format!("ratio={}", ratio.display()),
+        "--output",
+        &format!("doubled={}", doubled.display()),
+    ]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(!t.contains("panicked"), "{t}");
+    for needle in [
+        "output `ratio` has 1 NaN and 11 infinite of 12 values, the first at index 0 (NaN)",
+        "from finite inputs",
+        "the outputs were written all the same",
+    ] {
+        assert!(t.contains(needle), "expected `{needle}` in:\n{t}");
+    }
+    assert!(!t.contains("output `doubled` has"), "{t}");
+    let shape = mesoflow::graph::InputShape::Particles {
+        rows: mesoflow::graph::Dim::Free,
+        cols: 3,
+    };
+    // Written, as asked, for the user to look at (npy's reader refuses non-finite
+    // values as input, so the file is read raw).
+    let raw = std::fs::read(&ratio).unwrap();
+    let words: Vec<f32> = raw[raw.len() - 48..]
+        .chunks(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    assert!(
+        words[0].is_nan() && words[1..].iter().all(|w| w.is_infinite()),
+        "{words:?}"
+    );
+    let d = mesoflow::npy::read_input(&doubled, &shape).unwrap();
+    assert_eq!(d.data.to_f64()[1], 3.0);
+    assert!(temporaries(&dir).is_empty());
+    // Without the division asked for, the run is clean.
+    let o = mesoflow(&[
+        "run",
+        &graph,
+        "--input",
+        &format!("x={x}"),
+        "--output",
+        "doubled",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    // A summary only (no file) is judged the same way.
+    let o = mesoflow(&[
+        "run",
+        &graph,
+        "--input",
+        &format!("x={x}"),
+        "--output",
+        "ratio",
+    ]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains("output `ratio` has") && t.contains("nothing was written"),
+        "{t}"
+    );
+}
