@@ -14,7 +14,7 @@ use mesoflow::exec::{ExecError, Profile, Program, RunOptions, RunStats};
 use mesoflow::expr::{self, ParamValue};
 use mesoflow::gpu::{DeviceCaps, GpuContext, GpuError, KernelCache};
 use mesoflow::graph::{self, Graph, LoadOptions};
-use mesoflow::node::Registry;
+use mesoflow::node::{ParamKind, Registry};
 use mesoflow::plan::{self, Plan, PlanOptions};
 use mesoflow::value::{HostArray, HostData};
 
@@ -664,6 +664,20 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
         for p in k.params() {
             outln!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);
         }
+        outln!();
+    }
+    let f32_ranged = registry
+        .kinds()
+        .filter(|k| only.is_none_or(|o| o == k.name()))
+        .flat_map(|k| k.params())
+        .any(|p| match p.kind {
+            ParamKind::Number { max, .. } | ParamKind::Numbers { max, .. } => {
+                max == mesoflow::node::F32_PARAM_MAX
+            }
+            _ => false,
+        });
+    if f32_ranged {
+        outln!("{}", mesoflow::node::F32_RANGE_NOTE);
         outln!();
     }
     if only.is_none() {

@@ -17,6 +17,7 @@
 //!   windows of 2 or 3 cells are narrower than the radius fit assumes.) The radius
 //!   follows the actual cell size.
 
+use crate::expr::fmt_number;
 use crate::nodes::fft::next_friendly;
 use crate::nodes::fft::plan::{cells_per_axis, checked_grid};
 
@@ -179,7 +180,11 @@ pub fn grid_for(
                 return Err(format!("box lengths must be positive and finite, got {l}"));
             }
             // Bounded before any conversion to u32 (1e30 / h saturates it).
-            let what = format!("a box length of {l} for radius {radius}");
+            let what = format!(
+                "a box length of {} for radius {}",
+                fmt_number(l),
+                fmt_number(radius)
+            );
             cells_per_axis(&what, (l / h).floor().max(1.0))?;
             // Down as UAMMD rounds (its benchmark grids), unless that coarsens the cells
             // by more than 1 % (small boxes: 8.8 cells would become 8).

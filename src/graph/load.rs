@@ -10,7 +10,7 @@ use super::{
     Dim, Graph, GraphParam, InputDef, InputShape, NodeId, NodeInst, OutputDef, Problem, Problems,
     SizeDef, Source, StateDef,
 };
-use crate::expr::{self, ExprError, ParamValue, Scope};
+use crate::expr::{self, ExprError, Origin, ParamValue, Scope};
 use crate::ids::Id;
 use crate::node::{Registry, check_params, edit_distance, nearest};
 use crate::value::ValueType;
@@ -122,6 +122,8 @@ struct Binding<'a> {
     node: &'a str,
     scope: &'a str,
     inputs: &'a IndexMap<String, String>,
+    /// Where each param the node sets comes from, in the parent's scope.
+    param_origins: &'a BTreeMap<String, Origin>,
 }
 
 struct Loader<'r> {
@@ -466,6 +468,7 @@ impl<'r> Loader<'r> {
                 parent,
             ) {
                 Ok((default, value)) => {
+                    let origin = self.param_origin(name, decl, &scope, &value, overrides, parent);
                     if is_root {
                         self.root.params.push(GraphParam {
                             name: name.clone(),
@@ -475,7 +478,7 @@ impl<'r> Loader<'r> {
                             constraint: describe_constraint(decl),
                         });
                     }
-                    scope.insert(name.clone(), value);
+                    scope.insert_with_origin(name.clone(), value, origin);
                 }
                 Err(root) => {
                     if let Some(root) = root {
@@ -529,29 +532,66 @@ impl<'r> Loader<'r> {
                 return Err(self.root_of(file_scope, &from));
             }
             Err(e) => {
-                return Err(Some(self.push(Problem::file(
-                    path,
-                    format!("param `{name}`: default: {e}"),
-                ))));
+                let msg = scope
+                    .origin_of(&decl.default)
+                    .explain(format!("param `{name}`: default: {e}"));
+                return Err(Some(self.push(Problem::file(path, msg))));
             }
         };
         if let Err(e) = check_param(decl, &default, &default) {
-            return Err(Some(self.push(Problem::file(
-                path,
-                format!("param `{name}`: default {default}: {e}"),
-            ))));
+            let msg = scope
+                .origin_of(&decl.default)
+                .explain(format!("param `{name}`: default {default}: {e}"));
+            return Err(Some(self.push(Problem::file(path, msg))));
         }
         let Some(v) = given else {
             return Ok((default.clone(), default));
         };
         if let Err(e) = check_param(decl, &default, v) {
             let msg = format!("bad value {v} for param `{name}`: {e}");
-            return Err(Some(self.push(match parent {
-                Some(b) => Problem::port(b.file, b.node, name, msg),
-                None => Problem::file(path, msg),
-            })));
+            return Err(Some(
+                self.push(match parent {
+                    Some(b) => Problem::port(
+                        b.file,
+                        b.node,
+                        name,
+                        b.param_origins
+                            .get(name)
+                            .map_or(msg.clone(), |o| o.explain(msg)),
+                    ),
+                    None => Problem::file(path, msg),
+                }),
+            ));
         }
         Ok((default, v.clone()))
+    }
+
+    /// Where graph param `name` takes its value from: at the top level, the param itself
+    /// when set or a literal default, else what its default expression reads; in a
+    /// subgraph, the origin of the parent's value, else what its default reads.
+    fn param_origin(
+        &self,
+        name: &str,
+        decl: &ParamDecl,
+        scope: &Scope,
+        value: &ParamValue,
+        overrides: &IndexMap<String, ParamValue>,
+        parent: &Option<Binding>,
+    ) -> Origin {
+        let given = overrides.contains_key(name);
+        match parent {
+            None if given => Origin::param(name, value, true),
+            None => {
+                let read = scope.origin_of(&decl.default);
+                if read.sources.is_empty() {
+                    Origin::param(name, value, false)
+                } else {
+                    read
+                }
+            }
+            Some(b) if given => b.param_origins.get(name).cloned().unwrap_or_default(),
+            Some(_) => scope.origin_of(&decl.default),
+        }
     }
 
     /// Adds a problem; returns its index.
@@ -731,6 +771,11 @@ impl<'r> Loader<'r> {
             }
             // Param values: literals, `$name` references or `= expressions`.
             let mut raw_params = BTreeMap::new();
+            let param_origins: BTreeMap<String, Origin> = decl
+                .params
+                .iter()
+                .map(|(pname, v)| (pname.clone(), values.origin_of(v)))
+                .collect();
             let mut bad = false;
             for (pname, v) in &decl.params {
                 match expr::resolve(v, values) {
@@ -746,14 +791,15 @@ impl<'r> Loader<'r> {
                         self.problems.push(Problem::node(
                             path,
                             id,
-                            format!("param `{pname}`: {e}"),
+                            param_origins[pname].explain(format!("param `{pname}`: {e}")),
                         ));
                     }
                 }
             }
             match (&decl.kind, &decl.graph) {
                 (Some(kind), None) => {
-                    let built = !bad && self.kind_node(path, scope, &decl, kind, raw_params);
+                    let built = !bad
+                        && self.kind_node(path, scope, &decl, kind, raw_params, &param_origins);
                     if !built {
                         self.node_ids.insert(key, NodeEntry::Failed);
                     }
@@ -778,6 +824,7 @@ impl<'r> Loader<'r> {
                                 node: id,
                                 scope,
                                 inputs: &decl.inputs,
+                                param_origins: &param_origins,
                             };
                             self.load_file(&child_path, &child_scope, &overrides, Some(binding))
                         }
@@ -816,6 +863,7 @@ impl<'r> Loader<'r> {
         decl: &NodeDecl,
         kind_name: &str,
         raw_params: BTreeMap<String, ParamValue>,
+        param_origins: &BTreeMap<String, Origin>,
     ) -> bool {
         let id = decl.id.as_str();
         let Some(kind) = self.registry.get(kind_name) else {
@@ -870,8 +918,12 @@ impl<'r> Loader<'r> {
             Ok(p) => p,
             Err(errs) => {
                 for (pname, msg) in errs {
-                    self.problems
-                        .push(Problem::node(path, id, format!("param `{pname}`: {msg}")));
+                    let msg = format!("param `{pname}`: {msg}");
+                    let msg = match param_origins.get(&pname) {
+                        Some(o) => o.explain(msg),
+                        None => msg,
+                    };
+                    self.problems.push(Problem::node(path, id, msg));
                 }
                 return false;
             }
@@ -879,7 +931,13 @@ impl<'r> Loader<'r> {
         let node = match kind.build(&params) {
             Ok(n) => n,
             Err(e) => {
-                self.problems.push(Problem::node(path, id, e));
+                // The params the message names (in backticks), with where they came from.
+                let named = param_origins
+                    .iter()
+                    .filter(|(pname, _)| e.contains(&format!("`{pname}`")))
+                    .map(|(_, o)| o);
+                let msg = Origin::union(named).explain(e);
+                self.problems.push(Problem::node(path, id, msg));
                 return false;
             }
         };

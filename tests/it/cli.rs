@@ -497,9 +497,12 @@ fn nodes_prints_ranges_as_people_write_them() {
             .unwrap_or_else(|| panic!("{kind} has no param {param}"))
             .to_string()
     };
-    assert!(line("all_pairs", "radius").contains("number > 0"));
-    assert!(line("all_pairs", "split").contains("number >= 0"));
-    assert!(line("affine", "scale").contains("number, default 1"));
+    // Params the kernels compute with in f32 carry the range where that is meaningful.
+    assert!(line("all_pairs", "radius").contains("number in [1e-18, 1e18]"));
+    assert!(line("all_pairs", "split").contains("number in [0, 1e18]"));
+    assert!(line("affine", "scale").contains("number in [-1e18, 1e18], default 1"));
+    assert!(line("all_pairs", "table_points").contains("integer in [16, 4194304]"));
+    assert!(t.contains(mesoflow::node::F32_RANGE_NOTE), "{t}");
     // A bad node param value is told against the same readable range.
     let dir = tmpdir("cli-ranges");
     let g = crate::util::write_graph(
@@ -512,7 +515,7 @@ fn nodes_prints_ranges_as_people_write_them() {
     let o = mesoflow(&["validate", &g.display().to_string()]);
     let t = text(&o);
     assert_eq!(o.status.code(), Some(2), "{t}");
-    assert!(t.contains("-1 is not > 0"), "{t}");
+    assert!(t.contains("-1 is outside [1e-18, 1e18]"), "{t}");
     assert!(!t.contains("e-308") && !t.contains("0.0000000"), "{t}");
 }
 
