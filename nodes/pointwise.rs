@@ -4,8 +4,8 @@
 
 use crate::gpu::DeviceCaps;
 use crate::node::{
-    Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PointwiseBody, PortError, PortSpec,
-    RefCtx, Registry, Signature,
+    F32_PARAM_MAX, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PointwiseBody,
+    PortError, PortSpec, RefCtx, Registry, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
@@ -130,8 +130,8 @@ fn per_component_param(name: &'static str, doc: &'static str) -> ParamSpec {
         name,
         kind: ParamKind::Numbers {
             len: None,
-            min: f64::MIN,
-            max: f64::MAX,
+            min: -F32_PARAM_MAX,
+            max: F32_PARAM_MAX,
         },
         default: None,
         doc,
@@ -153,7 +153,7 @@ pub static KINDS: &[PointwiseKind] = &[
         inputs: &[("like", "shape template (its values are not read)", true)],
         params: || {
             vec![
-                ParamSpec::number("value", None, f64::MIN, f64::MAX, "the value"),
+                ParamSpec::f32_factor("value", None, "the value"),
                 ParamSpec::integer(
                     "rows",
                     Some(0.0),
@@ -186,15 +186,7 @@ pub static KINDS: &[PointwiseKind] = &[
         name: "scale",
         doc: "out = factor * x, element-wise",
         inputs: &[("x", "values to scale", false)],
-        params: || {
-            vec![ParamSpec::number(
-                "factor",
-                None,
-                f64::MIN,
-                f64::MAX,
-                "the factor",
-            )]
-        },
+        params: || vec![ParamSpec::f32_factor("factor", None, "the factor")],
         flatten: |p| numbers(p, &["factor"]),
         body: "return p0 * x;",
         reference: |i, _, p| p[0] * i[0],
@@ -240,15 +232,7 @@ pub static KINDS: &[PointwiseKind] = &[
         name: "axpy",
         doc: "out = alpha * x + y, element-wise",
         inputs: &[("x", "scaled term", false), ("y", "added term", false)],
-        params: || {
-            vec![ParamSpec::number(
-                "alpha",
-                None,
-                f64::MIN,
-                f64::MAX,
-                "factor on x",
-            )]
-        },
+        params: || vec![ParamSpec::f32_factor("alpha", None, "factor on x")],
         flatten: |p| numbers(p, &["alpha"]),
         body: "return fma(p0, x, y);",
         reference: |i, _, p| p[0] * i[0] + i[1],
@@ -261,8 +245,8 @@ pub static KINDS: &[PointwiseKind] = &[
         inputs: &[("x", "first term", false), ("y", "second term", false)],
         params: || {
             vec![
-                ParamSpec::number("alpha", None, f64::MIN, f64::MAX, "factor on x"),
-                ParamSpec::number("beta", None, f64::MIN, f64::MAX, "factor on y"),
+                ParamSpec::f32_factor("alpha", None, "factor on x"),
+                ParamSpec::f32_factor("beta", None, "factor on y"),
             ]
         },
         flatten: |p| numbers(p, &["alpha", "beta"]),
@@ -277,8 +261,8 @@ pub static KINDS: &[PointwiseKind] = &[
         inputs: &[("x", "values", false)],
         params: || {
             vec![
-                ParamSpec::number("scale", Some(1.0), f64::MIN, f64::MAX, "factor on x"),
-                ParamSpec::number("offset", Some(0.0), f64::MIN, f64::MAX, "added constant"),
+                ParamSpec::f32_factor("scale", Some(1.0), "factor on x"),
+                ParamSpec::f32_factor("offset", Some(0.0), "added constant"),
             ]
         },
         flatten: |p| numbers(p, &["scale", "offset"]),

@@ -163,8 +163,8 @@ pub static GENERATORS: &[PointwiseKind] = &[
             vec![
                 seed_param(),
                 stream_param(),
-                ParamSpec::number("mean", Some(0.0), f64::MIN, f64::MAX, "mean"),
-                ParamSpec::number("std", Some(1.0), 0.0, f64::MAX, "standard deviation"),
+                ParamSpec::f32_factor("mean", Some(0.0), "mean"),
+                ParamSpec::f32_nonnegative("std", Some(1.0), "standard deviation"),
                 rows,
                 cols,
             ]
@@ -198,8 +198,8 @@ pub static GENERATORS: &[PointwiseKind] = &[
             vec![
                 seed_param(),
                 stream_param(),
-                ParamSpec::number("low", Some(0.0), f64::MIN, f64::MAX, "lower bound"),
-                ParamSpec::number("high", Some(1.0), f64::MIN, f64::MAX, "upper bound"),
+                ParamSpec::f32_factor("low", Some(0.0), "lower bound"),
+                ParamSpec::f32_factor("high", Some(1.0), "upper bound"),
                 rows,
                 cols,
             ]

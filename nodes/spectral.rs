@@ -12,8 +12,8 @@ use std::f64::consts::PI;
 use crate::gpu::DeviceCaps;
 use crate::gpu::{CompileCtx, CompileError, Dispatch, NodeIo};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
-    RefCtx, Registry, Signature,
+    F32_PARAM_MAX, F32_PARAM_MIN, GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec,
+    Params, PortError, PortSpec, RefCtx, Registry, Signature, check_f32_coefficient,
 };
 use crate::transform::SpectralBody;
 use crate::value::{PortType, RefArray, ValueType, half_dims};
@@ -32,8 +32,8 @@ fn box_param() -> ParamSpec {
         name: "box",
         kind: ParamKind::Numbers {
             len: Some(3),
-            min: 0.0,
-            max: f64::INFINITY,
+            min: F32_PARAM_MIN,
+            max: F32_PARAM_MAX,
         },
         default: Some(crate::expr::ParamValue::Numbers(vec![1.0, 1.0, 1.0])),
         doc: "periodic box lengths (Lx, Ly, Lz): k = 2 pi (kx/Lx, ky/Ly, kz/Lz)",
@@ -78,6 +78,9 @@ struct SpectralKind {
     values: fn(&Params) -> Vec<f64>,
     /// The WGSL body with its f32 params (computed in f64 from `values`, rounded once).
     gpu: fn(&[f64]) -> SpectralBody,
+    /// Checks the coefficients the body forms from the values for f32
+    /// ([`check_f32_coefficient`]), when the node is built.
+    coefficients: fn(&[f64]) -> Result<(), String>,
     /// Checks the input spectrum against the values (a noisy Green function needs a half
     /// spectrum, whose Hermitian pairs it knows).
     check: fn(&[f64], &ValueType) -> Result<(), String>,
@@ -85,6 +88,39 @@ struct SpectralKind {
 }
 
 fn any_spectrum(_: &[f64], _: &ValueType) -> Result<(), String> {
+    Ok(())
+}
+
+/// For bodies whose f32 params are the values themselves (each in its param's range).
+fn no_coefficients(_: &[f64]) -> Result<(), String> {
+    Ok(())
+}
+
+/// The coefficients `stokes_body` forms, within f32's meaningful range: the mobility
+/// 1/(4 pi^2 eta q^2) at the smallest wave number (q = 1/L of the longest side, where it
+/// is largest), the noise amplitude, and with a split the screening's exponents.
+fn stokes_coefficients(v: &[f64]) -> Result<(), String> {
+    let eta = v[stokes::VISCOSITY];
+    let longest = v[..3].iter().cloned().fold(0.0, f64::max);
+    check_f32_coefficient(
+        "the mobility at the longest wavelength, `box`^2 / (4 pi^2 `viscosity`)",
+        longest * longest / (4.0 * PI * PI * eta),
+    )?;
+    let volume = v[0] * v[1] * v[2];
+    check_f32_coefficient(
+        "the noise amplitude `noise` / (2 pi sqrt(`viscosity` `box` volume))",
+        v[stokes::NOISE] / (2.0 * PI * (eta * volume).sqrt()),
+    )?;
+    let split = v[stokes::SPLIT];
+    if split != 0.0 {
+        let (a, sigma) = (v[stokes::RADIUS], v[stokes::WIDTH]);
+        check_f32_coefficient("2 pi `radius`", 2.0 * PI * a)?;
+        check_f32_coefficient("pi^2 / `split`^2", PI * PI / (split * split))?;
+        check_f32_coefficient(
+            "4 pi^2 `width`^2 - pi^2 / `split`^2",
+            4.0 * PI * PI * sigma * sigma - PI * PI / (split * split),
+        )?;
+    }
     Ok(())
 }
 
@@ -326,41 +362,27 @@ fn curl_apply(at: &Mode, p: &[f64], v: &mut [[f64; 2]]) {
 fn stokes_params(noise_default: f64) -> Vec<ParamSpec> {
     vec![
         box_param(),
-        ParamSpec::number(
-            "viscosity",
-            None,
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            "solvent viscosity eta",
-        ),
-        ParamSpec::number(
+        ParamSpec::f32_positive("viscosity", None, "solvent viscosity eta"),
+        ParamSpec::f32_nonnegative(
             "noise",
             Some(noise_default),
-            0.0,
-            f64::MAX,
             "factor on the fluctuating velocity M^(1/2) W (0: none, and no random numbers are drawn)",
         ),
         crate::nodes::random::seed_param(),
         crate::nodes::random::stream_param(),
-        ParamSpec::number(
+        ParamSpec::f32_nonnegative(
             "split",
             Some(0.0),
-            0.0,
-            f64::MAX,
             "Positively Split Ewald: the splitting parameter xi of the far field (0: plain Stokes); then the operator is times sinc^2(k a) (1 + k^2/(4 xi^2)) exp((width^2 - 1/(4 xi^2)) k^2)",
         ),
-        ParamSpec::number(
+        ParamSpec::f32_positive(
             "radius",
             Some(1.0),
-            f64::MIN_POSITIVE,
-            f64::MAX,
             "with a split: the hydrodynamic radius a of the RPY sinc^2(k a)",
         ),
-        ParamSpec::number(
+        ParamSpec::f32_nonnegative(
             "width",
             Some(0.0),
-            0.0,
-            f64::MAX,
             "with a split: standard deviation sigma of the spreading Gaussian, whose two convolutions the operator undoes",
         ),
     ]
@@ -389,7 +411,7 @@ static KINDS: &[SpectralKind] = &[
         doc: "Gaussian filter of a spectrum: every component times exp(-sigma^2 |k|^2 / 2), k in units of the box",
         params: || {
             vec![
-                ParamSpec::number("sigma", None, 0.0, f64::INFINITY, "filter width (a length)"),
+                ParamSpec::f32_nonnegative("sigma", None, "filter width (a length)"),
                 box_param(),
             ]
         },
@@ -413,6 +435,7 @@ static KINDS: &[SpectralKind] = &[
                 params,
             )
         },
+        coefficients: no_coefficients,
         check: any_spectrum,
         apply: |at, p, v| {
             let k = at.k;
@@ -447,6 +470,7 @@ static KINDS: &[SpectralKind] = &[
                 inverse_lengths(v),
             )
         },
+        coefficients: no_coefficients,
         check: any_spectrum,
         apply: |at, _, v| {
             let k = at.k;
@@ -468,7 +492,7 @@ static KINDS: &[SpectralKind] = &[
         params: || {
             vec![
                 box_param(),
-                ParamSpec::number("scale", Some(1.0), f64::MIN, f64::MAX, "factor on the curl"),
+                ParamSpec::f32_factor("scale", Some(1.0), "factor on the curl"),
             ]
         },
         comps: Some(3),
@@ -477,6 +501,7 @@ static KINDS: &[SpectralKind] = &[
             vec![b[0], b[1], b[2], p.number("scale")]
         },
         gpu: curl_body,
+        coefficients: no_coefficients,
         check: any_spectrum,
         apply: curl_apply,
     },
@@ -487,6 +512,7 @@ static KINDS: &[SpectralKind] = &[
         comps: Some(3),
         values: |p| stokes_values(p, true),
         gpu: stokes_body,
+        coefficients: stokes_coefficients,
         check: |v, t| match t {
             ValueType::ComplexGrid { .. } if v[stokes::NOISE] != 0.0 => Err(format!(
                 "noise needs the half spectrum of a real field (rfft), got {t}"
@@ -519,6 +545,7 @@ fn spectral_kind(row: &'static SpectralKind) -> NodeKind {
                     &values[..3]
                 ));
             }
+            (row.coefficients)(&values)?;
             Ok(Box::new(SpectralNode {
                 kind: row,
                 body: (row.gpu)(&values),
@@ -640,6 +667,7 @@ fn stokes_noise_kind() -> NodeKind {
     .params(params)
     .build(|params| {
         let values = stokes_values(params, false);
+        stokes_coefficients(&values)?;
         let grid = params.numbers("grid");
         if grid.iter().any(|g| g.fract() != 0.0) {
             return Err(format!(

@@ -1,6 +1,7 @@
 //! The `mesoflow` command line. Raw arguments (clap) become validated requests here, and
 //! every failure becomes a message and an exit code: 2 for problems in what the user gave
-//! (graph files, params, inputs, arguments), 1 for failures while running.
+//! (graph files, params, inputs, arguments), 1 for failures while running, 3 for a run
+//! whose outputs hold NaN or infinite values from finite inputs (written all the same).
 
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
@@ -13,7 +14,7 @@ use mesoflow::exec::{ExecError, Profile, Program, RunOptions, RunStats};
 use mesoflow::expr::{self, ParamValue};
 use mesoflow::gpu::{DeviceCaps, GpuContext, GpuError, KernelCache};
 use mesoflow::graph::{self, Graph, LoadOptions};
-use mesoflow::node::Registry;
+use mesoflow::node::{ParamKind, Registry};
 use mesoflow::plan::{self, Plan, PlanOptions};
 use mesoflow::value::{HostArray, HostData, ValueType};
 
@@ -115,6 +116,10 @@ pub enum CliError {
     /// Running failed (exit 1).
     #[error("{0}")]
     Runtime(String),
+    /// The run finished, but outputs hold NaN or infinite values from finite inputs
+    /// (exit 3); the outputs asked for were written all the same, for debugging.
+    #[error("{0}")]
+    NonFinite(String),
     #[error(transparent)]
     Bench(#[from] BenchError),
 }
@@ -125,6 +130,7 @@ impl CliError {
         match self {
             CliError::Input(_) => 2,
             CliError::Runtime(_) => 1,
+            CliError::NonFinite(_) => 3,
             CliError::Bench(e) if e.is_bad_input() => 2,
             CliError::Bench(_) => 1,
         }
@@ -307,6 +313,13 @@ fn run(
         progress,
     })?;
     let results = program.read_outputs()?;
+    // Judged now, reported after the files: a user debugging NaN wants to see them.
+    let non_finite = program.check_finite(&results).err();
+    if let Some(input) = program.non_finite_input() {
+        note!(
+            "mesoflow: input `{input}` holds NaN or infinite values: the outputs are not checked for them"
+        );
+    }
     note!(
         "mesoflow: {} step{} in {:.3} s ({} dispatches per step, GPU memory {} planned + {} tables)",
         stats.steps,
@@ -354,7 +367,17 @@ fn run(
             None => outln!("{name}: {}", summary(arr)),
         }
     }
-    Ok(())
+    match non_finite {
+        None => Ok(()),
+        Some(e) => Err(CliError::NonFinite(format!(
+            "{e}; {}",
+            if to_write.is_empty() {
+                "nothing was written".to_string()
+            } else {
+                "the outputs were written all the same (exit code 3)".to_string()
+            }
+        ))),
+    }
 }
 
 /// The `--output NAME[=FILE.npy]` arguments: each output at most once, each file for one
@@ -643,6 +666,20 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
         for p in k.params() {
             outln!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);
         }
+        outln!();
+    }
+    let f32_ranged = registry
+        .kinds()
+        .filter(|k| only.is_none_or(|o| o == k.name()))
+        .flat_map(|k| k.params())
+        .any(|p| match p.kind {
+            ParamKind::Number { max, .. } | ParamKind::Numbers { max, .. } => {
+                max == mesoflow::node::F32_PARAM_MAX
+            }
+            _ => false,
+        });
+    if f32_ranged {
+        outln!("{}", mesoflow::node::F32_RANGE_NOTE);
         outln!();
     }
     if only.is_none() {

@@ -131,10 +131,20 @@ fn json_number(x: f64) -> serde_json::Value {
         .unwrap_or(serde_json::Value::Null)
 }
 
+/// A number as people read it: in exponent form from 1e15 up and below 1e-6 (`5e-324`,
+/// not 324 digits).
+pub fn fmt_number(x: f64) -> String {
+    if x.abs() >= 1e15 || (x != 0.0 && x.abs() < 1e-6) {
+        format!("{x:e}")
+    } else {
+        x.to_string()
+    }
+}
+
 impl fmt::Display for ParamValue {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            ParamValue::Number(x) => write!(f, "{x}"),
+            ParamValue::Number(x) => write!(f, "{}", fmt_number(*x)),
             ParamValue::Text(s) => write!(f, "\"{s}\""),
             ParamValue::Numbers(v) => {
                 write!(f, "[")?;
@@ -142,7 +152,7 @@ impl fmt::Display for ParamValue {
                     if i > 0 {
                         write!(f, ", ")?;
                     }
-                    write!(f, "{x}")?;
+                    write!(f, "{}", fmt_number(*x))?;
                 }
                 write!(f, "]")
             }
@@ -201,10 +211,131 @@ impl ExprError {
     }
 }
 
+/// Where a param value comes from: the top-level graph's params it is computed from
+/// (what a user sets with `--set`), transitively through subgraphs, and the last
+/// expression on the way. A problem found in a derived value (a node param out of range,
+/// a planner refusing its arguments) names these, not only the derived value.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Origin {
+    /// By name, each once.
+    pub sources: Vec<OriginParam>,
+    /// The expression that computed the value from them (`fcm_support(...)`), if any.
+    pub via: Option<String>,
+}
+
+/// A top-level graph param a value is computed from, with its value.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OriginParam {
+    pub name: String,
+    pub value: ParamValue,
+    /// Set by the user (`--set`), not its default.
+    pub given: bool,
+}
+
+/// Expressions longer than this are shown cut (an origin's `via`).
+const MAX_SHOWN_EXPR: usize = 80;
+
+impl Origin {
+    /// A top-level param itself.
+    pub fn param(name: &str, value: &ParamValue, given: bool) -> Self {
+        Origin {
+            sources: vec![OriginParam {
+                name: name.into(),
+                value: value.clone(),
+                given,
+            }],
+            via: None,
+        }
+    }
+
+    /// The origin of a value computed from several: their sources together (and the one
+    /// expression where there is one value).
+    pub fn union<'o>(origins: impl IntoIterator<Item = &'o Origin>) -> Origin {
+        let all: Vec<&Origin> = origins.into_iter().collect();
+        if let [one] = all[..] {
+            return one.clone();
+        }
+        let mut out = Origin::default();
+        for o in all {
+            out.merge(o);
+        }
+        out
+    }
+
+    fn merge(&mut self, other: &Origin) {
+        for p in &other.sources {
+            if !self.sources.iter().any(|q| q.name == p.name) {
+                self.sources.push(p.clone());
+            }
+        }
+        self.sources.sort_by(|a, b| a.name.cmp(&b.name));
+    }
+
+    /// "computed from `radius` = 5e-324 via `fcm_support(...)`": the sources the user set
+    /// (all of them where the user set none), or `None` where there are none (a
+    /// subgraph's own constant).
+    pub fn describe(&self) -> Option<String> {
+        let given: Vec<&OriginParam> = self.sources.iter().filter(|p| p.given).collect();
+        let shown = if given.is_empty() {
+            self.sources.iter().collect()
+        } else {
+            given
+        };
+        if shown.is_empty() {
+            return None;
+        }
+        let names: Vec<String> = shown
+            .iter()
+            .map(|p| format!("`{}` = {}", p.name, p.value))
+            .collect();
+        Some(match &self.via {
+            Some(e) => {
+                let e = if e.chars().count() > MAX_SHOWN_EXPR {
+                    format!("{}...", e.chars().take(MAX_SHOWN_EXPR).collect::<String>())
+                } else {
+                    e.clone()
+                };
+                format!("computed from {} via `{e}`", names.join(", "))
+            }
+            None => format!("from graph param {}", names.join(", ")),
+        })
+    }
+
+    /// `message` followed by ` (computed from ...)` where there is something to say.
+    pub fn explain(&self, message: impl Into<String>) -> String {
+        let message = message.into();
+        match self.describe() {
+            Some(d) => format!("{message} ({d})"),
+            None => message,
+        }
+    }
+}
+
+/// The graph params an expression reads (every name not called as a function and not
+/// `pi`), in order of appearance; none for text that does not lex.
+pub fn names_read(text: &str) -> Vec<String> {
+    let Ok(toks) = lex(text) else {
+        return Vec::new();
+    };
+    let mut names = Vec::new();
+    for (i, t) in toks.iter().enumerate() {
+        if let Tok::Name(name) = t
+            && toks.get(i + 1) != Some(&Tok::Op('('))
+            && name != "pi"
+            && !names.contains(name)
+        {
+            names.push(name.clone());
+        }
+    }
+    names
+}
+
 /// Names visible to expressions, with the host functions they may call.
 #[derive(Clone)]
 pub struct Scope<'f> {
     values: BTreeMap<String, ParamValue>,
+    /// Where each value comes from ([`Origin`]); absent: a constant of its file.
+    origins: BTreeMap<String, Origin>,
     /// Declared names without a value: a param whose own value has a problem. Reading
     /// one is [`ExprError::Unresolved`], so that one bad value is one problem, not one
     /// more for everything computed from it.
@@ -217,6 +348,7 @@ impl<'f> Scope<'f> {
     pub fn new(functions: &'f HostFunctions) -> Self {
         Scope {
             values: BTreeMap::new(),
+            origins: BTreeMap::new(),
             unresolved: BTreeSet::new(),
             functions,
         }
@@ -224,13 +356,46 @@ impl<'f> Scope<'f> {
 
     pub fn insert(&mut self, name: String, value: ParamValue) {
         self.unresolved.remove(&name);
+        self.origins.remove(&name);
         self.values.insert(name, value);
+    }
+
+    /// [`Scope::insert`], with where the value comes from.
+    pub fn insert_with_origin(&mut self, name: String, value: ParamValue, origin: Origin) {
+        self.insert(name.clone(), value);
+        self.origins.insert(name, origin);
+    }
+
+    /// Where a param as written in a graph file takes its value from: a `$name`
+    /// reference, that name's origin; an `= expression`, the origins of every name it
+    /// reads, via the expression; a literal, nowhere.
+    pub fn origin_of(&self, v: &serde_json::Value) -> Origin {
+        let serde_json::Value::String(s) = v else {
+            return Origin::default();
+        };
+        if let Some(name) = s.strip_prefix('$') {
+            return self.origins.get(name.trim()).cloned().unwrap_or_default();
+        }
+        let Some(expr) = s.strip_prefix('=') else {
+            return Origin::default();
+        };
+        let mut origin = Origin {
+            sources: Vec::new(),
+            via: Some(expr.trim().to_string()),
+        };
+        for name in names_read(expr) {
+            if let Some(o) = self.origins.get(&name) {
+                origin.merge(o);
+            }
+        }
+        origin
     }
 
     /// Declares `name` without a value: its own value has a problem (reported by the
     /// caller), and what reads it gives [`ExprError::Unresolved`].
     pub fn insert_unresolved(&mut self, name: String) {
         self.values.remove(&name);
+        self.origins.remove(&name);
         self.unresolved.insert(name);
     }
 
@@ -814,6 +979,31 @@ impl Parser<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn origins_follow_references_and_expressions_to_the_params_set() {
+        let f = HostFunctions::default();
+        let mut scope = Scope::new(&f);
+        let radius = ParamValue::Number(5e-324);
+        scope.insert_with_origin(
+            "a".into(),
+            radius.clone(),
+            Origin::param("radius", &radius, true),
+        );
+        let box_ = ParamValue::Numbers(vec![8.0; 3]);
+        scope.insert_with_origin("b".into(), box_.clone(), Origin::param("box", &box_, false));
+        assert_eq!(names_read("max(a, b[0]) * pi + f(a)"), vec!["a", "b"]);
+        let o = scope.origin_of(&serde_json::json!("= a * b[0]"));
+        assert_eq!(
+            o.describe().unwrap(),
+            "computed from `radius` = 5e-324 via `a * b[0]`",
+            "the params the user set are named, not their defaults"
+        );
+        let r = scope.origin_of(&serde_json::json!("$b"));
+        assert_eq!(r.describe().unwrap(), "from graph param `box` = [8, 8, 8]");
+        assert_eq!(scope.origin_of(&serde_json::json!(3.0)).describe(), None);
+        assert_eq!(Origin::union([&o, &r]).sources.len(), 2);
+    }
 
     /// A host function that answers with a boolean, as planners such as
     /// `fcm_sort_particles` do.

@@ -81,6 +81,33 @@ pub enum ParamKind {
     Bool,
 }
 
+/// The largest magnitude of a param the kernels compute with in f32 (a factor, a
+/// viscosity, a length): about the square root of f32's largest value (3.4e38), so that
+/// its product with data of magnitude up to the same bound is still finite in f32.
+pub const F32_PARAM_MAX: f64 = 1e18;
+/// The smallest magnitude of a positive f32 param (one the kernels also divide by: a
+/// viscosity, a radius, a width): the square root of f32's smallest normal value
+/// (1.2e-38), so that its reciprocal stays within [`F32_PARAM_MAX`] and its product
+/// with data down to the same bound is still a normal f32.
+pub const F32_PARAM_MIN: f64 = 1e-18;
+
+/// Why the f32 ranges are what they are, as `mesoflow nodes` prints it under the kinds.
+pub const F32_RANGE_NOTE: &str = "Ranges up to 1e18 (and from 1e-18 for params that are also divided by) are where f32 arithmetic is meaningful: f32 holds magnitudes from 1.2e-38 to 3.4e38, so a param within the square root of that range, times or over data within it too, stays a finite, normal f32. A node also checks the coefficients it forms from several params (1/(4 pi^2 viscosity) times box^2, say) against the same range.";
+
+/// Checks a coefficient a node forms from its params for its kernels' f32 arithmetic:
+/// zero, or of magnitude in [`F32_PARAM_MIN`], [`F32_PARAM_MAX`]. `what` says how it is
+/// formed, naming the params in backticks (the loader then names where each came from).
+pub fn check_f32_coefficient(what: &str, x: f64) -> Result<(), String> {
+    let m = x.abs();
+    if x == 0.0 || (F32_PARAM_MIN..=F32_PARAM_MAX).contains(&m) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{what} = {x:.3e} is outside [1e-18, 1e18] in magnitude, where the node's f32 arithmetic is meaningful (f32 holds 1.2e-38 to 3.4e38; see `mesoflow nodes`)"
+        ))
+    }
+}
+
 /// One param of a node kind.
 #[derive(Clone, Debug)]
 pub struct ParamSpec {
@@ -109,6 +136,24 @@ impl ParamSpec {
             default: default.map(ParamValue::Number),
             doc,
         }
+    }
+
+    /// A number the kernels compute with in f32, of either sign: within
+    /// [`F32_PARAM_MAX`] in magnitude.
+    pub fn f32_factor(name: &'static str, default: Option<f64>, doc: &'static str) -> Self {
+        Self::number(name, default, -F32_PARAM_MAX, F32_PARAM_MAX, doc)
+    }
+
+    /// A positive number the kernels compute with in f32 and divide by: in
+    /// [[`F32_PARAM_MIN`], [`F32_PARAM_MAX`]].
+    pub fn f32_positive(name: &'static str, default: Option<f64>, doc: &'static str) -> Self {
+        Self::number(name, default, F32_PARAM_MIN, F32_PARAM_MAX, doc)
+    }
+
+    /// A non-negative number the kernels compute with in f32 (0 meaning none): in
+    /// [0, [`F32_PARAM_MAX`]].
+    pub fn f32_nonnegative(name: &'static str, default: Option<f64>, doc: &'static str) -> Self {
+        Self::number(name, default, 0.0, F32_PARAM_MAX, doc)
     }
 
     pub fn integer(
@@ -161,10 +206,10 @@ impl ParamSpec {
                     return Err(format!("{x} is not finite"));
                 }
                 if *integer && x.fract() != 0.0 {
-                    return Err(format!("{x} is not an integer"));
+                    return Err(format!("{} is not an integer", fmt_number(*x)));
                 }
                 if x < min || x > max {
-                    return Err(format!("{x} {}", out_of_range(*min, *max)));
+                    return Err(format!("{} {}", fmt_number(*x), out_of_range(*min, *max)));
                 }
                 Ok(())
             }
@@ -176,7 +221,11 @@ impl ParamSpec {
                 }
                 for x in xs {
                     if !x.is_finite() || x < min || x > max {
-                        return Err(format!("element {x} {}", out_of_range(*min, *max)));
+                        return Err(format!(
+                            "element {} {}",
+                            fmt_number(*x),
+                            out_of_range(*min, *max)
+                        ));
                     }
                 }
                 Ok(())
@@ -268,15 +317,9 @@ fn out_of_range(min: f64, max: f64) -> String {
     }
 }
 
-/// A number as people read it: in exponent form beyond 1e15 (2^53 - 1, the largest exact
-/// seed, and f64::MAX, a default meaning "no limit") or below 1e-6.
-pub fn fmt_number(x: f64) -> String {
-    if x.abs() >= 1e15 || (x != 0.0 && x.abs() < 1e-6) {
-        format!("{x:e}")
-    } else {
-        x.to_string()
-    }
-}
+// Numbers in messages and ranges as people read them (exponent form beyond 1e15 or
+// below 1e-6); defined with the expressions, whose values print the same way.
+pub use crate::expr::fmt_number;
 
 fn kind_name(k: &ParamKind) -> &'static str {
     match k {

@@ -317,12 +317,67 @@ impl HostArray {
         }
     }
 
+    /// Where the array holds NaN or infinite words, if anywhere (f32 arrays only: index
+    /// words are always finite).
+    pub fn non_finite(&self) -> Option<NonFinite> {
+        let HostData::F32(v) = &self.data else {
+            return None;
+        };
+        let mut found: Option<NonFinite> = None;
+        for (i, &x) in v.iter().enumerate() {
+            if x.is_finite() {
+                continue;
+            }
+            let f = found.get_or_insert(NonFinite {
+                nan: 0,
+                infinite: 0,
+                first: i,
+                first_value: x,
+                len: v.len(),
+            });
+            if x.is_nan() {
+                f.nan += 1;
+            } else {
+                f.infinite += 1;
+            }
+        }
+        found
+    }
+
     /// The same value widened to f64, as CPU references take it.
     pub fn to_ref(&self) -> RefArray {
         RefArray {
             ty: self.ty,
             data: self.data.to_f64(),
         }
+    }
+}
+
+/// The NaN and infinite words of one f32 array: how many of each, and the first.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NonFinite {
+    pub nan: usize,
+    pub infinite: usize,
+    /// Index of the first, in the array's words (row-major, as in its NPY file).
+    pub first: usize,
+    pub first_value: f32,
+    /// Words in the array.
+    pub len: usize,
+}
+
+impl fmt::Display for NonFinite {
+    /// "3 NaN and 1 infinite of 30 values, the first at index 4 (NaN)".
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let counts = match (self.nan, self.infinite) {
+            (n, 0) => format!("{n} NaN"),
+            (0, i) => format!("{i} infinite"),
+            (n, i) => format!("{n} NaN and {i} infinite"),
+        };
+        write!(
+            f,
+            "{counts} of {} values, the first at index {} ({})",
+            self.len, self.first, self.first_value
+        )
     }
 }
 

@@ -17,6 +17,7 @@
 //!   windows of 2 or 3 cells are narrower than the radius fit assumes.) The radius
 //!   follows the actual cell size.
 
+use crate::expr::fmt_number;
 use crate::nodes::fft::next_friendly;
 use crate::nodes::fft::plan::{cells_per_axis, checked_grid};
 
@@ -199,14 +200,19 @@ pub fn nominal_grid_for(
             }
             if l < 2.0 * radius {
                 return Err(format!(
-                    "a box side of {l} is shorter than the spheres' diameter 2a = {}: each sphere would overlap its own periodic images (make `box` at least {} per side, or `radius` at most {})",
-                    2.0 * radius,
-                    2.0 * radius,
-                    0.5 * l
+                    "a box side of {} is shorter than the spheres' diameter 2a = {}: each sphere would overlap its own periodic images (make `box` at least {} per side, or `radius` at most {})",
+                    fmt_number(l),
+                    fmt_number(2.0 * radius),
+                    fmt_number(2.0 * radius),
+                    fmt_number(0.5 * l)
                 ));
             }
             // Bounded before any conversion to u32 (1e30 / h saturates it).
-            let what = format!("a box length of {l} for radius {radius}");
+            let what = format!(
+                "a box length of {} for radius {}",
+                fmt_number(l),
+                fmt_number(radius)
+            );
             cells_per_axis(&what, (l / h).floor().max(1.0))?;
             // Down as UAMMD rounds (its benchmark grids), unless that coarsens the cells
             // by more than 1 % (small boxes: 8.8 cells would become 8).
@@ -602,7 +608,8 @@ pub fn force_support(
     }
     let result = found.ok_or_else(|| {
         format!(
-            "the grid {cells:?} is too coarse for FCM's Gaussian (sigma = {sigma}) at tolerance {tolerance:e}: its self-mobility error at the worst placement stays at {least:.2e} with any support (set a finer `grid` or a looser `tolerance`)"
+            "the grid {cells:?} is too coarse for FCM's Gaussian (sigma = {}) at tolerance {tolerance:e}: its self-mobility error at the worst placement stays at {least:.2e} with any support (set a finer `grid` or a looser `tolerance`)",
+            fmt_number(sigma)
         )
     });
     supports

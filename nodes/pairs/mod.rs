@@ -25,7 +25,7 @@ use crate::gpu::{
 };
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
-    RefCtx, Registry, Signature,
+    RefCtx, Registry, Signature, check_f32_coefficient,
 };
 use crate::value::{PortType, RefArray, ValueType};
 use rpy::NearTable;
@@ -55,6 +55,16 @@ impl PairKernel {
     fn from_params(p: &Params, cutoff: f64) -> Result<PairKernel, String> {
         let radius = p.number("radius");
         let viscosity = p.number("viscosity");
+        if p.text("kernel") != "lj" {
+            // The coefficients the RPY kernels multiply values by (`words`, the near
+            // table's scale), each within f32's meaningful range, so that M v neither
+            // overflows nor vanishes.
+            check_f32_coefficient(
+                "1/(6 pi `viscosity` `radius`)",
+                1.0 / (6.0 * PI * viscosity * radius),
+            )?;
+            check_f32_coefficient("1/(8 pi `viscosity`)", 1.0 / (8.0 * PI * viscosity))?;
+        }
         Ok(match p.text("kernel") {
             "rpy" => PairKernel::Rpy { radius, viscosity },
             "rpy_near" => {
@@ -75,10 +85,12 @@ impl PairKernel {
                     table: NearTable::shared(radius, viscosity, split, cutoff, points)?,
                 }
             }
-            "lj" => PairKernel::Lj {
-                epsilon: p.number("epsilon"),
-                sigma: p.number("sigma"),
-            },
+            "lj" => {
+                let (epsilon, sigma) = (p.number("epsilon"), p.number("sigma"));
+                check_f32_coefficient("`sigma`^2", sigma * sigma)?;
+                check_f32_coefficient("24 `epsilon`", 24.0 * epsilon)?;
+                PairKernel::Lj { epsilon, sigma }
+            }
             other => unreachable!("choice checked: {other}"),
         })
     }
@@ -204,25 +216,11 @@ fn kernel_params() -> Vec<ParamSpec> {
             KERNELS,
             "the pair kernel: rpy (free-space RPY mobility times values), rpy_near (PSE near field of RPY), lj (Lennard-Jones force; WCA with cutoff 2^(1/6) sigma)",
         ),
-        ParamSpec::number(
-            "radius",
-            Some(1.0),
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            "rpy, rpy_near: hydrodynamic radius a",
-        ),
-        ParamSpec::number(
-            "viscosity",
-            Some(1.0),
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            "rpy, rpy_near: viscosity eta",
-        ),
-        ParamSpec::number(
+        ParamSpec::f32_positive("radius", Some(1.0), "rpy, rpy_near: hydrodynamic radius a"),
+        ParamSpec::f32_positive("viscosity", Some(1.0), "rpy, rpy_near: viscosity eta"),
+        ParamSpec::f32_nonnegative(
             "split",
             Some(0.0),
-            0.0,
-            f64::MAX,
             "rpy_near: Ewald splitting parameter xi (> 0)",
         ),
         ParamSpec::integer(
@@ -232,14 +230,8 @@ fn kernel_params() -> Vec<ParamSpec> {
             (1u64 << 22) as f64,
             "rpy_near: points of the f64-computed table from 0 to the cutoff",
         ),
-        ParamSpec::number("epsilon", Some(1.0), 0.0, f64::MAX, "lj: energy scale"),
-        ParamSpec::number(
-            "sigma",
-            Some(1.0),
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            "lj: length scale",
-        ),
+        ParamSpec::f32_nonnegative("epsilon", Some(1.0), "lj: energy scale"),
+        ParamSpec::f32_positive("sigma", Some(1.0), "lj: length scale"),
     ]
 }
 

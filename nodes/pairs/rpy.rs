@@ -19,6 +19,8 @@ use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::sync::{Arc, Mutex, OnceLock};
 
+use crate::expr::fmt_number;
+
 /// Free-space RPY tensor (f, g) at distance r for spheres of radius a in a fluid of
 /// viscosity eta; the overlap form for r < 2a (regular at r = 0: f = 1 / (6 pi eta a)).
 pub fn rpy(r: f64, a: f64, eta: f64) -> (f64, f64) {
@@ -86,7 +88,10 @@ impl FarQuadrature {
         // of 1e300) must not saturate into a huge allocation.
         if !panels.is_finite() || panels > MAX_FAR_PANELS {
             return Err(format!(
-                "the RPY near field at split {xi}, radius {a} and distance {r_max} needs {panels} quadrature panels, more than MAX_FAR_PANELS ({MAX_FAR_PANELS}): lower the split or the cutoff (xi (cutoff + 2 radius) of about 1000 at most)"
+                "the RPY near field at split {}, radius {} and distance {} needs {panels} quadrature panels, more than MAX_FAR_PANELS ({MAX_FAR_PANELS}): lower the split or the cutoff (xi (cutoff + 2 radius) of about 1000 at most)",
+                fmt_number(xi),
+                fmt_number(a),
+                fmt_number(r_max)
             ));
         }
         let panels = panels.max(1.0) as usize;

@@ -178,11 +178,9 @@ fn grid_params() -> Vec<ParamSpec> {
             window::NAMES,
             "the window (smoothing kernel)",
         ),
-        ParamSpec::number(
+        ParamSpec::f32_nonnegative(
             "width",
             Some(0.0),
-            0.0,
-            f64::MAX,
             "Gaussian: standard deviation (length units)",
         ),
         ParamSpec::integer(

@@ -55,6 +55,13 @@ impl Window {
                         "the Gaussian window needs `width` (its standard deviation) > 0".into(),
                     );
                 }
+                // The kernels evaluate exp(-r^2 / (2 s^2)) / (sqrt(2 pi) s) in f32 with s
+                // = width / h: a width far below or above the cell leaves f32's range.
+                let s = width / h_min;
+                crate::node::check_f32_coefficient(
+                    "the Gaussian's exponent factor h^2 / (2 `width`^2) (h the cell size)",
+                    0.5 / (s * s),
+                )?;
                 let support = if support > 0 {
                     support
                 } else {

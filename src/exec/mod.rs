@@ -25,7 +25,7 @@ use crate::graph::{Graph, NodeId};
 use crate::ids::IdVec;
 use crate::node::{IterativeKernels, LoopError};
 use crate::plan::{BufferId, Phase, Plan, Storage, ValueId};
-use crate::value::HostArray;
+use crate::value::{HostArray, NonFinite};
 
 #[derive(Debug, Error)]
 #[non_exhaustive]
@@ -58,6 +58,11 @@ pub enum ExecError {
         "the device cannot hold this plan's buffers ({planned} in all; `mesoflow inspect` lists them): {reason}"
     )]
     Memory { planned: String, reason: String },
+    /// Outputs hold NaN or infinite values although every input was finite: something
+    /// in the graph (a param, a division) left f32's range. Each output with its count
+    /// and first index; the outputs themselves can still be read (`read_outputs`).
+    #[error("{}", describe_non_finite(.0))]
+    NonFinite(Vec<(String, NonFinite)>),
     #[error("{0}")]
     Run(String),
     /// A buffer of the plan is larger than the adapter allows; found before allocating.
@@ -193,6 +198,9 @@ pub struct Program<'a> {
     steps_done: u64,
     /// Iterations of each loop per step over the last run.
     iterations: Vec<(String, Vec<u32>)>,
+    /// The first uploaded input holding NaN or infinite values, if any: then NaN or
+    /// infinite outputs may come from it, and [`Program::check_finite`] does not judge.
+    non_finite_input: Option<String>,
 }
 
 fn storage_buffer(gpu: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
@@ -286,6 +294,7 @@ impl<'a> Program<'a> {
             table_bytes: 0,
             steps_done: 0,
             iterations: Vec::new(),
+            non_finite_input: None,
         };
         let mut prologue = Vec::new();
         for l in &plan.prologue {
@@ -408,8 +417,10 @@ impl<'a> Program<'a> {
 
     /// Uploads the given graph inputs; their types must be the planned ones, and the
     /// nodes that read them check their data first (`Graph::check_input_data`): nothing is
-    /// written unless every input passes.
-    pub fn upload(&self, inputs: &BTreeMap<String, HostArray>) -> Result<(), ExecError> {
+    /// written unless every input passes. Notes whether any holds NaN or infinite values
+    /// ([`Program::non_finite_input`]).
+    pub fn upload(&mut self, inputs: &BTreeMap<String, HostArray>) -> Result<(), ExecError> {
+        self.non_finite_input = None;
         let mut given = Vec::new();
         for (i, t) in &self.plan.inputs {
             let name = &self.graph.inputs[*i].name;
@@ -432,6 +443,9 @@ impl<'a> Program<'a> {
             given.push((i, a));
         }
         for (i, a) in given {
+            if self.non_finite_input.is_none() && a.non_finite().is_some() {
+                self.non_finite_input = Some(self.graph.inputs[*i].name.clone());
+            }
             if !a.data.is_empty() {
                 self.gpu
                     .queue
@@ -439,6 +453,38 @@ impl<'a> Program<'a> {
             }
         }
         Ok(())
+    }
+
+    /// The first input of the last upload that holds NaN or infinite values, if any.
+    pub fn non_finite_input(&self) -> Option<&str> {
+        self.non_finite_input.as_deref()
+    }
+
+    /// Checks outputs read back after a run for NaN and infinite values:
+    /// [`ExecError::NonFinite`] naming every output that holds some, when every input was
+    /// finite. Where an input held NaN or infinite values they may flow to the outputs
+    /// legitimately, and nothing is checked (`non_finite_input` says which input).
+    pub fn check_finite(&self, outputs: &[(String, HostArray)]) -> Result<(), ExecError> {
+        if self.non_finite_input.is_some() {
+            return Ok(());
+        }
+        let found: Vec<(String, NonFinite)> = outputs
+            .iter()
+            .filter_map(|(name, a)| Some((name.clone(), a.non_finite()?)))
+            .collect();
+        if found.is_empty() {
+            Ok(())
+        } else {
+            Err(ExecError::NonFinite(found))
+        }
+    }
+
+    /// [`Program::read_outputs`], then [`Program::check_finite`]: the outputs, or the error
+    /// naming those that hold NaN or infinite values from finite inputs.
+    pub fn read_finite_outputs(&self) -> Result<Vec<(String, HostArray)>, ExecError> {
+        let out = self.read_outputs()?;
+        self.check_finite(&out)?;
+        Ok(out)
     }
 
     /// Reads back the requested outputs (their values after the last step run).
@@ -516,6 +562,18 @@ fn reason(e: &wgpu::Error) -> String {
         text.replace_range(start..start + 7 + len + 7, "");
     }
     text.trim().to_string()
+}
+
+/// "output `velocities` has 3 NaN of 30 values, the first at index 4 (NaN); ...".
+fn describe_non_finite(found: &[(String, NonFinite)]) -> String {
+    let each: Vec<String> = found
+        .iter()
+        .map(|(name, f)| format!("output `{name}` has {f}"))
+        .collect();
+    format!(
+        "{}, from finite inputs: a param or an operation of the graph left f32's range (a division by zero, a factor too large)",
+        each.join("; ")
+    )
 }
 
 fn engine_err(source: CompileError) -> ExecError {

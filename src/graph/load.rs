@@ -10,9 +10,10 @@ use super::{
     BuiltNode, Dim, Graph, GraphParam, InputDef, InputShape, NodeId, NodeInst, OutputDef, Problem,
     Problems, SizeDef, Source, StateDef,
 };
-use crate::expr::{self, ExprError, ParamValue, Scope};
+use crate::expr::fmt_number;
+use crate::expr::{self, ExprError, Origin, ParamValue, Scope};
 use crate::ids::Id;
-use crate::node::{Registry, check_param_names, check_params, edit_distance, fmt_number, nearest};
+use crate::node::{Registry, check_param_names, check_params, edit_distance, nearest};
 use crate::value::ValueType;
 
 /// Names every graph sees without declaring them.
@@ -122,6 +123,18 @@ struct Binding<'a> {
     node: &'a str,
     scope: &'a str,
     inputs: &'a IndexMap<String, String>,
+    /// Where each param the node sets comes from, in the parent's scope.
+    param_origins: &'a BTreeMap<String, Origin>,
+}
+
+/// A kind node's param values as its file gives them, resolved in the node's scope.
+struct NodeParamValues {
+    values: BTreeMap<String, ParamValue>,
+    /// Values a host function refused (a planner outside its domain), for the planner to
+    /// report where the node runs.
+    value_problems: Vec<String>,
+    /// Where each value comes from (the top-level params it is computed from).
+    origins: BTreeMap<String, Origin>,
 }
 
 struct Loader<'r> {
@@ -466,6 +479,7 @@ impl<'r> Loader<'r> {
                 parent,
             ) {
                 Ok((default, value)) => {
+                    let origin = self.param_origin(name, decl, &scope, &value, overrides, parent);
                     if is_root {
                         self.root.params.push(GraphParam {
                             name: name.clone(),
@@ -475,7 +489,7 @@ impl<'r> Loader<'r> {
                             constraint: describe_constraint(decl),
                         });
                     }
-                    scope.insert(name.clone(), value);
+                    scope.insert_with_origin(name.clone(), value, origin);
                 }
                 Err(root) => {
                     if let Some(root) = root {
@@ -528,30 +542,72 @@ impl<'r> Loader<'r> {
                 self.follows(file_scope, &from, ("param", format!("{file_scope}{name}")));
                 return Err(self.root_of(file_scope, &from));
             }
+            // A planner refusing the values its default computes from does not matter
+            // where the param is set: setting it is how a user gets past such a refusal
+            // (`support` where `fcm_support` finds none). The value given is checked
+            // against the declared range on its own, and stands in for the default.
+            Err(e) if e.depends_on_values() && given.is_some() => given.unwrap().clone(),
             Err(e) => {
-                return Err(Some(self.push(Problem::file(
-                    path,
-                    format!("param `{name}`: default: {e}"),
-                ))));
+                let msg = scope
+                    .origin_of(&decl.default)
+                    .explain(format!("param `{name}`: default: {e}"));
+                return Err(Some(self.push(Problem::file(path, msg))));
             }
         };
         if let Err(e) = check_param(decl, &default, &default) {
-            return Err(Some(self.push(Problem::file(
-                path,
-                format!("param `{name}`: default {default}: {e}"),
-            ))));
+            let msg = scope
+                .origin_of(&decl.default)
+                .explain(format!("param `{name}`: default {default}: {e}"));
+            return Err(Some(self.push(Problem::file(path, msg))));
         }
         let Some(v) = given else {
             return Ok((default.clone(), default));
         };
         if let Err(e) = check_param(decl, &default, v) {
             let msg = format!("bad value {v} for param `{name}`: {e}");
-            return Err(Some(self.push(match parent {
-                Some(b) => Problem::port(b.file, b.node, name, msg),
-                None => Problem::file(path, msg),
-            })));
+            return Err(Some(
+                self.push(match parent {
+                    Some(b) => Problem::port(
+                        b.file,
+                        b.node,
+                        name,
+                        b.param_origins
+                            .get(name)
+                            .map_or(msg.clone(), |o| o.explain(msg)),
+                    ),
+                    None => Problem::file(path, msg),
+                }),
+            ));
         }
         Ok((default, v.clone()))
+    }
+
+    /// Where graph param `name` takes its value from: at the top level, the param itself
+    /// when set or a literal default, else what its default expression reads; in a
+    /// subgraph, the origin of the parent's value, else what its default reads.
+    fn param_origin(
+        &self,
+        name: &str,
+        decl: &ParamDecl,
+        scope: &Scope,
+        value: &ParamValue,
+        overrides: &IndexMap<String, ParamValue>,
+        parent: &Option<Binding>,
+    ) -> Origin {
+        let given = overrides.contains_key(name);
+        match parent {
+            None if given => Origin::param(name, value, true),
+            None => {
+                let read = scope.origin_of(&decl.default);
+                if read.sources.is_empty() {
+                    Origin::param(name, value, false)
+                } else {
+                    read
+                }
+            }
+            Some(b) if given => b.param_origins.get(name).cloned().unwrap_or_default(),
+            Some(_) => scope.origin_of(&decl.default),
+        }
     }
 
     /// Adds a problem; returns its index.
@@ -736,6 +792,11 @@ impl<'r> Loader<'r> {
             // with the file.
             let mut raw_params = BTreeMap::new();
             let mut value_problems = Vec::new();
+            let param_origins: BTreeMap<String, Origin> = decl
+                .params
+                .iter()
+                .map(|(pname, v)| (pname.clone(), values.origin_of(v)))
+                .collect();
             let mut bad = false;
             for (pname, v) in &decl.params {
                 match expr::resolve(v, values) {
@@ -747,14 +808,15 @@ impl<'r> Loader<'r> {
                         self.follows(scope, &name, ("node", format!("{scope}{id}")));
                     }
                     Err(e) if decl.kind.is_some() && e.depends_on_values() => {
-                        value_problems.push(format!("param `{pname}`: {e}"));
+                        value_problems
+                            .push(param_origins[pname].explain(format!("param `{pname}`: {e}")));
                     }
                     Err(e) => {
                         bad = true;
                         self.problems.push(Problem::node(
                             path,
                             id,
-                            format!("param `{pname}`: {e}"),
+                            param_origins[pname].explain(format!("param `{pname}`: {e}")),
                         ));
                     }
                 }
@@ -762,7 +824,17 @@ impl<'r> Loader<'r> {
             match (&decl.kind, &decl.graph) {
                 (Some(kind), None) => {
                     let built = !bad
-                        && self.kind_node(path, scope, &decl, kind, raw_params, value_problems);
+                        && self.kind_node(
+                            path,
+                            scope,
+                            &decl,
+                            kind,
+                            NodeParamValues {
+                                values: raw_params,
+                                value_problems,
+                                origins: param_origins,
+                            },
+                        );
                     if !built {
                         self.node_ids.insert(key, NodeEntry::Failed);
                     }
@@ -787,6 +859,7 @@ impl<'r> Loader<'r> {
                                 node: id,
                                 scope,
                                 inputs: &decl.inputs,
+                                param_origins: &param_origins,
                             };
                             self.load_file(&child_path, &child_scope, &overrides, Some(binding))
                         }
@@ -824,9 +897,13 @@ impl<'r> Loader<'r> {
         scope: &str,
         decl: &NodeDecl,
         kind_name: &str,
-        raw_params: BTreeMap<String, ParamValue>,
-        value_problems: Vec<String>,
+        params: NodeParamValues,
     ) -> bool {
+        let NodeParamValues {
+            values: raw_params,
+            value_problems,
+            origins: param_origins,
+        } = params;
         let id = decl.id.as_str();
         let Some(kind) = self.registry.get(kind_name) else {
             let hint = self
@@ -896,14 +973,21 @@ impl<'r> Loader<'r> {
                         node: node.into(),
                     })
                     .map_err(|e| {
-                        let from = computed_from(decl, |name| names_word(&e, name));
-                        vec![format!("{e}{from}")]
+                        // The params the message names, with where they came from.
+                        let named = param_origins
+                            .iter()
+                            .filter(|(pname, _)| names_word(&e, pname))
+                            .map(|(_, o)| o);
+                        vec![Origin::union(named).explain(e)]
                     }),
                 Err(errs) => Err(errs
                     .into_iter()
                     .map(|(pname, msg)| {
-                        let from = computed_from(decl, |name| name == pname);
-                        format!("param `{pname}`: {msg}{from}")
+                        let msg = format!("param `{pname}`: {msg}");
+                        match param_origins.get(&pname) {
+                            Some(o) => o.explain(msg),
+                            None => msg,
+                        }
                     })
                     .collect()),
             }
@@ -1313,27 +1397,6 @@ impl<'r> Loader<'r> {
                 ));
             }
         }
-    }
-}
-
-/// Where a node's params come from when it is not a graph param of the same name, for the
-/// params `named` picks: "(in this graph `mass` is `$solute_mass`)", so that a problem a
-/// node finds in its params names what the user sets. Empty when there is none.
-fn computed_from(decl: &NodeDecl, named: impl Fn(&str) -> bool) -> String {
-    let sources: Vec<String> = decl
-        .params
-        .iter()
-        .filter(|(name, _)| named(name))
-        .filter_map(|(name, v)| {
-            let text = v.as_str()?;
-            let is_reference = text.starts_with('$') || text.starts_with('=');
-            (is_reference && text != format!("${name}")).then(|| format!("`{name}` is `{text}`"))
-        })
-        .collect();
-    if sources.is_empty() {
-        String::new()
-    } else {
-        format!(" (in this graph {})", sources.join(", "))
     }
 }
 

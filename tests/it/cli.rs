@@ -550,9 +550,12 @@ fn nodes_prints_ranges_as_people_write_them() {
             .unwrap_or_else(|| panic!("{kind} has no param {param}"))
             .to_string()
     };
-    assert!(line("all_pairs", "radius").contains("number > 0"));
-    assert!(line("all_pairs", "split").contains("number >= 0"));
-    assert!(line("affine", "scale").contains("number, default 1"));
+    // Params the kernels compute with in f32 carry the range where that is meaningful.
+    assert!(line("all_pairs", "radius").contains("number in [1e-18, 1e18]"));
+    assert!(line("all_pairs", "split").contains("number in [0, 1e18]"));
+    assert!(line("affine", "scale").contains("number in [-1e18, 1e18], default 1"));
+    assert!(line("all_pairs", "table_points").contains("integer in [16, 4194304]"));
+    assert!(t.contains(mesoflow::node::F32_RANGE_NOTE), "{t}");
     // A bad node param value is told against the same readable range.
     let dir = tmpdir("cli-ranges");
     let g = crate::util::write_graph(
@@ -565,7 +568,7 @@ fn nodes_prints_ranges_as_people_write_them() {
     let o = mesoflow(&["validate", &g.display().to_string()]);
     let t = text(&o);
     assert_eq!(o.status.code(), Some(2), "{t}");
-    assert!(t.contains("-1 is not > 0"), "{t}");
+    assert!(t.contains("-1 is outside [1e-18, 1e18]"), "{t}");
     assert!(!t.contains("e-308") && !t.contains("0.0000000"), "{t}");
 }
 
@@ -834,5 +837,84 @@ fn npy_inputs_of_an_unsupported_dtype_are_refused_with_the_file_named() {
             &format!("positions={}", complex.display()),
         ],
         &["complex.npy", "complex"],
+    );
+}
+
+#[test]
+fn outputs_with_nan_or_infinity_from_finite_inputs_exit_3_and_are_written() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-nonfinite");
+    let graph = root().join("graphs/fixtures/divide_by_zero.json");
+    let graph = graph.display().to_string();
+    // x / 0: 0 / 0 is NaN (element 0), the rest infinite.
+    let mut v = vec![1.5; 12];
+    v[0] = 0.0;
+    let x = positions(&dir, "x.npy", v, 4);
+    let (ratio, doubled) = (dir.join("ratio.npy"), dir.join("doubled.npy"));
+    let o = mesoflow(&[
+        "run",
+        &graph,
+        "--input",
+        &format!("x={x}"),
+        "--output",
+        &format!("ratio={}", ratio.display()),
+        "--output",
+        &format!("doubled={}", doubled.display()),
+    ]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(!t.contains("panicked"), "{t}");
+    for needle in [
+        "output `ratio` has 1 NaN and 11 infinite of 12 values, the first at index 0 (NaN)",
+        "from finite inputs",
+        "the outputs were written all the same",
+    ] {
+        assert!(t.contains(needle), "expected `{needle}` in:\n{t}");
+    }
+    assert!(!t.contains("output `doubled` has"), "{t}");
+    let shape = mesoflow::graph::InputShape::Particles {
+        rows: mesoflow::graph::Dim::Free,
+        cols: 3,
+    };
+    // Written, as asked, for the user to look at (npy's reader refuses non-finite
+    // values as input, so the file is read raw).
+    let raw = std::fs::read(&ratio).unwrap();
+    let words: Vec<f32> = raw[raw.len() - 48..]
+        .chunks(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    assert!(
+        words[0].is_nan() && words[1..].iter().all(|w| w.is_infinite()),
+        "{words:?}"
+    );
+    let d = mesoflow::npy::read_input(&doubled, &shape).unwrap();
+    assert_eq!(d.data.to_f64()[1], 3.0);
+    assert!(temporaries(&dir).is_empty());
+    // Without the division asked for, the run is clean.
+    let o = mesoflow(&[
+        "run",
+        &graph,
+        "--input",
+        &format!("x={x}"),
+        "--output",
+        "doubled",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    // A summary only (no file) is judged the same way.
+    let o = mesoflow(&[
+        "run",
+        &graph,
+        "--input",
+        &format!("x={x}"),
+        "--output",
+        "ratio",
+    ]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains("output `ratio` has") && t.contains("nothing was written"),
+        "{t}"
     );
 }

@@ -410,3 +410,174 @@ fn nodes_the_plan_does_not_run_never_reject_it() {
     let with = g.assumed_input_types(&given, &["torques"]);
     assert_eq!(with.get("torques"), Some(&four));
 }
+
+/// The problems of `graphs/<name>` with these `--set` values (JSON literals), whether
+/// loading finds them or planning every output with the declared inputs does.
+fn load_or_plan_problems(name: &str, sets: &[(&str, &str)]) -> String {
+    let opts = mesoflow::graph::LoadOptions {
+        overrides: sets
+            .iter()
+            .map(|(k, v)| {
+                let json: serde_json::Value = serde_json::from_str(v).unwrap();
+                (
+                    k.to_string(),
+                    mesoflow::expr::ParamValue::from_json(&json).unwrap(),
+                )
+            })
+            .collect(),
+        ..Default::default()
+    };
+    let path = root().join("graphs").join(name);
+    let g = match mesoflow::graph::load(&path, crate::util::registry(), &opts) {
+        Ok(g) => g,
+        Err(e) => return e.to_string(),
+    };
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: g.declared_input_types(),
+        fuse: true,
+    };
+    match plan::plan(&g, &opts, &DeviceCaps::baseline()) {
+        Ok(_) => panic!("{name} with {sets:?} planned"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// Params past what f32 carries (issue 19) are refused where a node's f32 arithmetic
+/// stops being meaningful, and the message names the graph param the user set, also
+/// through subgraphs and expressions (before: NaN or infinite outputs with exit 0, or a
+/// derived value alone: `param support: 4294967295 is outside [0, 32]`).
+#[test]
+fn extreme_params_are_refused_naming_the_param_the_user_set() {
+    // (graph, --set values, what the report must say)
+    type Case<'a> = (&'a str, &'a [(&'a str, &'a str)], &'a [&'a str]);
+    let cases: &[Case] = &[
+        (
+            "examples/relax.json",
+            &[("dt", "1e308")],
+            &[
+                "node `move`: param `alpha`: bad value: 1e308 is outside [-1e18, 1e18]",
+                "(from graph param `dt` = 1e308)",
+            ],
+        ),
+        (
+            "examples/relax.json",
+            &[("stiffness", "1e30")],
+            &[
+                "node `force`: param `factor`: bad value: -1e30 is outside [-1e18, 1e18]",
+                "(computed from `stiffness` = 1e30 via `-stiffness`)",
+            ],
+        ),
+        (
+            "fcm.json",
+            &[("box", "[8, 8, 8]"), ("viscosity", "1e-300")],
+            &[
+                "node `flow`: param `viscosity`: bad value: 1e-300 is outside [1e-18, 1e18]",
+                "(from graph param `viscosity` = 1e-300)",
+            ],
+        ),
+        (
+            // Within the param's range, but the mobility the kernel forms is not.
+            "fcm.json",
+            &[("box", "[8, 8, 8]"), ("viscosity", "1e-18")],
+            &[
+                "node `flow`: the mobility at the longest wavelength",
+                "is outside [1e-18, 1e18] in magnitude",
+                "(from graph param `box` = [8, 8, 8], `viscosity` = 1e-18)",
+            ],
+        ),
+        (
+            "fcm.json",
+            &[("box", "[8, 8, 8]"), ("width", "1e-30")],
+            &[
+                // The worst-placement support search finds no support first.
+                "fcm_support: the grid [12, 12, 12] is too coarse for FCM's Gaussian (sigma = 1e-30)",
+                "`width` = 1e-30 via `fcm_support(",
+            ],
+        ),
+        (
+            // With the support given, the window's own coefficient check names `width`.
+            "fcm.json",
+            &[("box", "[8, 8, 8]"), ("width", "1e-30"), ("support", "8")],
+            &[
+                "node `spread_forces`: the Gaussian's exponent factor h^2 / (2 `width`^2) (h the cell size) = ",
+                "(from graph param `width` = 1e-30)",
+            ],
+        ),
+        (
+            "fcm.json",
+            &[("box", "[8, 8, 8]"), ("radius", "1e30")],
+            &[
+                "fcm_grid: a box side of 8 is shorter than the spheres' diameter 2a = 2e30",
+                "(computed from `box` = [8, 8, 8], `radius` = 1e30 via `fcm_grid(",
+            ],
+        ),
+        (
+            "fcm.json",
+            &[("box", "[1e-30, 1e-30, 1e-30]")],
+            &[
+                "shorter than the spheres' diameter 2a = 2",
+                "(computed from `box` = [1e-30, 1e-30, 1e-30] via `fcm_grid(",
+            ],
+        ),
+        (
+            "fcm.json",
+            &[("box", "[8, 8, 8]"), ("radius", "5e-324")],
+            &[
+                "fcm_grid: a box length of 8 for radius 5e-324 needs inf cells",
+                "(computed from `box` = [8, 8, 8], `radius` = 5e-324 via `fcm_grid(",
+            ],
+        ),
+        (
+            // Through pse.json's inlined fcm.json: the user's param, not fcm.json's.
+            "pse.json",
+            &[("box", "[8, 8, 8]"), ("viscosity", "1e-300")],
+            &[
+                "fcm.json: node `far/flow`: param `viscosity`: bad value: 1e-300",
+                "(from graph param `viscosity` = 1e-300)",
+            ],
+        ),
+        (
+            "pse.json",
+            &[("box", "[8, 8, 8]"), ("radius", "5e-324")],
+            &[
+                "pse_split: the RPY near field at split inf, radius 5e-324",
+                "(computed from `box` = [8, 8, 8], `radius` = 5e-324 via `pse_split(",
+            ],
+        ),
+        (
+            "rpy_open.json",
+            &[("viscosity", "1e-300")],
+            &[
+                "param `viscosity`: bad value: 1e-300",
+                "(from graph param `viscosity` = 1e-300)",
+            ],
+        ),
+        (
+            "rpy_open.json",
+            &[("viscosity", "1e-17"), ("radius", "1e-17")],
+            &[
+                "1/(6 pi `viscosity` `radius`) = ",
+                "(from graph param `radius` = 1e-17, `viscosity` = 1e-17)",
+            ],
+        ),
+        (
+            "bd_fcm.json",
+            &[("box", "[8, 8, 8]"), ("dt", "1e308")],
+            &[
+                "node `move`: param `alpha`: bad value: 1e308",
+                "(from graph param `dt` = 1e308)",
+            ],
+        ),
+    ];
+    for (name, sets, wanted) in cases {
+        let e = load_or_plan_problems(name, sets);
+        for w in *wanted {
+            assert!(e.contains(w), "{name} {sets:?}: expected `{w}` in:\n{e}");
+        }
+        assert!(
+            !e.contains("0000000000"),
+            "{name} {sets:?}: numbers in full:\n{e}"
+        );
+    }
+}

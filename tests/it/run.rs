@@ -302,3 +302,56 @@ fn a_buffer_past_the_device_limit_is_refused_by_name_before_anything_is_allocate
     assert!(e.contains("nothing was allocated"), "{e}");
     assert!(!e.contains("label"), "{e}");
 }
+
+/// `read_finite_outputs` refuses outputs holding NaN or infinity from finite inputs,
+/// naming each with its counts and first index; `read_outputs` still gives the values;
+/// an input holding NaN turns the check off (its NaN may flow to the outputs).
+#[test]
+fn non_finite_outputs_from_finite_inputs_are_an_error_of_the_checked_read() {
+    use mesoflow::exec::{ExecError, Profile, Program, RunOptions};
+    use mesoflow::gpu::KernelCache;
+    let Some(gpu) = gpu() else { return };
+    let g = load(&root().join("graphs/fixtures/divide_by_zero.json"));
+    let ty = ValueType::Particles { n: 2, k: 3 };
+    let p = plan_graph(
+        &gpu.caps,
+        &g,
+        [("x".to_string(), ty)].into_iter().collect(),
+        None,
+        true,
+    );
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(&gpu, &g, &p, &mut cache).unwrap();
+    let once = RunOptions {
+        steps: 1,
+        profile: Profile::Off,
+        progress: false,
+    };
+    let x = HostArray::f32(ty, vec![1.0, -2.0, 3.0, 0.0, 5.0, 6.0]);
+    program.upload(&named(&[("x", x)])).unwrap();
+    program.run(&once).unwrap();
+    assert_eq!(program.non_finite_input(), None);
+    match program.read_finite_outputs() {
+        Err(e @ ExecError::NonFinite(_)) => {
+            let ExecError::NonFinite(found) = &e else {
+                unreachable!()
+            };
+            assert_eq!(found.len(), 1, "{e}");
+            let (name, f) = &found[0];
+            assert_eq!(name, "ratio");
+            assert_eq!((f.nan, f.infinite, f.first, f.len), (1, 5, 0, 6), "{e}");
+            assert!(f.first_value.is_infinite());
+            assert!(e.to_string().contains("output `ratio` has 1 NaN and 5 infinite of 6 values, the first at index 0 (inf)"), "{e}");
+        }
+        other => panic!("expected NonFinite, got {other:?}"),
+    }
+    let raw: BTreeMap<String, HostArray> = program.read_outputs().unwrap().into_iter().collect();
+    assert_eq!(f32s(&raw["doubled"]), vec![2.0, -4.0, 6.0, 0.0, 10.0, 12.0]);
+    assert!(f32s(&raw["ratio"])[3].is_nan());
+    // A NaN given as input: not judged.
+    let x = HostArray::f32(ty, vec![f32::NAN, 1.0, 1.0, 1.0, 1.0, 1.0]);
+    program.upload(&named(&[("x", x)])).unwrap();
+    program.run(&once).unwrap();
+    assert_eq!(program.non_finite_input(), Some("x"));
+    assert!(program.read_finite_outputs().is_ok());
+}

@@ -65,14 +65,14 @@ fn extreme_mpcd_params_are_refused_naming_the_params_the_user_sets() {
                 "follow from it",
             ],
         ),
-        // A node param computed from a graph param of another name names it.
+        // A node param computed from a graph param of another name names the one set.
         (
             "mpcd_solute.json",
             &[cube, ("solute_mass", "1e-25")],
             &[
                 "node `stream_solute`",
                 "temperature / mass = 1 / 1e-25",
-                "`mass` is `$solute_mass`",
+                "(from graph param `solute_mass` = 1e-25)",
             ],
         ),
     ];
