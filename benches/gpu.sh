@@ -18,6 +18,8 @@
 #   fft         rfft + irfft against cuFFT (torch), convolutions (a folded filter)
 #   primitives  reduce, sort (every variant), scan against CUB (torch)
 #   overhead    the executor against raw wgpu
+#   determinism FCM (1e-3) and PSE (split 0.5) at 10^4 and 10^5, default and
+#               --deterministic; two identical runs of each at 10^5 compared word by word
 #   all         every suite above, in this order
 #   compare     the FCM, PSE, spread, FFT and MPCD rows timed with $BEFORE (another
 #               release binary, e.g. .gpu/mesoflow-before) and with .gpu/mesoflow,
@@ -28,7 +30,7 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse mpcd spread atomics fft primitives overhead)
+suites=(fcm pse mpcd spread atomics fft primitives overhead determinism)
 usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
@@ -119,6 +121,33 @@ suite_compare() {
     echo "######## compare round $round: after ($bin)" | tee -a "$log"
     compare_rows "$bin"
   done
+}
+
+suite_determinism() {
+  for mode in "" --deterministic; do
+    run $bin bench fcm --tolerances 1e-3 --sizes 65:10000,129:100000 --reps 20 \
+      --error-samples 4 $mode
+    run $bin bench pse --splits 0.5 --sizes 64:10000,128:100000 --reps 20 $mode
+  done
+  local dir=$out/repro
+  mkdir -p "$dir"
+  for case in fcm:129 pse:128; do
+    local graph=${case%:*} side=${case#*:}
+    python3 benches/reproducible.py inputs "$dir" 100000 "$side"
+    for mode in default deterministic; do
+      local flag=""
+      [ "$mode" = deterministic ] && flag=--deterministic
+      for k in 1 2; do
+        $bin run graphs/$graph.json --set "box=[$side,$side,$side]" $flag \
+          --input positions="$dir/positions.npy" --input forces="$dir/forces.npy" \
+          --output velocities="$dir/$graph-$mode-$k.npy" >/dev/null 2>&1 \
+          || echo "run $graph $mode $k failed" | tee -a "$log"
+      done
+      run python3 benches/reproducible.py compare "$dir/$graph-$mode-1.npy" \
+        "$dir/$graph-$mode-2.npy" "$graph.json N=10^5 L=$side $mode"
+    done
+  done
+  rm -rf "$dir"
 }
 
 suite_overhead() {

@@ -25,7 +25,12 @@
 //!
 //! Order inside a bin is NOT stable: ranks come in whatever order the atomics run, and
 //! change from run to run. Use `sort` where equal keys must keep their input order (or
-//! where keys are not small: the counters take 4 bytes per bin).
+//! where keys are not small: the counters take 4 bytes per bin). Deterministic runs
+//! (`DeviceCaps::deterministic`) make it stable at the price of two more dispatches:
+//! after step 4, `stable_rank` (shaders/bin_sort/stable_rank.wgsl) ranks each key by the
+//! indices of its bin below its own, and `place` runs again with those ranks (each key
+//! reads its whole bin: cheap for cell lists and tiles of a few hundred keys, quadratic
+//! in a bin's size).
 //!
 //! Keys at or past `bins` are well defined: they sort after every bin (in any order among
 //! themselves) and are counted in no bin, so `start[bins - 1] + count[bins - 1]` is the
@@ -97,6 +102,8 @@ pub struct BinSortPlan {
     pub scan: ScanPath,
     /// Bins the one-workgroup scan takes on this adapter (for the notes).
     pub capacity: u64,
+    /// Order inside a bin by input index (deterministic runs), not by the atomics.
+    pub stable: bool,
 }
 
 /// The plan for `bins` bins with `variant` on this adapter, or why the variant cannot
@@ -106,6 +113,7 @@ pub fn plan(variant: Variant, bins: u32, caps: &DeviceCaps) -> Result<BinSortPla
         path: variant.choose(caps, "bin_sort", scan::subgroup_scan_fits)?,
         scan: scan_path(bins as u64, caps),
         capacity: single_scan_capacity(caps),
+        stable: caps.deterministic,
     })
 }
 
@@ -123,7 +131,11 @@ impl std::fmt::Display for BinSortPlan {
                 "strategy: {} kernels; more than {} bins: the general scan (the place kernel copies the counts)",
                 self.path, self.capacity
             ),
+        }?;
+        if self.stable {
+            write!(f, "; stable inside a bin (deterministic)")?;
         }
+        Ok(())
     }
 }
 
@@ -142,7 +154,7 @@ pub fn scratch_bytes(n: u64, bins: u64) -> Vec<u64> {
 fn bin_sort_kind() -> NodeKind {
     NodeKind::declare(
         "bin_sort",
-        "counting sort of keys into `bins` bins by atomics (order inside a bin NOT stable: use `sort` where it matters; keys >= bins sort last, uncounted), with permutation, count and first slot per bin",
+        "counting sort of keys into `bins` bins by atomics (order inside a bin NOT stable, except in deterministic runs (--deterministic), which keep input order at the cost of two more dispatches: use `sort` where it matters; keys >= bins sort last, uncounted), with permutation, count and first slot per bin",
     )
     .input(PortSpec::new(
         "keys",
@@ -395,13 +407,41 @@ pub fn record(
             ],
         )?;
         let shape = cx.uniform("bin_sort place", bytemuck::cast_slice(&[n32, bins, copy]));
-        out.push(cx.dispatch(
+        let place = cx.dispatch(
             &kernel,
             &[
                 b.keys, b.rank, b.counter, b.start, b.perm, b.keys_out, b.count, &shape,
             ],
             cx.grid_1d(threads, WG_1D),
-        ));
+        );
+        if plan.stable && n > 0 {
+            // Rank again by input index inside each bin, then place again: the same
+            // kernel and buffers, now with order-independent ranks.
+            let rank_kernel = shader_kernel(
+                cx,
+                "bin_sort stable rank",
+                "bin_sort/stable_rank.wgsl",
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                ],
+            )?;
+            let rank_shape = cx.uniform("bin_sort stable rank", bytemuck::cast_slice(&[n32, bins]));
+            let again = place.clone();
+            out.push(place);
+            out.push(cx.dispatch(
+                &rank_kernel,
+                &[b.keys, b.perm, b.counter, b.start, b.rank, &rank_shape],
+                cx.grid_1d(n, WG_1D),
+            ));
+            out.push(again);
+        } else {
+            out.push(place);
+        }
     }
     Ok(out)
 }

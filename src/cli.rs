@@ -62,6 +62,11 @@ pub enum Command {
         /// Do not fuse element-wise nodes.
         #[arg(long)]
         no_fuse: bool,
+        /// Bitwise reproducible results from run to run on this adapter with this binary
+        /// and these inputs: integer (fixed-point) sums where float atomics would add in
+        /// any order, counting sorts stable inside a bin (README: Deterministic runs).
+        #[arg(long)]
+        deterministic: bool,
     },
     /// Check graph files: structure, params, kinds, ports, types and shapes (no GPU needed).
     Validate {
@@ -88,6 +93,9 @@ pub enum Command {
         steps: u64,
         #[arg(long)]
         no_fuse: bool,
+        /// Plan a deterministic run (as `run --deterministic`).
+        #[arg(long)]
+        deterministic: bool,
         /// Print Graphviz DOT instead of text.
         #[arg(long)]
         dot: bool,
@@ -166,6 +174,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             profile,
             profile_dispatches,
             no_fuse,
+            deterministic,
         } => {
             let profile = match (profile, profile_dispatches) {
                 (_, true) => Profile::Dispatches,
@@ -173,7 +182,16 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
                 (false, false) => Profile::Off,
             };
             run(
-                &registry, &graph, &sets, &inputs, &outputs, steps, seed, profile, !no_fuse,
+                &registry,
+                &graph,
+                &sets,
+                &inputs,
+                &outputs,
+                steps,
+                seed,
+                profile,
+                !no_fuse,
+                deterministic,
             )
         }
         Command::Validate { graphs } => validate(&registry, &graphs),
@@ -185,9 +203,19 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             outputs,
             steps,
             no_fuse,
+            deterministic,
             dot,
         } => inspect(
-            &registry, &graph, &sets, &inputs, &with, &outputs, steps, !no_fuse, dot,
+            &registry,
+            &graph,
+            &sets,
+            &inputs,
+            &with,
+            &outputs,
+            steps,
+            !no_fuse,
+            deterministic,
+            dot,
         ),
         Command::Nodes { kind } => nodes(&registry, kind.as_deref()),
         Command::Info => {
@@ -250,6 +278,7 @@ fn run(
     seed: Option<u64>,
     profile: Profile,
     fuse: bool,
+    deterministic: bool,
 ) -> Result<(), CliError> {
     if steps == 0 {
         return Err(CliError::Input("--steps must be at least 1".into()));
@@ -302,7 +331,11 @@ fn run(
         inputs: data.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse,
     };
-    let p = plan_requested(&g, &opts, requested.is_empty(), &gpu.caps)?;
+    let caps = DeviceCaps {
+        deterministic,
+        ..gpu.caps.clone()
+    };
+    let p = plan_requested(&g, &opts, requested.is_empty(), &caps)?;
     let mut cache = KernelCache::default();
     let mut program = Program::compile(&gpu, &g, &p, &mut cache)?;
     program.upload(&data)?;
@@ -584,6 +617,7 @@ fn inspect(
     outputs: &[String],
     steps: u64,
     fuse: bool,
+    deterministic: bool,
     dot: bool,
 ) -> Result<(), CliError> {
     let overrides = parse_sets(sets)?;
@@ -619,9 +653,12 @@ fn inspect(
     }
     let with: Vec<&str> = with.iter().map(String::as_str).collect();
     let inputs = g.assumed_input_types(&given, &with);
-    let caps = match GpuContext::new() {
-        Ok(gpu) => gpu.caps.clone(),
-        Err(_) => DeviceCaps::baseline(),
+    let caps = DeviceCaps {
+        deterministic,
+        ..match GpuContext::new() {
+            Ok(gpu) => gpu.caps.clone(),
+            Err(_) => DeviceCaps::baseline(),
+        }
     };
     let opts = PlanOptions {
         outputs: Some(outputs.to_vec()),

@@ -8,6 +8,7 @@
 //! <S F, v>_dV = <F, J v> by construction. Grid cells are centred at -L/2 + (j + 1/2) h.
 
 pub mod boxgen;
+pub mod fixed;
 pub mod interpgen;
 pub mod strategy;
 pub mod tilegen;
@@ -23,7 +24,7 @@ use crate::node::{
 };
 use crate::value::{PortType, RefArray, ValueType};
 use strategy::{
-    InterpolatePlan, InterpolateStrategy, SpreadPlan, SpreadStrategy, TileLaunch, TileMode,
+    Add, InterpolatePlan, InterpolateStrategy, SpreadPlan, SpreadStrategy, TileLaunch, TileMode,
     Variant, box_run,
 };
 use window::Window;
@@ -233,7 +234,7 @@ fn grid_params() -> Vec<ParamSpec> {
             "variant",
             "auto",
             &["auto", "atomic", "portable"],
-            "spreading: float atomics, or compare-and-swap for adapters without them (auto: atomics when available)",
+            "spreading: float atomics, or compare-and-swap for adapters without them (auto: atomics when available); deterministic runs (--deterministic) take 64-bit fixed-point adds whatever this says",
         ),
     ]
 }
@@ -474,13 +475,21 @@ impl Node for Spread {
             comps,
             caps,
         );
-        let scratch = match decision.0 {
+        // The fixed-point grid of deterministic runs first, then the strategy's own.
+        let mut scratch = match decision.0 {
             Ok(SpreadPlan {
-                strategy: SpreadStrategy::Tiles(_),
+                add: Add::FixedPoint { .. },
                 ..
-            }) => self.tile_scratch(n),
+            }) => vec![4 * fixed::fixed_words(self.gw.grid_type(comps).words())],
             _ => Vec::new(),
         };
+        if let Ok(SpreadPlan {
+            strategy: SpreadStrategy::Tiles(_),
+            ..
+        }) = decision.0
+        {
+            scratch.extend(self.tile_scratch(n));
+        }
         Ok(Signature::outputs(vec![self.gw.grid_type(comps)])
             .with_scratch(scratch)
             .with_plan(decision))
@@ -530,8 +539,11 @@ impl GpuKernels for Spread {
         let plan = *io.plan::<Choice<SpreadPlan>>().get()?;
         let add = plan.add.shader();
         let ns = self.gw.window.support();
+        let accumulate = Accumulate::of(plan.add, io, out);
         let (boxed, lanes) = match plan.strategy {
-            SpreadStrategy::Tiles(launch) => return self.compile_tiles(cx, io, add, launch),
+            SpreadStrategy::Tiles(launch) => {
+                return self.compile_tiles(cx, io, add, launch, accumulate);
+            }
             SpreadStrategy::Boxes { run } => (Some(run), None),
             SpreadStrategy::Lanes { seg } => (None, Some(seg)),
             SpreadStrategy::Table => (None, None),
@@ -543,7 +555,7 @@ impl GpuKernels for Spread {
         } else {
             format!("{prefix}{}", cx.shader("spread/spread.wgsl")?)
         };
-        let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
+        let mut dispatches = accumulate.begin(cx, vals, out)?;
         let chunks = plan.chunks;
         for first in (0..comps).step_by(CHUNK_COMPS as usize) {
             let chunk = CHUNK_COMPS.min(comps - first);
@@ -585,15 +597,72 @@ impl GpuKernels for Spread {
                     slot_groups(cx, n, chunks, table_segment(ns), self.gw.workgroup),
                 )
             };
-            let kernel = cx.kernel(&spec)?;
+            let kernel = cx.kernel(&accumulate.constants(spec, out))?;
             let geo = geometry_buffer(cx, "spread geometry", &self.gw, n, first);
             dispatches.push(cx.dispatch(
                 &kernel,
-                &[pos.buffer, vals.buffer, out.buffer, &geo],
+                &[pos.buffer, vals.buffer, accumulate.grid, &geo],
                 groups,
             ));
         }
+        dispatches.extend(accumulate.finish(cx, out)?);
         Ok(dispatches)
+    }
+}
+
+/// Where the spreading kernels add: the f32 grid itself, or in deterministic runs the
+/// fixed-point grid (fixed.rs, the first scratch buffer) converted to it at the end.
+struct Accumulate<'a> {
+    grid: &'a wgpu::Buffer,
+    fixed_exp: Option<i32>,
+}
+
+impl<'a> Accumulate<'a> {
+    fn of(add: Add, io: &NodeIo<'a>, out: Slot<'a>) -> Self {
+        match add {
+            Add::FixedPoint { exp } => Accumulate {
+                grid: io.scratch[0],
+                fixed_exp: Some(exp),
+            },
+            _ => Accumulate {
+                grid: out.buffer,
+                fixed_exp: None,
+            },
+        }
+    }
+
+    /// Scratch buffers before the strategy's own.
+    fn scratch_offset(&self) -> usize {
+        usize::from(self.fixed_exp.is_some())
+    }
+
+    fn begin(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        vals: Slot<'_>,
+        out: Slot<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        match self.fixed_exp {
+            Some(_) => fixed::begin(cx, self.grid, vals.buffer, vals.ty.words(), out.ty.words()),
+            None => Ok(vec![cx.fill(out.buffer, out.ty.words(), 0)?]),
+        }
+    }
+
+    fn constants(&self, spec: KernelSpec, out: Slot<'_>) -> KernelSpec {
+        match self.fixed_exp {
+            Some(exp) => fixed::with_constants(spec, out.ty.words(), exp),
+            None => spec,
+        }
+    }
+
+    fn finish(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        out: Slot<'_>,
+    ) -> Result<Option<Dispatch>, CompileError> {
+        self.fixed_exp
+            .map(|exp| fixed::finish(cx, self.grid, out.buffer, out.ty.words(), exp))
+            .transpose()
     }
 }
 
@@ -624,6 +693,7 @@ impl Spread {
         io: &NodeIo<'_>,
         add: &str,
         launch: TileLaunch,
+        accumulate: Accumulate<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
         let (pos, vals, out, n, comps) = spread_ports(io);
         let [
@@ -636,7 +706,7 @@ impl Spread {
             counter,
             rank,
             scan_scratch @ ..,
-        ] = &io.scratch[..]
+        ] = &io.scratch[accumulate.scratch_offset()..]
         else {
             unreachable!("scratch from infer")
         };
@@ -648,7 +718,7 @@ impl Spread {
         let tiles = cx.uniform("spread tiles", bytemuck::bytes_of(&TilesUniform { nt }));
         let geo = geometry_buffer(cx, "spread geometry", &self.gw, n, 0);
         let window = cx.shader(self.gw.window.shader())?;
-        let mut dispatches = vec![cx.fill(out.buffer, out.ty.words(), 0)?];
+        let mut dispatches = accumulate.begin(cx, vals, out)?;
         let spec = KernelSpec::new(
             "spread tiles: keys",
             cx.shader("spread/tiles.wgsl")?,
@@ -708,14 +778,14 @@ impl Spread {
                 ],
             )
             .constant("PEAK", peak);
-            let kernel = cx.kernel(&spec)?;
+            let kernel = cx.kernel(&accumulate.constants(spec, out))?;
             let geo = geometry_buffer(cx, "spread geometry", &self.gw, n, first);
             dispatches.push(cx.dispatch(
                 &kernel,
                 &[
                     pos.buffer,
                     vals.buffer,
-                    out.buffer,
+                    accumulate.grid,
                     &geo,
                     &tiles,
                     count,
@@ -726,6 +796,7 @@ impl Spread {
                 cx.grid_1d(nt[3] as u64, 1),
             ));
         }
+        dispatches.extend(accumulate.finish(cx, out)?);
         Ok(dispatches)
     }
 }

@@ -8,7 +8,7 @@
 
 use std::fmt;
 
-use super::{GridWindow, interpgen, tilegen};
+use super::{GridWindow, fixed, interpgen, tilegen};
 use crate::gpu::{Choice, DeviceCaps};
 use crate::nodes::bin_sort::{self, BinSortPlan};
 use crate::nodes::scan;
@@ -62,6 +62,10 @@ pub enum Add {
     FloatAtomic,
     /// A compare-and-swap loop on the f32 bits.
     CompareAndSwap,
+    /// Deterministic runs: 64-bit fixed-point integers in a scratch grid (fixed.rs),
+    /// scaled by 2^(60 - e - exp) for the largest |value| 2^e and the bound 2^exp on a
+    /// cell's total weight, then converted to f32: any order of the adds, the same bits.
+    FixedPoint { exp: i32 },
 }
 
 impl Add {
@@ -70,6 +74,7 @@ impl Add {
         match self {
             Add::FloatAtomic => "spread/add_atomic.wgsl",
             Add::CompareAndSwap => "spread/add_cas.wgsl",
+            Add::FixedPoint { .. } => "spread/add_fixed.wgsl",
         }
     }
 }
@@ -240,6 +245,12 @@ pub fn spread(
     caps: &DeviceCaps,
 ) -> Choice<SpreadPlan> {
     let add = match variant {
+        // Deterministic runs take fixed-point adds whatever the variant asks for: both
+        // float paths add in the order the threads run.
+        _ if caps.deterministic => match fixed::weight_exponent(gw, n) {
+            Ok(exp) => Add::FixedPoint { exp },
+            Err(why) => return Choice(Err(why)),
+        },
         Variant::Atomic if !caps.f32_atomics => {
             return Choice(Err("variant \"atomic\" needs float atomics (SHADER_FLOAT32_ATOMIC), which this adapter lacks; use \"portable\" or \"auto\"".into()));
         }
@@ -315,8 +326,11 @@ impl fmt::Display for SpreadPlan {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let p = self;
         let add = match p.add {
-            Add::FloatAtomic => "float atomic adds",
-            Add::CompareAndSwap => "compare-and-swap adds",
+            Add::FloatAtomic => "float atomic adds".to_string(),
+            Add::CompareAndSwap => "compare-and-swap adds".to_string(),
+            Add::FixedPoint { exp } => format!(
+                "64-bit fixed-point adds (deterministic; unit 2^(e + {exp} - 60) for the largest |value| 2^e)"
+            ),
         };
         match p.strategy {
             SpreadStrategy::Tiles(t) => write!(

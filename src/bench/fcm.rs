@@ -39,6 +39,8 @@ pub struct FcmBench {
     pub plot: Option<PathBuf>,
     /// Other graph params for the timed runs.
     pub sets: Vec<(String, ParamValue)>,
+    /// Deterministic plans (`run --deterministic`).
+    pub deterministic: bool,
 }
 
 /// UAMMD's FCM benchmark (H200, Gaussian, a = 1): (tolerance, L, N, ms).
@@ -312,9 +314,14 @@ pub fn run(bench: &FcmBench) -> Result<(), BenchError> {
             "--reps and --error-samples must be positive".into(),
         ));
     }
-    let gpu = GpuContext::new()?;
+    let mut gpu = GpuContext::new()?;
+    // Every plan of the bench, timed and error runs alike, sees the request.
+    gpu.caps.deterministic = bench.deterministic;
     let registry = mesoflow::nodes::registry();
     outln!("adapter: {}", gpu.caps.summary());
+    if bench.deterministic {
+        outln!("deterministic runs (--deterministic)");
+    }
     outln!(
         "graph {}; a = 1, eta = 1; time: median of one evaluation over {} runs, e2e: end to end ({}), \
          ns/part and the ratio to UAMMD from it; launches: sum of its launches' medians; errors \

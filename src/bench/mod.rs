@@ -390,6 +390,10 @@ pub enum BenchCommand {
         /// Other graph params for the timed runs (NAME=VALUE, as in `run`).
         #[arg(long = "set")]
         sets: Vec<String>,
+        /// Plan deterministic runs (as `run --deterministic`): what bitwise
+        /// reproducibility costs.
+        #[arg(long)]
+        deterministic: bool,
     },
     /// MPCD particle-steps per second (3D SRD) at several particle counts.
     Mpcd {
@@ -433,6 +437,10 @@ pub enum BenchCommand {
         /// Other graph params for the timed runs (NAME=VALUE, as in `run`).
         #[arg(long = "set")]
         sets: Vec<String>,
+        /// Plan deterministic runs (as `run --deterministic`): what bitwise
+        /// reproducibility costs.
+        #[arg(long)]
+        deterministic: bool,
     },
 }
 
@@ -493,6 +501,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             error_samples,
             plot,
             sets,
+            deterministic,
         } => {
             let kernels = if kernels.iter().any(|k| k == "all") {
                 mesoflow::nodes::spread::window::NAMES
@@ -513,6 +522,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
                 error_samples,
                 plot,
                 sets: parse_sets(&sets)?,
+                deterministic,
             })
         }
         BenchCommand::Mpcd {
@@ -537,6 +547,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             reps,
             error_box,
             sets,
+            deterministic,
         } => pse::run(&pse::PseBench {
             graph,
             splits,
@@ -546,6 +557,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             reps,
             error_box,
             sets: parse_sets(&sets)?,
+            deterministic,
         }),
     }
 }

@@ -31,6 +31,8 @@ pub struct PseBench {
     pub error_box: f64,
     /// Other graph params, for the timed runs and the error runs alike.
     pub sets: Vec<(String, ParamValue)>,
+    /// Deterministic plans (`run --deterministic`).
+    pub deterministic: bool,
 }
 
 /// UAMMD's PSE benchmark (H200, a = 1, tolerance 1e-3): (L, N, split, ms, with noise ms).
@@ -116,9 +118,14 @@ pub fn run(bench: &PseBench) -> Result<(), BenchError> {
     if bench.reps == 0 {
         return Err(BenchError::Args("--reps must be positive".into()));
     }
-    let gpu = GpuContext::new()?;
+    let mut gpu = GpuContext::new()?;
+    // Every plan of the bench, timed and error runs alike, sees the request.
+    gpu.caps.deterministic = bench.deterministic;
     let registry = mesoflow::nodes::registry();
     outln!("adapter: {}", gpu.caps.summary());
+    if bench.deterministic {
+        outln!("deterministic runs (--deterministic)");
+    }
     outln!(
         "graph {}; a = 1, eta = 1, tolerance {:e}; time: median of one evaluation over {} runs, \
          e2e: end to end ({}; with noise, kT = 1: the Lanczos loop makes host round trips inside \

@@ -50,6 +50,12 @@ pub struct DeviceCaps {
     pub max_workgroup_storage: u32,
     pub max_invocations: u32,
     pub max_workgroups_per_dim: u32,
+    /// Not a capability but a request of the run, carried with the caps so that every
+    /// node's `infer` sees it (`--deterministic`): plans whose results are bitwise the
+    /// same from run to run on this adapter with this binary and these inputs (integer
+    /// sums where float atomics would add in any order, counting sorts stable inside a
+    /// bin). Off by default: adapters' own caps never set it.
+    pub deterministic: bool,
 }
 
 impl DeviceCaps {
@@ -71,6 +77,7 @@ impl DeviceCaps {
             max_workgroup_storage: l.max_compute_workgroup_storage_size,
             max_invocations: l.max_compute_invocations_per_workgroup,
             max_workgroups_per_dim: l.max_compute_workgroups_per_dimension,
+            deterministic: false,
         }
     }
 
@@ -204,6 +211,7 @@ impl GpuContext {
             max_workgroup_storage: required_limits.max_compute_workgroup_storage_size,
             max_invocations: required_limits.max_compute_invocations_per_workgroup,
             max_workgroups_per_dim: required_limits.max_compute_workgroups_per_dimension,
+            deterministic: false,
         };
         Ok(GpuContext {
             adapter,

@@ -8,6 +8,7 @@
 mod bin_sort;
 mod cells;
 mod cli;
+mod determinism;
 mod fcm;
 mod fft;
 mod fuzz;
