@@ -183,7 +183,6 @@ static FUNCTIONS: &[HostFunction] = &[
                 return Err(format!("takes 5 or 6 arguments, got {}", a.len()));
             }
             let t = tolerance(a, 0)?;
-            let sigma = positive(a, 2, "width")?;
             let lengths = box_lengths(a, 3)?;
             let cells = grid_cells(a, 4)?;
             let split = if a.len() == 6 {
@@ -198,12 +197,17 @@ static FUNCTIONS: &[HostFunction] = &[
                     cells.len()
                 ));
             }
+            // Only the Gaussian has a width (fcm_width is 0 for the other kernels).
             Ok(ParamValue::Number(match text(a, 1, "kernel")? {
                 "es" => plan::es_support(t) as f64,
                 "gaussian" if split > 0.0 => {
+                    let sigma = positive(a, 2, "width")?;
                     plan::gaussian_support(t, sigma / finest_cell(lengths, &cells)) as f64
                 }
-                "gaussian" => plan::force_support(t, sigma, lengths, &cells)? as f64,
+                "gaussian" => {
+                    let sigma = positive(a, 2, "width")?;
+                    plan::force_support(t, sigma, lengths, &cells)? as f64
+                }
                 _ => 0.0,
             }))
         },
@@ -578,6 +582,28 @@ mod tests {
 
     /// fcm_sort_bins covers every Morton key of fcm_sort_cells(grid), and no more than
     /// the largest one needs.
+    /// The kernels other than the Gaussian have no width (fcm_width gives them 0): their
+    /// support does not need one.
+    #[test]
+    fn fcm_support_takes_a_zero_width_for_kernels_without_one() {
+        let n = ParamValue::Number;
+        let t = |s: &str| ParamValue::Text(s.into());
+        let v = |x: &[f64]| ParamValue::Numbers(x.to_vec());
+        let support = |kernel: &str| {
+            call(
+                "fcm_support",
+                &[n(1e-3), t(kernel), n(0.0), v(&[32.0; 3]), v(&[48.0; 3])],
+            )
+        };
+        assert_eq!(
+            support("es"),
+            Ok(n(crate::nodes::fcm::plan::es_support(1e-3) as f64))
+        );
+        assert_eq!(support("peskin4"), Ok(n(0.0)));
+        let e = support("gaussian").unwrap_err();
+        assert!(e.contains("width") && e.contains("positive"), "{e}");
+    }
+
     #[test]
     fn sort_bins_cover_every_morton_key_of_the_sort_cells() {
         for grid in [

@@ -93,6 +93,60 @@ fn self_mobility_matches_hasimoto_within_the_tolerance() {
     }
 }
 
+/// Every kernel fcm.json offers plans and runs, and its self-mobility at random positions
+/// in a box of 32 a is Hasimoto's for its hydrodynamic radius (`effective_radius`, the
+/// radius the kernel has on the plan's grid) within what the kernel reaches (BENCHMARKS.md, "Every
+/// kernel", measured on the H200: ES at 1e-2 9.4e-3, Peskin 3, 4, 6 points 4.8e-2,
+/// 7.5e-3, 3.7e-4 at their worst), with a margin. Before: fcm_support refused the zero
+/// width that fcm_width gives a kernel other than the Gaussian, so only the Gaussian ran.
+#[test]
+fn every_kernel_runs_with_its_measured_self_mobility_error() {
+    let Some(gpu) = gpu() else { return };
+    let mut rng = Rng::new(67);
+    let l = 32.0;
+    for (kernel, tol, bound) in [
+        ("es", 1e-2, 1.5e-2),
+        ("es", 1e-3, 3e-3),
+        ("peskin3", 1e-3, 7e-2),
+        ("peskin4", 1e-3, 1.2e-2),
+        ("peskin6", 1e-3, 8e-4),
+    ] {
+        let g = load_with(
+            "fcm.json",
+            &[
+                ("box", &format!("[{l}, {l}, {l}]")),
+                ("tolerance", &tol.to_string()),
+                ("kernel", &format!("\"{kernel}\"")),
+            ],
+            1,
+            0,
+        );
+        let a = match g.params.iter().find(|p| p.name == "effective_radius") {
+            Some(p) => match p.value {
+                mesoflow::expr::ParamValue::Number(a) => a,
+                ref v => panic!("effective_radius {v}"),
+            },
+            None => panic!("fcm.json has no effective_radius"),
+        };
+        assert!((a - 1.0).abs() < 0.1, "kernel {kernel}: radius {a}");
+        let want = hasimoto(a, l) / (6.0 * PI * a);
+        let plan = mobility_plan(&gpu, &g, 1, false, &["velocities"]);
+        let mut fcm = compile_cached(&gpu, &g, &plan);
+        let mut worst: f64 = 0.0;
+        for _ in 0..4 {
+            let x = random_positions(&mut rng, 1, [l; 3]);
+            for axis in 0..3 {
+                let mut f = [0.0; 3];
+                f[axis] = 1.0;
+                let v = &eval(&mut fcm, &x, &[f], None)["velocities"][0];
+                worst = worst.max((v[axis] / want - 1.0).abs());
+            }
+        }
+        eprintln!("kernel {kernel} tol {tol:e}: worst self error {worst:e}");
+        assert!(worst <= bound, "kernel {kernel} tol {tol:e}: {worst:e}");
+    }
+}
+
 /// The worst error of fcm.json's M F (box of side `l`, this tolerance) at the placements
 /// where the Gaussian's discretisation error peaks: on a grid point (a cell centre), at a
 /// cell corner (midway on every axis), at the centres of a cell's faces and edges; and for
