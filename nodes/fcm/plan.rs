@@ -289,7 +289,7 @@ fn refine_for_accuracy(
             }
             after_first += 1;
         }
-        let finer: Vec<u32> = cells.iter().map(|&n| next_friendly(n + 1)).collect();
+        let finer: Vec<u32> = cells.iter().map(|&n| next_fast_fft(n + 1)).collect();
         if finer.iter().any(|&n| n > 4096) {
             break;
         }
@@ -303,6 +303,40 @@ fn refine_for_accuracy(
     })
 }
 
+/// Whether the transforms run an FFT of `n` points at full rate: n = 2^a 3^b 5^c 7^d with
+/// b <= 1 and c <= 1 (or c >= 2 with a factor 7). On an H200 (bench fft, 3 components,
+/// rfft + irfft, 2026-12-03) such sizes reach 1730-2560 GB/s at 112-512 points (175 =
+/// 5^2 7: 1955, 448 = 2^6 7: 1978); the others run at 1000-1760 (441 = 3^2 7^2: 12.0 ms
+/// against 6.57 at 448; 432 = 2^4 3^3: 8.16; 162 = 2 3^4: 0.353 against 0.333 at 168).
+/// Fitted to that one run: it steers the grid choice only, never its accuracy.
+pub fn full_rate_fft_size(n: u32) -> bool {
+    let mut r = n;
+    let mut count = |p: u32| {
+        let mut k = 0;
+        while r > 0 && r.is_multiple_of(p) {
+            r /= p;
+            k += 1;
+        }
+        k
+    };
+    let (_, threes, fives, sevens) = (count(2), count(3), count(5), count(7));
+    r == 1 && threes <= 1 && (fives <= 1 || sevens >= 1)
+}
+
+/// The smallest FFT size >= `n` that [`full_rate_fft_size`] takes: the grid refinement steps
+/// through these only.
+fn next_fast_fft(n: u32) -> u32 {
+    let mut m = next_friendly(n);
+    while !full_rate_fft_size(m) {
+        m = next_friendly(m + 1);
+    }
+    m
+}
+
+/// How much more a transform of a size [`full_rate_fft_size`] refuses costs per cell than one
+/// it takes (about 2200 against 1450 GB/s in the run it cites).
+const SLOW_FFT_FACTOR: f64 = 1.5;
+
 /// Finer grids than the first accurate one that [`refine_for_accuracy`] weighs.
 const REFINEMENTS: u32 = 2;
 
@@ -313,12 +347,15 @@ pub const NOMINAL_DENSITY: f64 = 0.045;
 /// GPU time of one M F per unit volume, in ps per a^3 (an H200's, BENCHMARKS.md, 1e-2 at
 /// 10^5: 0.33 ms of transforms on 162^3 cells, 78 ps a cell; 0.2 ms of spreading and
 /// interpolation for 10^5 particles of 5^3 support cells, 16 ps each): what the grid
-/// choice weighs, cells against support.
+/// choice weighs, cells against support; cells of a grid with an axis the transforms do
+/// not run at full rate cost [`SLOW_FFT_FACTOR`] times more.
 pub fn fcm_cost(lengths: &[f64], cells: &[u32], support: u32, radius: f64) -> f64 {
     let volume: f64 = lengths.iter().product();
     let cell_count: f64 = cells.iter().map(|&n| n as f64).product();
     let per_volume = radius.powi(3) / volume;
-    78.0 * cell_count * per_volume
+    let slow = cells.iter().any(|&n| !full_rate_fft_size(n));
+    let fft = if slow { SLOW_FFT_FACTOR } else { 1.0 };
+    78.0 * fft * cell_count * per_volume
         + 16.0 * NOMINAL_DENSITY * (support as f64).powi(lengths.len() as i32)
 }
 
@@ -672,6 +709,21 @@ pub fn hasimoto(radius: f64, length: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The refinement's sizes skip the slow FFT lengths (3^2 or 5^2 factors).
+    #[test]
+    fn refinement_steps_through_fast_fft_sizes() {
+        assert_eq!(next_fast_fft(433), 448);
+        assert_eq!(next_fast_fft(217), 224);
+        assert_eq!(next_fast_fft(109), 112);
+        assert_eq!(next_fast_fft(343), 343);
+        assert_eq!(next_fast_fft(170), 175);
+        assert!(!full_rate_fft_size(441) && !full_rate_fft_size(432) && !full_rate_fft_size(162));
+        for n in 1..=1024 {
+            let m = next_fast_fft(n);
+            assert!(m >= n && full_rate_fft_size(m) && m % 9 != 0, "{n} -> {m}");
+        }
+    }
 
     /// The digest's Hasimoto values (section 13.2, item 8).
     #[test]
