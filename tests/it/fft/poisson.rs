@@ -9,7 +9,8 @@ use mesoflow::plan::{Launch, TransformFold};
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::{
-    Rng, assert_like_reference, gpu, input_decl, load, run_cached, tmpdir, write_graph,
+    Rng, assert_like_reference, gpu, input_decl, load, run_cached, tmpdir, validation_error,
+    write_graph,
 };
 
 #[test]
@@ -130,4 +131,30 @@ fn poisson_solves_for_a_smooth_periodic_density() {
             scale[comp]
         );
     }
+}
+
+#[test]
+fn poisson_refuses_what_it_cannot_solve() {
+    let three = ValueType::HalfComplexGrid {
+        dims: [8, 6, 4],
+        comps: 3,
+    };
+    let e = validation_error("poisson", r#"{"permittivity": 1.0}"#, &[("x", three)]);
+    assert!(e.contains("poisson needs 1 components"), "{e}");
+    let one = ValueType::HalfComplexGrid {
+        dims: [8, 6, 4],
+        comps: 1,
+    };
+    let e = validation_error(
+        "poisson",
+        r#"{"permittivity": 1e-17, "box": [1e9, 1.0, 1.0]}"#,
+        &[("x", one)],
+    );
+    assert!(e.contains("`box`^2 / (4 pi^2 `permittivity`)"), "{e}");
+    let e = validation_error(
+        "poisson",
+        r#"{"permittivity": 1.0, "outputs": "gradient"}"#,
+        &[("x", one)],
+    );
+    assert!(e.contains("outputs"), "{e}");
 }
