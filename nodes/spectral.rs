@@ -1,7 +1,9 @@
 //! Spectral operations: functions of the wave vector applied to all components of a
 //! spectrum at once. Placed between a forward and an inverse transform they are folded
-//! into the forward transform's last pass (see `src/plan/spectral.rs`), so a convolution
-//! costs no pass over the grid of its own.
+//! into the forward transform's last pass (see `src/plan/fold.rs`), so a convolution
+//! costs no pass over the grid of its own. A kind whose output has another component
+//! count than its input (`poisson`: 1 in, 1, 3 or 4 out; `SpectralKind::out_comps`) is
+//! not folded and runs as a pass of its own (`src/plan/fold.rs`).
 //!
 //! Wave vectors are in physical units of the periodic box (lengths Lx, Ly, Lz):
 //! k = 2 pi (kx / Lx, ky / Ly, kz / Lz), with signed wave numbers (index i on an axis of n
@@ -65,7 +67,9 @@ impl Mode {
 }
 
 /// The f64 operation at one wave vector on the components, with the kind's own params
-/// (after the box lengths).
+/// (after the box lengths). `v` holds the input's components, padded with zeros to the
+/// output's count where that is larger; the operation leaves the output's components in
+/// its first places.
 type Apply = fn(at: &Mode, p: &[f64], v: &mut [[f64; 2]]);
 
 struct SpectralKind {
@@ -74,6 +78,10 @@ struct SpectralKind {
     params: fn() -> Vec<ParamSpec>,
     /// Components the operation needs (`None`: any count).
     comps: Option<u32>,
+    /// Components of the output for the values and the input's count ([`same_comps`]
+    /// for an operation on the components in place). A count other than the input's
+    /// keeps the node out of the transforms' passes (`src/plan/fold.rs`).
+    out_comps: fn(&[f64], u32) -> u32,
     /// f64 params of the reference: the box lengths, then the kind's own.
     values: fn(&Params) -> Vec<f64>,
     /// The WGSL body with its f32 params (computed in f64 from `values`, rounded once).
@@ -85,6 +93,11 @@ struct SpectralKind {
     /// spectrum, whose Hermitian pairs it knows).
     check: fn(&[f64], &ValueType) -> Result<(), String>,
     apply: Apply,
+}
+
+/// The output has the input's components.
+fn same_comps(_: &[f64], input: u32) -> u32 {
+    input
 }
 
 fn any_spectrum(_: &[f64], _: &ValueType) -> Result<(), String> {
@@ -405,6 +418,103 @@ fn stokes_values(p: &Params, forces: bool) -> Vec<f64> {
     ]
 }
 
+/// Index of the `poisson` values: box (3), permittivity, screening, outputs (0 potential,
+/// 1 field, 2 both).
+mod poisson {
+    pub const PERMITTIVITY: usize = 3;
+    pub const SCREENING: usize = 4;
+    pub const OUTPUTS: usize = 5;
+    pub const CHOICES: &[&str] = &["potential", "field", "both"];
+}
+
+/// Components `poisson` writes: phi; Ex, Ey, Ez; or phi, Ex, Ey, Ez.
+fn poisson_out_comps(v: &[f64], _: u32) -> u32 {
+    [1, 3, 4][v[poisson::OUTPUTS] as usize]
+}
+
+/// The coefficients `poisson_body` forms, within f32's meaningful range: the potential's
+/// factor at the longest wavelength, `box`^2 / (4 pi^2 eps), and with screening its
+/// exponent's factor 2 pi^2 s^2 (on q^2 = (k / 2 pi)^2).
+fn poisson_coefficients(v: &[f64]) -> Result<(), String> {
+    let eps = v[poisson::PERMITTIVITY];
+    let longest = v[..3].iter().cloned().fold(0.0, f64::max);
+    check_f32_coefficient(
+        "the potential at the longest wavelength, `box`^2 / (4 pi^2 `permittivity`)",
+        longest * longest / (4.0 * PI * PI * eps),
+    )?;
+    let s = v[poisson::SCREENING];
+    check_f32_coefficient("2 pi^2 `screening`^2", 2.0 * PI * PI * s * s)
+}
+
+/// f32 params: 1/L (3), 1/(4 pi^2 eps), 2 pi^2 s^2; with q = k / (2 pi) (k the physical
+/// wave vector), phi = exp(-p4 q^2) p3 f / q^2 and E = -i 2 pi q phi.
+fn poisson_body(v: &[f64]) -> SpectralBody {
+    let eps = v[poisson::PERMITTIVITY];
+    let s = v[poisson::SCREENING];
+    let mut params = inverse_lengths(v);
+    params.push((1.0 / (4.0 * PI * PI * eps)) as f32);
+    params.push((2.0 * PI * PI * s * s) as f32);
+    let outputs = v[poisson::OUTPUTS] as usize;
+    let mut text = String::from(
+        "let q = vec3<f32>(k) * vec3<f32>(spectral_params[0], spectral_params[1], spectral_params[2]);
+    let q2 = dot(q, q);
+    var u: array<vec2<f32>, SPECTRAL_OUT>;
+    if (q2 == 0.0) {
+        return u;
+    }
+    let phi = v[0] * (spectral_params[3] * exp(-spectral_params[4] * q2) / q2);
+",
+    );
+    if outputs != 1 {
+        text.push_str("    u[0] = phi;\n");
+    }
+    if outputs != 0 {
+        let first = if outputs == 2 { 1 } else { 0 };
+        // -i k phi = k (phi.y, -phi.x); unpaired Nyquist wave numbers carry no derivative.
+        text.push_str(&format!(
+            "    let even = (n % vec3<u32>(2u)) == vec3<u32>(0u);
+    let nyquist = (even & (vec3<u32>(abs(k)) == n / vec3<u32>(2u))) & (n > vec3<u32>(1u));
+    let d = select(q, vec3<f32>(0.0), nyquist) * 6.2831855;
+    let mi = vec2<f32>(phi.y, -phi.x);
+    u[{first}u] = d.x * mi;
+    u[{}u] = d.y * mi;
+    u[{}u] = d.z * mi;
+",
+            first + 1,
+            first + 2
+        ));
+    }
+    text.push_str("    return u;");
+    body(&text, params)
+}
+
+/// The f64 twin of `poisson_body`, from the physical wave vector: phi = exp(-s^2 k^2 / 2)
+/// f / (eps k^2), E = -i k phi.
+fn poisson_apply(at: &Mode, p: &[f64], v: &mut [[f64; 2]]) {
+    let (eps, s, outputs) = (p[0], p[1], p[2] as usize);
+    let k = at.k;
+    let k2 = k[0] * k[0] + k[1] * k[1] + k[2] * k[2];
+    let f = v[0];
+    v.fill([0.0; 2]);
+    if k2 == 0.0 {
+        return;
+    }
+    let g = (-0.5 * s * s * k2).exp() / (eps * k2);
+    let phi = [g * f[0], g * f[1]];
+    let mut out = Vec::new();
+    if outputs != 1 {
+        out.push(phi);
+    }
+    if outputs != 0 {
+        for (a, &ka) in k.iter().enumerate() {
+            let ka = if at.nyquist(a) { 0.0 } else { ka };
+            // -i (x + i y) = y - i x.
+            out.push([ka * phi[1], -ka * phi[0]]);
+        }
+    }
+    v[..out.len()].copy_from_slice(&out);
+}
+
 static KINDS: &[SpectralKind] = &[
     SpectralKind {
         name: "spectral_filter",
@@ -416,6 +526,7 @@ static KINDS: &[SpectralKind] = &[
             ]
         },
         comps: None,
+        out_comps: same_comps,
         values: |p| {
             let b = p.numbers("box");
             vec![b[0], b[1], b[2], p.number("sigma")]
@@ -428,7 +539,7 @@ static KINDS: &[SpectralKind] = &[
                 "let q = vec3<f32>(k) * vec3<f32>(spectral_params[1], spectral_params[2], spectral_params[3]);
     let g = exp(spectral_params[0] * dot(q, q));
     var u = v;
-    for (var c = 0u; c < SPECTRAL_COMPS; c++) {
+    for (var c = 0u; c < SPECTRAL_IN; c++) {
         u[c] = u[c] * g;
     }
     return u;",
@@ -451,6 +562,7 @@ static KINDS: &[SpectralKind] = &[
         doc: "projection of a 3-component spectrum onto divergence-free fields: (I - k k^T / |k|^2) f; the k = 0 mode is kept",
         params: || vec![box_param()],
         comps: Some(3),
+        out_comps: same_comps,
         values: |p| p.numbers("box").to_vec(),
         // Only the direction of k matters: k/L without 2 pi.
         gpu: |v| {
@@ -496,6 +608,7 @@ static KINDS: &[SpectralKind] = &[
             ]
         },
         comps: Some(3),
+        out_comps: same_comps,
         values: |p| {
             let b = p.numbers("box");
             vec![b[0], b[1], b[2], p.number("scale")]
@@ -510,6 +623,7 @@ static KINDS: &[SpectralKind] = &[
         doc: "periodic Stokes flow of a force density: u = (I - k k^T / k^2) f / (eta k^2), k = 0 mode zero (unpaired Nyquist components left out of the projection); plus noise * M^(1/2) W drawn in Fourier space (FCM's fluctuating stress) when noise > 0; with split > 0 the Positively Split Ewald far field of RPY (times sinc^2(ka) H(k, xi), undoing the spreading Gaussian)",
         params: || stokes_params(0.0),
         comps: Some(3),
+        out_comps: same_comps,
         values: |p| stokes_values(p, true),
         gpu: stokes_body,
         coefficients: stokes_coefficients,
@@ -520,6 +634,48 @@ static KINDS: &[SpectralKind] = &[
             _ => Ok(()),
         },
         apply: stokes_apply,
+    },
+    SpectralKind {
+        name: "poisson",
+        doc: "periodic Poisson equation of a charge density's spectrum (1 component): phi = exp(-s^2 k^2 / 2) f / (eps k^2) (s the `screening` width: the Gaussian screening of an Ewald split, a Gaussian of variance s^2 convolved once more; 0: none) and the field E = -grad phi = -i k phi, written as `outputs` says: potential (1 component: phi), field (3: Ex, Ey, Ez) or both (4: phi, Ex, Ey, Ez). The k = 0 mode is zero: a uniform neutralising background (a non-neutral density's mean is cancelled). Unpaired Nyquist wave numbers carry no derivative (no field along that axis). Never folded into the transforms' passes (its output has more components than its input): runs as a pass of its own",
+        params: || {
+            vec![
+                box_param(),
+                ParamSpec::f32_positive("permittivity", None, "permittivity eps of the medium"),
+                ParamSpec::f32_nonnegative(
+                    "screening",
+                    Some(0.0),
+                    "Gaussian screening width s (a length): the spectrum is times exp(-s^2 k^2 / 2)",
+                ),
+                ParamSpec::choice(
+                    "outputs",
+                    "both",
+                    poisson::CHOICES,
+                    "what the output holds: potential (phi), field (Ex, Ey, Ez) or both (phi, Ex, Ey, Ez)",
+                ),
+            ]
+        },
+        comps: Some(1),
+        out_comps: poisson_out_comps,
+        values: |p| {
+            let b = p.numbers("box");
+            let outputs = poisson::CHOICES
+                .iter()
+                .position(|c| *c == p.text("outputs"))
+                .expect("checked against the choices");
+            vec![
+                b[0],
+                b[1],
+                b[2],
+                p.number("permittivity"),
+                p.number("screening"),
+                outputs as f64,
+            ]
+        },
+        gpu: poisson_body,
+        coefficients: poisson_coefficients,
+        check: any_spectrum,
+        apply: poisson_apply,
     },
 ];
 
@@ -534,7 +690,7 @@ fn spectral_kind(row: &'static SpectralKind) -> NodeKind {
         .output(PortSpec::new(
             "out",
             PortType::Spectrum,
-            "the result, shaped like the input",
+            "the result, on the input's wave vectors (components: the input's, or as the kind's doc says)",
         ))
         .params((row.params)())
         .build(move |params| {
@@ -582,7 +738,19 @@ impl Node for SpectralNode {
             ));
         }
         (self.kind.check)(&self.values, &t).map_err(|e| PortError::new("x", e))?;
-        Ok(Signature::outputs(vec![t]))
+        let out_comps = (self.kind.out_comps)(&self.values, comps);
+        let out = match t {
+            ValueType::ComplexGrid { dims, .. } => ValueType::ComplexGrid {
+                dims,
+                comps: out_comps,
+            },
+            ValueType::HalfComplexGrid { dims, .. } => ValueType::HalfComplexGrid {
+                dims,
+                comps: out_comps,
+            },
+            other => other,
+        };
+        Ok(Signature::outputs(vec![out]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -591,14 +759,26 @@ impl Node for SpectralNode {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
         let Some(x) = &inputs[0] else { return };
-        outputs[0].data.copy_from_slice(&x.data);
-        apply_reference(&self.values, self.kind.apply, &mut outputs[0], cx.step);
+        apply_reference(
+            &self.values,
+            self.kind.apply,
+            Some(x),
+            &mut outputs[0],
+            cx.step,
+        );
     }
 }
 
-/// Applies `apply` in f64 to every stored wave vector of the spectrum `out` in place;
-/// `values` starts with the box lengths.
-fn apply_reference(values: &[f64], apply: Apply, out: &mut RefArray, step: u64) {
+/// Applies `apply` in f64 to every stored wave vector of the spectrum `input` (zeros of
+/// `out`'s count without one, as a generator), writing `out` (the same wave vectors, its
+/// own component count); `values` starts with the box lengths.
+fn apply_reference(
+    values: &[f64],
+    apply: Apply,
+    input: Option<&RefArray>,
+    out: &mut RefArray,
+    step: u64,
+) {
     let (dims, comps, half) = match out.ty {
         ValueType::ComplexGrid { dims, comps } => (dims, comps as usize, false),
         ValueType::HalfComplexGrid { dims, comps } => (dims, comps as usize, true),
@@ -607,7 +787,13 @@ fn apply_reference(values: &[f64], apply: Apply, out: &mut RefArray, step: u64) 
     let s = if half { half_dims(dims) } else { dims };
     let cells = (s[0] * s[1] * s[2]) as usize;
     let lengths = [values[0], values[1], values[2]];
-    let mut v = vec![[0.0; 2]; comps];
+    let in_comps = match input.map(|x| x.ty) {
+        Some(ValueType::ComplexGrid { comps, .. } | ValueType::HalfComplexGrid { comps, .. }) => {
+            comps as usize
+        }
+        _ => comps,
+    };
+    let mut v = vec![[0.0; 2]; comps.max(in_comps)];
     for cell in 0..cells {
         let c32 = cell as u32;
         let (ix, iy, iz) = (c32 % s[0], (c32 / s[0]) % s[1], c32 / (s[0] * s[1]));
@@ -624,12 +810,15 @@ fn apply_reference(values: &[f64], apply: Apply, out: &mut RefArray, step: u64) 
             lengths,
             step,
         };
-        for (c, vc) in v.iter_mut().enumerate() {
-            let i = 2 * (c * cells + cell);
-            *vc = [out.data[i], out.data[i + 1]];
+        v.fill([0.0; 2]);
+        if let Some(x) = input {
+            for (c, vc) in v[..in_comps].iter_mut().enumerate() {
+                let i = 2 * (c * cells + cell);
+                *vc = [x.data[i], x.data[i + 1]];
+            }
         }
         apply(&at, &values[3..], &mut v);
-        for (c, vc) in v.iter().enumerate() {
+        for (c, vc) in v[..comps].iter().enumerate() {
             let i = 2 * (c * cells + cell);
             out.data[i] = vc[0];
             out.data[i + 1] = vc[1];
@@ -707,8 +896,7 @@ impl Node for StokesNoiseNode {
     }
 
     fn cpu_reference(&self, _: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
-        outputs[0].data.fill(0.0);
-        apply_reference(&self.values, stokes_apply, &mut outputs[0], cx.step);
+        apply_reference(&self.values, stokes_apply, None, &mut outputs[0], cx.step);
     }
 }
 

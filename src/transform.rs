@@ -95,9 +95,13 @@ pub struct LinePass {
 /// otherwise it runs as a kernel of its own through the same function.
 ///
 /// The body is the WGSL body of `fn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>,
-/// SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS>`: `k` holds the signed wave
+/// SPECTRAL_IN>) -> array<vec2<f32>, SPECTRAL_OUT>`: `k` holds the signed wave
 /// numbers (index i on an axis of n points is i for i <= n/2, else i - n), `n` the dims of
-/// the real-space grid, `v` the components at k as (re, im). Params are read as
+/// the real-space grid, `v` the input's components at k as (re, im), the result the
+/// output's. The counts are the input's and the output's types' (the node's `infer`
+/// says the output's; a Green function that differentiates returns more components than
+/// it reads). Only a node whose counts are equal is folded into a transform (see
+/// `src/plan/fold.rs`); the others run alone. Params are read as
 /// `spectral_params[i]` (f32); a body with `uses_step` reads the time step as `step`.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct SpectralBody {
@@ -118,11 +122,12 @@ impl SpectralBody {
         p
     }
 
-    /// The WGSL function for `comps` components, preceded by its imports. A kernel using
+    /// The WGSL function from `in_comps` to `out_comps` components (the constants
+    /// `SPECTRAL_IN` and `SPECTRAL_OUT`), preceded by its imports. A kernel using
     /// it declares `spectral_params: array<f32>` as a read-only storage binding holding
     /// [`SpectralBody::param_words`], `clock: array<u32>` (the engine clock) when
     /// `uses_step`, and imports `common/wave.wgsl` for `wave_number`.
-    pub fn function(&self, comps: u32) -> String {
+    pub fn function(&self, in_comps: u32, out_comps: u32) -> String {
         let mut w = String::new();
         for i in &self.imports {
             w.push_str(&format!("#import {i}\n"));
@@ -133,18 +138,20 @@ impl SpectralBody {
             ""
         };
         w.push_str(&format!(
-            "const SPECTRAL_COMPS: u32 = {comps}u;\nfn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>, SPECTRAL_COMPS>) -> array<vec2<f32>, SPECTRAL_COMPS> {{\n    {step}{}\n}}\n",
+            "const SPECTRAL_IN: u32 = {in_comps}u;\nconst SPECTRAL_OUT: u32 = {out_comps}u;\nfn spectral(k: vec3<i32>, n: vec3<u32>, v: array<vec2<f32>, SPECTRAL_IN>) -> array<vec2<f32>, SPECTRAL_OUT> {{\n    {step}{}\n}}\n",
             self.body.trim()
         ));
         w
     }
 }
 
-/// The kernel of a spectral node that runs alone on a spectrum of type `ty`: one thread
-/// per wave vector, all components. Bindings: params, input (when `reads_input`; else the
-/// body sees zeros, as a generator), output, then the engine clock when the body reads
-/// the step.
-pub fn standalone_source(body: &SpectralBody, ty: &ValueType, reads_input: bool) -> String {
+/// The kernel of a spectral node that runs alone, writing a spectrum of type `ty`: one
+/// thread per wave vector, all components. Bindings: params, input (when `in_comps` is
+/// given: the input spectrum's components, on the output's wave vectors; else the body
+/// sees zeros of the output's count, as a generator), output, then the engine clock when
+/// the body reads the step.
+pub fn standalone_source(body: &SpectralBody, ty: &ValueType, in_comps: Option<u32>) -> String {
+    let reads_input = in_comps.is_some();
     let (dims, comps, half) = match *ty {
         ValueType::HalfComplexGrid { dims, comps } => (dims, comps, true),
         ValueType::ComplexGrid { dims, comps } => (dims, comps, false),
@@ -178,7 +185,8 @@ pub fn standalone_source(body: &SpectralBody, ty: &ValueType, reads_input: bool)
         )
         .expect("String");
     }
-    w.push_str(&body.function(comps));
+    let in_comps = in_comps.unwrap_or(comps);
+    w.push_str(&body.function(in_comps, comps));
     let kx = if half {
         "i32(ix)".to_string()
     } else {
@@ -186,14 +194,14 @@ pub fn standalone_source(body: &SpectralBody, ty: &ValueType, reads_input: bool)
     };
     writeln!(
         w,
-        "\n@compute @workgroup_size({WG_1D})\nfn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,\n        @builtin(local_invocation_index) lid: u32) {{\n    let i = flat_index(wid, nwg, lid, {WG_1D}u);\n    if (i >= {cells}u) {{ return; }}\n    let ix = i % {sx}u; let iy = (i / {sx}u) % {sy}u; let iz = i / {sxy}u;\n    var v: array<vec2<f32>, SPECTRAL_COMPS>;",
+        "\n@compute @workgroup_size({WG_1D})\nfn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,\n        @builtin(local_invocation_index) lid: u32) {{\n    let i = flat_index(wid, nwg, lid, {WG_1D}u);\n    if (i >= {cells}u) {{ return; }}\n    let ix = i % {sx}u; let iy = (i / {sx}u) % {sy}u; let iz = i / {sxy}u;\n    var v: array<vec2<f32>, SPECTRAL_IN>;",
         sx = s[0],
         sy = s[1],
         sxy = s[0] * s[1]
     )
     .expect("String");
     if reads_input {
-        for c in 0..comps as u64 {
+        for c in 0..in_comps as u64 {
             writeln!(w, "    v[{c}] = src[{}u + i];", c * cells).expect("String");
         }
     }
@@ -212,16 +220,28 @@ pub fn standalone_source(body: &SpectralBody, ty: &ValueType, reads_input: bool)
 }
 
 /// The kernel of a spectral function run alone over every wave vector of `out`: on
-/// `input` (a spectral node that is not folded into a transform), or on zeros (a
-/// generator such as `stokes_noise`). `label` names the kernel and its params table.
+/// `input` (a spectral node that is not folded into a transform; its component count
+/// may differ from the output's, its wave vectors may not), or on zeros (a generator
+/// such as `stokes_noise`). `label` names the kernel and its params table.
 pub fn standalone_dispatch(
     cx: &mut CompileCtx,
     label: &str,
     body: &SpectralBody,
-    input: Option<&wgpu::Buffer>,
+    input: Option<Slot>,
     out: Slot,
 ) -> Result<Dispatch, CompileError> {
-    let source = standalone_source(body, &out.ty, input.is_some());
+    let in_comps = match input.map(|s| s.ty) {
+        None => None,
+        Some(ValueType::ComplexGrid { comps, .. } | ValueType::HalfComplexGrid { comps, .. }) => {
+            Some(comps)
+        }
+        Some(other) => {
+            return Err(CompileError::Unsupported(format!(
+                "a spectral node reads a spectrum, got {other}"
+            )));
+        }
+    };
+    let source = standalone_source(body, &out.ty, in_comps);
     let mut bindings = vec![Binding::StorageRead];
     if input.is_some() {
         bindings.push(Binding::StorageRead);
@@ -242,7 +262,7 @@ pub fn standalone_dispatch(
         _ => 0,
     };
     let mut buffers = vec![&params];
-    buffers.extend(input);
+    buffers.extend(input.map(|s| s.buffer));
     buffers.push(out.buffer);
     if body.uses_step {
         buffers.push(cx.clock);

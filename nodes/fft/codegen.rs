@@ -270,7 +270,8 @@ pub fn source(p: &Pass, fold: Option<&Fold>) -> String {
         .unwrap();
     }
     if let (Some(f), true) = (fold, p.spectral) {
-        w.push_str(&f.body.function(p.comps_per_line()));
+        // Folded nodes keep the component count (`src/plan/fold.rs` folds no other).
+        w.push_str(&f.body.function(p.comps_per_line(), p.comps_per_line()));
     }
 
     writeln!(
@@ -386,7 +387,7 @@ fn output_phase(w: &mut String, p: &Pass, fold: Option<&Fold>, scale: &str, post
         writeln!(w, "        let s2 = g * {bs}u + ls;").unwrap();
         writeln!(w, "        if (s2 < {}u) {{", p.lines).unwrap();
         let array = if p.spectral {
-            "SPECTRAL_COMPS".to_string()
+            "SPECTRAL_IN".to_string()
         } else {
             format!("{comps}u")
         };
@@ -719,7 +720,7 @@ fn spectral_in_registers(
     writeln!(w, "    // the folded spectral node at this thread's points").unwrap();
     points(w, &|w, i, pos| {
         writeln!(w, "      {{ let q = {pos};").unwrap();
-        writeln!(w, "        var v: array<vec2<f32>, SPECTRAL_COMPS>;").unwrap();
+        writeln!(w, "        var v: array<vec2<f32>, SPECTRAL_IN>;").unwrap();
         for c in 0..comps {
             writeln!(w, "        v[{c}] = o{c}_{i};").unwrap();
         }

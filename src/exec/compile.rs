@@ -109,7 +109,7 @@ impl<'a> Program<'a> {
                         cx,
                         "spectral",
                         &body,
-                        Some(input.buffer),
+                        Some(input),
                         io.outputs[0],
                     )
                     .map_err(err)?,

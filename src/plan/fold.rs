@@ -7,6 +7,12 @@
 //! the spectral node's output and its own output is never stored, so rfft -> Green
 //! function -> irfft makes no pass over the grid beyond the transforms' own.
 //!
+//! A spectral node whose output has another component count than its input (a Green
+//! function that also differentiates: `poisson`, 1 in, up to 4 out) is not folded: the
+//! passes are generated for one count of lines in and out, so it runs alone
+//! ([`crate::transform::standalone_dispatch`]), one pass over the grid more. Correct,
+//! and the transforms around it keep their own counts.
+//!
 //! When the spectral node's output in turn has one reader, an inverse transform whose
 //! first pass runs along the axis of the forward transform's last
 //! ([`crate::transform::Transform::first_pass`], [`crate::transform::Transform::hosts_inverse`]),
@@ -56,6 +62,13 @@ pub fn fold(
         let [src @ Source::Node { node: a, port: 0 }] = inst.inputs[..] else {
             continue;
         };
+        // Same count in and out (see the module doc): the output type is the input's.
+        let same_shape = ctx.types[b]
+            .outputs()
+            .is_some_and(|o| o.first().copied() == input_types(b).first().copied().flatten());
+        if !same_shape {
+            continue;
+        }
         let producer = &ctx.g.nodes[a];
         let Lowering::Transform(k) = producer.node().lowering() else {
             continue;

@@ -3,5 +3,6 @@
 //! spectral nodes folded into a transform. Shared helpers: `crate::util::fft`.
 
 mod folding;
+mod poisson;
 mod recipes;
 mod transforms;
