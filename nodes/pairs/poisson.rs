@@ -188,9 +188,9 @@ mod tests {
             "G(0) = {phi0}, want {taylor}"
         );
         assert_eq!(dphi0, 0.0);
-        // G'(r) ~ -r (1/a^3 - 1/g^3) / (12 pi^(3/2) eps) near 0.
+        // G'(r) ~ -r (1/a^3 - 1/g^3) / (24 pi^(3/2) eps) near 0.
         let r = 1e-4;
-        let slope = -r * (a.powi(-3) - g.powi(-3)) / (12.0 * PI.powf(1.5) * eps);
+        let slope = -r * (a.powi(-3) - g.powi(-3)) / (24.0 * PI.powf(1.5) * eps);
         let (_, d) = near_potential(r, a, xi, eps);
         assert!(
             (d - slope).abs() <= 1e-6 * slope.abs(),
