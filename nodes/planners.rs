@@ -137,6 +137,19 @@ static FUNCTIONS: &[HostFunction] = &[
         },
     },
     HostFunction {
+        name: "poisson_cutoff",
+        doc: "poisson_cutoff(width, split, tolerance, box): the smallest distance at which the Ewald-split Poisson near field of Gaussian charges (standard deviation width) has fallen to tolerance of its value at 0 (G(0)) and its field to tolerance of its peak (computed in f64); refused past half the smallest box length",
+        call: |a| {
+            arity(a, 4)?;
+            let width = positive(a, 0, "width")?;
+            let split = positive(a, 1, "split")?;
+            let t = tolerance(a, 2)?;
+            let lengths = box_lengths(a, 3)?;
+            crate::nodes::pairs::poisson::poisson_cutoff(width, split, t, lengths)
+                .map(ParamValue::Number)
+        },
+    },
+    HostFunction {
         name: "fcm_grid",
         doc: "fcm_grid(box, radius, tolerance, kernel[, rotation[, split]]): FFT-friendly cells per axis for FCM; for the Gaussian, refined until some support keeps the self-mobility within the tolerance at the worst placement; with rotation true, fine enough for the torque Gaussian too (Gaussian kernel only); with split > 0 (PSE's far field, which plans its own grid) without the refinement",
         call: |a| {
@@ -474,6 +487,24 @@ mod tests {
             .find(|f| f.name == name)
             .expect("a planner");
         (f.call)(args)
+    }
+
+    /// poisson_cutoff is callable from expressions and names its refusals.
+    #[test]
+    fn poisson_cutoff_from_expressions() {
+        let n = |x: f64| ParamValue::Number(x);
+        let v = |x: &[f64]| ParamValue::Numbers(x.to_vec());
+        let rc = match call("poisson_cutoff", &[n(1.0), n(0.5), n(1e-4), v(&[40.0; 3])]).unwrap() {
+            ParamValue::Number(x) => x,
+            other => panic!("not a number: {other:?}"),
+        };
+        let want =
+            crate::nodes::pairs::poisson::poisson_cutoff(1.0, 0.5, 1e-4, &[40.0; 3]).unwrap();
+        assert_eq!(rc, want);
+        let err = call("poisson_cutoff", &[n(1.0), n(0.5), n(1e-4), v(&[4.0; 3])]).unwrap_err();
+        assert!(err.contains("half the smallest box length"), "{err}");
+        let err = call("poisson_cutoff", &[n(1.0), n(-1.0), n(1e-4), v(&[40.0; 3])]).unwrap_err();
+        assert!(err.contains("split"), "{err}");
     }
 
     /// Planners are called from expressions with their errors named.

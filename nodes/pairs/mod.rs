@@ -15,6 +15,7 @@
 //! linear order, bin_sort (the order, the count and the first slot of each cell) and a
 //! gather of the rows. The sum runs in the sorted order it is given.
 
+pub mod poisson;
 pub mod rpy;
 
 use std::f64::consts::PI;
