@@ -875,8 +875,10 @@ mod tests {
             (130.0, 1e-4, 216, 216),
             (260.0, 1e-4, 432, 432),
         ] {
+            // The nominal rule; `grid` then refines it where the worst placement, or the
+            // transforms' rate, asks for another (refinement_steps_through_...).
             assert_eq!(
-                grid(&[l], 1.0, tol, "gaussian").unwrap(),
+                nominal_grid_for(&[l], 1.0, tol, "gaussian", false).unwrap(),
                 vec![n],
                 "L = {l}, tolerance {tol}"
             );
