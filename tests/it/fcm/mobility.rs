@@ -435,7 +435,11 @@ fn hard_placements_and_shapes() {
     let g = load_with("fcm.json", &[("box", "[12, 12, 12]")], 1, 0);
     let plan = mobility_plan(&gpu, &g, 2, false, &["velocities"]);
     let mut fcm = compile_cached(&gpu, &g, &plan);
-    let h = l / 18.0;
+    let cells = match g.params.iter().find(|p| p.name == "grid").map(|p| &p.value) {
+        Some(mesoflow::expr::ParamValue::Numbers(n)) => n[0],
+        other => panic!("fcm.json's grid param: {other:?}"),
+    };
+    let h = l / cells;
     let f = [[1.0, -0.5, 0.25], [0.0, 0.0, 0.0]];
     // On a cell face, a cell edge and a cell corner of the grid; at the box face the same
     // point seen from both sides.

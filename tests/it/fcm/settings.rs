@@ -22,14 +22,15 @@ fn velocities_do_not_depend_on_where_the_grid_is() {
     );
     let plan = mobility_plan(&gpu, &g, n as u32, false, &["velocities"]);
     let mut fcm = compile_cached(&gpu, &g, &plan);
-    let h = l / 18.0; // the planner's grid for L = 12 a at 1e-3
+    // The planner's grid for L = 12 a at 1e-3: 20 cells (18 = 2 3^2 is not a full-rate FFT size).
     assert_eq!(
         g.params
             .iter()
             .find(|p| p.name == "grid")
             .map(|p| p.value.clone()),
-        Some(ParamValue::Numbers(vec![18.0; 3]))
+        Some(ParamValue::Numbers(vec![20.0; 3]))
     );
+    let h = l / 20.0;
     let mut rng = Rng::new(71);
     let x = random_positions(&mut rng, n, [l; 3]);
     let f: Vec<[f64; 3]> = (0..n)
