@@ -10,6 +10,7 @@ pub mod pairs;
 pub mod permute;
 pub mod planners;
 pub mod pointwise;
+pub mod poisson;
 pub mod pse;
 pub mod random;
 pub mod record;

@@ -31,6 +31,18 @@ fn positive(args: &[ParamValue], i: usize, what: &str) -> Result<f64, String> {
     }
 }
 
+fn nonnegative(args: &[ParamValue], i: usize, what: &str) -> Result<f64, String> {
+    let x = number(args, i, what)?;
+    if x >= 0.0 && x.is_finite() {
+        Ok(x)
+    } else {
+        Err(format!(
+            "argument {} ({what}) must be zero or positive, got {x}",
+            i + 1
+        ))
+    }
+}
+
 fn flag(args: &[ParamValue], i: usize, what: &str) -> Result<bool, String> {
     match args.get(i) {
         Some(ParamValue::Bool(b)) => Ok(*b),
@@ -138,15 +150,88 @@ static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "poisson_cutoff",
-        doc: "poisson_cutoff(width, split, tolerance, box): the smallest distance at which the Ewald-split Poisson near field of Gaussian charges (standard deviation width) has fallen to tolerance of its value at 0 (G(0)) and its field to tolerance of its peak (computed in f64); refused past half the smallest box length",
+        doc: "poisson_cutoff(width, split, tolerance, box): the smallest distance at which the Ewald-split Poisson near field of Gaussian charges (standard deviation width) has fallen to tolerance of its value at 0 (G(0)) and its field to tolerance of its peak (computed in f64); refused past half the smallest box length; 0 for split 0 (unsplit: no near field)",
         call: |a| {
             arity(a, 4)?;
             let width = positive(a, 0, "width")?;
-            let split = positive(a, 1, "split")?;
+            let split = nonnegative(a, 1, "split")?;
             let t = tolerance(a, 2)?;
             let lengths = box_lengths(a, 3)?;
-            crate::nodes::pairs::poisson::poisson_cutoff(width, split, t, lengths)
+            crate::nodes::poisson::cutoff(width, split, t, lengths).map(ParamValue::Number)
+        },
+    },
+    HostFunction {
+        name: "poisson_split",
+        doc: "poisson_split(width, tolerance, box): the Ewald split xi the Poisson cost model finds cheapest for charges of this width (0: unsplit, everything on the grid)",
+        call: |a| {
+            arity(a, 3)?;
+            let width = positive(a, 0, "width")?;
+            let t = tolerance(a, 1)?;
+            crate::nodes::poisson::default_split(width, t, box_lengths(a, 2)?)
                 .map(ParamValue::Number)
+        },
+    },
+    HostFunction {
+        name: "poisson_far_width",
+        doc: "poisson_far_width(width, split): the far field's Gaussian standard deviation g_t = sqrt(width^2 + 1 / (4 split^2)) (width itself for split 0)",
+        call: |a| {
+            arity(a, 2)?;
+            let width = positive(a, 0, "width")?;
+            let split = nonnegative(a, 1, "split")?;
+            Ok(ParamValue::Number(crate::nodes::poisson::far_width(width, split)))
+        },
+    },
+    HostFunction {
+        name: "poisson_grid",
+        doc: "poisson_grid(box, far_width, tolerance): the far field's cells per axis, UAMMD's rule h = (1.3 - min(-0.1 log10 tol, 0.9)) g_t, at least 32 per axis, rounded up to a full-rate FFT size",
+        call: |a| {
+            arity(a, 3)?;
+            let lengths = box_lengths(a, 0)?;
+            let g = positive(a, 1, "far_width")?;
+            let t = tolerance(a, 2)?;
+            let grid = crate::nodes::poisson::grid(lengths, g, t)?;
+            Ok(ParamValue::Numbers(grid.into_iter().map(f64::from).collect()))
+        },
+    },
+    HostFunction {
+        name: "poisson_support",
+        doc: "poisson_support(box, grid, far_width, tolerance): the far field's Gaussian support in cells (where it falls to the tolerance of its peak, at least 3)",
+        call: |a| {
+            arity(a, 4)?;
+            let lengths = box_lengths(a, 0)?;
+            let grid = grid_cells(a, 1)?;
+            let g = positive(a, 2, "far_width")?;
+            let t = tolerance(a, 3)?;
+            crate::nodes::poisson::support(lengths, &grid, g, t).map(|p| ParamValue::Number(p as f64))
+        },
+    },
+    HostFunction {
+        name: "poisson_cells",
+        doc: "poisson_cells(box, cutoff, grid): cells per axis of the cell list that orders the charges (at least the cutoff wide; unsplit, cutoff 0, coarse cells for spreading locality)",
+        call: |a| {
+            arity(a, 3)?;
+            let lengths = box_lengths(a, 0)?;
+            let cutoff = nonnegative(a, 1, "cutoff")?;
+            let grid = grid_cells(a, 2)?;
+            Ok(ParamValue::Numbers(
+                crate::nodes::poisson::cells(lengths, cutoff, &grid)
+                    .into_iter()
+                    .map(f64::from)
+                    .collect(),
+            ))
+        },
+    },
+    HostFunction {
+        name: "poisson_background",
+        doc: "poisson_background(box, split, permittivity): c of the term c Q_tot added to every potential so that the potential's mean over the box is zero for any split, as unsplit (the uniform neutralising background): -1 / (4 split^2 permittivity V); 0 for split 0",
+        call: |a| {
+            arity(a, 3)?;
+            let lengths = box_lengths(a, 0)?;
+            let split = nonnegative(a, 1, "split")?;
+            let eps = positive(a, 2, "permittivity")?;
+            Ok(ParamValue::Number(crate::nodes::poisson::background(
+                lengths, split, eps,
+            )))
         },
     },
     HostFunction {
@@ -501,6 +586,11 @@ mod tests {
         let want =
             crate::nodes::pairs::poisson::poisson_cutoff(1.0, 0.5, 1e-4, &[40.0; 3]).unwrap();
         assert_eq!(rc, want);
+        // Unsplit: no near field.
+        assert_eq!(
+            call("poisson_cutoff", &[n(1.0), n(0.0), n(1e-4), v(&[4.0; 3])]).unwrap(),
+            n(0.0)
+        );
         let err = call("poisson_cutoff", &[n(1.0), n(0.5), n(1e-4), v(&[4.0; 3])]).unwrap_err();
         assert!(err.contains("half the smallest box length"), "{err}");
         let err = call("poisson_cutoff", &[n(1.0), n(-1.0), n(1e-4), v(&[40.0; 3])]).unwrap_err();

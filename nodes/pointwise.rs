@@ -214,7 +214,7 @@ pub static KINDS: &[PointwiseKind] = &[
     },
     PointwiseKind {
         name: "multiply",
-        doc: "out = a * b, element-wise (a scalar operand is broadcast)",
+        doc: "out = a * b, element-wise (a scalar operand is broadcast, and a one-column particle array over the columns of the other: charges times fields)",
         inputs: &[("a", "first factor", false), ("b", "second factor", false)],
         body: "return a * b;",
         reference: |i, _, _| i[0] * i[1],
@@ -356,6 +356,24 @@ pub(crate) fn pointwise_kind(row: &'static PointwiseKind) -> NodeKind {
         })
 }
 
+/// Whether two particle arrays of the same rows differ only in that one has a single
+/// column (broadcast over the other's columns).
+pub fn row_broadcast(a: &ValueType, b: &ValueType) -> bool {
+    match (a, b) {
+        (ValueType::Particles { n, k }, ValueType::Particles { n: m, k: l }) => {
+            n == m && k != l && (*k == 1 || *l == 1)
+        }
+        _ => false,
+    }
+}
+
+fn column_count(t: &ValueType) -> u32 {
+    match t {
+        ValueType::Particles { k, .. } => *k,
+        _ => 1,
+    }
+}
+
 struct PointwiseNode {
     kind: &'static PointwiseKind,
     values: Vec<f64>,
@@ -373,6 +391,13 @@ impl Node for PointwiseNode {
             }
             match shape {
                 None => shape = Some((i, *t)),
+                // One column per particle is broadcast over the columns of the other
+                // operands (charges times fields), as a scalar is over every element.
+                Some((_, s)) if row_broadcast(&s, t) => {
+                    if column_count(t) > column_count(&s) {
+                        shape = Some((i, *t));
+                    }
+                }
                 Some((j, s)) if s != *t => {
                     return Err(PortError::new(
                         self.kind.inputs[i].0,
@@ -430,6 +455,10 @@ impl Node for PointwiseNode {
                 *a = match inp {
                     None => 0.0,
                     Some(r) if r.data.len() == 1 => r.data[0],
+                    // A one-column particle array broadcast over the columns.
+                    Some(r) if r.data.len() < out.data.len() => {
+                        r.data[idx / (out.data.len() / r.data.len())]
+                    }
                     Some(r) => r.data[idx],
                 };
             }

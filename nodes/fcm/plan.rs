@@ -325,7 +325,7 @@ pub fn full_rate_fft_size(n: u32) -> bool {
 
 /// The smallest FFT size >= `n` that [`full_rate_fft_size`] takes: the grid refinement steps
 /// through these only.
-fn next_fast_fft(n: u32) -> u32 {
+pub fn next_fast_fft(n: u32) -> u32 {
     let mut m = next_friendly(n);
     while !full_rate_fft_size(m) {
         m = next_friendly(m + 1);

@@ -6,10 +6,14 @@
 //! r_ij = x_i - x_j (the minimum image on periodic axes).
 //!
 //! A pair kernel is one WGSL file in `shaders/pairs/` defining `pair_term(r, r2, vj)` and
-//! `self_term(vi)` (3-vectors; `pair_params` and `pair_table` are its f32 words and
-//! table), plus its arm in [`PairKernel`] here with the f64 twin: swapping the kernel is
-//! changing the `kernel` param. Mobility kernels act on values (forces): a sum is then a
-//! matrix-vector product M v, and can be a Lanczos loop body.
+//! `self_term(vi)` (values and results as 4-vectors: a kernel reads the first
+//! `value_comps` words of each particle's value row and its result row is the components
+//! `out_first ..` of its own (`out_comps` of them; `shaders/pairs/values.wgsl`);
+//! `pair_params` and `pair_table` are its f32 words and table), plus its arm in
+//! [`PairKernel`] here with the f64 twin: swapping the kernel is changing the `kernel`
+//! param. Mobility kernels act on values (forces, 3 in and 3 out): a sum is then a
+//! matrix-vector product M v, and can be a Lanczos loop body; the Poisson near field takes
+//! charges (1) and gives the potential (1), the field (3) or both (4).
 //!
 //! The cell list is made of primitives (see `graphs/lib/cell_list.json`): cell_hash in
 //! linear order, bin_sort (the order, the count and the first slot of each cell) and a
@@ -32,7 +36,10 @@ use crate::value::{PortType, RefArray, ValueType};
 use rpy::NearTable;
 
 /// The pair kernels, by name in the `kernel` param.
-pub const KERNELS: &[&str] = &["rpy", "rpy_near", "lj"];
+pub const KERNELS: &[&str] = &["rpy", "rpy_near", "lj", "poisson_near"];
+
+/// What `poisson_near` writes: the potential, the field or both (phi, Ex, Ey, Ez).
+pub const POISSON_OUTPUTS: &[&str] = &["potential", "field", "both"];
 
 /// One pair kernel with its parameters, as built from node params.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,13 +57,25 @@ pub enum PairKernel {
     /// Lennard-Jones force 24 eps (2 (s/r)^12 - (s/r)^6) r / r^2 (values unused); with
     /// cutoff 2^(1/6) sigma it is the WCA force.
     Lj { epsilon: f64, sigma: f64 },
+    /// The near field of Ewald-split Gaussian charges (see `poisson.rs`): values are
+    /// charges; the potential, the field or both (`outputs`, an index into
+    /// [`POISSON_OUTPUTS`]). `table` holds (G, G'/r) at equally spaced distances from 0 to
+    /// `cutoff`, in f64.
+    PoissonNear {
+        width: f64,
+        permittivity: f64,
+        split: f64,
+        outputs: usize,
+        cutoff: f64,
+        table: std::sync::Arc<Vec<[f64; 2]>>,
+    },
 }
 
 impl PairKernel {
     fn from_params(p: &Params, cutoff: f64) -> Result<PairKernel, String> {
         let radius = p.number("radius");
         let viscosity = p.number("viscosity");
-        if p.text("kernel") != "lj" {
+        if matches!(p.text("kernel"), "rpy" | "rpy_near") {
             // The coefficients the RPY kernels multiply values by (`words`, the near
             // table's scale), each within f32's meaningful range, so that M v neither
             // overflows nor vanishes.
@@ -92,8 +111,70 @@ impl PairKernel {
                 check_f32_coefficient("24 `epsilon`", 24.0 * epsilon)?;
                 PairKernel::Lj { epsilon, sigma }
             }
+            "poisson_near" => {
+                let (width, split, permittivity) =
+                    (p.number("width"), p.number("split"), p.number("permittivity"));
+                if split <= 0.0 {
+                    return Err(
+                        "kernel poisson_near needs `split` (the Ewald parameter xi) > 0".into(),
+                    );
+                }
+                if !cutoff.is_finite() || cutoff <= 0.0 {
+                    return Err(format!(
+                        "kernel poisson_near needs a positive finite `cutoff` (its table ends there), got {cutoff}"
+                    ));
+                }
+                check_f32_coefficient(
+                    "the self potential (1/`width` - 1/g_t) / (4 pi^(3/2) `permittivity`)",
+                    poisson::self_potential(width, split, permittivity),
+                )?;
+                let points = (p.number("table_points") as usize).max(2);
+                let step = cutoff / (points - 1) as f64;
+                let table = (0..points)
+                    .map(|i| {
+                        let (g, _, slope_over_r) =
+                            poisson::near_terms(i as f64 * step, width, split, permittivity);
+                        [g, slope_over_r]
+                    })
+                    .collect();
+                PairKernel::PoissonNear {
+                    width,
+                    permittivity,
+                    split,
+                    outputs: POISSON_OUTPUTS
+                        .iter()
+                        .position(|o| *o == p.text("outputs"))
+                        .expect("choice checked"),
+                    cutoff,
+                    table: std::sync::Arc::new(table),
+                }
+            }
             other => unreachable!("choice checked: {other}"),
         })
+    }
+
+    /// Words of each particle's value row the kernel reads.
+    pub fn value_comps(&self) -> u32 {
+        match self {
+            PairKernel::PoissonNear { .. } => 1,
+            _ => 3,
+        }
+    }
+
+    /// The first component of the kernel's 4-vector result that the row holds.
+    pub fn out_first(&self) -> u32 {
+        match self {
+            PairKernel::PoissonNear { outputs: 1, .. } => 1,
+            _ => 0,
+        }
+    }
+
+    /// Components of each particle's result row.
+    pub fn out_comps(&self) -> u32 {
+        match self {
+            PairKernel::PoissonNear { outputs, .. } => [1, 3, 4][*outputs],
+            _ => 3,
+        }
     }
 
     pub fn name(&self) -> &'static str {
@@ -101,11 +182,19 @@ impl PairKernel {
             PairKernel::Rpy { .. } => "rpy",
             PairKernel::RpyNear { .. } => "rpy_near",
             PairKernel::Lj { .. } => "lj",
+            PairKernel::PoissonNear { .. } => "poisson_near",
         }
     }
 
-    fn shader(&self) -> String {
-        format!("pairs/{}.wgsl", self.name())
+    /// The kernel's WGSL with the row shapes the traversals read (`values.wgsl`).
+    fn source(&self, cx: &CompileCtx<'_>) -> Result<String, CompileError> {
+        Ok(format!(
+            "const VALUE_COMPS: u32 = {}u;\nconst OUT_FIRST: u32 = {}u;\nconst OUT_COMPS: u32 = {}u;\n{}",
+            self.value_comps(),
+            self.out_first(),
+            self.out_comps(),
+            cx.shader(&format!("pairs/{}.wgsl", self.name()))?
+        ))
     }
 
     /// Whether the kernel reads the values (a product M v) or only positions (forces).
@@ -128,6 +217,10 @@ impl PairKernel {
             PairKernel::Lj { epsilon, sigma } => {
                 vec![(24.0 * epsilon) as f32, (sigma * sigma) as f32]
             }
+            PairKernel::PoissonNear { table, cutoff, .. } => {
+                let last = (table.len() - 1) as f64;
+                vec![(last / cutoff) as f32, last as f32]
+            }
         }
     }
 
@@ -140,12 +233,20 @@ impl PairKernel {
                 .zip(&table.g)
                 .flat_map(|(f, g)| [*f as f32, *g as f32])
                 .collect(),
+            PairKernel::PoissonNear { table, .. } => table
+                .iter()
+                .flat_map(|[g, s]| [*g as f32, *s as f32])
+                .collect(),
             _ => vec![0.0],
         }
     }
 
-    /// The f64 twin of `pair_term`: the contribution of j (value vj) to i at r = x_i - x_j.
-    pub fn pair(&self, r: [f64; 3], vj: [f64; 3]) -> [f64; 3] {
+    /// The f64 twin of `pair_term`: the contribution of j (value vj) to i at r = x_i - x_j,
+    /// as the kernel's 4-vector (the row is `out_first ..`).
+    pub fn pair(&self, r: [f64; 3], vj: [f64; 4]) -> [f64; 4] {
+        let v3 = |v: [f64; 3]| [v[0], v[1], v[2], 0.0];
+        let vj4 = vj;
+        let vj = [vj[0], vj[1], vj[2]];
         let r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
         let d = r2.sqrt();
         let tensor = |f: f64, g: f64| {
@@ -161,28 +262,55 @@ impl PairKernel {
         match self {
             PairKernel::Rpy { radius, viscosity } => {
                 let (f, g) = rpy::rpy(d, *radius, *viscosity);
-                tensor(f, g)
+                v3(tensor(f, g))
             }
             PairKernel::RpyNear { table, .. } => {
                 let (f, g) = table.at(d);
-                tensor(f, g)
+                v3(tensor(f, g))
             }
             PairKernel::Lj { epsilon, sigma } => {
                 let s6 = (sigma * sigma / r2).powi(3);
                 let c = 24.0 * epsilon * (2.0 * s6 * s6 - s6) / r2;
-                r.map(|x| c * x)
+                v3(r.map(|x| c * x))
+            }
+            PairKernel::PoissonNear {
+                width,
+                permittivity,
+                split,
+                ..
+            } => {
+                // The exact near field, not the table: the tests bound the table's error.
+                let (g, _, slope_over_r) = poisson::near_terms(d, *width, *split, *permittivity);
+                let q = vj4[0];
+                [
+                    q * g,
+                    -q * slope_over_r * r[0],
+                    -q * slope_over_r * r[1],
+                    -q * slope_over_r * r[2],
+                ]
             }
         }
     }
 
     /// The f64 twin of `self_term`.
-    pub fn self_term(&self, vi: [f64; 3]) -> [f64; 3] {
+    pub fn self_term(&self, vi: [f64; 4]) -> [f64; 4] {
         match self {
             PairKernel::Rpy { radius, viscosity } => {
                 vi.map(|v| v / (6.0 * PI * viscosity * radius))
             }
             PairKernel::RpyNear { table, .. } => vi.map(|v| table.f[0] * v),
-            PairKernel::Lj { .. } => [0.0; 3],
+            PairKernel::Lj { .. } => [0.0; 4],
+            PairKernel::PoissonNear {
+                width,
+                permittivity,
+                split,
+                ..
+            } => [
+                vi[0] * poisson::self_potential(*width, *split, *permittivity),
+                0.0,
+                0.0,
+                0.0,
+            ],
         }
     }
 
@@ -205,6 +333,19 @@ impl PairKernel {
             PairKernel::Lj { epsilon, sigma } => {
                 format!("Lennard-Jones force, epsilon {epsilon}, sigma {sigma}")
             }
+            PairKernel::PoissonNear {
+                width,
+                permittivity,
+                split,
+                outputs,
+                cutoff,
+                table,
+            } => format!(
+                "Poisson near field of Gaussian charges ({}), width {width}, permittivity {permittivity}, split {split}: table of {} points to r = {cutoff:.6} (self potential {:.6e})",
+                POISSON_OUTPUTS[*outputs],
+                table.len(),
+                table[0][0]
+            ),
         }
     }
 }
@@ -215,21 +356,37 @@ fn kernel_params() -> Vec<ParamSpec> {
             "kernel",
             "rpy",
             KERNELS,
-            "the pair kernel: rpy (free-space RPY mobility times values), rpy_near (PSE near field of RPY), lj (Lennard-Jones force; WCA with cutoff 2^(1/6) sigma)",
+            "the pair kernel: rpy (free-space RPY mobility times values), rpy_near (PSE near field of RPY), lj (Lennard-Jones force; WCA with cutoff 2^(1/6) sigma), poisson_near (near field of Ewald-split Gaussian charges: charges in (N x 1), potential, field or both out)",
         ),
         ParamSpec::f32_positive("radius", Some(1.0), "rpy, rpy_near: hydrodynamic radius a"),
         ParamSpec::f32_positive("viscosity", Some(1.0), "rpy, rpy_near: viscosity eta"),
         ParamSpec::f32_nonnegative(
             "split",
             Some(0.0),
-            "rpy_near: Ewald splitting parameter xi (> 0)",
+            "rpy_near, poisson_near: Ewald splitting parameter xi (> 0)",
+        ),
+        ParamSpec::f32_positive(
+            "width",
+            Some(1.0),
+            "poisson_near: the charges' Gaussian standard deviation a",
+        ),
+        ParamSpec::f32_positive(
+            "permittivity",
+            Some(1.0),
+            "poisson_near: permittivity eps of the medium",
+        ),
+        ParamSpec::choice(
+            "outputs",
+            "both",
+            POISSON_OUTPUTS,
+            "poisson_near: what each row holds: potential (phi), field (Ex, Ey, Ez) or both (phi, Ex, Ey, Ez)",
         ),
         ParamSpec::integer(
             "table_points",
             Some(4096.0),
             16.0,
             (1u64 << 22) as f64,
-            "rpy_near: points of the f64-computed table from 0 to the cutoff",
+            "rpy_near, poisson_near: points of the f64-computed table from 0 to the cutoff",
         ),
         ParamSpec::f32_nonnegative("epsilon", Some(1.0), "lj: energy scale"),
         ParamSpec::f32_positive("sigma", Some(1.0), "lj: length scale"),
@@ -245,8 +402,8 @@ fn value_inputs() -> Vec<PortSpec> {
         ),
         PortSpec::new(
             "values",
-            PortType::Particles(Some(3)),
-            "the vector each particle carries (forces for a mobility product); unused by force kernels",
+            PortType::Particles(None),
+            "the row each particle carries (forces, N x 3, for a mobility product; charges, N x 1, for poisson_near); unused by force kernels",
         )
         .optional(),
     ]
@@ -255,8 +412,8 @@ fn value_inputs() -> Vec<PortSpec> {
 fn out_port() -> Vec<PortSpec> {
     vec![PortSpec::new(
         "out",
-        PortType::Particles(Some(3)),
-        "per particle: self(v_i) + sum over neighbours j of pair(x_i - x_j, v_j)",
+        PortType::Particles(None),
+        "per particle: self(v_i) + sum over neighbours j of pair(x_i - x_j, v_j) (3 columns; poisson_near 1, 3 or 4)",
     )]
 }
 
@@ -270,6 +427,18 @@ fn check_rows(kernel: &PairKernel, inputs: &[Option<ValueType>]) -> Result<u32, 
             "values",
             format!("has {m} rows but positions has {n}"),
         )),
+        Some(ValueType::Particles { k, .. })
+            if kernel.uses_values() && k != kernel.value_comps() =>
+        {
+            Err(PortError::new(
+                "values",
+                format!(
+                    "has {k} columns; kernel {} reads {} per particle",
+                    kernel.name(),
+                    kernel.value_comps()
+                ),
+            ))
+        }
         None if kernel.uses_values() => Err(PortError::new(
             "values",
             format!("kernel {} multiplies values: connect them", kernel.name()),
@@ -280,6 +449,13 @@ fn check_rows(kernel: &PairKernel, inputs: &[Option<ValueType>]) -> Result<u32, 
 
 fn row(data: &[f64], i: usize) -> [f64; 3] {
     [data[3 * i], data[3 * i + 1], data[3 * i + 2]]
+}
+
+/// Row i of `comps` columns as a kernel's 4-vector (zeros after the row).
+fn row4(data: &[f64], comps: usize, i: usize) -> [f64; 4] {
+    let mut v = [0.0; 4];
+    v[..comps].copy_from_slice(&data[comps * i..comps * (i + 1)]);
+    v
 }
 
 /// The f64 O(N^2) reference shared by both nodes: every pair, minimum image on the
@@ -293,14 +469,19 @@ fn reference_sum(
     out: &mut [f64],
 ) {
     let pos = &inputs[0].as_ref().expect("required").data;
-    let zero = vec![0.0; pos.len()];
-    let vals = inputs[1].as_ref().map(|v| &v.data).unwrap_or(&zero);
     let n = pos.len() / 3;
+    let (vc, first, oc) = (
+        kernel.value_comps() as usize,
+        kernel.out_first() as usize,
+        kernel.out_comps() as usize,
+    );
+    let zero = vec![0.0; n * vc];
+    let vals = inputs[1].as_ref().map(|v| &v.data).unwrap_or(&zero);
     // The cutoff is compared as the GPU does, squared in f32.
     let cut2 = (cutoff as f32 * cutoff as f32) as f64;
     for i in 0..n {
         let xi = row(pos, i);
-        let mut acc = kernel.self_term(row(vals, i));
+        let mut acc = kernel.self_term(row4(vals, vc, i));
         for j in 0..n {
             if j == i {
                 continue;
@@ -315,13 +496,13 @@ fn reference_sum(
             }
             let r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
             if r2 <= cut2 {
-                let t = kernel.pair(r, row(vals, j));
-                for a in 0..3 {
+                let t = kernel.pair(r, row4(vals, vc, j));
+                for a in 0..4 {
                     acc[a] += t[a];
                 }
             }
         }
-        out[3 * i..3 * i + 3].copy_from_slice(&acc);
+        out[oc * i..oc * (i + 1)].copy_from_slice(&acc[first..first + oc]);
     }
 }
 
@@ -624,8 +805,11 @@ impl Node for NeighbourSum {
             }
             _ => unreachable!("port types checked"),
         }
-        Ok(Signature::outputs(vec![ValueType::Particles { n, k: 3 }])
-            .with_plan(Choice(self.segment(caps))))
+        Ok(Signature::outputs(vec![ValueType::Particles {
+            n,
+            k: self.kernel.out_comps(),
+        }])
+        .with_plan(Choice(self.segment(caps))))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -704,7 +888,7 @@ impl GpuKernels for NeighbourSum {
         let seg = io.plan::<Choice<Traversal>>().get()?.lanes;
         let source = format!(
             "{}{}",
-            cx.shader(&self.kernel.shader())?,
+            self.kernel.source(cx)?,
             cx.shader(if seg.is_some() {
                 "pairs/neighbour_sum_lanes.wgsl"
             } else {
@@ -1010,8 +1194,8 @@ fn all_pairs_kind() -> NodeKind {
     .params(kernel_params())
     .build(|p| {
         let cutoff = p.number("cutoff");
-        if p.text("kernel") == "rpy_near" {
-            return Err("kernel rpy_near is the near field of a periodic split: use it in neighbour_sum, and rpy for open boundaries".into());
+        if matches!(p.text("kernel"), "rpy_near" | "poisson_near") {
+            return Err(format!("kernel {} is the near field of a periodic split: use it in neighbour_sum", p.text("kernel")));
         }
         Ok(Box::new(AllPairs {
             kernel: PairKernel::from_params(p, cutoff)?,
@@ -1028,7 +1212,10 @@ pub struct AllPairs {
 impl Node for AllPairs {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = check_rows(&self.kernel, inputs)?;
-        Ok(Signature::outputs(vec![ValueType::Particles { n, k: 3 }]))
+        Ok(Signature::outputs(vec![ValueType::Particles {
+            n,
+            k: self.kernel.out_comps(),
+        }]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -1071,7 +1258,7 @@ impl GpuKernels for AllPairs {
         let values = io.inputs[1].map(|v| v.buffer);
         let source = format!(
             "{}{}",
-            cx.shader(&self.kernel.shader())?,
+            self.kernel.source(cx)?,
             cx.shader("pairs/all_pairs.wgsl")?
         );
         let kernel = cx.kernel(

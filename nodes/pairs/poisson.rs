@@ -18,32 +18,41 @@ use std::f64::consts::PI;
 /// cancels like 1 / x^2.
 const SERIES_BELOW: f64 = 0.5;
 
-/// erf(r / c) / r and its r-derivative, accurate in f64 down to r = 0.
-fn erf_over_r(r: f64, c: f64) -> (f64, f64) {
+/// erf(r / c) / r, its r-derivative and the derivative over r, accurate in f64 down to
+/// r = 0 (the derivative over r is regular there: -4 / (3 sqrt(pi) c^3)).
+fn erf_over_r(r: f64, c: f64) -> (f64, f64, f64) {
     let x = r / c;
     let two_over_sqrt_pi = 2.0 / PI.sqrt();
     if x < SERIES_BELOW {
         // erf(x) = 2/sqrt(pi) sum_n (-1)^n x^(2n+1) / (n! (2n+1)); 20 terms reach
-        // x^40 / 20! < 1e-30 at x = 0.5.
+        // x^40 / 20! < 1e-30 at x = 0.5. With t_n = (-1)^n x^(2n) / (n! (2n+1)),
+        // erf(x) / r = 2/(sqrt(pi) c) sum t_n, its derivative 2/(sqrt(pi) c) sum t_n 2n / r
+        // and that over r 2/(sqrt(pi) c^3) sum_{n>=1} (-1)^n 2n x^(2n-2) / (n! (2n+1)).
         let x2 = x * x;
-        let (mut value, mut slope) = (0.0, 0.0);
+        let (mut value, mut slope, mut slope_over_r) = (0.0, 0.0, 0.0);
         let mut power = 1.0; // (-1)^n x^(2n) / n!
+        let mut lower = 0.0; // (-1)^n x^(2n-2) / n! for n >= 1
         for n in 0..20 {
             let k = 2.0 * n as f64 + 1.0;
             value += power / k;
-            if n > 0 && x > 0.0 {
-                // d/dr x^(2n) = 2n x^(2n-1) / c.
-                slope += power * 2.0 * n as f64 / (k * x * c);
+            if n > 0 {
+                slope_over_r += lower * 2.0 * n as f64 / k;
+                if x > 0.0 {
+                    slope += power * 2.0 * n as f64 / (k * x * c);
+                }
             }
+            lower = -power / (n as f64 + 1.0);
             power *= -x2 / (n as f64 + 1.0);
         }
-        (two_over_sqrt_pi * value / c, two_over_sqrt_pi * slope / c)
+        (
+            two_over_sqrt_pi * value / c,
+            two_over_sqrt_pi * slope / c,
+            two_over_sqrt_pi * slope_over_r / (c * c * c),
+        )
     } else {
         let e = libm::erf(x);
-        (
-            e / r,
-            two_over_sqrt_pi * (-x * x).exp() / (c * r) - e / (r * r),
-        )
+        let slope = two_over_sqrt_pi * (-x * x).exp() / (c * r) - e / (r * r);
+        (e / r, slope, slope / r)
     }
 }
 
@@ -54,10 +63,21 @@ pub fn far_width(width: f64, split: f64) -> f64 {
 
 /// (G(r), G'(r)) of the near field per unit charges.
 pub fn near_potential(r: f64, width: f64, split: f64, permittivity: f64) -> (f64, f64) {
-    let (narrow, narrow_slope) = erf_over_r(r, 2.0 * width);
-    let (wide, wide_slope) = erf_over_r(r, 2.0 * far_width(width, split));
+    let (g, dg, _) = near_terms(r, width, split, permittivity);
+    (g, dg)
+}
+
+/// (G(r), G'(r), G'(r) / r) of the near field per unit charges; G'(r) / r is regular at 0,
+/// where it is -(1/a^3 - 1/g_t^3) / (24 pi^(3/2) eps).
+pub fn near_terms(r: f64, width: f64, split: f64, permittivity: f64) -> (f64, f64, f64) {
+    let (narrow, narrow_slope, narrow_over) = erf_over_r(r, 2.0 * width);
+    let (wide, wide_slope, wide_over) = erf_over_r(r, 2.0 * far_width(width, split));
     let c = 1.0 / (4.0 * PI * permittivity);
-    (c * (narrow - wide), c * (narrow_slope - wide_slope))
+    (
+        c * (narrow - wide),
+        c * (narrow_slope - wide_slope),
+        c * (narrow_over - wide_over),
+    )
 }
 
 /// The self term G(0) = (1 / (4 pi^(3/2) eps)) (1/a - 1/g_t).
@@ -65,8 +85,8 @@ pub fn self_potential(width: f64, split: f64, permittivity: f64) -> f64 {
     (1.0 / width - 1.0 / far_width(width, split)) / (4.0 * PI.powf(1.5) * permittivity)
 }
 
-/// (G, G') at `points` equally spaced distances from 0 to the cutoff, interleaved, for
-/// the GPU to interpolate.
+/// (G, G') at `points` equally spaced distances from 0 to the cutoff, for the GPU to
+/// interpolate (the pair kernel reads G and G'/r: [`near_terms`]).
 pub fn near_table(
     width: f64,
     split: f64,
@@ -196,6 +216,13 @@ mod tests {
             (d - slope).abs() <= 1e-6 * slope.abs(),
             "G'({r}) = {d}, want {slope}"
         );
+        // G'/r at 0 is that slope's coefficient, and continuous across the series switch.
+        let (_, _, over0) = near_terms(0.0, a, xi, eps);
+        assert!((over0 - slope / r).abs() <= 1e-6 * over0.abs(), "{over0}");
+        for r in [1e-3, 0.3, 0.69, 0.71, 1.45, 2.0, 3.5] {
+            let (_, d, over) = near_terms(r, a, xi, eps);
+            assert!((over - d / r).abs() <= 1e-12 * over.abs(), "G'/r at {r}");
+        }
         let table = near_table(a, xi, eps, 3.0, 301);
         assert_eq!(table[0][0], phi0);
         assert_eq!(table[300], {

@@ -4,7 +4,6 @@
 // and walks the others in tiles of TILE loaded into workgroup memory.
 #import common/index.wgsl
 
-override HAS_VALUES: bool = true;
 const TILE: u32 = 128u;  // nodes/pairs/mod.rs TILE
 
 struct Shape {
@@ -20,14 +19,9 @@ struct Shape {
 @group(0) @binding(5) var<storage, read> pair_table: array<f32>;
 
 var<workgroup> tile_pos: array<vec3<f32>, TILE>;
-var<workgroup> tile_val: array<vec3<f32>, TILE>;
+var<workgroup> tile_val: array<vec4<f32>, TILE>;
 
-fn value3(a: u32) -> vec3<f32> {
-    if (HAS_VALUES) {
-        return vec3<f32>(vals[3u * a], vals[3u * a + 1u], vals[3u * a + 2u]);
-    }
-    return vec3<f32>(0.0);
-}
+#import pairs/values.wgsl
 
 @compute @workgroup_size(TILE)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -37,13 +31,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let inside = i < n;
     let ii = min(i, max(n, 1u) - 1u);
     let xi = vec3<f32>(pos[3u * ii], pos[3u * ii + 1u], pos[3u * ii + 2u]);
-    var acc = self_term(value3(ii));
+    var acc = self_term(value4(ii));
     let tiles = (n + TILE - 1u) / TILE;
     for (var t = 0u; t < tiles; t++) {
         let j = t * TILE + lid;
         if (j < n) {
             tile_pos[lid] = vec3<f32>(pos[3u * j], pos[3u * j + 1u], pos[3u * j + 2u]);
-            tile_val[lid] = value3(j);
+            tile_val[lid] = value4(j);
         }
         workgroupBarrier();
         let count = min(TILE, n - t * TILE);
@@ -57,8 +51,6 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         workgroupBarrier();
     }
     if (inside) {
-        out[3u * i] = acc.x;
-        out[3u * i + 1u] = acc.y;
-        out[3u * i + 2u] = acc.z;
+        store_out(i, acc);
     }
 }

@@ -3,12 +3,12 @@
 // Lennard-Jones force on i from j: 24 eps (2 (s/r)^12 - (s/r)^6) r / r^2 (the WCA force
 // with cutoff 2^(1/6) sigma). Values are not read. pair_params: 24 eps, sigma^2.
 
-fn pair_term(r: vec3<f32>, r2: f32, vj: vec3<f32>) -> vec3<f32> {
+fn pair_term(r: vec3<f32>, r2: f32, vj: vec4<f32>) -> vec4<f32> {
     let s2 = pair_params[1] / r2;
     let s6 = s2 * s2 * s2;
-    return (pair_params[0] * (2.0 * s6 * s6 - s6) / r2) * r;
+    return vec4<f32>((pair_params[0] * (2.0 * s6 * s6 - s6) / r2) * r, 0.0);
 }
 
-fn self_term(vi: vec3<f32>) -> vec3<f32> {
-    return vec3<f32>(0.0);
+fn self_term(vi: vec4<f32>) -> vec4<f32> {
+    return vec4<f32>(0.0);
 }

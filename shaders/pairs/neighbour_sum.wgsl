@@ -18,7 +18,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         return;
     }
     let xi = load3(i);
-    var acc = self_term(value3(i));
+    var acc = self_term(value4(i));
     let per = geo.periodic.xyz == vec3<u32>(1u);
     if (LIST_WIDTH > 0u) {
         let m = list_count[i];
@@ -27,11 +27,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                 // A list from any indices port: entries clamped to the particles.
                 let j = min(list[k * geo.n + i], geo.n - 1u);
                 let r = displacement(xi, j);
-                acc += pair_term(r, dot(r, r), value3(j));
+                acc += pair_term(r, dot(r, r), value4(j));
             }
-            out[3u * i] = acc.x;
-            out[3u * i + 1u] = acc.y;
-            out[3u * i + 2u] = acc.z;
+            store_out(i, acc);
             return;
         }
     }
@@ -56,13 +54,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                     let r = displacement(xi, j);
                     let r2 = dot(r, r);
                     if (r2 <= geo.cutoff2) {
-                        acc += pair_term(r, r2, value3(j));
+                        acc += pair_term(r, r2, value4(j));
                     }
                 }
             }
         }
     }
-    out[3u * i] = acc.x;
-    out[3u * i + 1u] = acc.y;
-    out[3u * i + 2u] = acc.z;
+    store_out(i, acc);
 }

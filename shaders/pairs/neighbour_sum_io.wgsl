@@ -1,8 +1,7 @@
 // template: the bindings and value loads of both neighbour_sum traversals
 // (neighbour_sum.wgsl, neighbour_sum_lanes.wgsl; nodes/pairs/mod.rs binds them in this
-// order).
+// order). VALUE_COMPS, OUT_FIRST, OUT_COMPS: pairs/values.wgsl.
 
-override HAS_VALUES: bool = true;
 override LIST_WIDTH: u32 = 0u;   // neighbour list entries per particle (0: no list)
 
 @group(0) @binding(0) var<storage, read> pos: array<f32>;
@@ -17,9 +16,4 @@ override LIST_WIDTH: u32 = 0u;   // neighbour list entries per particle (0: no l
 @group(0) @binding(9) var<storage, read> list: array<u32>;
 @group(0) @binding(10) var<storage, read> list_count: array<u32>;
 
-fn value3(a: u32) -> vec3<f32> {
-    if (HAS_VALUES) {
-        return vec3<f32>(vals[3u * a], vals[3u * a + 1u], vals[3u * a + 2u]);
-    }
-    return vec3<f32>(0.0);
-}
+#import pairs/values.wgsl

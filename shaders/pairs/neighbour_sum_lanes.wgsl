@@ -19,13 +19,13 @@
 override SEG: u32 = 8u;          // lanes per particle
 
 // This lane's share of the candidates first..last (sorted slots) of particle i at xi.
-fn run_sum(xi: vec3<f32>, i: u32, first: u32, last: u32, lane: u32) -> vec3<f32> {
-    var acc = vec3<f32>(0.0);
+fn run_sum(xi: vec3<f32>, i: u32, first: u32, last: u32, lane: u32) -> vec4<f32> {
+    var acc = vec4<f32>(0.0);
     for (var j = first + lane; j < last; j += SEG) {
         let r = displacement(xi, j);
         let r2 = dot(r, r);
         if (j != i && r2 <= geo.cutoff2) {
-            acc += pair_term(r, r2, value3(j));
+            acc += pair_term(r, r2, value4(j));
         }
     }
     return acc;
@@ -33,13 +33,13 @@ fn run_sum(xi: vec3<f32>, i: u32, first: u32, last: u32, lane: u32) -> vec3<f32>
 
 // Particles of cells a..=b of one row (consecutive linear keys), slots clamped to the
 // particles (`cell_slots`).
-fn cells_run(xi: vec3<f32>, i: u32, a: u32, b: u32, lane: u32) -> vec3<f32> {
+fn cells_run(xi: vec3<f32>, i: u32, a: u32, b: u32, lane: u32) -> vec4<f32> {
     return run_sum(xi, i, cell_slots(a).x, cell_slots(b).y, lane);
 }
 
-fn own_sum(i: u32, lane: u32) -> vec3<f32> {
+fn own_sum(i: u32, lane: u32) -> vec4<f32> {
     let xi = load3(i);
-    var acc = vec3<f32>(0.0);
+    var acc = vec4<f32>(0.0);
     if (LIST_WIDTH > 0u) {
         let m = list_count[i];
         if (m <= LIST_WIDTH) {
@@ -47,7 +47,7 @@ fn own_sum(i: u32, lane: u32) -> vec3<f32> {
                 // A list from any indices port: entries clamped to the particles.
                 let j = min(list[k * geo.n + i], geo.n - 1u);
                 let r = displacement(xi, j);
-                acc += pair_term(r, dot(r, r), value3(j));
+                acc += pair_term(r, dot(r, r), value4(j));
             }
             return acc;
         }
@@ -86,7 +86,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let lane = sub_lane % SEG;
     let i = flat_index(wid, nwg, lid, 256u) / SEG;
     let live = i < geo.n;
-    var acc = vec3<f32>(0.0);
+    var acc = vec4<f32>(0.0);
     if (live) {
         acc = own_sum(i, lane);
     }
@@ -95,9 +95,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         acc += subgroupShuffleXor(acc, m);
     }
     if (live && lane == 0u) {
-        let total = acc + self_term(value3(i));
-        out[3u * i] = total.x;
-        out[3u * i + 1u] = total.y;
-        out[3u * i + 2u] = total.z;
+        let total = acc + self_term(value4(i));
+        store_out(i, total);
     }
 }

@@ -1,7 +1,7 @@
 // template: a pair kernel (see nodes/pairs/mod.rs), composed with a pair traversal.
 //
 // Free-space Rotne-Prager-Yamakawa mobility times the value of j, with the overlap form
-// below contact (r < 2a). pair_params: a, 1 / (6 pi eta a), 1 / (8 pi eta).
+// below contact (r < 2a). Values and results: 3 components (x, y, z; w unused). pair_params: a, 1 / (6 pi eta a), 1 / (8 pi eta).
 
 fn rpy_tensor(r: vec3<f32>, r2: f32, v: vec3<f32>, f: f32, g: f32) -> vec3<f32> {
     // f v + g (r^ . v) r^; r^ r^ is taken as 0 for coincident particles (g is 0 there).
@@ -9,7 +9,11 @@ fn rpy_tensor(r: vec3<f32>, r2: f32, v: vec3<f32>, f: f32, g: f32) -> vec3<f32> 
     return f * v + (g * rv) * r;
 }
 
-fn pair_term(r: vec3<f32>, r2: f32, vj: vec3<f32>) -> vec3<f32> {
+fn pair_term(r: vec3<f32>, r2: f32, vj4: vec4<f32>) -> vec4<f32> {
+    return vec4<f32>(rpy_pair(r, r2, vj4.xyz), 0.0);
+}
+
+fn rpy_pair(r: vec3<f32>, r2: f32, vj: vec3<f32>) -> vec3<f32> {
     let a = pair_params[0];
     let d = sqrt(r2);
     if (d >= 2.0 * a) {
@@ -22,6 +26,6 @@ fn pair_term(r: vec3<f32>, r2: f32, vj: vec3<f32>) -> vec3<f32> {
     return rpy_tensor(r, r2, vj, c * (1.0 - 9.0 * t), c * (3.0 * t));
 }
 
-fn self_term(vi: vec3<f32>) -> vec3<f32> {
+fn self_term(vi: vec4<f32>) -> vec4<f32> {
     return pair_params[1] * vi;
 }

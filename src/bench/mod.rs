@@ -17,6 +17,7 @@ mod fcm;
 mod fft;
 mod mpcd;
 mod overhead;
+mod poisson;
 mod primitives;
 mod pse;
 mod reduce;
@@ -412,6 +413,32 @@ pub enum BenchCommand {
         #[arg(long = "set")]
         sets: Vec<String>,
     },
+    /// Poisson speed against error: per tolerance and size the fastest split, its errors
+    /// against an f64 Ewald sum, and fcm.json's M F timed beside it.
+    Poisson {
+        /// The Poisson graph file.
+        #[arg(long, default_value = "graphs/poisson.json")]
+        graph: PathBuf,
+        /// The FCM graph timed beside it.
+        #[arg(long, default_value = "graphs/fcm.json")]
+        fcm_graph: PathBuf,
+        #[arg(long, value_delimiter = ',', default_values_t = [1e-2, 1e-3, 1e-4, 1e-5])]
+        tolerances: Vec<f64>,
+        /// Ewald splits to try (0: unsplit); the fastest is reported.
+        #[arg(long, value_delimiter = ',', default_values_t = [0.0, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0])]
+        splits: Vec<f64>,
+        /// Box sides and charge counts as L:N (default 64:10000,128:100000,276:1000000).
+        #[arg(long, value_delimiter = ',')]
+        sizes: Vec<String>,
+        #[arg(long, default_value_t = 20)]
+        reps: u64,
+        /// Side of the cubic box the errors are measured in.
+        #[arg(long, default_value_t = 24.0)]
+        error_box: f64,
+        /// Other graph params (NAME=VALUE, as in `run`).
+        #[arg(long = "set")]
+        sets: Vec<String>,
+    },
     /// PSE speed against error per split (time of one M F, with --noise also M F +
     /// M^(1/2) W; self- and pair-mobility errors against f64 references).
     Pse {
@@ -536,6 +563,29 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             sizes,
             density,
             reps,
+            sets: parse_sets(&sets)?,
+        }),
+        BenchCommand::Poisson {
+            graph,
+            fcm_graph,
+            tolerances,
+            splits,
+            sizes,
+            reps,
+            error_box,
+            sets,
+        } => poisson::run(&poisson::PoissonBench {
+            graph,
+            fcm_graph,
+            tolerances,
+            splits,
+            sizes: if sizes.is_empty() {
+                vec![(64.0, 10_000), (128.0, 100_000), (276.0, 1_000_000)]
+            } else {
+                parse_sizes(&sizes)?
+            },
+            reps,
+            error_box,
             sets: parse_sets(&sets)?,
         }),
         BenchCommand::Pse {

@@ -50,6 +50,7 @@ pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Grap
         builtins,
         problems: Vec::new(),
         pending_nodes: Vec::new(),
+        disabled_scopes: Vec::new(),
         node_ids: HashMap::new(),
         input_alias: HashMap::new(),
         sub_outputs: HashMap::new(),
@@ -142,6 +143,9 @@ struct Loader<'r> {
     builtins: Scope<'r>,
     problems: Vec<Problem>,
     pending_nodes: Vec<PendingNode>,
+    /// Subgraph scopes (`parent/`) whose node is disabled, with why: every node loaded
+    /// inside is disabled too.
+    disabled_scopes: Vec<(String, String)>,
     node_ids: HashMap<(String, String), NodeEntry>,
     input_alias: HashMap<(String, String), Alias>,
     sub_outputs: HashMap<(String, String), PendingRef>,
@@ -821,6 +825,51 @@ impl<'r> Loader<'r> {
                     }
                 }
             }
+            let disabled = match &decl.enabled {
+                None => None,
+                Some(v) => match expr::resolve(v, values) {
+                    // A number reads as a flag, as the nodes' own `enabled` params do: a
+                    // graph writes `"enabled": "$split"` for "where there is a split".
+                    Ok(ParamValue::Bool(true)) => None,
+                    Ok(ParamValue::Number(x)) if x != 0.0 && !x.is_nan() => None,
+                    Ok(off @ (ParamValue::Bool(false) | ParamValue::Number(_))) => {
+                        Some(values.origin_of(v).explain(format!("`enabled` is {off}")))
+                    }
+                    Ok(other) => {
+                        bad = true;
+                        self.problems.push(Problem::node(
+                            path,
+                            id,
+                            values
+                                .origin_of(v)
+                                .explain(format!("`enabled` must be true or false, got {other}")),
+                        ));
+                        None
+                    }
+                    Err(ExprError::Unresolved { name }) => {
+                        bad = true;
+                        self.follows(scope, &name, ("node", format!("{scope}{id}")));
+                        None
+                    }
+                    Err(e) => {
+                        bad = true;
+                        self.problems.push(Problem::node(
+                            path,
+                            id,
+                            values.origin_of(v).explain(format!("`enabled`: {e}")),
+                        ));
+                        None
+                    }
+                },
+            }
+            .or_else(|| {
+                self.disabled_scopes
+                    .iter()
+                    .find(|(prefix, _)| scope.starts_with(prefix.as_str()))
+                    .map(|(prefix, why)| {
+                        format!("its subgraph node `{}` is disabled: {why}", prefix.trim_end_matches('/'))
+                    })
+            });
             match (&decl.kind, &decl.graph) {
                 (Some(kind), None) => {
                     let built = !bad
@@ -834,6 +883,7 @@ impl<'r> Loader<'r> {
                                 value_problems,
                                 origins: param_origins,
                             },
+                            disabled,
                         );
                     if !built {
                         self.node_ids.insert(key, NodeEntry::Failed);
@@ -841,6 +891,9 @@ impl<'r> Loader<'r> {
                 }
                 (None, Some(sub)) => {
                     let child_scope = format!("{scope}{id}/");
+                    if let Some(why) = disabled {
+                        self.disabled_scopes.push((child_scope.clone(), why));
+                    }
                     let child_path = if bad {
                         None
                     } else {
@@ -898,6 +951,7 @@ impl<'r> Loader<'r> {
         decl: &NodeDecl,
         kind_name: &str,
         params: NodeParamValues,
+        disabled: Option<String>,
     ) -> bool {
         let NodeParamValues {
             values: raw_params,
@@ -1006,6 +1060,7 @@ impl<'r> Loader<'r> {
                 output_ports,
                 inputs: Vec::new(),
                 built,
+                disabled,
             },
             refs,
         });

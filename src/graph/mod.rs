@@ -260,6 +260,9 @@ pub struct NodeInst {
     /// outputs never run (fcm.json's torque path when no torques are given), so these
     /// problems are the planner's to report, for the nodes it would run (`plan::infer`).
     pub built: Result<BuiltNode, Vec<String>>,
+    /// Why the file leaves this node out (its `enabled`, or its subgraph node's, is
+    /// false, with where the value came from): the planner treats it as absent.
+    pub disabled: Option<String>,
 }
 
 /// A node built from params its kind accepted.

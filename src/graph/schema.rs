@@ -132,6 +132,11 @@ pub struct NodeDecl {
     pub params: IndexMap<String, serde_json::Value>,
     #[serde(default)]
     pub inputs: IndexMap<String, String>,
+    /// `false` or 0 (a literal, `$param` or `= expression`) leaves the node out: it and what
+    /// needs it are absent, as if an optional input were not given. A subgraph node's
+    /// value applies to every node inside.
+    #[serde(default)]
+    pub enabled: Option<serde_json::Value>,
     /// For readers of the file; the engine does not use it.
     #[serde(default)]
     #[allow(dead_code)]

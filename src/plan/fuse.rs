@@ -385,8 +385,13 @@ pub fn generate(
                             inputs.push(v);
                             next
                         });
-                        if values[v].ty.words() == 1 && len != 1 {
+                        let words = values[v].ty.words();
+                        if words == 1 && len != 1 {
                             format!("in{b}[0]")
+                        } else if words < len {
+                            // A one-column particle array broadcast over the columns
+                            // (nodes/pointwise.rs `row_broadcast`).
+                            format!("in{b}[idx / {}u]", len / words)
                         } else {
                             format!("in{b}[idx]")
                         }

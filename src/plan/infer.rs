@@ -197,6 +197,10 @@ impl Inference<'_> {
     fn signature(&mut self, n: NodeId, without_loop_input: bool) {
         let g = self.g;
         let inst = &g.nodes[n];
+        if inst.disabled.is_some() {
+            self.types.nodes[n] = Inferred::Absent;
+            return;
+        }
         let mut types = Vec::new();
         let mut absent = false;
         let mut upstream_failed = false;
@@ -315,6 +319,13 @@ impl Inference<'_> {
             if self.types.of(out.source).is_some() || self.types.failed(out.source) {
                 continue;
             }
+            if let Some((node, why)) = disabled_upstream(g, out.source) {
+                self.fail(format!(
+                    "output `{}` cannot be computed: it needs node `{node}`, which the graph leaves out ({why})",
+                    out.name
+                ));
+                continue;
+            }
             let missing: Vec<&str> = g
                 .inputs
                 .iter()
@@ -329,4 +340,29 @@ impl Inference<'_> {
             ));
         }
     }
+}
+
+/// The first disabled node a value depends on (`NodeInst::disabled`), with why, walking
+/// its required inputs upstream.
+fn disabled_upstream(g: &Graph, source: Source) -> Option<(String, String)> {
+    let mut stack = vec![source];
+    let mut seen = std::collections::HashSet::new();
+    while let Some(s) = stack.pop() {
+        let Source::Node { node, .. } = s else {
+            continue;
+        };
+        if !seen.insert(node) {
+            continue;
+        }
+        let inst = &g.nodes[node];
+        if let Some(why) = &inst.disabled {
+            return Some((inst.id.clone(), why.clone()));
+        }
+        for (port, src) in inst.input_ports.iter().zip(&inst.inputs) {
+            if !port.optional {
+                stack.push(*src);
+            }
+        }
+    }
+    None
 }

@@ -18,6 +18,7 @@ mod layout;
 mod nodes;
 mod pairs;
 mod plan;
+mod poisson;
 mod pse;
 mod random;
 mod reduce;
