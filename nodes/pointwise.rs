@@ -393,11 +393,10 @@ impl Node for PointwiseNode {
                 None => shape = Some((i, *t)),
                 // One column per particle is broadcast over the columns of the other
                 // operands (charges times fields), as a scalar is over every element.
-                Some((_, s)) if row_broadcast(&s, t) => {
-                    if column_count(t) > column_count(&s) {
-                        shape = Some((i, *t));
-                    }
+                Some((_, s)) if row_broadcast(&s, t) && column_count(t) > column_count(&s) => {
+                    shape = Some((i, *t));
                 }
+                Some((_, s)) if row_broadcast(&s, t) => {}
                 Some((j, s)) if s != *t => {
                     return Err(PortError::new(
                         self.kind.inputs[i].0,

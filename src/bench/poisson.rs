@@ -71,12 +71,12 @@ fn inputs(x: &[[f64; 3]], q: &[f64]) -> BTreeMap<String, HostArray> {
     .collect()
 }
 
-fn sets_for<'a>(
-    bench: &'a PoissonBench,
+fn sets_for(
+    bench: &PoissonBench,
     l: f64,
     tolerance: f64,
     split: f64,
-) -> Vec<(&'a str, ParamValue)> {
+) -> Vec<(&str, ParamValue)> {
     let mut sets = vec![
         ("box", ParamValue::Numbers(vec![l; 3])),
         ("tolerance", ParamValue::Number(tolerance)),
@@ -221,10 +221,8 @@ pub fn run(bench: &PoissonBench) -> Result<(), BenchError> {
                 outln!("{tolerance:>7.0e} {l:>6} {n:>8}  no split plans");
                 continue;
             };
-            let (phi_err, e_err) = match accuracy(&gpu, bench, &registry, tolerance, split) {
-                Ok(e) => e,
-                Err(_) => (f64::NAN, f64::NAN),
-            };
+            let (phi_err, e_err) = accuracy(&gpu, bench, &registry, tolerance, split)
+                .unwrap_or((f64::NAN, f64::NAN));
             let grid = number(&g, "grid");
             let mut same = fcm_sets.to_vec();
             same.push(("grid", ParamValue::Numbers(vec![grid; 3])));
