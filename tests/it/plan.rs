@@ -581,3 +581,56 @@ fn extreme_params_are_refused_naming_the_param_the_user_set() {
         );
     }
 }
+
+/// A node whose `enabled` is false or 0 (literal or `$param`), and every node inside a
+/// disabled subgraph node, is left out: its readers see an absent optional input, and an
+/// output that needs it is not computed, with the node and the reason named.
+#[test]
+fn disabled_nodes_are_left_out_with_the_reason() {
+    let dir = tmpdir("disabled");
+    let graph = |extra: &str| {
+        format!(
+            r#"{{"mesoflow": 1,
+  "params": {{"on": {{"default": 0}}}},
+  "sizes": {{"n": {{"default": 8}}}},
+  "inputs": {{"x": {{"type": "particles", "rows": "n", "cols": 3}}}},
+  "nodes": [
+    {{"id": "a", "kind": "scale", "params": {{"factor": 2}}, "inputs": {{"x": "inputs.x"}}}},
+    {{"id": "b", "kind": "scale", "enabled": "$on", "params": {{"factor": 3}}, "inputs": {{"x": "inputs.x"}}}},
+    {{"id": "c", "kind": "add", "inputs": {{"a": "a.out", "b": "b.out"}}}}{extra}
+  ],
+  "outputs": {{"sum": "c.out", "tripled": "b.out"}}
+}}"#
+        )
+    };
+    let path = write_graph(&dir, "g.json", &graph(""));
+    let (g, p) = plan_file(&path, Some(&["sum"]), false);
+    assert_eq!(node_ids(&g, &p), vec!["a".to_string()], "b left out, c read through");
+    let g = load(&path);
+    let err = plan::plan(
+        &g,
+        &PlanOptions {
+            outputs: Some(vec!["tripled".into()]),
+            inputs: g.declared_input_types(),
+            fuse: false,
+        },
+        &DeviceCaps::baseline(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("`tripled`") && err.contains("node `b`") && err.contains("`enabled` is 0"),
+        "{err}"
+    );
+    // A true `enabled` keeps the node; a string is a load error naming it.
+    let on = write_graph(&dir, "on.json", &graph("").replace(r#""default": 0"#, r#""default": true"#));
+    let (g, p) = plan_file(&on, Some(&["tripled"]), false);
+    assert_eq!(node_ids(&g, &p), vec!["b".to_string()]);
+    let bad = write_graph(&dir, "bad.json", &graph("").replace(r#""default": 0"#, r#""default": "yes""#));
+    let err = match mesoflow::graph::load(&bad, crate::util::registry(), &Default::default()) {
+        Ok(_) => panic!("a string `enabled` loaded"),
+        Err(e) => e.to_string(),
+    };
+    assert!(err.contains("`enabled` must be true or false"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
