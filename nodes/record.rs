@@ -16,8 +16,8 @@ fn record_kind() -> NodeKind {
     )
     .input(PortSpec::new(
         "x",
-        PortType::Particles(None),
-        "the array to record (N x k)",
+        PortType::RealArray,
+        "the array to record (N x k), or a scalar (an observable's time series: frames of 1 x 1)",
     ))
     .output(PortSpec::new("out", PortType::Frames, "the frames (F x N x k)").persistent())
     .param(ParamSpec::integer(
@@ -49,8 +49,16 @@ struct Record {
 
 impl Node for Record {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
-        let Some(ValueType::Particles { n, k }) = inputs[0] else {
-            unreachable!("port type checked")
+        let (n, k) = match inputs[0] {
+            Some(ValueType::Particles { n, k }) => (n, k),
+            Some(ValueType::Scalar) => (1, 1),
+            Some(other) => {
+                return Err(PortError::new(
+                    "x",
+                    format!("records particle arrays and scalars, got {other}"),
+                ));
+            }
+            None => unreachable!("a required port"),
         };
         let out = ValueType::Frames {
             frames: self.frames,

@@ -38,8 +38,12 @@ use rpy::NearTable;
 /// The pair kernels, by name in the `kernel` param.
 pub const KERNELS: &[&str] = &["rpy", "rpy_near", "lj", "poisson_near"];
 
-/// What `poisson_near` writes: the potential, the field or both (phi, Ex, Ey, Ez).
-pub const POISSON_OUTPUTS: &[&str] = &["potential", "field", "both"];
+/// What `poisson_near` and `lj` write: the potential (the energy, for lj), the field (the
+/// force, for lj) or both (potential first: phi, Ex, Ey, Ez).
+pub const PAIR_OUTPUTS: &[&str] = &["potential", "field", "both"];
+
+/// Index of `field` in [`PAIR_OUTPUTS`].
+const FIELD: usize = 1;
 
 /// One pair kernel with its parameters, as built from node params.
 #[derive(Clone, Debug, PartialEq)]
@@ -55,11 +59,19 @@ pub enum PairKernel {
         table: std::sync::Arc<NearTable>,
     },
     /// Lennard-Jones force 24 eps (2 (s/r)^12 - (s/r)^6) r / r^2 (values unused); with
-    /// cutoff 2^(1/6) sigma it is the WCA force.
-    Lj { epsilon: f64, sigma: f64 },
+    /// cutoff 2^(1/6) sigma it is the WCA force. Its potential is half of each pair's
+    /// energy 4 eps ((s/r)^12 - (s/r)^6) - `shift` (the energy at the cutoff, so it is
+    /// continuous there; 0 for an infinite cutoff), so that the particles' potentials add
+    /// up to the total energy. `outputs` as for PoissonNear.
+    Lj {
+        epsilon: f64,
+        sigma: f64,
+        shift: f64,
+        outputs: usize,
+    },
     /// The near field of Ewald-split Gaussian charges (see `poisson.rs`): values are
     /// charges; the potential, the field or both (`outputs`, an index into
-    /// [`POISSON_OUTPUTS`]). `table` holds (G, G'/r) at equally spaced distances from 0 to
+    /// [`PAIR_OUTPUTS`]). `table` holds (G, G'/r) at equally spaced distances from 0 to
     /// `cutoff`, in f64.
     PoissonNear {
         width: f64,
@@ -109,7 +121,21 @@ impl PairKernel {
                 let (epsilon, sigma) = (p.number("epsilon"), p.number("sigma"));
                 check_f32_coefficient("`sigma`^2", sigma * sigma)?;
                 check_f32_coefficient("24 `epsilon`", 24.0 * epsilon)?;
-                PairKernel::Lj { epsilon, sigma }
+                let shift = if cutoff.is_finite() && cutoff > 0.0 {
+                    let s6 = (sigma / cutoff).powi(6);
+                    4.0 * epsilon * (s6 * s6 - s6)
+                } else {
+                    0.0
+                };
+                PairKernel::Lj {
+                    epsilon,
+                    sigma,
+                    shift,
+                    outputs: PAIR_OUTPUTS
+                        .iter()
+                        .position(|o| *o == p.text("outputs"))
+                        .expect("choice checked"),
+                }
             }
             "poisson_near" => {
                 let (width, split, permittivity) =
@@ -141,7 +167,7 @@ impl PairKernel {
                     width,
                     permittivity,
                     split,
-                    outputs: POISSON_OUTPUTS
+                    outputs: PAIR_OUTPUTS
                         .iter()
                         .position(|o| *o == p.text("outputs"))
                         .expect("choice checked"),
@@ -164,7 +190,9 @@ impl PairKernel {
     /// The first component of the kernel's 4-vector result that the row holds.
     pub fn out_first(&self) -> u32 {
         match self {
-            PairKernel::PoissonNear { outputs: 1, .. } => 1,
+            PairKernel::PoissonNear { outputs, .. } | PairKernel::Lj { outputs, .. } => {
+                u32::from(*outputs == FIELD)
+            }
             _ => 0,
         }
     }
@@ -172,7 +200,9 @@ impl PairKernel {
     /// Components of each particle's result row.
     pub fn out_comps(&self) -> u32 {
         match self {
-            PairKernel::PoissonNear { outputs, .. } => [1, 3, 4][*outputs],
+            PairKernel::PoissonNear { outputs, .. } | PairKernel::Lj { outputs, .. } => {
+                [1, 3, 4][*outputs]
+            }
             _ => 3,
         }
     }
@@ -214,8 +244,18 @@ impl PairKernel {
                 let last = (table.f.len() - 1) as f64;
                 vec![(last / table.cutoff) as f32, last as f32]
             }
-            PairKernel::Lj { epsilon, sigma } => {
-                vec![(24.0 * epsilon) as f32, (sigma * sigma) as f32]
+            PairKernel::Lj {
+                epsilon,
+                sigma,
+                shift,
+                ..
+            } => {
+                vec![
+                    (24.0 * epsilon) as f32,
+                    (sigma * sigma) as f32,
+                    (2.0 * epsilon) as f32,
+                    (0.5 * shift) as f32,
+                ]
             }
             PairKernel::PoissonNear { table, cutoff, .. } => {
                 let last = (table.len() - 1) as f64;
@@ -268,10 +308,16 @@ impl PairKernel {
                 let (f, g) = table.at(d);
                 v3(tensor(f, g))
             }
-            PairKernel::Lj { epsilon, sigma } => {
+            PairKernel::Lj {
+                epsilon,
+                sigma,
+                shift,
+                ..
+            } => {
                 let s6 = (sigma * sigma / r2).powi(3);
                 let c = 24.0 * epsilon * (2.0 * s6 * s6 - s6) / r2;
-                v3(r.map(|x| c * x))
+                let half = 2.0 * epsilon * (s6 * s6 - s6) - 0.5 * shift;
+                [half, c * r[0], c * r[1], c * r[2]]
             }
             PairKernel::PoissonNear {
                 width,
@@ -330,9 +376,15 @@ impl PairKernel {
                 table.cutoff,
                 table.f[0]
             ),
-            PairKernel::Lj { epsilon, sigma } => {
-                format!("Lennard-Jones force, epsilon {epsilon}, sigma {sigma}")
-            }
+            PairKernel::Lj {
+                epsilon,
+                sigma,
+                shift,
+                outputs,
+            } => format!(
+                "Lennard-Jones ({}: energy and force), epsilon {epsilon}, sigma {sigma}, energy shifted by {shift:e}",
+                PAIR_OUTPUTS[*outputs]
+            ),
             PairKernel::PoissonNear {
                 width,
                 permittivity,
@@ -342,7 +394,7 @@ impl PairKernel {
                 table,
             } => format!(
                 "Poisson near field of Gaussian charges ({}), width {width}, permittivity {permittivity}, split {split}: table of {} points to r = {cutoff:.6} (self potential {:.6e})",
-                POISSON_OUTPUTS[*outputs],
+                PAIR_OUTPUTS[*outputs],
                 table.len(),
                 table[0][0]
             ),
@@ -377,9 +429,9 @@ fn kernel_params() -> Vec<ParamSpec> {
         ),
         ParamSpec::choice(
             "outputs",
-            "both",
-            POISSON_OUTPUTS,
-            "poisson_near: what each row holds: potential (phi), field (Ex, Ey, Ez) or both (phi, Ex, Ey, Ez)",
+            "field",
+            PAIR_OUTPUTS,
+            "poisson_near, lj: what each row holds: potential (phi; lj: the energy, half of each pair's truncated and shifted energy), field (Ex, Ey, Ez; lj: the force) or both (the potential, then the field)",
         ),
         ParamSpec::integer(
             "table_points",

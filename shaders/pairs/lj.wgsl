@@ -1,12 +1,18 @@
 // template: a pair kernel (see nodes/pairs/mod.rs), composed with a pair traversal.
 //
-// Lennard-Jones force on i from j: 24 eps (2 (s/r)^12 - (s/r)^6) r / r^2 (the WCA force
-// with cutoff 2^(1/6) sigma). Values are not read. pair_params: 24 eps, sigma^2.
+// Lennard-Jones on i from j, as (potential, force): half the pair's energy
+// 4 eps ((s/r)^12 - (s/r)^6) - shift (shifted to 0 at the cutoff) and the force
+// 24 eps (2 (s/r)^12 - (s/r)^6) r / r^2 (the WCA force with cutoff 2^(1/6) sigma). Values
+// are not read. pair_params: 24 eps, sigma^2, 2 eps, shift / 2.
 
 fn pair_term(r: vec3<f32>, r2: f32, vj: vec4<f32>) -> vec4<f32> {
     let s2 = pair_params[1] / r2;
     let s6 = s2 * s2 * s2;
-    return vec4<f32>((pair_params[0] * (2.0 * s6 * s6 - s6) / r2) * r, 0.0);
+    var half = 0.0;
+    if (OUT_FIRST == 0u) {
+        half = pair_params[2] * (s6 * s6 - s6) - pair_params[3];
+    }
+    return vec4<f32>(half, (pair_params[0] * (2.0 * s6 * s6 - s6) / r2) * r);
 }
 
 fn self_term(vi: vec4<f32>) -> vec4<f32> {

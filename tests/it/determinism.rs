@@ -103,6 +103,22 @@ const CASES: &[Case] = &[
         outputs: None,
     },
     Case {
+        file: "poisson.json",
+        // An 8^3 grid (the planner takes at least 32): FFTs fold their dispatches
+        // within the second run's two workgroups per dimension only that small.
+        sets: &[("box", "[8, 8, 8]"), ("split", "0"), ("grid", "[8, 8, 8]")],
+        steps: 1,
+        inputs: &[("positions", 48, 3), ("charges", 48, 1)],
+        outputs: None,
+    },
+    Case {
+        file: "poisson.json",
+        sets: &[("box", "[8, 8, 8]"), ("width", "0.3"), ("split", "2"), ("grid", "[8, 8, 8]")],
+        steps: 1,
+        inputs: &[("positions", 48, 3), ("charges", 48, 1)],
+        outputs: None,
+    },
+    Case {
         file: "rpy_open.json",
         sets: &[("temperature", "1")],
         steps: 1,

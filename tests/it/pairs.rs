@@ -556,3 +556,81 @@ fn lanes_wider_than_the_subgroups_are_a_compile_error_naming_the_node() {
         "{e}"
     );
 }
+
+/// The Lennard-Jones potential output (`outputs`: potential, both): per particle half of
+/// each pair's energy 4 eps ((s/r)^12 - (s/r)^6), shifted to 0 at the cutoff, so the
+/// particles' potentials add up to the total energy; `both` is (energy, force).
+#[test]
+fn lennard_jones_energies_add_up_to_the_total() {
+    if gpu().is_none() {
+        return;
+    }
+    let gpu = gpu().expect("checked");
+    let lengths = [6.0, 6.0, 6.0];
+    let (eps, sigma, cutoff): (f64, f64, f64) = (1.5, 0.6, 1.4);
+    let mut rng = Rng::new(97);
+    let pos = random_points(&mut rng, 60, &lengths);
+    let pos32 = flat_particles(&pos, 3);
+    let p = pos32.data.to_f64();
+    let n = p.len() / 3;
+    // f64 energies and forces of every pair within the cutoff (minimum image).
+    let shift = 4.0 * eps * ((sigma / cutoff).powi(12) - (sigma / cutoff).powi(6));
+    let mut energy = vec![0.0; n];
+    let mut force = vec![[0.0; 3]; n];
+    for i in 0..n {
+        for j in 0..n {
+            if i == j {
+                continue;
+            }
+            let r: Vec<f64> = (0..3)
+                .map(|a| {
+                    let d = p[3 * i + a] - p[3 * j + a];
+                    d - lengths[a] * (d / lengths[a]).round()
+                })
+                .collect();
+            let r2: f64 = r.iter().map(|x| x * x).sum();
+            if r2 > cutoff * cutoff {
+                continue;
+            }
+            let s6 = (sigma * sigma / r2).powi(3);
+            energy[i] += 0.5 * (4.0 * eps * (s6 * s6 - s6) - shift);
+            for a in 0..3 {
+                force[i][a] += 24.0 * eps * (2.0 * s6 * s6 - s6) / r2 * r[a];
+            }
+        }
+    }
+    for (outputs, cols) in [("potential", 1usize), ("both", 4)] {
+        let dir = util::tmpdir("lj_energy");
+        let json = neighbour_graph(
+            lengths,
+            [4, 4, 4],
+            [1, 1, 1],
+            &format!(
+                r#""cutoff": {cutoff}, "kernel": "lj", "sigma": {sigma}, "epsilon": {eps}, "outputs": "{outputs}""#
+            ),
+            false,
+            None,
+        );
+        let g = util::load(&util::write_graph(&dir, "g.json", &json));
+        let inputs = BTreeMap::from([("positions".to_string(), pos32.clone())]);
+        let out = util::run_graph(&gpu, &g, &inputs, None, 1, true);
+        let _ = std::fs::remove_dir_all(&dir);
+        let got = out["out"].data.to_f64();
+        assert_eq!(got.len(), cols * n, "{outputs}");
+        let scale_u = energy.iter().fold(1e-30f64, |m, x| m.max(x.abs()));
+        let scale_f = force.iter().flatten().fold(1e-30f64, |m, x| m.max(x.abs()));
+        for i in 0..n {
+            let u = got[cols * i];
+            assert!((u - energy[i]).abs() <= 1e-5 * scale_u, "{outputs}: energy {i}: {u} vs {}", energy[i]);
+            if cols == 4 {
+                for a in 0..3 {
+                    let f = got[cols * i + 1 + a];
+                    assert!((f - force[i][a]).abs() <= 1e-5 * scale_f, "force {i}.{a}: {f} vs {}", force[i][a]);
+                }
+            }
+        }
+        let total: f64 = got.iter().step_by(cols).sum();
+        let want: f64 = energy.iter().sum();
+        assert!((total - want).abs() <= 1e-5 * scale_u * n as f64, "total {total} vs {want}");
+    }
+}

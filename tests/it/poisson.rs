@@ -423,3 +423,67 @@ fn bad_poisson_params_are_named() {
     let e = crate::util::load_error("poisson.json", &[("box", "[8, 8, 8]"), ("split", "0.05")]);
     assert!(e.contains("half the smallest box length"), "{e}");
 }
+
+/// A neutral system of charged soft spheres on a jittered lattice: positions, velocities
+/// and charges for md_charged.json.
+pub fn charged_lattice(per_side: usize, spacing: f64, seed: u64) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<f64>) {
+    let mut rng = Rng::new(seed);
+    let side = spacing * per_side as f64;
+    let mut x = Vec::new();
+    let mut v = Vec::new();
+    let mut q = Vec::new();
+    for i in 0..per_side {
+        for j in 0..per_side {
+            for k in 0..per_side {
+                x.push([i, j, k].map(|c| (c as f64 + 0.5) * spacing - side / 2.0 + rng.uniform(-0.2, 0.2)));
+                v.push([0, 1, 2].map(|_| rng.uniform(-1.0, 1.0)));
+                q.push(if (i + j + k) % 2 == 0 { 1.0 } else { -1.0 });
+            }
+        }
+    }
+    // No net momentum.
+    let n = v.len() as f64;
+    let mean: [f64; 3] = [0, 1, 2].map(|c| v.iter().map(|r| r[c]).sum::<f64>() / n);
+    for r in v.iter_mut() {
+        for c in 0..3 {
+            r[c] -= mean[c];
+        }
+    }
+    (x, v, q)
+}
+
+/// md_charged.json conserves energy: velocity Verlet with the Poisson forces and the WCA
+/// repulsion, the total energy's drift and fluctuation over the run small against the
+/// kinetic energy, and of second order in dt (half the step, a quarter of the error).
+#[test]
+fn molecular_dynamics_conserves_energy() {
+    let Some(gpu) = gpu() else { return };
+    let (x, v, q) = charged_lattice(4, 2.5, 12);
+    let mut data = inputs(&x, &q);
+    data.insert("velocities".into(), particles(&v));
+    let kinetic: f64 = 0.5 * v.iter().flatten().map(|c| c * c).sum::<f64>();
+    let mut spread = Vec::new();
+    for (dt, steps) in [(0.02, 200u64), (0.01, 400)] {
+        let g = load_with(
+            "md_charged.json",
+            &[("box", "[10, 10, 10]"), ("dt", &format!("{dt}")), ("width", "0.5"), ("wca_sigma", "1.2")],
+            steps,
+            0,
+        );
+        let (out, _) = run_cached(&gpu, &g, &data, Some(&["energies", "kinetic_energy"]), steps, true);
+        let e = out["energies"].to_ref().data;
+        let (lo, hi) = e.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        let drift = (e[e.len() - 1] - e[0]).abs();
+        eprintln!(
+            "md dt {dt}: energy {:.6} .. {:.6} (spread {:.3e}, drift {:.3e}) kinetic {:.4} (initial {kinetic:.4})",
+            lo,
+            hi,
+            hi - lo,
+            drift,
+            out["kinetic_energy"].to_ref().data[0]
+        );
+        assert!(hi - lo < 2e-3 * kinetic, "dt {dt}: energy spread {:.3e}", hi - lo);
+        spread.push(hi - lo);
+    }
+    assert!(spread[1] < 0.5 * spread[0], "second order: {spread:?}");
+}
