@@ -281,10 +281,12 @@ impl PairKernel {
         }
     }
 
-    /// The f64 twin of `pair_term`: the contribution of j (value vj) to i at r = x_i - x_j,
-    /// as the kernel's 4-vector (the row is `out_first ..`).
-    pub fn pair(&self, r: [f64; 3], vj: [f64; 4]) -> [f64; 4] {
-        let v3 = |v: [f64; 3]| [v[0], v[1], v[2], 0.0];
+    /// The f64 twin of `pair_term`: the contribution of j (at xj, value vj) to i (at xi,
+    /// value vi) at r = x_i - x_j (the minimum image), as the kernel's 8 words (the row is
+    /// `out_first ..`).
+    pub fn pair(&self, xi: [f64; 3], xj: [f64; 3], r: [f64; 3], vi: Row, vj: Row) -> Row {
+        let _ = (xi, xj, vi);
+        let v3 = |v: [f64; 3]| [v[0], v[1], v[2], 0.0, 0.0, 0.0, 0.0, 0.0];
         let vj4 = vj;
         let vj = [vj[0], vj[1], vj[2]];
         let r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
@@ -317,7 +319,7 @@ impl PairKernel {
                 let s6 = (sigma * sigma / r2).powi(3);
                 let c = 24.0 * epsilon * (2.0 * s6 * s6 - s6) / r2;
                 let half = 2.0 * epsilon * (s6 * s6 - s6) - 0.5 * shift;
-                [half, c * r[0], c * r[1], c * r[2]]
+                [half, c * r[0], c * r[1], c * r[2], 0.0, 0.0, 0.0, 0.0]
             }
             PairKernel::PoissonNear {
                 width,
@@ -333,30 +335,34 @@ impl PairKernel {
                     -q * slope_over_r * r[0],
                     -q * slope_over_r * r[1],
                     -q * slope_over_r * r[2],
+                    0.0,
+                    0.0,
+                    0.0,
+                    0.0,
                 ]
             }
         }
     }
 
-    /// The f64 twin of `self_term`.
-    pub fn self_term(&self, vi: [f64; 4]) -> [f64; 4] {
+    /// The f64 twin of `self_term`, for particle i at xi with value vi.
+    pub fn self_term(&self, xi: [f64; 3], vi: Row) -> Row {
+        let _ = xi;
         match self {
             PairKernel::Rpy { radius, viscosity } => {
                 vi.map(|v| v / (6.0 * PI * viscosity * radius))
             }
             PairKernel::RpyNear { table, .. } => vi.map(|v| table.f[0] * v),
-            PairKernel::Lj { .. } => [0.0; 4],
+            PairKernel::Lj { .. } => [0.0; 8],
             PairKernel::PoissonNear {
                 width,
                 permittivity,
                 split,
                 ..
-            } => [
-                vi[0] * poisson::self_potential(*width, *split, *permittivity),
-                0.0,
-                0.0,
-                0.0,
-            ],
+            } => {
+                let mut row = [0.0; 8];
+                row[0] = vi[0] * poisson::self_potential(*width, *split, *permittivity);
+                row
+            }
         }
     }
 
@@ -503,9 +509,12 @@ fn row(data: &[f64], i: usize) -> [f64; 3] {
     [data[3 * i], data[3 * i + 1], data[3 * i + 2]]
 }
 
-/// Row i of `comps` columns as a kernel's 4-vector (zeros after the row).
-fn row4(data: &[f64], comps: usize, i: usize) -> [f64; 4] {
-    let mut v = [0.0; 4];
+/// A kernel's value or result row: 8 words (`shaders/pairs/values.wgsl` `Row`).
+pub type Row = [f64; 8];
+
+/// Row i of `comps` columns as a kernel's 8 words (zeros after the row).
+fn row8(data: &[f64], comps: usize, i: usize) -> Row {
+    let mut v = [0.0; 8];
     v[..comps].copy_from_slice(&data[comps * i..comps * (i + 1)]);
     v
 }
@@ -533,7 +542,8 @@ fn reference_sum(
     let cut2 = (cutoff as f32 * cutoff as f32) as f64;
     for i in 0..n {
         let xi = row(pos, i);
-        let mut acc = kernel.self_term(row4(vals, vc, i));
+        let vi = row8(vals, vc, i);
+        let mut acc = kernel.self_term(xi, vi);
         for j in 0..n {
             if j == i {
                 continue;
@@ -548,8 +558,8 @@ fn reference_sum(
             }
             let r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
             if r2 <= cut2 {
-                let t = kernel.pair(r, row4(vals, vc, j));
-                for a in 0..4 {
+                let t = kernel.pair(xi, xj, r, vi, row8(vals, vc, j));
+                for a in 0..8 {
                     acc[a] += t[a];
                 }
             }

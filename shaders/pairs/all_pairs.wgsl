@@ -19,7 +19,7 @@ struct Shape {
 @group(0) @binding(5) var<storage, read> pair_table: array<f32>;
 
 var<workgroup> tile_pos: array<vec3<f32>, TILE>;
-var<workgroup> tile_val: array<vec4<f32>, TILE>;
+var<workgroup> tile_val: array<Row, TILE>;
 
 #import pairs/values.wgsl
 
@@ -31,21 +31,23 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let inside = i < n;
     let ii = min(i, max(n, 1u) - 1u);
     let xi = vec3<f32>(pos[3u * ii], pos[3u * ii + 1u], pos[3u * ii + 2u]);
-    var acc = self_term(value4(ii));
+    let vi = value_row(ii);
+    var acc = self_term(xi, vi);
     let tiles = (n + TILE - 1u) / TILE;
     for (var t = 0u; t < tiles; t++) {
         let j = t * TILE + lid;
         if (j < n) {
             tile_pos[lid] = vec3<f32>(pos[3u * j], pos[3u * j + 1u], pos[3u * j + 2u]);
-            tile_val[lid] = value4(j);
+            tile_val[lid] = value_row(j);
         }
         workgroupBarrier();
         let count = min(TILE, n - t * TILE);
         for (var k = 0u; k < count; k++) {
-            let r = xi - tile_pos[k];
+            let xj = tile_pos[k];
+            let r = xi - xj;
             let r2 = dot(r, r);
             if (t * TILE + k != i && r2 <= shape.cutoff2) {
-                acc += pair_term(r, r2, tile_val[k]);
+                acc = row_add(acc, pair_term(xi, xj, r, r2, vi, tile_val[k]));
             }
         }
         workgroupBarrier();

@@ -44,7 +44,11 @@ fn cell_slots(cell: u32) -> vec2<u32> {
 
 // The displacement x_i - x_j, minimum image on the periodic axes.
 fn displacement(xi: vec3<f32>, j: u32) -> vec3<f32> {
-    let r = xi - load3(j);
+    return minimum_image(xi - load3(j));
+}
+
+// x_i - x_j folded to the nearest image on periodic axes.
+fn minimum_image(r: vec3<f32>) -> vec3<f32> {
     let l = geo.lengths.xyz;
     return select(r, r - l * round(r / l), geo.periodic.xyz == vec3<u32>(1u));
 }

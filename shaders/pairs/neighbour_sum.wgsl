@@ -18,7 +18,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         return;
     }
     let xi = load3(i);
-    var acc = self_term(value4(i));
+    let vi = value_row(i);
+    var acc = self_term(xi, vi);
     let per = geo.periodic.xyz == vec3<u32>(1u);
     if (LIST_WIDTH > 0u) {
         let m = list_count[i];
@@ -26,8 +27,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             for (var k = 0u; k < m; k++) {
                 // A list from any indices port: entries clamped to the particles.
                 let j = min(list[k * geo.n + i], geo.n - 1u);
-                let r = displacement(xi, j);
-                acc += pair_term(r, dot(r, r), value4(j));
+                let xj = load3(j);
+                let r = minimum_image(xi - xj);
+                acc = row_add(acc, pair_term(xi, xj, r, dot(r, r), vi, value_row(j)));
             }
             store_out(i, acc);
             return;
@@ -51,10 +53,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                     if (j == i) {
                         continue;
                     }
-                    let r = displacement(xi, j);
+                    let xj = load3(j);
+                    let r = minimum_image(xi - xj);
                     let r2 = dot(r, r);
                     if (r2 <= geo.cutoff2) {
-                        acc += pair_term(r, r2, value4(j));
+                        acc = row_add(acc, pair_term(xi, xj, r, r2, vi, value_row(j)));
                     }
                 }
             }

@@ -19,13 +19,14 @@
 override SEG: u32 = 8u;          // lanes per particle
 
 // This lane's share of the candidates first..last (sorted slots) of particle i at xi.
-fn run_sum(xi: vec3<f32>, i: u32, first: u32, last: u32, lane: u32) -> vec4<f32> {
-    var acc = vec4<f32>(0.0);
+fn run_sum(xi: vec3<f32>, vi: Row, i: u32, first: u32, last: u32, lane: u32) -> Row {
+    var acc = row4(vec4<f32>(0.0));
     for (var j = first + lane; j < last; j += SEG) {
-        let r = displacement(xi, j);
+        let xj = load3(j);
+        let r = minimum_image(xi - xj);
         let r2 = dot(r, r);
         if (j != i && r2 <= geo.cutoff2) {
-            acc += pair_term(r, r2, value4(j));
+            acc = row_add(acc, pair_term(xi, xj, r, r2, vi, value_row(j)));
         }
     }
     return acc;
@@ -33,21 +34,23 @@ fn run_sum(xi: vec3<f32>, i: u32, first: u32, last: u32, lane: u32) -> vec4<f32>
 
 // Particles of cells a..=b of one row (consecutive linear keys), slots clamped to the
 // particles (`cell_slots`).
-fn cells_run(xi: vec3<f32>, i: u32, a: u32, b: u32, lane: u32) -> vec4<f32> {
-    return run_sum(xi, i, cell_slots(a).x, cell_slots(b).y, lane);
+fn cells_run(xi: vec3<f32>, vi: Row, i: u32, a: u32, b: u32, lane: u32) -> Row {
+    return run_sum(xi, vi, i, cell_slots(a).x, cell_slots(b).y, lane);
 }
 
-fn own_sum(i: u32, lane: u32) -> vec4<f32> {
+fn own_sum(i: u32, lane: u32) -> Row {
     let xi = load3(i);
-    var acc = vec4<f32>(0.0);
+    let vi = value_row(i);
+    var acc = row4(vec4<f32>(0.0));
     if (LIST_WIDTH > 0u) {
         let m = list_count[i];
         if (m <= LIST_WIDTH) {
             for (var k = lane; k < m; k += SEG) {
                 // A list from any indices port: entries clamped to the particles.
                 let j = min(list[k * geo.n + i], geo.n - 1u);
-                let r = displacement(xi, j);
-                acc += pair_term(r, dot(r, r), value4(j));
+                let xj = load3(j);
+                let r = minimum_image(xi - xj);
+                acc = row_add(acc, pair_term(xi, xj, r, dot(r, r), vi, value_row(j)));
             }
             return acc;
         }
@@ -67,11 +70,11 @@ fn own_sum(i: u32, lane: u32) -> vec4<f32> {
             let cy = (c.y + dy + n.y) % n.y;
             let row = n.x * (cy + n.y * cz);
             if (contiguous) {
-                acc += cells_run(xi, i, u32(row + lo), u32(row + hi), lane);
+                acc = row_add(acc, cells_run(xi, vi, i, u32(row + lo), u32(row + hi), lane));
             } else {
                 for (var dx = ox.x; dx <= ox.y; dx++) {
                     let cell = u32((c.x + dx + n.x) % n.x + row);
-                    acc += cells_run(xi, i, cell, cell, lane);
+                    acc = row_add(acc, cells_run(xi, vi, i, cell, cell, lane));
                 }
             }
         }
@@ -86,16 +89,19 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let lane = sub_lane % SEG;
     let i = flat_index(wid, nwg, lid, 256u) / SEG;
     let live = i < geo.n;
-    var acc = vec4<f32>(0.0);
+    var acc = row4(vec4<f32>(0.0));
     if (live) {
         acc = own_sum(i, lane);
     }
     // Every lane reaches the shuffles (none returned): the segment's sum in each lane.
     for (var m = SEG / 2u; m > 0u; m >>= 1u) {
-        acc += subgroupShuffleXor(acc, m);
+        acc.a += subgroupShuffleXor(acc.a, m);
+        if (VALUE_COMPS > 4u || OUT_FIRST + OUT_COMPS > 4u) {
+            acc.b += subgroupShuffleXor(acc.b, m);
+        }
     }
     if (live && lane == 0u) {
-        let total = acc + self_term(value4(i));
-        store_out(i, total);
+        let xi = load3(i);
+        store_out(i, row_add(acc, self_term(xi, value_row(i))));
     }
 }

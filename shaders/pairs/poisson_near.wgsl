@@ -8,7 +8,8 @@
 // (points - 1) / cutoff, points - 1. The field at i from j is -q_j G'(r) r^ =
 // -q_j (G'/r) r, with r = x_i - x_j.
 
-fn pair_term(r: vec3<f32>, r2: f32, vj: vec4<f32>) -> vec4<f32> {
+fn pair_term(xi: vec3<f32>, xj: vec3<f32>, r: vec3<f32>, r2: f32, vi: Row, vj4: Row) -> Row {
+    let vj = vj4.a;
     let s = sqrt(r2) * pair_params[0];
     let i = u32(min(floor(s), pair_params[1] - 1.0));
     let t = s - f32(i);
@@ -21,9 +22,9 @@ fn pair_term(r: vec3<f32>, r2: f32, vj: vec4<f32>) -> vec4<f32> {
         let e = (-vj.x * slope) * r;
         result = vec4<f32>(result.x, e);
     }
-    return result;
+    return row4(result);
 }
 
-fn self_term(vi: vec4<f32>) -> vec4<f32> {
-    return vec4<f32>(pair_table[0] * vi.x, 0.0, 0.0, 0.0);
+fn self_term(xi: vec3<f32>, vi: Row) -> Row {
+    return row4(vec4<f32>(pair_table[0] * vi.a.x, 0.0, 0.0, 0.0));
 }

@@ -9,8 +9,8 @@ fn rpy_tensor(r: vec3<f32>, r2: f32, v: vec3<f32>, f: f32, g: f32) -> vec3<f32> 
     return f * v + (g * rv) * r;
 }
 
-fn pair_term(r: vec3<f32>, r2: f32, vj4: vec4<f32>) -> vec4<f32> {
-    return vec4<f32>(rpy_pair(r, r2, vj4.xyz), 0.0);
+fn pair_term(xi: vec3<f32>, xj: vec3<f32>, r: vec3<f32>, r2: f32, vi: Row, vj: Row) -> Row {
+    return row4(vec4<f32>(rpy_pair(r, r2, first3(vj)), 0.0));
 }
 
 fn rpy_pair(r: vec3<f32>, r2: f32, vj: vec3<f32>) -> vec3<f32> {
@@ -26,6 +26,6 @@ fn rpy_pair(r: vec3<f32>, r2: f32, vj: vec3<f32>) -> vec3<f32> {
     return rpy_tensor(r, r2, vj, c * (1.0 - 9.0 * t), c * (3.0 * t));
 }
 
-fn self_term(vi: vec4<f32>) -> vec4<f32> {
-    return pair_params[1] * vi;
+fn self_term(xi: vec3<f32>, vi: Row) -> Row {
+    return row4(pair_params[1] * vi.a);
 }
