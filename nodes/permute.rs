@@ -1,6 +1,8 @@
 //! Gather and scatter of rows by index, so any particle array can follow a permutation
 //! (the `perm` of a sort: `gather(values, perm)` reorders, `scatter(values, perm)` undoes).
 //! Rows are copied as raw 4-byte words, so f32 particle arrays and u32 index arrays alike.
+//! `columns` and `concat` take columns apart and put them together (forces and torques
+//! as one N x 6 array for a grand mobility, and its result back as two N x 3 arrays).
 
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
@@ -277,7 +279,245 @@ impl GpuKernels for Scatter {
     }
 }
 
+/// Dispatches copying `count` columns of every row from `x` (starting at `in_first`) to
+/// `out` (starting at `out_first`).
+#[allow(clippy::too_many_arguments)]
+fn copy_columns(
+    cx: &mut CompileCtx<'_>,
+    x: &wgpu::Buffer,
+    out: &wgpu::Buffer,
+    rows: u32,
+    in_cols: u32,
+    out_cols: u32,
+    in_first: u32,
+    out_first: u32,
+    count: u32,
+) -> Result<Dispatch, CompileError> {
+    let kernel = cx.kernel(&KernelSpec::new(
+        "columns",
+        cx.shader("permute/columns.wgsl")?,
+        &[Binding::StorageRead, Binding::StorageReadWrite, Binding::Uniform],
+    ))?;
+    let shape = cx.uniform(
+        "columns shape",
+        bytemuck::cast_slice(&[rows, in_cols, out_cols, in_first, out_first, count]),
+    );
+    let groups = cx.grid_1d(rows as u64 * count as u64, WG_1D);
+    Ok(cx.dispatch(&kernel, &[x, out, &shape], groups))
+}
+
+fn columns_kind() -> NodeKind {
+    NodeKind::declare(
+        "columns",
+        "out = columns first .. first + count of x, row by row (N x count)",
+    )
+    .input(PortSpec::new("x", PortType::Particles(None), "the rows (N x k)"))
+    .output(PortSpec::new("out", PortType::Particles(None), "the columns taken (N x count)"))
+    .param(ParamSpec::integer("first", Some(0.0), 0.0, 1024.0, "the first column taken"))
+    .param(ParamSpec::integer("count", None, 1.0, 1024.0, "how many columns"))
+    .build(|p| {
+        Ok(Box::new(Columns {
+            first: p.number("first") as u32,
+            count: p.number("count") as u32,
+        }))
+    })
+}
+
+struct Columns {
+    first: u32,
+    count: u32,
+}
+
+impl Node for Columns {
+    fn forwards(&self, inputs: &[Option<ValueType>]) -> Option<usize> {
+        match inputs[0] {
+            Some(ValueType::Particles { k, .. }) if self.first == 0 && self.count == k => Some(0),
+            _ => None,
+        }
+    }
+
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+        let Some(ValueType::Particles { n, k }) = inputs[0] else {
+            unreachable!("port type checked")
+        };
+        if self.first + self.count > k {
+            return Err(PortError::new(
+                "x",
+                format!(
+                    "has {k} columns; columns {} to {} were asked for",
+                    self.first,
+                    self.first + self.count - 1
+                ),
+            ));
+        }
+        Ok(Signature::outputs(vec![ValueType::Particles { n, k: self.count }]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let x = inputs[0].as_ref().expect("required");
+        let (n, k) = rows_of(x.ty);
+        let (first, count) = (self.first as usize, self.count as usize);
+        for i in 0..n as usize {
+            for c in 0..count {
+                outputs[0].data[i * count + c] = x.data[i * k as usize + first + c];
+            }
+        }
+    }
+}
+
+impl GpuKernels for Columns {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let x = io.inputs[0].expect("required");
+        let (n, k) = rows_of(x.ty);
+        Ok(vec![copy_columns(
+            cx,
+            x.buffer,
+            io.outputs[0].buffer,
+            n,
+            k,
+            self.count,
+            self.first,
+            0,
+            self.count,
+        )?])
+    }
+}
+
+fn concat_kind() -> NodeKind {
+    NodeKind::declare(
+        "concat",
+        "out = [a | b] row by row (N x (ka + kb)); without b, a followed by zero columns up to `cols` (forces with no torques as the N x 6 of a grand mobility)",
+    )
+    .input(PortSpec::new("a", PortType::Particles(None), "the first columns (N x ka)"))
+    .input(
+        PortSpec::new("b", PortType::Particles(None), "the next columns (N x kb)").optional(),
+    )
+    .output(PortSpec::new("out", PortType::Particles(None), "the rows side by side"))
+    .param(ParamSpec::integer(
+        "cols",
+        Some(0.0),
+        0.0,
+        1024.0,
+        "columns of the output: 0 for ka + kb (ka without b); with b it must be 0 or ka + kb; without b, the columns past a are zero",
+    ))
+    .build(|p| {
+        Ok(Box::new(Concat {
+            cols: p.number("cols") as u32,
+        }))
+    })
+}
+
+struct Concat {
+    cols: u32,
+}
+
+impl Concat {
+    fn out_cols(&self, ka: u32, kb: Option<u32>) -> u32 {
+        match (self.cols, kb) {
+            (0, Some(kb)) => ka + kb,
+            (0, None) => ka,
+            (c, _) => c,
+        }
+    }
+}
+
+impl Node for Concat {
+    fn forwards(&self, inputs: &[Option<ValueType>]) -> Option<usize> {
+        match (inputs[0], inputs[1]) {
+            (Some(ValueType::Particles { k, .. }), None) if self.out_cols(k, None) == k => Some(0),
+            _ => None,
+        }
+    }
+
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+        let Some(ValueType::Particles { n, k: ka }) = inputs[0] else {
+            unreachable!("port type checked")
+        };
+        let kb = match inputs[1] {
+            Some(ValueType::Particles { n: m, k }) => {
+                if m != n {
+                    return Err(PortError::new("b", format!("has {m} rows but a has {n}")));
+                }
+                Some(k)
+            }
+            _ => None,
+        };
+        let cols = self.out_cols(ka, kb);
+        if let Some(kb) = kb
+            && cols != ka + kb
+        {
+            return Err(PortError::new(
+                "b",
+                format!("a has {ka} columns and b {kb}: `cols` {cols} is neither 0 nor their sum"),
+            ));
+        }
+        if cols < ka {
+            return Err(PortError::new(
+                "a",
+                format!("has {ka} columns, more than `cols` {cols}"),
+            ));
+        }
+        Ok(Signature::outputs(vec![ValueType::Particles { n, k: cols }]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let a = inputs[0].as_ref().expect("required");
+        let (n, ka) = rows_of(a.ty);
+        let (_, cols) = rows_of(outputs[0].ty);
+        let (ka, cols) = (ka as usize, cols as usize);
+        outputs[0].data.fill(0.0);
+        for i in 0..n as usize {
+            outputs[0].data[i * cols..i * cols + ka].copy_from_slice(&a.data[i * ka..(i + 1) * ka]);
+            if let Some(b) = &inputs[1] {
+                let kb = cols - ka;
+                outputs[0].data[i * cols + ka..(i + 1) * cols]
+                    .copy_from_slice(&b.data[i * kb..(i + 1) * kb]);
+            }
+        }
+    }
+}
+
+impl GpuKernels for Concat {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let a = io.inputs[0].expect("required");
+        let out = io.outputs[0];
+        let (n, ka) = rows_of(a.ty);
+        let (_, cols) = rows_of(out.ty);
+        let mut dispatches = Vec::new();
+        match io.inputs[1] {
+            Some(b) => {
+                let (_, kb) = rows_of(b.ty);
+                dispatches.push(copy_columns(cx, a.buffer, out.buffer, n, ka, cols, 0, 0, ka)?);
+                dispatches.push(copy_columns(cx, b.buffer, out.buffer, n, kb, cols, 0, ka, kb)?);
+            }
+            None => {
+                dispatches.push(cx.fill(out.buffer, out.ty.words(), 0)?);
+                dispatches.push(copy_columns(cx, a.buffer, out.buffer, n, ka, cols, 0, 0, ka)?);
+            }
+        }
+        Ok(dispatches)
+    }
+}
+
 pub fn register(r: &mut Registry) {
     r.add(gather_kind());
     r.add(scatter_kind());
+    r.add(columns_kind());
+    r.add(concat_kind());
 }

@@ -19,6 +19,7 @@
 //! linear order, bin_sort (the order, the count and the first slot of each cell) and a
 //! gather of the rows. The sum runs in the sorted order it is given.
 
+pub mod blake;
 pub mod poisson;
 pub mod rpy;
 
@@ -30,13 +31,13 @@ use crate::gpu::{
 };
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
-    RefCtx, Registry, Signature, check_f32_coefficient,
+    RefCtx, Registry, RowError, Signature, check_f32_coefficient,
 };
-use crate::value::{PortType, RefArray, ValueType};
+use crate::value::{HostArray, HostData, PortType, RefArray, ValueType};
 use rpy::NearTable;
 
 /// The pair kernels, by name in the `kernel` param.
-pub const KERNELS: &[&str] = &["rpy", "rpy_near", "lj", "poisson_near"];
+pub const KERNELS: &[&str] = &["rpy", "rpy_near", "lj", "poisson_near", "rpy_wall"];
 
 /// What `poisson_near` and `lj` write: the potential (the energy, for lj), the field (the
 /// force, for lj) or both (potential first: phi, Ex, Ey, Ez).
@@ -48,8 +49,22 @@ const FIELD: usize = 1;
 /// One pair kernel with its parameters, as built from node params.
 #[derive(Clone, Debug, PartialEq)]
 pub enum PairKernel {
-    /// Free-space Rotne-Prager-Yamakawa mobility (overlap form below 2a): out = M v.
-    Rpy { radius: f64, viscosity: f64 },
+    /// Free-space Rotne-Prager-Yamakawa mobility (overlap form below 2a): out = M v; with
+    /// `rotation` the grand mobility, values (force, torque) and results (velocity, angular
+    /// velocity) as 6 columns.
+    Rpy {
+        radius: f64,
+        viscosity: f64,
+        rotation: bool,
+    },
+    /// Rotne-Prager-Blake: RPY above a no-slip wall at z = `wall_height` (see `blake.rs`),
+    /// translation only or (`rotation`) the grand mobility.
+    RpyWall {
+        radius: f64,
+        viscosity: f64,
+        wall_height: f64,
+        rotation: bool,
+    },
     /// The near field of RPY under the Positively Split Ewald split with parameter xi,
     /// tabulated in f64 on the host (see `rpy.rs`), linear interpolation on the GPU.
     RpyNear {
@@ -87,7 +102,7 @@ impl PairKernel {
     fn from_params(p: &Params, cutoff: f64) -> Result<PairKernel, String> {
         let radius = p.number("radius");
         let viscosity = p.number("viscosity");
-        if matches!(p.text("kernel"), "rpy" | "rpy_near") {
+        if matches!(p.text("kernel"), "rpy" | "rpy_near" | "rpy_wall") {
             // The coefficients the RPY kernels multiply values by (`words`, the near
             // table's scale), each within f32's meaningful range, so that M v neither
             // overflows nor vanishes.
@@ -96,9 +111,25 @@ impl PairKernel {
                 1.0 / (6.0 * PI * viscosity * radius),
             )?;
             check_f32_coefficient("1/(8 pi `viscosity`)", 1.0 / (8.0 * PI * viscosity))?;
+            if p.flag("rotation") {
+                check_f32_coefficient(
+                    "1/(8 pi `viscosity` `radius`^3)",
+                    1.0 / (8.0 * PI * viscosity * radius.powi(3)),
+                )?;
+            }
         }
         Ok(match p.text("kernel") {
-            "rpy" => PairKernel::Rpy { radius, viscosity },
+            "rpy" => PairKernel::Rpy {
+                radius,
+                viscosity,
+                rotation: p.flag("rotation"),
+            },
+            "rpy_wall" => PairKernel::RpyWall {
+                radius,
+                viscosity,
+                wall_height: p.number("wall_height"),
+                rotation: p.flag("rotation"),
+            },
             "rpy_near" => {
                 let split = p.number("split");
                 if split <= 0.0 {
@@ -183,6 +214,7 @@ impl PairKernel {
     pub fn value_comps(&self) -> u32 {
         match self {
             PairKernel::PoissonNear { .. } => 1,
+            PairKernel::Rpy { rotation: true, .. } | PairKernel::RpyWall { rotation: true, .. } => 6,
             _ => 3,
         }
     }
@@ -203,6 +235,7 @@ impl PairKernel {
             PairKernel::PoissonNear { outputs, .. } | PairKernel::Lj { outputs, .. } => {
                 [1, 3, 4][*outputs]
             }
+            PairKernel::Rpy { rotation: true, .. } | PairKernel::RpyWall { rotation: true, .. } => 6,
             _ => 3,
         }
     }
@@ -210,6 +243,7 @@ impl PairKernel {
     pub fn name(&self) -> &'static str {
         match self {
             PairKernel::Rpy { .. } => "rpy",
+            PairKernel::RpyWall { .. } => "rpy_wall",
             PairKernel::RpyNear { .. } => "rpy_near",
             PairKernel::Lj { .. } => "lj",
             PairKernel::PoissonNear { .. } => "poisson_near",
@@ -235,10 +269,26 @@ impl PairKernel {
     /// The `pair_params` words, computed in f64 and rounded once.
     fn words(&self) -> Vec<f32> {
         match self {
-            PairKernel::Rpy { radius, viscosity } => vec![
+            PairKernel::Rpy {
+                radius, viscosity, ..
+            } => vec![
                 *radius as f32,
                 (1.0 / (6.0 * PI * viscosity * radius)) as f32,
                 (1.0 / (8.0 * PI * viscosity)) as f32,
+                (1.0 / (8.0 * PI * viscosity * radius.powi(3))) as f32,
+            ],
+            PairKernel::RpyWall {
+                radius,
+                viscosity,
+                wall_height,
+                ..
+            } => vec![
+                *radius as f32,
+                (1.0 / (6.0 * PI * viscosity * radius)) as f32,
+                (1.0 / (8.0 * PI * viscosity)) as f32,
+                (1.0 / (8.0 * PI * viscosity * radius.powi(3))) as f32,
+                (1.0 / (8.0 * PI * viscosity * radius * radius)) as f32,
+                *wall_height as f32,
             ],
             PairKernel::RpyNear { table, .. } => {
                 let last = (table.f.len() - 1) as f64;
@@ -285,7 +335,14 @@ impl PairKernel {
     /// value vi) at r = x_i - x_j (the minimum image), as the kernel's 8 words (the row is
     /// `out_first ..`).
     pub fn pair(&self, xi: [f64; 3], xj: [f64; 3], r: [f64; 3], vi: Row, vj: Row) -> Row {
-        let _ = (xi, xj, vi);
+        let _ = vi;
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ]
+        };
         let v3 = |v: [f64; 3]| [v[0], v[1], v[2], 0.0, 0.0, 0.0, 0.0, 0.0];
         let vj4 = vj;
         let vj = [vj[0], vj[1], vj[2]];
@@ -302,9 +359,49 @@ impl PairKernel {
             [0, 1, 2].map(|c| f * vj[c] + g * rv * r[c])
         };
         match self {
-            PairKernel::Rpy { radius, viscosity } => {
+            PairKernel::Rpy {
+                radius,
+                viscosity,
+                rotation,
+            } => {
                 let (f, g) = rpy::rpy(d, *radius, *viscosity);
-                v3(tensor(f, g))
+                let u = tensor(f, g);
+                if !rotation {
+                    return v3(u);
+                }
+                let t = [vj4[3], vj4[4], vj4[5]];
+                let (fr, gr) = rpy::rpy_rotation(d, *radius, *viscosity);
+                let rt = if r2 > 0.0 {
+                    (r[0] * t[0] + r[1] * t[1] + r[2] * t[2]) / r2
+                } else {
+                    0.0
+                };
+                let c = rpy::rpy_coupling(d, *radius, *viscosity);
+                let (tr, fr_) = (cross(t, r), cross(vj, r));
+                [
+                    u[0] + c * tr[0],
+                    u[1] + c * tr[1],
+                    u[2] + c * tr[2],
+                    fr * t[0] + gr * rt * r[0] + c * fr_[0],
+                    fr * t[1] + gr * rt * r[1] + c * fr_[1],
+                    fr * t[2] + gr * rt * r[2] + c * fr_[2],
+                    0.0,
+                    0.0,
+                ]
+            }
+            PairKernel::RpyWall {
+                radius,
+                viscosity,
+                wall_height,
+                rotation,
+            } => {
+                let t = if *rotation {
+                    [vj4[3], vj4[4], vj4[5]]
+                } else {
+                    [0.0; 3]
+                };
+                let (u, w) = blake::blake(xi, xj, vj, t, *radius, *viscosity, *wall_height, false);
+                [u[0], u[1], u[2], w[0], w[1], w[2], 0.0, 0.0]
             }
             PairKernel::RpyNear { table, .. } => {
                 let (f, g) = table.at(d);
@@ -346,10 +443,34 @@ impl PairKernel {
 
     /// The f64 twin of `self_term`, for particle i at xi with value vi.
     pub fn self_term(&self, xi: [f64; 3], vi: Row) -> Row {
-        let _ = xi;
         match self {
-            PairKernel::Rpy { radius, viscosity } => {
-                vi.map(|v| v / (6.0 * PI * viscosity * radius))
+            PairKernel::Rpy {
+                radius,
+                viscosity,
+                rotation,
+            } => {
+                let mut row = vi.map(|v| v / (6.0 * PI * viscosity * radius));
+                if *rotation {
+                    for c in 3..6 {
+                        row[c] = vi[c] / (8.0 * PI * viscosity * radius.powi(3));
+                    }
+                }
+                row
+            }
+            PairKernel::RpyWall {
+                radius,
+                viscosity,
+                wall_height,
+                rotation,
+            } => {
+                let f = [vi[0], vi[1], vi[2]];
+                let t = if *rotation {
+                    [vi[3], vi[4], vi[5]]
+                } else {
+                    [0.0; 3]
+                };
+                let (u, w) = blake::blake(xi, xi, f, t, *radius, *viscosity, *wall_height, true);
+                [u[0], u[1], u[2], w[0], w[1], w[2], 0.0, 0.0]
             }
             PairKernel::RpyNear { table, .. } => vi.map(|v| table.f[0] * v),
             PairKernel::Lj { .. } => [0.0; 8],
@@ -368,9 +489,23 @@ impl PairKernel {
 
     fn describe(&self) -> String {
         match self {
-            PairKernel::Rpy { radius, viscosity } => {
-                format!("RPY mobility, radius {radius}, viscosity {viscosity}")
-            }
+            PairKernel::Rpy {
+                radius,
+                viscosity,
+                rotation,
+            } => format!(
+                "RPY mobility{}, radius {radius}, viscosity {viscosity}",
+                if *rotation { " (forces and torques)" } else { "" }
+            ),
+            PairKernel::RpyWall {
+                radius,
+                viscosity,
+                wall_height,
+                rotation,
+            } => format!(
+                "Rotne-Prager-Blake mobility{} above the wall z = {wall_height}, radius {radius}, viscosity {viscosity}",
+                if *rotation { " (forces and torques)" } else { "" }
+            ),
             PairKernel::RpyNear {
                 radius,
                 viscosity,
@@ -414,10 +549,20 @@ fn kernel_params() -> Vec<ParamSpec> {
             "kernel",
             "rpy",
             KERNELS,
-            "the pair kernel: rpy (free-space RPY mobility times values), rpy_near (PSE near field of RPY), lj (Lennard-Jones force; WCA with cutoff 2^(1/6) sigma), poisson_near (near field of Ewald-split Gaussian charges: charges in (N x 1), potential, field or both out)",
+            "the pair kernel: rpy (free-space RPY mobility times values; with `rotation` forces and torques, N x 6), rpy_wall (RPY above a no-slip wall at `wall_height`, Rotne-Prager-Blake with Swan and Brady's corrections; open boundaries, all_pairs only), rpy_near (PSE near field of RPY), lj (Lennard-Jones force; WCA with cutoff 2^(1/6) sigma), poisson_near (near field of Ewald-split Gaussian charges: charges in (N x 1), potential, field or both out)",
         ),
         ParamSpec::f32_positive("radius", Some(1.0), "rpy, rpy_near: hydrodynamic radius a"),
         ParamSpec::f32_positive("viscosity", Some(1.0), "rpy, rpy_near: viscosity eta"),
+        ParamSpec::flag(
+            "rotation",
+            false,
+            "rpy, rpy_wall: the grand mobility: values are forces and torques, results velocities and angular velocities (N x 6 each)",
+        ),
+        ParamSpec::f32_factor(
+            "wall_height",
+            Some(0.0),
+            "rpy_wall: the height of the no-slip wall (the plane z = wall_height); particle centres must lie above it",
+        ),
         ParamSpec::f32_nonnegative(
             "split",
             Some(0.0),
@@ -488,10 +633,16 @@ fn check_rows(kernel: &PairKernel, inputs: &[Option<ValueType>]) -> Result<u32, 
         Some(ValueType::Particles { k, .. })
             if kernel.uses_values() && k != kernel.value_comps() =>
         {
+            let hint = match kernel {
+                PairKernel::Rpy { .. } | PairKernel::RpyWall { .. } => {
+                    " (3: forces; 6: forces and torques, with `rotation`)"
+                }
+                _ => "",
+            };
             Err(PortError::new(
                 "values",
                 format!(
-                    "has {k} columns; kernel {} reads {} per particle",
+                    "has {k} columns; kernel {} reads {} per particle{hint}",
                     kernel.name(),
                     kernel.value_comps()
                 ),
@@ -695,6 +846,9 @@ fn neighbour_sum_kind() -> NodeKind {
         let periodic: Vec<bool> = p.numbers("periodic").iter().map(|&x| x == 1.0).collect();
         let cutoff = p.number("cutoff");
         check_geometry(&lengths, &cells, &periodic, cutoff)?;
+        if p.text("kernel") == "rpy_wall" {
+            return Err("kernel rpy_wall sums every pair above a wall in open space: use it in all_pairs".into());
+        }
         Ok(Box::new(NeighbourSum {
             kernel: PairKernel::from_params(p, cutoff)?,
             lengths,
@@ -1272,6 +1426,33 @@ pub struct AllPairs {
 }
 
 impl Node for AllPairs {
+    /// Above a wall, every particle's centre lies above it (as libMobility refuses).
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        let PairKernel::RpyWall { wall_height, .. } = self.kernel else {
+            return Ok(());
+        };
+        let (0, ValueType::Particles { k: 3, .. }, HostData::F32(values)) =
+            (port, data.ty, &data.data)
+        else {
+            return Ok(());
+        };
+        for (row, x) in values.chunks_exact(3).enumerate() {
+            if x.iter().any(|c| !c.is_finite()) {
+                return Err(RowError::new(row, format!("position {x:?} is not finite")));
+            }
+            if (x[2] as f64) < wall_height {
+                return Err(RowError::new(
+                    row,
+                    format!(
+                        "z = {} is below the wall at wall_height = {wall_height}: a particle's centre must lie above the wall",
+                        x[2]
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = check_rows(&self.kernel, inputs)?;
         Ok(Signature::outputs(vec![ValueType::Particles {

@@ -34,6 +34,34 @@ pub fn rpy(r: f64, a: f64, eta: f64) -> (f64, f64) {
     }
 }
 
+/// The rotation-rotation RPY mobility f I + g r^ r^ at distance r (overlap form below
+/// 2a): (1 / (16 pi eta r^3)) (3 r^ r^ - I) apart, and at r = 0 the self-mobility
+/// 1 / (8 pi eta a^3).
+pub fn rpy_rotation(r: f64, a: f64, eta: f64) -> (f64, f64) {
+    let r0 = 1.0 / (8.0 * PI * eta * a * a * a);
+    let s = r / a;
+    if s >= 2.0 {
+        let c = 1.0 / (8.0 * PI * eta * r * r * r);
+        (-0.5 * c, 1.5 * c)
+    } else {
+        (
+            r0 * (1.0 - 27.0 * s / 32.0 + 5.0 * s * s * s / 64.0),
+            r0 * (9.0 * s / 32.0 - 3.0 * s * s * s / 64.0),
+        )
+    }
+}
+
+/// The translation-rotation coupling c of RPY: the angular velocity of i from a force on
+/// j is c f_j x r_ij, the velocity of i from a torque on j c t_j x r_ij (r_ij = x_i - x_j):
+/// 1 / (8 pi eta r^3) apart, (1 / (16 pi eta a^3)) (1 - 3 r / 8a) overlapping.
+pub fn rpy_coupling(r: f64, a: f64, eta: f64) -> f64 {
+    if r >= 2.0 * a {
+        1.0 / (8.0 * PI * eta * r * r * r)
+    } else {
+        (1.0 - 3.0 * r / (8.0 * a)) / (16.0 * PI * eta * a * a * a)
+    }
+}
+
 /// (j0(x) - j1(x)/x, j2(x)): the isotropic and r^ r^ parts of the angular average of
 /// e^(ik.r) (I - k^ k^); series below x = 0.1, where the closed forms cancel.
 fn angular(x: f64) -> (f64, f64) {

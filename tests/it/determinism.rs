@@ -120,9 +120,16 @@ const CASES: &[Case] = &[
     },
     Case {
         file: "rpy_open.json",
-        sets: &[("temperature", "1")],
+        sets: &[("temperature", "1"), ("rotation", "true")],
         steps: 1,
-        inputs: PARTICLES,
+        inputs: &[("positions", 48, 3), ("forces", 48, 3), ("torques", 48, 3)],
+        outputs: None,
+    },
+    Case {
+        file: "rpy_wall.json",
+        sets: &[("temperature", "1"), ("rotation", "true"), ("wall_height", "-3")],
+        steps: 1,
+        inputs: &[("positions", 48, 3), ("forces", 48, 3), ("torques", 48, 3)],
         outputs: None,
     },
     Case {

@@ -15,6 +15,7 @@ mod fuzz;
 mod graph_files;
 mod lanczos;
 mod layout;
+mod nbody;
 mod nodes;
 mod pairs;
 mod plan;

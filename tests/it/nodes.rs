@@ -47,6 +47,9 @@ fn pointwise_kinds_match_their_references() {
         ("add", "{}", &[("a", P(33, 2)), ("b", ValueType::Scalar)]),
         ("sub", "{}", &[("a", ValueType::Scalar), ("b", P(33, 2))]),
         ("multiply", "{}", &[("a", P(100, 1)), ("b", P(100, 1))]),
+        // One column broadcast over the other's columns (charges times fields).
+        ("multiply", "{}", &[("a", P(100, 1)), ("b", P(100, 3))]),
+        ("multiply", "{}", &[("a", P(100, 3)), ("b", P(100, 1))]),
         ("divide", "{}", &[("a", P(100, 4)), ("b", P(100, 4))]),
         (
             "axpy",
@@ -103,6 +106,24 @@ fn pointwise_kinds_match_their_references() {
     ];
     for (kind, params, inputs) in cases {
         check(kind, params, inputs, ELEMENTWISE_TOL);
+    }
+}
+
+/// Columns taken apart and put together, against their references (raw word copies:
+/// exact).
+#[test]
+fn columns_and_concat_match_their_references() {
+    let cases: &[Case] = &[
+        ("columns", r#"{"first": 3, "count": 3}"#, &[("x", P(301, 6))]),
+        ("columns", r#"{"first": 1, "count": 1}"#, &[("x", P(5, 4))]),
+        ("columns", r#"{"first": 0, "count": 3}"#, &[("x", P(7, 3))]),
+        ("concat", "{}", &[("a", P(301, 3)), ("b", P(301, 3))]),
+        ("concat", r#"{"cols": 4}"#, &[("a", P(9, 1)), ("b", P(9, 3))]),
+        ("concat", r#"{"cols": 6}"#, &[("a", P(33, 3))]),
+        ("concat", "{}", &[("a", P(33, 2))]),
+    ];
+    for (kind, params, inputs) in cases {
+        check(kind, params, inputs, 0.0);
     }
 }
 
