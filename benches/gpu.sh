@@ -13,6 +13,8 @@
 #   pse         PSE per split with noise, where split 0.5 at 10^5 spends its time
 #   poisson     Poisson per tolerance and size (fastest split, errors, fcm.json beside it),
 #               where 10^5 at 1e-3 spends its time
+#   nbody       the direct pair mobilities, open and above a wall, translation and grand:
+#               pair interactions per second and GFLOP/s
 #   mpcd        MPCD particle-steps per second, per dispatch, torch's copy bandwidth
 #   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
 #   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
@@ -32,7 +34,7 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson mpcd spread atomics fft primitives overhead determinism)
+suites=(fcm pse poisson nbody mpcd spread atomics fft primitives overhead determinism)
 usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
@@ -57,6 +59,10 @@ suite_fcm() {
     run $bin run graphs/examples/colloids.json --set n=${size%:*} --set side=${size#*:} \
       --steps 500 --seed 1 --output diffusion --output theory
   done
+}
+
+suite_nbody() {
+  run $bin bench nbody --reps 10
 }
 
 suite_poisson() {

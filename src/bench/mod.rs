@@ -16,6 +16,7 @@
 mod fcm;
 mod fft;
 mod mpcd;
+mod nbody;
 mod overhead;
 mod poisson;
 mod primitives;
@@ -413,6 +414,18 @@ pub enum BenchCommand {
         #[arg(long = "set")]
         sets: Vec<String>,
     },
+    /// Direct pair mobilities (rpy_open.json, rpy_wall.json; translation and grand):
+    /// time, pair interactions per second and GFLOP/s at the kernels' flop counts.
+    Nbody {
+        /// The folder of rpy_open.json and rpy_wall.json.
+        #[arg(long, default_value = "graphs")]
+        graphs: PathBuf,
+        /// Particle counts.
+        #[arg(long, value_delimiter = ',', default_values_t = [1000, 10000, 100000])]
+        sizes: Vec<u32>,
+        #[arg(long, default_value_t = 10)]
+        reps: u64,
+    },
     /// Poisson speed against error: per tolerance and size the fastest split, its errors
     /// against an f64 Ewald sum, and fcm.json's M F timed beside it.
     Poisson {
@@ -564,6 +577,15 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             density,
             reps,
             sets: parse_sets(&sets)?,
+        }),
+        BenchCommand::Nbody {
+            graphs,
+            sizes,
+            reps,
+        } => nbody::run(&nbody::NbodyBench {
+            graphs_dir: graphs,
+            sizes,
+            reps,
         }),
         BenchCommand::Poisson {
             graph,
