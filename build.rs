@@ -1,9 +1,15 @@
-//! Embeds every WGSL file under `shaders/` into the binary, so kernels need no file IO at
-//! run time and the binary can be copied alone (as to the GPU machine).
+//! Embeds every WGSL file under `shaders/` and every graph file under `graphs/` (not the
+//! test fixtures) into the binary, so kernels need no file IO at run time, graphs are
+//! found by name wherever the binary or the Python package goes, and the binary can be
+//! copied alone (as to the GPU machine).
 use std::fmt::Write;
 use std::path::Path;
 
 fn walk(dir: &Path, root: &Path, out: &mut Vec<String>) {
+    walk_ext(dir, root, "wgsl", out)
+}
+
+fn walk_ext(dir: &Path, root: &Path, ext: &str, out: &mut Vec<String>) {
     let mut entries: Vec<_> = std::fs::read_dir(dir)
         .expect("read shaders/")
         .flatten()
@@ -12,8 +18,11 @@ fn walk(dir: &Path, root: &Path, out: &mut Vec<String>) {
     for e in entries {
         let p = e.path();
         if p.is_dir() {
-            walk(&p, root, out);
-        } else if p.extension().is_some_and(|x| x == "wgsl") {
+            if p.file_name().is_some_and(|n| n == "fixtures") {
+                continue;
+            }
+            walk_ext(&p, root, ext, out);
+        } else if p.extension().is_some_and(|x| x == ext) {
             out.push(
                 p.strip_prefix(root)
                     .unwrap()
@@ -45,5 +54,24 @@ fn main() {
     }
     code.push_str("];\n");
     let out = Path::new(&std::env::var("OUT_DIR").unwrap()).join("shader_files.rs");
+    std::fs::write(out, code).unwrap();
+
+    let graphs = Path::new(&manifest).join("graphs");
+    println!("cargo:rerun-if-changed=graphs");
+    let mut files = Vec::new();
+    walk_ext(&graphs, &graphs, "json", &mut files);
+    let mut code = String::from("pub static GRAPH_FILES: &[(&str, &str)] = &[\n");
+    for f in &files {
+        let abs = graphs.join(f);
+        println!("cargo:rerun-if-changed={}", abs.display());
+        writeln!(
+            code,
+            "    ({f:?}, include_str!({:?})),",
+            abs.display().to_string()
+        )
+        .unwrap();
+    }
+    code.push_str("];\n");
+    let out = Path::new(&std::env::var("OUT_DIR").unwrap()).join("graph_files.rs");
     std::fs::write(out, code).unwrap();
 }

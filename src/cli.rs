@@ -239,7 +239,18 @@ fn parse_sets(sets: &[String]) -> Result<BTreeMap<String, ParamValue>, CliError>
 }
 
 fn load(registry: &Registry, path: &Path, opts: &LoadOptions) -> Result<Graph, CliError> {
-    graph::load(path, registry, opts).map_err(|p| CliError::Input(p.to_string()))
+    graph::load(&resolve(path), registry, opts).map_err(|p| CliError::Input(p.to_string()))
+}
+
+/// A graph argument: the file when it exists, else a graph of the library by name
+/// (`fcm`, `examples/colloids`), else the path as given (its load names it missing).
+fn resolve(path: &Path) -> PathBuf {
+    if path.exists() {
+        return path.to_path_buf();
+    }
+    path.to_str()
+        .and_then(graph::library::find)
+        .unwrap_or_else(|| path.to_path_buf())
 }
 
 fn read_inputs(g: &Graph, args: &[String]) -> Result<BTreeMap<String, HostArray>, CliError> {
@@ -595,7 +606,7 @@ fn print_profile(stats: &RunStats) {
 fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
     let mut failures = Vec::new();
     for path in graphs {
-        match plan::validate_file(registry, path) {
+        match plan::validate_file(registry, &resolve(path)) {
             Ok(summary) => outln!("{}: ok ({summary})", path.display()),
             Err(e) => failures.push(e.to_string()),
         }

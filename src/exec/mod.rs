@@ -502,6 +502,11 @@ impl<'a> Program<'a> {
         Ok(out)
     }
 
+    /// The outputs the program computes, in the plan's order.
+    pub fn output_names(&self) -> Vec<String> {
+        self.plan.outputs.iter().map(|(name, _)| name.clone()).collect()
+    }
+
     /// Number of dispatches recorded per step (the clock tick included).
     pub fn dispatches_per_step(&self) -> usize {
         self.step[0]

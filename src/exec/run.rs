@@ -213,6 +213,43 @@ impl Program<'_> {
         })
     }
 
+    /// Runs `steps` more time steps after the last run's, state and step counter carried
+    /// on (random draws fresh); the first call after compiling or [`Program::reset`] runs
+    /// the prologue as [`Program::run`] does. Inputs uploaded since are read by the steps;
+    /// states keep their values (their initial values come from inputs at the prologue).
+    pub fn run_on(&mut self, opts: &RunOptions) -> Result<RunStats, ExecError> {
+        if self.steps_done == 0 {
+            return self.run(opts);
+        }
+        if opts.steps == 0 {
+            return Err(ExecError::Run(
+                "the number of steps must be at least 1".into(),
+            ));
+        }
+        let t0 = Instant::now();
+        let stats = match opts.profile {
+            Profile::Off => self.run_batched(opts)?,
+            Profile::Launches => self.run_profiled(opts.steps, false)?,
+            Profile::Dispatches => self.run_profiled(opts.steps, true)?,
+            Profile::Steps => self.run_timed_steps(opts.steps)?,
+        };
+        Ok(RunStats {
+            wall: t0.elapsed(),
+            ..stats
+        })
+    }
+
+    /// The next [`Program::run_on`] starts over: prologue, states from their initial
+    /// values, step counter at 0 (the same draws as the first run, for the same seed).
+    pub fn reset(&mut self) {
+        self.steps_done = 0;
+    }
+
+    /// Steps run since the prologue.
+    pub fn steps_done(&self) -> u64 {
+        self.steps_done
+    }
+
     fn run_batched(&mut self, opts: &RunOptions) -> Result<RunStats, ExecError> {
         let per_step: usize = self.step[0]
             .iter()

@@ -118,6 +118,15 @@ impl DeviceCaps {
     }
 }
 
+fn vulkan_adapters() -> Vec<wgpu::Adapter> {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::VULKAN;
+    // No validation layers unless asked for through WGPU_VALIDATION / WGPU_DEBUG.
+    desc.flags = wgpu::InstanceFlags::empty().with_env();
+    let instance = wgpu::Instance::new(desc);
+    pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN))
+}
+
 /// The device mesoflow runs on.
 pub struct GpuContext {
     pub adapter: wgpu::Adapter,
@@ -134,17 +143,28 @@ impl GpuContext {
     /// Opens the discrete GPU when there is one, otherwise any Vulkan adapter;
     /// `MESOFLOW_ADAPTER=<substring>` picks one by name.
     pub fn new() -> Result<GpuContext, GpuError> {
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = wgpu::Backends::VULKAN;
-        // No validation layers unless asked for through WGPU_VALIDATION / WGPU_DEBUG.
-        desc.flags = wgpu::InstanceFlags::empty().with_env();
-        let instance = wgpu::Instance::new(desc);
-        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
         let wanted = std::env::var("MESOFLOW_ADAPTER")
             .ok()
             .filter(|s| !s.is_empty());
-        let adapter = choose_adapter(adapters, wanted.as_deref())?;
+        Self::open_named(wanted.as_deref())
+    }
+
+    /// Opens the adapter whose name contains `wanted`, or (None) the one `new` would
+    /// choose without `MESOFLOW_ADAPTER`.
+    pub fn open_named(wanted: Option<&str>) -> Result<GpuContext, GpuError> {
+        let adapter = choose_adapter(vulkan_adapters(), wanted)?;
         Self::open(adapter)
+    }
+
+    /// Every Vulkan adapter: its name and device type.
+    pub fn adapters() -> Vec<(String, String)> {
+        vulkan_adapters()
+            .iter()
+            .map(|a| {
+                let info = a.get_info();
+                (info.name, format!("{:?}", info.device_type))
+            })
+            .collect()
     }
 
     fn open(adapter: wgpu::Adapter) -> Result<GpuContext, GpuError> {

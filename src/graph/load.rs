@@ -182,14 +182,7 @@ struct SubgraphFolders {
 
 impl SubgraphFolders {
     fn new(top: &Path) -> Self {
-        let library: Vec<PathBuf> = match std::env::var_os("MESOFLOW_GRAPH_LIB") {
-            Some(list) => std::env::split_paths(&list).collect(),
-            None => vec![PathBuf::from(concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/graphs"
-            ))],
-        };
-        let library: Vec<PathBuf> = library
+        let library: Vec<PathBuf> = super::library::library_folders()
             .iter()
             .filter_map(|d| d.canonicalize().ok())
             .collect();

@@ -7,6 +7,7 @@
 //! `mobility/spread`.
 
 mod data;
+pub mod library;
 mod load;
 mod schema;
 

@@ -89,6 +89,22 @@ fn validate_reports_problems_with_exit_code_two() {
     );
 }
 
+/// Graphs of the library are found by name from any folder; an unknown name is an error
+/// naming it.
+#[test]
+fn graphs_are_found_by_name_from_any_folder() {
+    let o = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+        .args(["validate", "rpy_open", "examples/relax"])
+        .current_dir(std::env::temp_dir())
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("run mesoflow");
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("rpy_open: ok") && t.contains("examples/relax: ok"), "{t}");
+    fails_with(&["validate", "no_such_graph"], &["no_such_graph"]);
+}
+
 #[test]
 fn inspect_prints_the_plan_and_dot() {
     let o = mesoflow(&["inspect", &relax(), "--set", "dt=0.5"]);

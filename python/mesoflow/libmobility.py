@@ -1,0 +1,396 @@
+"""libMobility's Python interface on mesoflow's graphs.
+
+A script written for libMobility runs after changing its import::
+
+    from mesoflow import libmobility as libMobility
+    solver = libMobility.NBody("open", "open", "single_wall")
+    solver.setParameters(wallHeight=0.0)
+    solver.initialize(viscosity=1.0, hydrodynamicRadius=1.0, includeAngular=True)
+    solver.setPositions(x)
+    u, w = solver.Mdot(forces, torques)
+
+Solvers and the graphs behind them:
+
+- ``SelfMobility`` (any periodicity): no hydrodynamic interactions, computed with numpy.
+- ``NBody`` ("open", "open", "open" or "single_wall"): ``rpy_open.json`` /
+  ``rpy_wall.json`` (Rotne-Prager-Yamakawa, Rotne-Prager-Blake above a wall at
+  ``wallHeight``), every pair.
+- ``PSE`` ("periodic" x3): ``pse.json``, ``psi`` the Ewald split.
+- ``FCM`` ("periodic" x3, not in libMobility): ``fcm.json``.
+
+Where mesoflow differs from libMobility: ``precision`` is always "float" (the GPU
+computes in f32; arrays of any float dtype are taken and float32 is returned);
+``NBody``'s ``algorithm``, ``Nbatch`` and ``NperBatch`` are accepted but one all-pairs
+kernel serves every size (batches are not supported: ``Nbatch`` other than 1 or -1 is an
+error); ``divM`` is a random finite difference per call (as libMobility's), zero where
+the mobility does not depend on positions (open, periodic).
+"""
+
+import math
+import os
+
+import numpy as np
+
+from . import _mesoflow
+
+__all__ = ["SelfMobility", "NBody", "PSE", "FCM"]
+
+_PERIODICITIES = ("open", "unspecified", "single_wall", "two_walls", "periodic")
+
+
+def _error(message):
+    return RuntimeError(message)
+
+
+def _as_rows(name, array, n=None):
+    """An array of 3-vectors as float32 (N, 3); the shape check of libMobility."""
+    if array is None:
+        return None
+    a = np.asarray(array)
+    if a.size % 3 != 0 or a.size == 0:
+        raise _error(f"{name}: {a.size} values is not a whole number of 3-vectors")
+    if n is not None and a.size != 3 * n:
+        raise _error(
+            f"{name}: {a.size // 3} vectors for {n} particles (the number of {name} does "
+            "not match the number of particles)"
+        )
+    return np.ascontiguousarray(a, dtype=np.float32).reshape(-1, 3)
+
+
+class _Solver:
+    """The libMobility interface shared by every solver."""
+
+    precision = "float"
+    _allowed = ()
+
+    def __init__(self, periodicityX, periodicityY, periodicityZ):
+        periodicity = (periodicityX, periodicityY, periodicityZ)
+        for p in periodicity:
+            if p not in _PERIODICITIES:
+                raise _error(f"[Mobility] unknown periodicity {p!r}")
+        if periodicity not in self._allowed:
+            raise _error(
+                f"[Mobility] {type(self).__name__} does not support the periodicity "
+                f"{periodicity}; it takes {', '.join(map(str, self._allowed))}"
+            )
+        self.periodicity = periodicity
+        self._parameters = {}
+        self._initialized = False
+        self._positions = None
+        self._programs = {}
+
+    # -- libMobility's calls ------------------------------------------------------------
+
+    def setParameters(self, **parameters):
+        unknown = set(parameters) - set(self._parameter_names)
+        if unknown:
+            raise _error(
+                f"[Mobility] {type(self).__name__}.setParameters takes "
+                f"{', '.join(self._parameter_names)}; not {', '.join(sorted(unknown))}"
+            )
+        self._parameters.update(parameters)
+        self._initialized = False
+        self._programs = {}
+
+    def initialize(
+        self,
+        viscosity,
+        hydrodynamicRadius,
+        includeAngular=False,
+        tolerance=1e-4,
+        seed=None,
+        **extra,
+    ):
+        if extra:
+            raise _error(f"[Mobility] initialize takes no {', '.join(extra)}")
+        if not (viscosity > 0 and hydrodynamicRadius > 0):
+            raise _error("[Mobility] viscosity and hydrodynamicRadius must be positive")
+        if includeAngular and not self._supports_angular:
+            raise _error(f"[Mobility] {type(self).__name__} does not support torques")
+        self.viscosity = float(viscosity)
+        self.hydrodynamicRadius = float(hydrodynamicRadius)
+        self.includeAngular = bool(includeAngular)
+        self.tolerance = float(tolerance)
+        if seed is None or seed == 0:
+            seed = int.from_bytes(os.urandom(4), "little")
+        self.seed = int(seed)
+        self._programs = {}
+        self._setup()
+        self._initialized = True
+
+    def setPositions(self, positions):
+        self._require_initialized()
+        x = _as_rows("positions", positions)
+        self._check_positions(x)
+        self._positions = x
+
+    def Mdot(self, forces=None, torques=None):
+        self._require_positions()
+        n = len(self._positions)
+        if torques is not None and not self.includeAngular:
+            raise _error(
+                "[libMobility] Received torques but the solver was initialized with includeAngular=False"
+            )
+        f = _as_rows("forces", forces, n)
+        t = _as_rows("torques", torques, n)
+        shape = np.shape(forces) if forces is not None else np.shape(torques) if torques is not None else (n, 3)
+        if f is None:
+            f = np.zeros((n, 3), np.float32)
+        u, w = self._mdot(f, t)
+        return self._shaped(u, w, shape, torques)
+
+    def sqrtMdotW(self, prefactor=1.0):
+        self._require_positions()
+        u, w = self._noise()
+        n = len(self._positions)
+        return self._shaped(prefactor * u, None if w is None else prefactor * w, (n, 3), None)
+
+    def divM(self, prefactor=1.0):
+        self._require_positions()
+        n = len(self._positions)
+        u, w = self._divergence()
+        return self._shaped(prefactor * u, None if w is None else prefactor * w, (n, 3), None)
+
+    def LangevinVelocities(self, dt, kbt, forces=None, torques=None):
+        self._require_positions()
+        if dt <= 0:
+            raise _error("[libMobility] dt must be positive")
+        u, w = self.Mdot(forces, torques)
+        shape = np.shape(u)
+        if kbt > 0:
+            nu, nw = self.sqrtMdotW(math.sqrt(2.0 * kbt / dt))
+            du, dw = self.divM(kbt)
+            u = u + nu.reshape(shape) + du.reshape(shape)
+            if w is not None and nw is not None:
+                w = w + nw.reshape(np.shape(w)) + dw.reshape(np.shape(w))
+        return u, w
+
+    def clean(self):
+        self._programs = {}
+        self._positions = None
+        self._initialized = False
+
+    # -- shared helpers -----------------------------------------------------------------
+
+    def _require_initialized(self):
+        if not self._initialized:
+            raise _error("[Mobility] call initialize before using the solver")
+
+    def _require_positions(self):
+        self._require_initialized()
+        if self._positions is None:
+            raise _error("[Mobility] Positions have 0 particles. Did you call setPositions?")
+
+    def _check_positions(self, x):
+        pass
+
+    def _shaped(self, u, w, shape, torques):
+        u = np.asarray(u, np.float32).reshape(shape)
+        if not self.includeAngular:
+            return u, None
+        wshape = np.shape(torques) if torques is not None else shape
+        return u, np.asarray(w, np.float32).reshape(wshape)
+
+    def _program(self, key, outputs, **sets):
+        """A compiled program of the solver's graph for these outputs, kept between calls
+        (new sizes recompile inside `run`)."""
+        program = self._programs.get(key)
+        if program is None:
+            graph = _mesoflow.Graph(self._graph_name, seed=self.seed + len(self._programs), **self._graph_params(), **sets)
+            n = len(self._positions)
+            shapes = {"positions": (n, 3), "forces": (n, 3)}
+            if self.includeAngular and self._torque_input:
+                shapes["torques"] = (n, 3)
+            program = graph.compile(outputs=outputs, **shapes)
+            self._programs[key] = program
+        return program
+
+    _torque_input = True
+
+    def _run(self, key, outputs, arrays, **sets):
+        try:
+            return self._program(key, outputs, **sets).run(**arrays)
+        except (_mesoflow.GraphError, _mesoflow.RunError) as e:
+            raise _error(f"[Mobility] {e}") from None
+
+
+class SelfMobility(_Solver):
+    """No hydrodynamic interactions: M = I / (6 pi eta a), rotation I / (8 pi eta a^3)."""
+
+    _allowed = tuple(
+        (a, b, c) for a in _PERIODICITIES for b in _PERIODICITIES for c in _PERIODICITIES
+    )
+    _parameter_names = ("parameter",)
+    _supports_angular = True
+
+    def _setup(self):
+        self._rng = np.random.default_rng(self.seed)
+        a, eta = self.hydrodynamicRadius, self.viscosity
+        self._t = 1.0 / (6.0 * math.pi * eta * a)
+        self._r = 1.0 / (8.0 * math.pi * eta * a**3)
+
+    def _mdot(self, f, t):
+        w = None
+        if self.includeAngular:
+            w = self._r * (t if t is not None else np.zeros_like(f))
+        return self._t * f, w
+
+    def _noise(self):
+        n = len(self._positions)
+        u = math.sqrt(self._t) * self._rng.standard_normal((n, 3))
+        w = math.sqrt(self._r) * self._rng.standard_normal((n, 3)) if self.includeAngular else None
+        return u, w
+
+    def _divergence(self):
+        n = len(self._positions)
+        return np.zeros((n, 3), np.float32), (np.zeros((n, 3), np.float32) if self.includeAngular else None)
+
+
+class _GraphSolver(_Solver):
+    """A solver running one of mesoflow's mobility graphs."""
+
+    _angular_outputs = ("angular_velocities", "angular_noise", "angular_drift")
+
+    def _setup(self):
+        pass
+
+    def _arrays(self, f=None, t=None):
+        arrays = {"positions": self._positions}
+        arrays["forces"] = f if f is not None else np.zeros_like(self._positions)
+        if self.includeAngular and self._torque_input:
+            arrays["torques"] = t if t is not None else np.zeros_like(self._positions)
+        return arrays
+
+    def _mdot(self, f, t):
+        outputs = ["velocities"] + (["angular_velocities"] if self.includeAngular else [])
+        out = self._run("mdot", outputs, self._arrays(f, t))
+        return out["velocities"], out.get("angular_velocities")
+
+    _angular_noise = True
+
+    def _noise(self):
+        if self.includeAngular and not self._angular_noise:
+            raise _error(
+                f"[Mobility] {type(self).__name__} has no angular noise (its graph draws the linear part only)"
+            )
+        outputs = ["noise"] + (["angular_noise"] if self.includeAngular else [])
+        out = self._run("noise", outputs, self._arrays())
+        return out["noise"], out.get("angular_noise")
+
+    def _divergence(self):
+        n = len(self._positions)
+        zero = np.zeros((n, 3), np.float32)
+        return zero, (zero if self.includeAngular else None)
+
+
+class NBody(_GraphSolver):
+    """Every pair: open RPY, or Rotne-Prager-Blake above a wall ("single_wall", at
+    ``wallHeight``)."""
+
+    _allowed = (("open", "open", "open"), ("open", "open", "single_wall"))
+    _parameter_names = ("algorithm", "Nbatch", "NperBatch", "wallHeight", "delta")
+    _supports_angular = True
+
+    @property
+    def _graph_name(self):
+        return "rpy_wall" if self.periodicity[2] == "single_wall" else "rpy_open"
+
+    def _setup(self):
+        p = self._parameters
+        if p.get("algorithm", "advise") not in ("advise", "naive", "fast", "block"):
+            raise _error(f"[Mobility] unknown NBody algorithm {p['algorithm']!r}")
+        if p.get("Nbatch", -1) not in (-1, 1) or p.get("NperBatch", -1) != -1:
+            raise _error("[Mobility] mesoflow's NBody runs one batch: leave Nbatch and NperBatch at their defaults")
+        wall = self.periodicity[2] == "single_wall"
+        if wall and "wallHeight" not in p:
+            raise _error(
+                "[Mobility] Wall height parameter is required for a bottom wall. If you want to use a wall, set the wallHeight parameter."
+            )
+        if not wall and "wallHeight" in p and p["wallHeight"] is not None:
+            raise _error(
+                "[Mobility] Wall height parameter is only valid for bottom wall. If you want to use a wall, set periodicityZ to single_wall."
+            )
+
+    def _graph_params(self):
+        params = {
+            "viscosity": self.viscosity,
+            "radius": self.hydrodynamicRadius,
+            "rotation": self.includeAngular,
+            "tolerance": min(max(self.tolerance, 1e-7), 0.5),
+        }
+        if self.periodicity[2] == "single_wall":
+            params["wall_height"] = float(self._parameters["wallHeight"])
+            params["rfd_delta"] = float(self._parameters.get("delta", 1e-3))
+        return params
+
+    def _check_positions(self, x):
+        if self.periodicity[2] == "single_wall":
+            below = np.nonzero(x[:, 2] < self._parameters["wallHeight"])[0]
+            if below.size:
+                raise _error(
+                    f"[Mobility] The center of a particle has fallen below the wall (particle {below[0]}, "
+                    f"z = {x[below[0], 2]} < wallHeight = {self._parameters['wallHeight']}). "
+                    "Check your configuration and forces to ensure particle centers stay above the wall."
+                )
+
+    def _divergence(self):
+        if self.periodicity[2] != "single_wall":
+            return super()._divergence()
+        outputs = ["drift"] + (["angular_drift"] if self.includeAngular else [])
+        out = self._run("drift", outputs, self._arrays(), temperature=1.0)
+        return out["drift"], out.get("angular_drift")
+
+
+class PSE(_GraphSolver):
+    """Positively Split Ewald in a periodic box (``psi`` the split, ``Lx``, ``Ly``,
+    ``Lz``); no torques, as in libMobility."""
+
+    _allowed = (("periodic", "periodic", "periodic"),)
+    _parameter_names = ("psi", "Lx", "Ly", "Lz", "shearStrain")
+    _supports_angular = False
+    _graph_name = "pse"
+    _torque_input = False
+
+    def _setup(self):
+        p = self._parameters
+        for name in ("psi", "Lx", "Ly", "Lz"):
+            if name not in p:
+                raise _error(f"[Mobility] PSE needs the parameter {name}")
+        if p.get("shearStrain", 0.0) != 0.0:
+            raise _error("[Mobility] mesoflow's PSE takes no shear strain (shearStrain must be 0)")
+
+    def _graph_params(self):
+        p = self._parameters
+        return {
+            "viscosity": self.viscosity,
+            "radius": self.hydrodynamicRadius,
+            "box": [float(p["Lx"]), float(p["Ly"]), float(p["Lz"])],
+            "split": float(p["psi"]),
+            "tolerance": min(max(self.tolerance, 1e-6), 0.1),
+        }
+
+
+class FCM(_GraphSolver):
+    """The Force Coupling Method in a periodic box (``Lx``, ``Ly``, ``Lz``); torques with
+    ``includeAngular`` (a finer grid). Not in libMobility: the same interface."""
+
+    _allowed = (("periodic", "periodic", "periodic"),)
+    _parameter_names = ("Lx", "Ly", "Lz")
+    _supports_angular = True
+    _graph_name = "fcm"
+    _angular_noise = False
+
+    def _setup(self):
+        for name in ("Lx", "Ly", "Lz"):
+            if name not in self._parameters:
+                raise _error(f"[Mobility] FCM needs the parameter {name}")
+
+    def _graph_params(self):
+        p = self._parameters
+        return {
+            "viscosity": self.viscosity,
+            "radius": self.hydrodynamicRadius,
+            "box": [float(p["Lx"]), float(p["Ly"]), float(p["Lz"])],
+            "tolerance": min(max(self.tolerance, 1e-6), 0.1),
+            "rotation": self.includeAngular,
+        }
