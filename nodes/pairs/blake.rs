@@ -151,6 +151,7 @@ pub fn damping(h: f64, a: f64) -> f64 {
 
 /// The velocity and angular velocity of sphere i (at xi) from the force fj and torque tj
 /// on sphere j (at xj), or from its own (`same`: i is j), above the wall z = `wall`.
+#[allow(clippy::too_many_arguments)]
 pub fn blake(
     xi: V3,
     xj: V3,

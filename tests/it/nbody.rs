@@ -106,6 +106,7 @@ fn grand(g: &Graph, x: &[V3], f: &[V3], t: &[V3]) -> (Vec<V3>, Vec<V3>) {
 
 /// The grand mobility (6N x 6N, rows and columns ordered as f_0, t_0, f_1, ...) of a graph
 /// by unit forces and torques, one at a time.
+#[allow(clippy::needless_range_loop)]
 fn assemble(g: &Graph, x: &[V3]) -> Vec<Vec<f64>> {
     let n = x.len();
     let mut m = vec![vec![0.0; 6 * n]; 6 * n];
@@ -507,7 +508,7 @@ fn noise_covariance_and_drift_match_the_mobility() {
     let delta = 1e-5;
     let mut div = vec![[0.0; 3]; n];
     for i in 0..n {
-        for (j, xj) in x.iter().enumerate() {
+        for j in 0..n {
             for b in 0..3 {
                 let mut f = [0.0; 3];
                 f[b] = 1.0;
