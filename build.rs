@@ -5,13 +5,9 @@
 use std::fmt::Write;
 use std::path::Path;
 
-fn walk(dir: &Path, root: &Path, out: &mut Vec<String>) {
-    walk_ext(dir, root, "wgsl", out)
-}
-
 fn walk_ext(dir: &Path, root: &Path, ext: &str, out: &mut Vec<String>) {
     let mut entries: Vec<_> = std::fs::read_dir(dir)
-        .expect("read shaders/")
+        .expect("read the folder to embed")
         .flatten()
         .collect();
     entries.sort_by_key(|e| e.path());
@@ -33,15 +29,14 @@ fn walk_ext(dir: &Path, root: &Path, ext: &str, out: &mut Vec<String>) {
     }
 }
 
-fn main() {
-    // Read at run time, not with env!(): a build-script binary reused from another
-    // checkout (a copied target folder) would otherwise embed that checkout's shaders.
-    let manifest = std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR");
-    let root = Path::new(&manifest).join("shaders");
-    println!("cargo:rerun-if-changed=shaders");
+/// Writes `OUT_DIR/<out>`: `pub static <name>: &[(&str, &str)]`, the path under
+/// `<manifest>/<folder>` and the text of every file with extension `ext`.
+fn embed(manifest: &str, folder: &str, ext: &str, name: &str, out: &str) {
+    let root = Path::new(manifest).join(folder);
+    println!("cargo:rerun-if-changed={folder}");
     let mut files = Vec::new();
-    walk(&root, &root, &mut files);
-    let mut code = String::from("pub static FILES: &[(&str, &str)] = &[\n");
+    walk_ext(&root, &root, ext, &mut files);
+    let mut code = format!("pub static {name}: &[(&str, &str)] = &[\n");
     for f in &files {
         let abs = root.join(f);
         println!("cargo:rerun-if-changed={}", abs.display());
@@ -53,25 +48,14 @@ fn main() {
         .unwrap();
     }
     code.push_str("];\n");
-    let out = Path::new(&std::env::var("OUT_DIR").unwrap()).join("shader_files.rs");
+    let out = Path::new(&std::env::var("OUT_DIR").unwrap()).join(out);
     std::fs::write(out, code).unwrap();
+}
 
-    let graphs = Path::new(&manifest).join("graphs");
-    println!("cargo:rerun-if-changed=graphs");
-    let mut files = Vec::new();
-    walk_ext(&graphs, &graphs, "json", &mut files);
-    let mut code = String::from("pub static GRAPH_FILES: &[(&str, &str)] = &[\n");
-    for f in &files {
-        let abs = graphs.join(f);
-        println!("cargo:rerun-if-changed={}", abs.display());
-        writeln!(
-            code,
-            "    ({f:?}, include_str!({:?})),",
-            abs.display().to_string()
-        )
-        .unwrap();
-    }
-    code.push_str("];\n");
-    let out = Path::new(&std::env::var("OUT_DIR").unwrap()).join("graph_files.rs");
-    std::fs::write(out, code).unwrap();
+fn main() {
+    // Read at run time, not with env!(): a build-script binary reused from another
+    // checkout (a copied target folder) would otherwise embed that checkout's shaders.
+    let manifest = std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR");
+    embed(&manifest, "shaders", "wgsl", "FILES", "shader_files.rs");
+    embed(&manifest, "graphs", "json", "GRAPH_FILES", "graph_files.rs");
 }

@@ -98,6 +98,14 @@ pub enum PairKernel {
     },
 }
 
+/// The `outputs` param as an index into [`PAIR_OUTPUTS`].
+fn outputs_index(p: &Params) -> usize {
+    PAIR_OUTPUTS
+        .iter()
+        .position(|o| *o == p.text("outputs"))
+        .expect("choice checked")
+}
+
 impl PairKernel {
     fn from_params(p: &Params, cutoff: f64) -> Result<PairKernel, String> {
         let radius = p.number("radius");
@@ -162,10 +170,7 @@ impl PairKernel {
                     epsilon,
                     sigma,
                     shift,
-                    outputs: PAIR_OUTPUTS
-                        .iter()
-                        .position(|o| *o == p.text("outputs"))
-                        .expect("choice checked"),
+                    outputs: outputs_index(p),
                 }
             }
             "poisson_near" => {
@@ -198,10 +203,7 @@ impl PairKernel {
                     width,
                     permittivity,
                     split,
-                    outputs: PAIR_OUTPUTS
-                        .iter()
-                        .position(|o| *o == p.text("outputs"))
-                        .expect("choice checked"),
+                    outputs: outputs_index(p),
                     cutoff,
                     table: std::sync::Arc::new(table),
                 }

@@ -201,6 +201,11 @@ impl Program<'_> {
         }
         let t0 = Instant::now();
         self.start()?;
+        self.run_steps(opts, t0)
+    }
+
+    /// `opts.steps` steps after those already run, timed as `opts.profile` says.
+    fn run_steps(&mut self, opts: &RunOptions, t0: Instant) -> Result<RunStats, ExecError> {
         let stats = match opts.profile {
             Profile::Off => self.run_batched(opts)?,
             Profile::Launches => self.run_profiled(opts.steps, false)?,
@@ -226,17 +231,7 @@ impl Program<'_> {
                 "the number of steps must be at least 1".into(),
             ));
         }
-        let t0 = Instant::now();
-        let stats = match opts.profile {
-            Profile::Off => self.run_batched(opts)?,
-            Profile::Launches => self.run_profiled(opts.steps, false)?,
-            Profile::Dispatches => self.run_profiled(opts.steps, true)?,
-            Profile::Steps => self.run_timed_steps(opts.steps)?,
-        };
-        Ok(RunStats {
-            wall: t0.elapsed(),
-            ..stats
-        })
+        self.run_steps(opts, Instant::now())
     }
 
     /// The next [`Program::run_on`] starts over: prologue, states from their initial

@@ -130,6 +130,31 @@ fn assemble(g: &Graph, x: &[V3]) -> Vec<Vec<f64>> {
     m
 }
 
+/// The grand mobility (6N x 6N, ordered as `assemble`) of an f64 pair function
+/// `pair(x_i, x_j, f_j, t_j, i == j) -> (u_i, w_i)`.
+fn grand_matrix(x: &[V3], pair: impl Fn(V3, V3, V3, V3, bool) -> (V3, V3)) -> Vec<Vec<f64>> {
+    let n = x.len();
+    let mut m = vec![vec![0.0; 6 * n]; 6 * n];
+    for i in 0..n {
+        for j in 0..n {
+            for c in 0..6 {
+                let (mut f, mut t) = ([0.0; 3], [0.0; 3]);
+                if c < 3 {
+                    f[c] = 1.0;
+                } else {
+                    t[c - 3] = 1.0;
+                }
+                let (u, w) = pair(x[i], x[j], f, t, i == j);
+                for k in 0..3 {
+                    m[6 * i + k][6 * j + c] = u[k];
+                    m[6 * i + 3 + k][6 * j + c] = w[k];
+                }
+            }
+        }
+    }
+    m
+}
+
 fn relative_max(got: &[Vec<f64>], want: &[Vec<f64>]) -> f64 {
     let scale = want.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
     got.iter()
@@ -164,25 +189,9 @@ fn open_grand_rpy_matches_the_closed_forms() {
     let mut rng = Rng::new(31);
     let x = cluster(&mut rng, 7, 0.0);
     let got = assemble(&g, &x);
-    let mut want = vec![vec![0.0; 42]; 42];
-    for i in 0..7 {
-        for j in 0..7 {
-            let r = [0, 1, 2].map(|k| x[i][k] - x[j][k]);
-            for c in 0..6 {
-                let (mut f, mut t) = ([0.0; 3], [0.0; 3]);
-                if c < 3 {
-                    f[c] = 1.0;
-                } else {
-                    t[c - 3] = 1.0;
-                }
-                let (u, w) = grand_rpy(r, a, f, t, i == j);
-                for k in 0..3 {
-                    want[6 * i + k][6 * j + c] = u[k];
-                    want[6 * i + 3 + k][6 * j + c] = w[k];
-                }
-            }
-        }
-    }
+    let want = grand_matrix(&x, |xi, xj, f, t, same| {
+        grand_rpy([0, 1, 2].map(|k| xi[k] - xj[k]), a, f, t, same)
+    });
     let err = relative_max(&got, &want);
     assert!(err < 2e-6, "open grand RPY: relative error {err:e}");
     assert!(cholesky_min_pivot(&want).is_some());
@@ -345,25 +354,7 @@ fn wall_kernel_matches_its_f64_twin() {
     let mut x = cluster(&mut rng, 6, wall + 0.4);
     x.push([x[0][0] + 0.3, x[0][1], x[0][2] + 0.2]);
     let got = assemble(&g, &x);
-    let n = x.len();
-    let mut want = vec![vec![0.0; 6 * n]; 6 * n];
-    for i in 0..n {
-        for j in 0..n {
-            for c in 0..6 {
-                let (mut f, mut t) = ([0.0; 3], [0.0; 3]);
-                if c < 3 {
-                    f[c] = 1.0;
-                } else {
-                    t[c - 3] = 1.0;
-                }
-                let (u, w) = blake(x[i], x[j], f, t, a, 1.0, wall, i == j);
-                for k in 0..3 {
-                    want[6 * i + k][6 * j + c] = u[k];
-                    want[6 * i + 3 + k][6 * j + c] = w[k];
-                }
-            }
-        }
-    }
+    let want = grand_matrix(&x, |xi, xj, f, t, same| blake(xi, xj, f, t, a, 1.0, wall, same));
     let err = relative_max(&got, &want);
     assert!(err < 5e-6, "wall kernel against its twin: {err:e}");
 }
@@ -466,24 +457,7 @@ fn noise_covariance_and_drift_match_the_mobility() {
         }
         v
     };
-    let mut m = vec![vec![0.0; 6 * n]; 6 * n];
-    for i in 0..n {
-        for j in 0..n {
-            for c in 0..6 {
-                let (mut f, mut t) = ([0.0; 3], [0.0; 3]);
-                if c < 3 {
-                    f[c] = 1.0;
-                } else {
-                    t[c - 3] = 1.0;
-                }
-                let (u, w) = blake(x[i], x[j], f, t, a, 1.0, 0.0, i == j);
-                for k in 0..3 {
-                    m[6 * i + k][6 * j + c] = u[k];
-                    m[6 * i + 3 + k][6 * j + c] = w[k];
-                }
-            }
-        }
-    }
+    let m = grand_matrix(&x, |xi, xj, f, t, same| blake(xi, xj, f, t, a, 1.0, 0.0, same));
     let mut cov = vec![vec![0.0; 6 * n]; 6 * n];
     for s in 0..steps as usize {
         let v = sample(s);
