@@ -42,11 +42,57 @@ def _error(message):
     return RuntimeError(message)
 
 
+def _framework(array):
+    """The array library an input came from (torch, cupy, jax, tensorflow, numpy)."""
+    module = type(array).__module__.split(".")[0]
+    return module if module in ("torch", "cupy", "jax", "jaxlib", "tensorflow") else "numpy"
+
+
+def _like(result, template):
+    """`result` (numpy) as an array of the library and device `template` came from."""
+    if result is None:
+        return None
+    kind = _framework(template)
+    if kind == "torch":
+        import torch
+
+        return torch.as_tensor(result, device=template.device)
+    if kind == "cupy":
+        import cupy
+
+        with cupy.cuda.Device(template.device.id):
+            return cupy.asarray(result)
+    if kind in ("jax", "jaxlib"):
+        import jax
+
+        return jax.device_put(result, list(template.devices())[0])
+    if kind == "tensorflow":
+        import tensorflow as tf
+
+        with tf.device(template.device):
+            return tf.convert_to_tensor(result)
+    return result
+
+
+def _host(array):
+    """Any array (numpy, torch, cupy, jax, tensorflow, lists) as numpy, on the host."""
+    if array is None:
+        return None
+    kind = _framework(array)
+    if kind == "torch":
+        return array.detach().cpu().numpy()
+    if kind == "cupy":
+        return array.get()
+    if kind == "tensorflow":
+        return array.numpy()
+    return np.asarray(array)
+
+
 def _as_rows(name, array, n=None):
     """An array of 3-vectors as float32 (N, 3); the shape check of libMobility."""
     if array is None:
         return None
-    a = np.asarray(array)
+    a = _host(array)
     if a.size % 3 != 0 or a.size == 0:
         raise _error(f"{name}: {a.size} values is not a whole number of 3-vectors")
     if n is not None and a.size != 3 * n:
@@ -81,16 +127,30 @@ class _Solver:
 
     # -- libMobility's calls ------------------------------------------------------------
 
-    def setParameters(self, **parameters):
+    def setParameters(self, *args, **parameters):
+        """libMobility's parameters by position (in its order) or by name."""
+        if len(args) > len(self._parameter_names):
+            raise _error(
+                f"[Mobility] {type(self).__name__}.setParameters takes at most "
+                f"{len(self._parameter_names)} parameters ({', '.join(self._parameter_names)})"
+            )
+        for name, value in zip(self._parameter_names, args):
+            if name in parameters:
+                raise _error(f"[Mobility] parameter {name} given twice")
+            parameters[name] = value
         unknown = set(parameters) - set(self._parameter_names)
         if unknown:
             raise _error(
                 f"[Mobility] {type(self).__name__}.setParameters takes "
                 f"{', '.join(self._parameter_names)}; not {', '.join(sorted(unknown))}"
             )
-        self._parameters.update(parameters)
+        self._check_parameters(parameters)
+        self._parameters = dict(parameters)
         self._initialized = False
         self._programs = {}
+
+    def _check_parameters(self, parameters):
+        pass
 
     def initialize(
         self,
@@ -111,6 +171,7 @@ class _Solver:
         self.hydrodynamicRadius = float(hydrodynamicRadius)
         self.includeAngular = bool(includeAngular)
         self.tolerance = float(tolerance)
+        self._seed_given = seed is not None
         if seed is None or seed == 0:
             seed = int.from_bytes(os.urandom(4), "little")
         self.seed = int(seed)
@@ -123,6 +184,7 @@ class _Solver:
         x = _as_rows("positions", positions)
         self._check_positions(x)
         self._positions = x
+        self._template = positions
 
     def Mdot(self, forces=None, torques=None):
         self._require_positions()
@@ -133,7 +195,11 @@ class _Solver:
             )
         f = _as_rows("forces", forces, n)
         t = _as_rows("torques", torques, n)
-        shape = np.shape(forces) if forces is not None else np.shape(torques) if torques is not None else (n, 3)
+        shape = (
+            _host(forces).shape if forces is not None
+            else _host(torques).shape if torques is not None
+            else (n, 3)
+        )
         if f is None:
             f = np.zeros((n, 3), np.float32)
         u, w = self._mdot(f, t)
@@ -155,15 +221,14 @@ class _Solver:
         self._require_positions()
         if dt <= 0:
             raise _error("[libMobility] dt must be positive")
-        u, w = self.Mdot(forces, torques)
-        shape = np.shape(u)
+        u, w = (_host(v) for v in self.Mdot(forces, torques))
         if kbt > 0:
-            nu, nw = self.sqrtMdotW(math.sqrt(2.0 * kbt / dt))
-            du, dw = self.divM(kbt)
-            u = u + nu.reshape(shape) + du.reshape(shape)
+            nu, nw = (_host(v) for v in self.sqrtMdotW(math.sqrt(2.0 * kbt / dt)))
+            du, dw = (_host(v) for v in self.divM(kbt))
+            u = u + nu.reshape(u.shape) + du.reshape(u.shape)
             if w is not None and nw is not None:
-                w = w + nw.reshape(np.shape(w)) + dw.reshape(np.shape(w))
-        return u, w
+                w = w + nw.reshape(w.shape) + dw.reshape(w.shape)
+        return _like(u, self._template), _like(w, self._template)
 
     def clean(self):
         self._programs = {}
@@ -187,9 +252,10 @@ class _Solver:
     def _shaped(self, u, w, shape, torques):
         u = np.asarray(u, np.float32).reshape(shape)
         if not self.includeAngular:
-            return u, None
-        wshape = np.shape(torques) if torques is not None else shape
-        return u, np.asarray(w, np.float32).reshape(wshape)
+            return _like(u, self._template), None
+        wshape = _host(torques).shape if torques is not None else shape
+        w = np.asarray(w, np.float32).reshape(wshape)
+        return _like(u, self._template), _like(w, self._template)
 
     def _program(self, key, outputs, **sets):
         """A compiled program of the solver's graph for these outputs, kept between calls
@@ -291,25 +357,32 @@ class NBody(_GraphSolver):
     _parameter_names = ("algorithm", "Nbatch", "NperBatch", "wallHeight", "delta")
     _supports_angular = True
 
+    def _check_parameters(self, p):
+        if p.get("algorithm", "advise") not in ("advise", "naive", "fast", "block"):
+            raise _error(f"[Mobility] unknown NBody algorithm {p['algorithm']!r}")
+        wall = self.periodicity[2] == "single_wall"
+        if wall and p.get("wallHeight") is None:
+            raise _error(
+                "[Mobility] Wall height parameter is required for a bottom wall. If you want to use a wall, set the wallHeight parameter."
+            )
+        if not wall and p.get("wallHeight") is not None:
+            raise _error(
+                "[Mobility] Wall height parameter is only valid for bottom wall. If you want to use a wall, set periodicityZ to single_wall."
+            )
+
     @property
     def _graph_name(self):
         return "rpy_wall" if self.periodicity[2] == "single_wall" else "rpy_open"
 
     def _setup(self):
-        p = self._parameters
-        if p.get("algorithm", "advise") not in ("advise", "naive", "fast", "block"):
-            raise _error(f"[Mobility] unknown NBody algorithm {p['algorithm']!r}")
-        if p.get("Nbatch", -1) not in (-1, 1) or p.get("NperBatch", -1) != -1:
-            raise _error("[Mobility] mesoflow's NBody runs one batch: leave Nbatch and NperBatch at their defaults")
-        wall = self.periodicity[2] == "single_wall"
-        if wall and "wallHeight" not in p:
+        self._check_parameters(self._parameters)
+        nbatch = int(self._parameters.get("Nbatch", -1))
+        nper = int(self._parameters.get("NperBatch", -1))
+        if nbatch == 0 or nper == 0 or nbatch < -1 or nper < -1 or (nbatch > 1 and nper == -1):
             raise _error(
-                "[Mobility] Wall height parameter is required for a bottom wall. If you want to use a wall, set the wallHeight parameter."
+                f"[Mobility] Invalid batch parameters for NBody (Nbatch {nbatch}, NperBatch {nper}). If in doubt, use the defaults."
             )
-        if not wall and "wallHeight" in p and p["wallHeight"] is not None:
-            raise _error(
-                "[Mobility] Wall height parameter is only valid for bottom wall. If you want to use a wall, set periodicityZ to single_wall."
-            )
+        self._batches = (nbatch, nper)
 
     def _graph_params(self):
         params = {
@@ -324,6 +397,12 @@ class NBody(_GraphSolver):
         return params
 
     def _check_positions(self, x):
+        nbatch, nper = self._batches
+        n = len(x)
+        if (nbatch > 0 and nper > 0 and nbatch * nper != n) or (nbatch == -1 and nper > 0 and nper != n):
+            raise _error(
+                f"[Mobility] Invalid batch parameters for NBody: {nbatch} batches of {nper} for {n} particles. If in doubt, use the defaults."
+            )
         if self.periodicity[2] == "single_wall":
             below = np.nonzero(x[:, 2] < self._parameters["wallHeight"])[0]
             if below.size:
@@ -336,9 +415,41 @@ class NBody(_GraphSolver):
     def _divergence(self):
         if self.periodicity[2] != "single_wall":
             return super()._divergence()
+        return self._batched(lambda: self._drift_one())
+
+    def _drift_one(self):
         outputs = ["drift"] + (["angular_drift"] if self.includeAngular else [])
         out = self._run("drift", outputs, self._arrays(), temperature=1.0)
         return out["drift"], out.get("angular_drift")
+
+    # Batches (libMobility's Nbatch x NperBatch): independent groups of particles that do
+    # not see each other, each run through the same program.
+    def _batched(self, one, f=None, t=None):
+        nbatch = self._batches[0]
+        if nbatch <= 1:
+            return one() if f is None and t is None else one(f, t)
+        x = self._positions
+        per = len(x) // nbatch
+        us, ws = [], []
+        try:
+            for b in range(nbatch):
+                rows = slice(b * per, (b + 1) * per)
+                self._positions = x[rows]
+                fb = None if f is None else f[rows]
+                tb = None if t is None else t[rows]
+                u, w = one() if f is None and t is None else one(fb, tb)
+                us.append(u)
+                ws.append(w)
+        finally:
+            self._positions = x
+        w = None if ws[0] is None else np.concatenate(ws)
+        return np.concatenate(us), w
+
+    def _mdot(self, f, t):
+        return self._batched(super()._mdot, f, t if t is not None else np.zeros_like(f) if self.includeAngular else None)
+
+    def _noise(self):
+        return self._batched(super()._noise)
 
 
 class PSE(_GraphSolver):
@@ -353,6 +464,8 @@ class PSE(_GraphSolver):
 
     def _setup(self):
         p = self._parameters
+        if self._seed_given:
+            raise _error("[Mobility] PSE does not take a seed (as in libMobility): leave it at None")
         for name in ("psi", "Lx", "Ly", "Lz"):
             if name not in p:
                 raise _error(f"[Mobility] PSE needs the parameter {name}")
