@@ -29,3 +29,15 @@ def test_mpcd_example_gives_a_flow_profile():
     # Flow along the force, fastest in the middle, slowest at the plates.
     assert u[10] > 0 and u[10] > u[0] and u[10] > u[-1]
     assert np.all(np.isfinite(u))
+
+
+def test_speed_against_error_reads_the_benchmark_tables():
+    data = load("speed_vs_error").main(plot=None)
+    fcm = data["FCM (Gaussian)"]
+    poisson = data["Poisson (fields and potentials)"]
+    assert len(fcm) >= 3 and len(poisson) >= 3
+    # Every measured error is within its tolerance, and tighter costs more.
+    for points in (fcm, poisson):
+        assert all(err <= tol for tol, _, err in points)
+        ordered = sorted(points)
+        assert ordered[0][1] >= ordered[-1][1]
