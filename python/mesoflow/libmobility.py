@@ -320,6 +320,16 @@ class _GraphSolver(_Solver):
     def _setup(self):
         pass
 
+    def _periodic_params(self):
+        """The params of the periodic graphs (fcm.json, pse.json) from libMobility's."""
+        p = self._parameters
+        return {
+            "viscosity": self.viscosity,
+            "radius": self.hydrodynamicRadius,
+            "box": [float(p["Lx"]), float(p["Ly"]), float(p["Lz"])],
+            "tolerance": min(max(self.tolerance, 1e-6), 0.1),
+        }
+
     def _arrays(self, f=None, t=None):
         arrays = {"positions": self._positions}
         arrays["forces"] = f if f is not None else np.zeros_like(self._positions)
@@ -473,14 +483,7 @@ class PSE(_GraphSolver):
             raise _error("[Mobility] mesoflow's PSE takes no shear strain (shearStrain must be 0)")
 
     def _graph_params(self):
-        p = self._parameters
-        return {
-            "viscosity": self.viscosity,
-            "radius": self.hydrodynamicRadius,
-            "box": [float(p["Lx"]), float(p["Ly"]), float(p["Lz"])],
-            "split": float(p["psi"]),
-            "tolerance": min(max(self.tolerance, 1e-6), 0.1),
-        }
+        return dict(self._periodic_params(), split=float(self._parameters["psi"]))
 
 
 class FCM(_GraphSolver):
@@ -499,11 +502,4 @@ class FCM(_GraphSolver):
                 raise _error(f"[Mobility] FCM needs the parameter {name}")
 
     def _graph_params(self):
-        p = self._parameters
-        return {
-            "viscosity": self.viscosity,
-            "radius": self.hydrodynamicRadius,
-            "box": [float(p["Lx"]), float(p["Ly"]), float(p["Lz"])],
-            "tolerance": min(max(self.tolerance, 1e-6), 0.1),
-            "rotation": self.includeAngular,
-        }
+        return dict(self._periodic_params(), rotation=self.includeAngular)
