@@ -17,6 +17,7 @@ Solvers and the graphs behind them:
   ``wallHeight``), every pair.
 - ``PSE`` ("periodic" x3): ``pse.json``, ``psi`` the Ewald split.
 - ``FCM`` ("periodic" x3, not in libMobility): ``fcm.json``.
+- ``DPStokes``: not yet; constructing it raises a RuntimeError saying so.
 
 Where mesoflow differs from libMobility: ``precision`` is always "float" (the GPU
 computes in f32; arrays of any float dtype are taken and float32 is returned);
@@ -33,7 +34,7 @@ import numpy as np
 
 from . import _mesoflow
 
-__all__ = ["SelfMobility", "NBody", "PSE", "FCM"]
+__all__ = ["SelfMobility", "NBody", "PSE", "FCM", "DPStokes"]
 
 _PERIODICITIES = ("open", "unspecified", "single_wall", "two_walls", "periodic")
 
@@ -503,3 +504,15 @@ class FCM(_GraphSolver):
 
     def _graph_params(self):
         return dict(self._periodic_params(), rotation=self.includeAngular)
+
+
+class DPStokes:
+    """Not in mesoflow yet (the doubly periodic Stokes graph is still to come): the name
+    exists so that scripts importing it load, and constructing it says why it fails."""
+
+    precision = "float"
+
+    def __init__(self, *periodicity):
+        raise RuntimeError(
+            "[Mobility] DPStokes is not available in mesoflow yet: graphs/dpstokes.json does not exist"
+        )

@@ -219,3 +219,8 @@ def test_outputs_come_back_as_the_positions_came():
     u, w = s.Mdot(torch.rand(5, 3), torch.rand(5, 3))
     assert type(u) is type(x) and type(w) is type(x)
     assert type(s.LangevinVelocities(1.0, 1.0)[0]) is type(x)
+
+
+def test_dpstokes_is_named_but_not_there_yet():
+    with pytest.raises(RuntimeError, match="DPStokes is not available"):
+        lm.DPStokes("periodic", "periodic", "single_wall")
