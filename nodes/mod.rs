@@ -2,6 +2,7 @@
 
 pub mod bin_sort;
 pub mod cells;
+pub mod chebyshev;
 pub mod fcm;
 pub mod fft;
 pub mod lanczos;
@@ -33,6 +34,7 @@ pub fn registry() -> Registry {
 pub fn register_all(r: &mut Registry) {
     planners::register(r);
     bin_sort::register(r);
+    chebyshev::register(r);
     fft::register(r);
     pointwise::register(r);
     cells::register(r);

@@ -7,6 +7,7 @@
 
 mod bin_sort;
 mod cells;
+mod chebyshev;
 mod cli;
 mod determinism;
 mod fcm;
