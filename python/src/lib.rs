@@ -327,6 +327,9 @@ struct Program {
     built: usize,
     /// Outputs left out when every output the inputs allow was asked for, with why.
     left_out: Vec<(String, String)>,
+    /// Inputs uploaded since the program was built (a recompile keeps the buffers' data
+    /// only for inputs given again).
+    given: std::collections::BTreeSet<String>,
 }
 
 impl Program {
@@ -345,6 +348,7 @@ impl Program {
             gpu,
             built: 0,
             left_out: Vec::new(),
+            given: Default::default(),
         };
         p.recompile()?;
         Ok(p)
@@ -354,6 +358,8 @@ impl Program {
     /// compiles, with the program's kernel cache.
     fn recompile(&mut self) -> PyResult<()> {
         self.compiled = None;
+        // New buffers: every input must be given again.
+        self.given.clear();
         let optional: Vec<&str> = self.input_types.keys().map(|s| s.as_str()).collect();
         let inputs = self.graph.assumed_input_types(&self.input_types, &optional);
         let opts = PlanOptions {
@@ -485,6 +491,30 @@ impl Program {
                 PyValueError::new_err(format!("input `{name}` is not one the program reads"))
             })?;
             upload.insert(name.clone(), host_array(name, v, ty)?);
+        }
+        self.given.extend(upload.keys().cloned());
+        // Every input the plan reads must have been given (once is enough: the buffers
+        // keep it), or the run would read zeros.
+        if let Some(c) = &self.compiled {
+            let missing: Vec<&str> = c
+                ._plan
+                .inputs
+                .iter()
+                .map(|(i, _)| self.graph.inputs[*i].name.as_str())
+                .filter(|name| !self.given.contains(*name))
+                .collect();
+            if !missing.is_empty() {
+                return Err(PyValueError::new_err(format!(
+                    "input{} {} never given: pass {} to run()",
+                    if missing.len() == 1 { "" } else { "s" },
+                    missing
+                        .iter()
+                        .map(|m| format!("`{m}`"))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    if missing.len() == 1 { "it" } else { "them" }
+                )));
+            }
         }
         let compiled = self.compiled()? as *mut Compiled;
         let exclusive = Exclusive(compiled);

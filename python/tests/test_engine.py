@@ -136,6 +136,9 @@ def test_refused_data_and_bad_arrays_raise():
         p.run(positions=np.zeros(7), forces=np.zeros((2, 3)))
     with pytest.raises(ValueError):
         p.run(steps=0)
+    fresh = g.compile(outputs=["velocities"], positions=(2, 3), forces=(2, 3))
+    with pytest.raises(ValueError, match="`forces` never given"):
+        fresh.run(positions=[[0, 0, 2.0], [1, 0, 3.0]])
 
 
 def test_every_output_the_inputs_allow_and_the_plan_and_profile():
