@@ -3,6 +3,7 @@
 pub mod bin_sort;
 pub mod cells;
 pub mod chebyshev;
+pub mod chebyshev_bvp;
 pub mod fcm;
 pub mod fft;
 pub mod lanczos;
@@ -35,6 +36,7 @@ pub fn register_all(r: &mut Registry) {
     planners::register(r);
     bin_sort::register(r);
     chebyshev::register(r);
+    chebyshev_bvp::register(r);
     fft::register(r);
     pointwise::register(r);
     cells::register(r);
