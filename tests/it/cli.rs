@@ -934,3 +934,53 @@ fn outputs_with_nan_or_infinity_from_finite_inputs_exit_3_and_are_written() {
         "{t}"
     );
 }
+
+/// The new physics graphs from the command line: poisson.json writes its outputs from NPY
+/// positions and (N, 1) charges; rpy_wall.json refuses a particle below the wall by row,
+/// exit 2, writing nothing.
+#[test]
+fn poisson_and_wall_graphs_run_from_the_command_line() {
+    let dir = crate::util::tmpdir("cli-physics");
+    let x = positions(&dir, "x.npy", vec![0.0, 0.0, 0.0, 2.0, 0.5, 0.0], 2);
+    let q = dir.join("q.npy");
+    mesoflow::npy::write(&q, &HostArray::f32(ValueType::Particles { n: 2, k: 1 }, vec![1.0, -1.0]))
+        .unwrap();
+    let energy = dir.join("energy.npy");
+    let o = mesoflow(&[
+        "run",
+        &root().join("graphs/poisson.json").display().to_string(),
+        "--set",
+        "box=[16,16,16]",
+        "--input",
+        &format!("positions={x}"),
+        "--input",
+        &format!("charges={}", q.display()),
+        "--output",
+        &format!("energy={}", energy.display()),
+        "--output",
+        "forces",
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(energy.is_file() && t.contains("forces"), "{t}");
+    let f = positions(&dir, "f.npy", vec![0.0; 6], 2);
+    let below = positions(&dir, "below.npy", vec![0.0, 0.0, 2.0, 1.0, 0.0, 0.5], 2);
+    let u = dir.join("u.npy");
+    fails_with(
+        &[
+            "run",
+            &root().join("graphs/rpy_wall.json").display().to_string(),
+            "--set",
+            "wall_height=1",
+            "--input",
+            &format!("positions={below}"),
+            "--input",
+            &format!("forces={f}"),
+            "--output",
+            &format!("velocities={}", u.display()),
+        ],
+        &["row 1", "below the wall"],
+    );
+    assert!(!u.exists(), "no output is written when the input is refused");
+    let _ = std::fs::remove_dir_all(&dir);
+}
