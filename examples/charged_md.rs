@@ -74,7 +74,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     .map(|(k, v)| (k.to_string(), v))
     .collect();
     let registry = mesoflow::nodes::registry();
-    let g = graph::load(&path, &registry, &LoadOptions { overrides, steps, seed: 1 })?;
+    let g = graph::load(
+        &path,
+        &registry,
+        &LoadOptions {
+            overrides,
+            steps,
+            seed: 1,
+        },
+    )?;
     let inputs: BTreeMap<String, HostArray> = [
         ("positions".to_string(), array(&x, 3)),
         ("velocities".to_string(), array(&v, 3)),
@@ -92,12 +100,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut program = Program::compile(&gpu, &g, &p, &mut KernelCache::default())?;
     program.upload(&inputs)?;
     let started = std::time::Instant::now();
-    program.run(&RunOptions { steps, profile: Profile::Off, progress: false })?;
+    program.run(&RunOptions {
+        steps,
+        profile: Profile::Off,
+        progress: false,
+    })?;
     let outputs: BTreeMap<String, HostArray> = program.read_outputs()?.into_iter().collect();
     let elapsed = started.elapsed();
     let e = outputs["energies"].to_ref().data;
     let kinetic0 = 0.5 * v.iter().map(|c| c * c).sum::<f64>();
-    let (lo, hi) = e.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &y| (a.min(y), b.max(y)));
+    let (lo, hi) = e
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &y| {
+            (a.min(y), b.max(y))
+        });
     println!(
         "{n} charged soft spheres (width 0.5, WCA sigma 1.2) in a periodic box of side {side}, {steps} steps of dt = {dt} on {} in {:.2} s",
         gpu.caps.summary(),
@@ -111,6 +127,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         hi - lo,
         (hi - lo) / kinetic0
     );
-    println!("kinetic energy after the run: {:.4}", outputs["kinetic_energy"].to_ref().data[0]);
+    println!(
+        "kinetic energy after the run: {:.4}",
+        outputs["kinetic_energy"].to_ref().data[0]
+    );
     Ok(())
 }

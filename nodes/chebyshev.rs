@@ -30,12 +30,16 @@ use crate::value::{PortType, RefArray, ValueType, half_dims};
 /// `plane` words of each level, `plane` apart.
 fn lines(t: &ValueType) -> Option<(u64, u64, u64)> {
     match *t {
-        ValueType::RealGrid { dims, comps } => {
-            Some((comps as u64, dims[2] as u64, dims[0] as u64 * dims[1] as u64))
-        }
-        ValueType::ComplexGrid { dims, comps } => {
-            Some((comps as u64, dims[2] as u64, 2 * dims[0] as u64 * dims[1] as u64))
-        }
+        ValueType::RealGrid { dims, comps } => Some((
+            comps as u64,
+            dims[2] as u64,
+            dims[0] as u64 * dims[1] as u64,
+        )),
+        ValueType::ComplexGrid { dims, comps } => Some((
+            comps as u64,
+            dims[2] as u64,
+            2 * dims[0] as u64 * dims[1] as u64,
+        )),
         ValueType::HalfComplexGrid { dims, comps } => {
             let h = half_dims(dims);
             Some((comps as u64, dims[2] as u64, 2 * h[0] as u64 * h[1] as u64))
@@ -46,9 +50,8 @@ fn lines(t: &ValueType) -> Option<(u64, u64, u64)> {
 
 /// The grid's z lines, refused with a reason for other values and fewer than 2 points.
 fn check_grid(t: &ValueType) -> Result<(u64, u64, u64), PortError> {
-    let (c, n, plane) = lines(t).ok_or_else(|| {
-        PortError::new("x", format!("expects a real or complex grid, got {t}"))
-    })?;
+    let (c, n, plane) = lines(t)
+        .ok_or_else(|| PortError::new("x", format!("expects a real or complex grid, got {t}")))?;
     if n < 2 {
         return Err(PortError::new(
             "x",
@@ -287,7 +290,11 @@ impl GpuKernels for Derivative {
         let kernel = cx.kernel(&KernelSpec::new(
             "chebyshev derivative",
             cx.shader("chebyshev/derivative.wgsl")?,
-            &[Binding::StorageRead, Binding::StorageReadWrite, Binding::Uniform],
+            &[
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
         ))?;
         let u = cx.uniform("chebyshev shape", bytemuck::bytes_of(&s));
         let lines = s.comps as u64 * s.plane as u64;

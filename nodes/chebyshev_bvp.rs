@@ -267,7 +267,11 @@ fn wave_numbers(dims: [u32; 3], lengths: [f64; 2]) -> Vec<f64> {
     let h = half_dims(dims);
     let mut k = Vec::with_capacity((h[0] * h[1]) as usize);
     for y in 0..h[1] {
-        let fy = if y <= dims[1] / 2 { y as f64 } else { y as f64 - dims[1] as f64 };
+        let fy = if y <= dims[1] / 2 {
+            y as f64
+        } else {
+            y as f64 - dims[1] as f64
+        };
         for x in 0..h[0] {
             let kx = 2.0 * PI * x as f64 / lengths[0];
             let ky = 2.0 * PI * fy / lengths[1];
@@ -351,7 +355,10 @@ impl Node for Bvp {
                 ),
             ));
         }
-        if let Some(ValueType::HalfComplexGrid { dims: bd, comps: bc }) = inputs[1]
+        if let Some(ValueType::HalfComplexGrid {
+            dims: bd,
+            comps: bc,
+        }) = inputs[1]
             && (bd[0] != dims[0] || bd[1] != dims[1] || bd[2] != 2 || bc != comps)
         {
             return Err(PortError::new(
@@ -479,7 +486,14 @@ impl GpuKernels for Bvp {
         let boundary = io.inputs[1].map(|b| b.buffer).unwrap_or(f.buffer);
         Ok(vec![cx.dispatch(
             &kernel,
-            &[f.buffer, boundary, io.outputs[0].buffer, &tables, &u, scratch],
+            &[
+                f.buffer,
+                boundary,
+                io.outputs[0].buffer,
+                &tables,
+                &u,
+                scratch,
+            ],
             cx.grid_1d(nk as u64 * comps as u64 * 2, WG_1D),
         )])
     }
@@ -498,14 +512,19 @@ mod tests {
     fn schur_solve_matches_the_dense_system() {
         for n in [2usize, 3, 5, 16, 33] {
             for kappa in [0.0, 0.3, 2.0, 40.0] {
-                let f: Vec<f64> = (0..n).map(|i| ((i * 7 + 3) % 11) as f64 / 5.0 - 1.0).collect();
+                let f: Vec<f64> = (0..n)
+                    .map(|i| ((i * 7 + 3) % 11) as f64 / 5.0 - 1.0)
+                    .collect();
                 let (alpha, beta) = (0.7, -1.3);
                 let dense = solve_reference(&f, kappa, alpha, beta);
                 let fac = factors(n, kappa);
                 let fast = solve(&fac, &f, kappa, alpha, beta);
                 let scale = dense.iter().fold(1e-30f64, |m, x| m.max(x.abs()));
                 for (a, b) in fast.iter().zip(&dense) {
-                    assert!((a - b).abs() < 1e-10 * scale, "n {n} kappa {kappa}: {a} vs {b}");
+                    assert!(
+                        (a - b).abs() < 1e-10 * scale,
+                        "n {n} kappa {kappa}: {a} vs {b}"
+                    );
                 }
             }
         }

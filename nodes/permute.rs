@@ -296,7 +296,11 @@ fn copy_columns(
     let kernel = cx.kernel(&KernelSpec::new(
         "columns",
         cx.shader("permute/columns.wgsl")?,
-        &[Binding::StorageRead, Binding::StorageReadWrite, Binding::Uniform],
+        &[
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+            Binding::Uniform,
+        ],
     ))?;
     let shape = cx.uniform(
         "columns shape",
@@ -311,10 +315,30 @@ fn columns_kind() -> NodeKind {
         "columns",
         "out = columns first .. first + count of x, row by row (N x count)",
     )
-    .input(PortSpec::new("x", PortType::Particles(None), "the rows (N x k)"))
-    .output(PortSpec::new("out", PortType::Particles(None), "the columns taken (N x count)"))
-    .param(ParamSpec::integer("first", Some(0.0), 0.0, 1024.0, "the first column taken"))
-    .param(ParamSpec::integer("count", None, 1.0, 1024.0, "how many columns"))
+    .input(PortSpec::new(
+        "x",
+        PortType::Particles(None),
+        "the rows (N x k)",
+    ))
+    .output(PortSpec::new(
+        "out",
+        PortType::Particles(None),
+        "the columns taken (N x count)",
+    ))
+    .param(ParamSpec::integer(
+        "first",
+        Some(0.0),
+        0.0,
+        1024.0,
+        "the first column taken",
+    ))
+    .param(ParamSpec::integer(
+        "count",
+        None,
+        1.0,
+        1024.0,
+        "how many columns",
+    ))
     .build(|p| {
         Ok(Box::new(Columns {
             first: p.number("first") as u32,
@@ -350,7 +374,10 @@ impl Node for Columns {
                 ),
             ));
         }
-        Ok(Signature::outputs(vec![ValueType::Particles { n, k: self.count }]))
+        Ok(Signature::outputs(vec![ValueType::Particles {
+            n,
+            k: self.count,
+        }]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -465,7 +492,10 @@ impl Node for Concat {
                 format!("has {ka} columns, more than `cols` {cols}"),
             ));
         }
-        Ok(Signature::outputs(vec![ValueType::Particles { n, k: cols }]))
+        Ok(Signature::outputs(vec![ValueType::Particles {
+            n,
+            k: cols,
+        }]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -503,12 +533,18 @@ impl GpuKernels for Concat {
         match io.inputs[1] {
             Some(b) => {
                 let (_, kb) = rows_of(b.ty);
-                dispatches.push(copy_columns(cx, a.buffer, out.buffer, n, ka, cols, 0, 0, ka)?);
-                dispatches.push(copy_columns(cx, b.buffer, out.buffer, n, kb, cols, 0, ka, kb)?);
+                dispatches.push(copy_columns(
+                    cx, a.buffer, out.buffer, n, ka, cols, 0, 0, ka,
+                )?);
+                dispatches.push(copy_columns(
+                    cx, b.buffer, out.buffer, n, kb, cols, 0, ka, kb,
+                )?);
             }
             None => {
                 dispatches.push(cx.fill(out.buffer, out.ty.words(), 0)?);
-                dispatches.push(copy_columns(cx, a.buffer, out.buffer, n, ka, cols, 0, 0, ka)?);
+                dispatches.push(copy_columns(
+                    cx, a.buffer, out.buffer, n, ka, cols, 0, 0, ka,
+                )?);
             }
         }
         Ok(dispatches)

@@ -178,7 +178,9 @@ static FUNCTIONS: &[HostFunction] = &[
             arity(a, 2)?;
             let width = positive(a, 0, "width")?;
             let split = nonnegative(a, 1, "split")?;
-            Ok(ParamValue::Number(crate::nodes::poisson::far_width(width, split)))
+            Ok(ParamValue::Number(crate::nodes::poisson::far_width(
+                width, split,
+            )))
         },
     },
     HostFunction {
@@ -190,7 +192,9 @@ static FUNCTIONS: &[HostFunction] = &[
             let g = positive(a, 1, "far_width")?;
             let t = tolerance(a, 2)?;
             let grid = crate::nodes::poisson::grid(lengths, g, t)?;
-            Ok(ParamValue::Numbers(grid.into_iter().map(f64::from).collect()))
+            Ok(ParamValue::Numbers(
+                grid.into_iter().map(f64::from).collect(),
+            ))
         },
     },
     HostFunction {
@@ -202,7 +206,8 @@ static FUNCTIONS: &[HostFunction] = &[
             let grid = grid_cells(a, 1)?;
             let g = positive(a, 2, "far_width")?;
             let t = tolerance(a, 3)?;
-            crate::nodes::poisson::support(lengths, &grid, g, t).map(|p| ParamValue::Number(p as f64))
+            crate::nodes::poisson::support(lengths, &grid, g, t)
+                .map(|p| ParamValue::Number(p as f64))
         },
     },
     HostFunction {

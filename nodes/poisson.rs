@@ -8,7 +8,9 @@
 //! (nodes/pairs/poisson.rs) is the rest. `split = 0` means no split: g_t = a and no near
 //! field.
 
-use crate::nodes::fcm::plan::{NOMINAL_DENSITY, check_tolerance, full_rate_fft_size, next_fast_fft};
+use crate::nodes::fcm::plan::{
+    NOMINAL_DENSITY, check_tolerance, full_rate_fft_size, next_fast_fft,
+};
 use crate::nodes::pairs::poisson::{far_width as split_far_width, poisson_cutoff};
 
 /// The far field's Gaussian width: g_t, or a itself unsplit (split 0).
@@ -54,7 +56,12 @@ pub fn grid(lengths: &[f64], far_width: f64, tolerance: f64) -> Result<Vec<u32>,
 /// on the finest axis; at most the grid. UAMMD rounds 2 r / h to the nearest instead:
 /// measured against the Ewald sum (tests/it/poisson.rs), that 7 at 1e-3 (h = g) left a
 /// pair's field 1.15e-3 off at r = 4a, where 8 gives 1.0e-4.
-pub fn support(lengths: &[f64], grid: &[u32], far_width: f64, tolerance: f64) -> Result<u32, String> {
+pub fn support(
+    lengths: &[f64],
+    grid: &[u32],
+    far_width: f64,
+    tolerance: f64,
+) -> Result<u32, String> {
     check_tolerance(tolerance)?;
     let h = lengths
         .iter()
@@ -119,11 +126,19 @@ fn cost(width: f64, split: f64, tolerance: f64, lengths: &[f64]) -> Option<f64> 
     let volume: f64 = lengths.iter().product();
     let a3 = width.powi(3);
     let cells: f64 = grid.iter().map(|&n| n as f64).product();
-    let slow = if grid.iter().all(|&n| full_rate_fft_size(n)) { 1.0 } else { 1.5 };
+    let slow = if grid.iter().all(|&n| full_rate_fft_size(n)) {
+        1.0
+    } else {
+        1.5
+    };
     let density = NOMINAL_DENSITY / a3;
     let far = 78.0 * slow * cells * a3 / volume + 16.0 * NOMINAL_DENSITY * (p as f64).powi(3);
     let list = cells_volume(lengths, rc);
-    let near = if rc > 0.0 { 2.0 * NOMINAL_DENSITY * density * list } else { 0.0 };
+    let near = if rc > 0.0 {
+        2.0 * NOMINAL_DENSITY * density * list
+    } else {
+        0.0
+    };
     Some(far + near)
 }
 
@@ -254,7 +269,13 @@ mod tests {
     #[test]
     fn grid_follows_uammd_rule() {
         // h / g_t = 1.1, 1.0, 0.9, 0.8, 0.7 at 1e-2 .. 1e-6 (digest 13.3 #26).
-        for (tol, ratio) in [(1e-2, 1.1), (1e-3, 1.0), (1e-4, 0.9), (1e-5, 0.8), (1e-6, 0.7)] {
+        for (tol, ratio) in [
+            (1e-2, 1.1),
+            (1e-3, 1.0),
+            (1e-4, 0.9),
+            (1e-5, 0.8),
+            (1e-6, 0.7),
+        ] {
             assert!((cell_over_width(tol) - ratio).abs() < 1e-12, "{tol}");
         }
         // L = 128, g = 1 at 1e-3: 128 cells (a full-rate size); at least 32 cells.

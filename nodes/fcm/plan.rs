@@ -721,7 +721,10 @@ mod tests {
         assert!(!full_rate_fft_size(441) && !full_rate_fft_size(432) && !full_rate_fft_size(162));
         for n in 1..=1024 {
             let m = next_fast_fft(n);
-            assert!(m >= n && full_rate_fft_size(m) && !m.is_multiple_of(9), "{n} -> {m}");
+            assert!(
+                m >= n && full_rate_fft_size(m) && !m.is_multiple_of(9),
+                "{n} -> {m}"
+            );
         }
     }
 

@@ -152,16 +152,7 @@ pub fn damping(h: f64, a: f64) -> f64 {
 /// The velocity and angular velocity of sphere i (at xi) from the force fj and torque tj
 /// on sphere j (at xj), or from its own (`same`: i is j), above the wall z = `wall`.
 #[allow(clippy::too_many_arguments)]
-pub fn blake(
-    xi: V3,
-    xj: V3,
-    fj: V3,
-    tj: V3,
-    a: f64,
-    eta: f64,
-    wall: f64,
-    same: bool,
-) -> (V3, V3) {
+pub fn blake(xi: V3, xj: V3, fj: V3, tj: V3, a: f64, eta: f64, wall: f64, same: bool) -> (V3, V3) {
     let bij = damping(xi[2] - wall, a) * damping(xj[2] - wall, a);
     let hi = (xi[2] - wall).max(a);
     let hj = (xj[2] - wall).max(a);
@@ -210,7 +201,11 @@ pub fn blake(
         add(&mut u, apply(&uf(Some(rim), hj / a), fj), t0);
         add(&mut w, apply(&wt(Some(rim), hj / a), tj), r0);
         add(&mut w, apply(&wf(Some(rim), hj / a), fj), rt0);
-        add(&mut u, apply(&transpose(&wf(Some(rim_ji), hi / a)), tj), rt0);
+        add(
+            &mut u,
+            apply(&transpose(&wf(Some(rim_ji), hi / a)), tj),
+            rt0,
+        );
     }
     (u.map(|x| bij * x), w.map(|x| bij * x))
 }
@@ -256,10 +251,18 @@ mod tests {
             let s = 1.0 / h;
             let (u, _) = blake(x, x, [1.0, 0.0, 0.0], [0.0; 3], a, eta, 2.0, true);
             let par = 1.0 - 9.0 / 16.0 * s + s.powi(3) / 8.0 - s.powi(5) / 16.0;
-            assert!((u[0] / t0 - par).abs() < 1e-13, "h {h}: {} vs {par}", u[0] / t0);
+            assert!(
+                (u[0] / t0 - par).abs() < 1e-13,
+                "h {h}: {} vs {par}",
+                u[0] / t0
+            );
             let (u, _) = blake(x, x, [0.0, 0.0, 1.0], [0.0; 3], a, eta, 2.0, true);
             let perp = 1.0 - 9.0 / 8.0 * s + s.powi(3) / 2.0 - s.powi(5) / 8.0;
-            assert!((u[2] / t0 - perp).abs() < 1e-13, "h {h}: {} vs {perp}", u[2] / t0);
+            assert!(
+                (u[2] / t0 - perp).abs() < 1e-13,
+                "h {h}: {} vs {perp}",
+                u[2] / t0
+            );
         }
     }
 }

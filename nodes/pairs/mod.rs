@@ -174,8 +174,11 @@ impl PairKernel {
                 }
             }
             "poisson_near" => {
-                let (width, split, permittivity) =
-                    (p.number("width"), p.number("split"), p.number("permittivity"));
+                let (width, split, permittivity) = (
+                    p.number("width"),
+                    p.number("split"),
+                    p.number("permittivity"),
+                );
                 if split <= 0.0 {
                     return Err(
                         "kernel poisson_near needs `split` (the Ewald parameter xi) > 0".into(),
@@ -216,7 +219,9 @@ impl PairKernel {
     pub fn value_comps(&self) -> u32 {
         match self {
             PairKernel::PoissonNear { .. } => 1,
-            PairKernel::Rpy { rotation: true, .. } | PairKernel::RpyWall { rotation: true, .. } => 6,
+            PairKernel::Rpy { rotation: true, .. } | PairKernel::RpyWall { rotation: true, .. } => {
+                6
+            }
             _ => 3,
         }
     }
@@ -237,7 +242,9 @@ impl PairKernel {
             PairKernel::PoissonNear { outputs, .. } | PairKernel::Lj { outputs, .. } => {
                 [1, 3, 4][*outputs]
             }
-            PairKernel::Rpy { rotation: true, .. } | PairKernel::RpyWall { rotation: true, .. } => 6,
+            PairKernel::Rpy { rotation: true, .. } | PairKernel::RpyWall { rotation: true, .. } => {
+                6
+            }
             _ => 3,
         }
     }
@@ -497,7 +504,11 @@ impl PairKernel {
                 rotation,
             } => format!(
                 "RPY mobility{}, radius {radius}, viscosity {viscosity}",
-                if *rotation { " (forces and torques)" } else { "" }
+                if *rotation {
+                    " (forces and torques)"
+                } else {
+                    ""
+                }
             ),
             PairKernel::RpyWall {
                 radius,
@@ -506,7 +517,11 @@ impl PairKernel {
                 rotation,
             } => format!(
                 "Rotne-Prager-Blake mobility{} above the wall z = {wall_height}, radius {radius}, viscosity {viscosity}",
-                if *rotation { " (forces and torques)" } else { "" }
+                if *rotation {
+                    " (forces and torques)"
+                } else {
+                    ""
+                }
             ),
             PairKernel::RpyNear {
                 radius,

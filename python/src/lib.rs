@@ -52,7 +52,9 @@ fn device(name: Option<&str>) -> PyResult<&'static GpuContext> {
     }
     let wanted = match name {
         Some(n) => Some(n.to_string()),
-        None => std::env::var("MESOFLOW_ADAPTER").ok().filter(|s| !s.is_empty()),
+        None => std::env::var("MESOFLOW_ADAPTER")
+            .ok()
+            .filter(|s| !s.is_empty()),
     };
     let gpu = GpuContext::open_named(wanted.as_deref())
         .map_err(|e| RunError::new_err(format!("no GPU device: {e}")))?;
@@ -83,9 +85,18 @@ fn param_value(name: &str, v: &Bound<'_, PyAny>) -> PyResult<ParamValue> {
 
 fn to_python(py: Python<'_>, v: &ParamValue) -> Py<PyAny> {
     let object: PyResult<Py<PyAny>> = match v {
-        ParamValue::Number(x) => Ok(x.into_pyobject(py).map(|o| o.into_any().unbind()).unwrap_or_else(|e| match e {})),
-        ParamValue::Bool(b) => Ok(b.into_pyobject(py).map(|o| o.to_owned().into_any().unbind()).unwrap_or_else(|e| match e {})),
-        ParamValue::Text(s) => Ok(s.into_pyobject(py).map(|o| o.into_any().unbind()).unwrap_or_else(|e| match e {})),
+        ParamValue::Number(x) => Ok(x
+            .into_pyobject(py)
+            .map(|o| o.into_any().unbind())
+            .unwrap_or_else(|e| match e {})),
+        ParamValue::Bool(b) => Ok(b
+            .into_pyobject(py)
+            .map(|o| o.to_owned().into_any().unbind())
+            .unwrap_or_else(|e| match e {})),
+        ParamValue::Text(s) => Ok(s
+            .into_pyobject(py)
+            .map(|o| o.into_any().unbind())
+            .unwrap_or_else(|e| match e {})),
         ParamValue::Numbers(xs) => PyList::new(py, xs).map(|o| o.into_any().unbind()),
     };
     object.unwrap_or_else(|_| py.None())
@@ -271,9 +282,8 @@ fn input_type(g: &EngineGraph, name: &str, shape: &[usize]) -> PyResult<ValueTyp
         ))
     })?;
     let count: usize = shape.iter().product();
-    let too_big = |what: &str| {
-        GraphError::new_err(format!("input `{name}`: {what} {shape:?} is too large"))
-    };
+    let too_big =
+        |what: &str| GraphError::new_err(format!("input `{name}`: {what} {shape:?} is too large"));
     match &decl.shape {
         InputShape::Particles { cols, .. } => {
             let (n, k) = match shape {
@@ -384,12 +394,8 @@ impl Program {
         // SAFETY: the program borrows `*graph` (behind an Arc kept in `Compiled`) and
         // `*plan` (a Box kept in `Compiled`, never moved out), and the device, which lives
         // for the process; `Compiled` drops the program before both.
-        let (g_ref, p_ref): (&'static EngineGraph, &'static Plan) = unsafe {
-            (
-                &*(Arc::as_ptr(&graph)),
-                &*(plan.as_ref() as *const Plan),
-            )
-        };
+        let (g_ref, p_ref): (&'static EngineGraph, &'static Plan) =
+            unsafe { (&*(Arc::as_ptr(&graph)), &*(plan.as_ref() as *const Plan)) };
         let program =
             EngineProgram::compile(self.gpu, g_ref, p_ref, &mut self.cache).map_err(run_error)?;
         self.built += program.kernels_built;

@@ -71,12 +71,7 @@ fn inputs(x: &[[f64; 3]], q: &[f64]) -> BTreeMap<String, HostArray> {
     .collect()
 }
 
-fn sets_for(
-    bench: &PoissonBench,
-    l: f64,
-    tolerance: f64,
-    split: f64,
-) -> Vec<(&str, ParamValue)> {
+fn sets_for(bench: &PoissonBench, l: f64, tolerance: f64, split: f64) -> Vec<(&str, ParamValue)> {
     let mut sets = vec![
         ("box", ParamValue::Numbers(vec![l; 3])),
         ("tolerance", ParamValue::Number(tolerance)),
@@ -95,7 +90,11 @@ fn accuracy(
     split: f64,
 ) -> Result<(f64, f64), BenchError> {
     let l = bench.error_box;
-    let g = load(&bench.graph, &sets_for(bench, l, tolerance, split), registry)?;
+    let g = load(
+        &bench.graph,
+        &sets_for(bench, l, tolerance, split),
+        registry,
+    )?;
     let mut rng = Rng(0x5851_F42D_4C95_7F2D);
     let (x, q) = system(&mut rng, 32, l);
     let run = time_loaded(
@@ -130,13 +129,7 @@ fn number(g: &Graph, name: &str) -> f64 {
     }
 }
 
-fn timed(
-    gpu: &GpuContext,
-    g: &Graph,
-    l: f64,
-    n: u32,
-    reps: u64,
-) -> Result<TimedRun, BenchError> {
+fn timed(gpu: &GpuContext, g: &Graph, l: f64, n: u32, reps: u64) -> Result<TimedRun, BenchError> {
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ n as u64);
     let (x, q) = system(&mut rng, n as usize, l);
     time_loaded(
@@ -201,8 +194,11 @@ pub fn run(bench: &PoissonBench) -> Result<(), BenchError> {
         for &tolerance in &bench.tolerances {
             let mut best: Option<(f64, Graph, TimedRun)> = None;
             for &split in &bench.splits {
-                let g = match load(&bench.graph, &sets_for(bench, l, tolerance, split), &registry)
-                {
+                let g = match load(
+                    &bench.graph,
+                    &sets_for(bench, l, tolerance, split),
+                    &registry,
+                ) {
                     Ok(g) => g,
                     Err(_) => continue,
                 };
@@ -221,8 +217,8 @@ pub fn run(bench: &PoissonBench) -> Result<(), BenchError> {
                 outln!("{tolerance:>7.0e} {l:>6} {n:>8}  no split plans");
                 continue;
             };
-            let (phi_err, e_err) = accuracy(&gpu, bench, &registry, tolerance, split)
-                .unwrap_or((f64::NAN, f64::NAN));
+            let (phi_err, e_err) =
+                accuracy(&gpu, bench, &registry, tolerance, split).unwrap_or((f64::NAN, f64::NAN));
             let grid = number(&g, "grid");
             let mut same = fcm_sets.to_vec();
             same.push(("grid", ParamValue::Numbers(vec![grid; 3])));

@@ -504,7 +504,11 @@ impl<'a> Program<'a> {
 
     /// The outputs the program computes, in the plan's order.
     pub fn output_names(&self) -> Vec<String> {
-        self.plan.outputs.iter().map(|(name, _)| name.clone()).collect()
+        self.plan
+            .outputs
+            .iter()
+            .map(|(name, _)| name.clone())
+            .collect()
     }
 
     /// Number of dispatches recorded per step (the clock tick included).

@@ -115,10 +115,18 @@ mod tests {
     fn embedded_graphs_are_written_out_whole() {
         let dir = materialized().expect("a temporary folder");
         for (name, text) in embedded_files() {
-            assert_eq!(&std::fs::read_to_string(dir.join(name)).unwrap(), text, "{name}");
+            assert_eq!(
+                &std::fs::read_to_string(dir.join(name)).unwrap(),
+                text,
+                "{name}"
+            );
         }
         assert!(dir.join("lib/cell_list.json").is_file());
-        assert!(!embedded_files().iter().any(|(n, _)| n.starts_with("fixtures/")));
+        assert!(
+            !embedded_files()
+                .iter()
+                .any(|(n, _)| n.starts_with("fixtures/"))
+        );
         assert_eq!(materialized().unwrap(), dir);
         assert!(names().contains(&"fcm".to_string()));
     }
@@ -128,7 +136,10 @@ mod tests {
     fn names_and_paths_are_found() {
         let fcm = find("fcm").expect("fcm by name");
         assert!(fcm.ends_with("fcm.json"));
-        assert_eq!(find("examples/colloids.json").unwrap().file_name().unwrap(), "colloids.json");
+        assert_eq!(
+            find("examples/colloids.json").unwrap().file_name().unwrap(),
+            "colloids.json"
+        );
         assert!(find("no_such_graph").is_none());
         let here = concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/pse.json");
         assert_eq!(find(here).unwrap(), std::path::PathBuf::from(here));

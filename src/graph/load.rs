@@ -860,7 +860,10 @@ impl<'r> Loader<'r> {
                     .iter()
                     .find(|(prefix, _)| scope.starts_with(prefix.as_str()))
                     .map(|(prefix, why)| {
-                        format!("its subgraph node `{}` is disabled: {why}", prefix.trim_end_matches('/'))
+                        format!(
+                            "its subgraph node `{}` is disabled: {why}",
+                            prefix.trim_end_matches('/')
+                        )
                     })
             });
             match (&decl.kind, &decl.graph) {

@@ -24,11 +24,26 @@ fn chebyshev_nodes_match_their_references() {
     }
     let mut rng = Rng::new(41);
     for ty in [
-        ValueType::RealGrid { dims: [5, 3, 17], comps: 2 },
-        ValueType::ComplexGrid { dims: [4, 4, 9], comps: 1 },
-        ValueType::HalfComplexGrid { dims: [8, 6, 33], comps: 3 },
-        ValueType::RealGrid { dims: [2, 2, 2], comps: 1 },
-        ValueType::RealGrid { dims: [1, 1, 65], comps: 1 },
+        ValueType::RealGrid {
+            dims: [5, 3, 17],
+            comps: 2,
+        },
+        ValueType::ComplexGrid {
+            dims: [4, 4, 9],
+            comps: 1,
+        },
+        ValueType::HalfComplexGrid {
+            dims: [8, 6, 33],
+            comps: 3,
+        },
+        ValueType::RealGrid {
+            dims: [2, 2, 2],
+            comps: 1,
+        },
+        ValueType::RealGrid {
+            dims: [1, 1, 65],
+            comps: 1,
+        },
     ] {
         let x = rng.array(ty, -1.0, 1.0);
         for (kind, params, tol) in [
@@ -58,15 +73,27 @@ fn chebyshev_polynomials_transform_to_unit_vectors() {
         }
     }
     let x = grid([n as u32, 1, n as u32], 1, &values);
-    let (c, _) = run_out("chebyshev", r#"{"direction": "forward"}"#, &[("x", x.clone())]);
+    let (c, _) = run_out(
+        "chebyshev",
+        r#"{"direction": "forward"}"#,
+        &[("x", x.clone())],
+    );
     let c = c.data.to_f64();
     for m in 0..n {
         for k in 0..n {
             let want = if k == m { 1.0 } else { 0.0 };
-            assert!((c[k * n + m] - want).abs() < 2e-6, "T_{m}: c_{k} = {}", c[k * n + m]);
+            assert!(
+                (c[k * n + m] - want).abs() < 2e-6,
+                "T_{m}: c_{k} = {}",
+                c[k * n + m]
+            );
         }
     }
-    let (back, _) = run_out("chebyshev", r#"{"direction": "inverse"}"#, &[("x", grid([n as u32, 1, n as u32], 1, &c))]);
+    let (back, _) = run_out(
+        "chebyshev",
+        r#"{"direction": "inverse"}"#,
+        &[("x", grid([n as u32, 1, n as u32], 1, &c))],
+    );
     for (a, b) in back.data.to_f64().iter().zip(&values) {
         assert!((a - b).abs() < 4e-6, "round trip {a} vs {b}");
     }
@@ -117,7 +144,13 @@ fn chebyshev_nodes_refuse_what_they_cannot_transform() {
     let e = crate::util::validation_error(
         "chebyshev_derivative",
         "{}",
-        &[("x", ValueType::RealGrid { dims: [4, 4, 1], comps: 1 })],
+        &[(
+            "x",
+            ValueType::RealGrid {
+                dims: [4, 4, 1],
+                comps: 1,
+            },
+        )],
     );
     assert!(e.contains("at least 2"), "{e}");
 }
@@ -130,16 +163,30 @@ fn the_bvp_node_matches_its_dense_reference() {
         return;
     }
     let mut rng = Rng::new(43);
-    for (dims, comps, zmax) in [([8u32, 6, 17], 1u32, 3.0), ([4, 4, 9], 2, 1.0), ([6, 5, 33], 1, 10.0)] {
+    for (dims, comps, zmax) in [
+        ([8u32, 6, 17], 1u32, 3.0),
+        ([4, 4, 9], 2, 1.0),
+        ([6, 5, 33], 1, 10.0),
+    ] {
         let f = rng.array(ValueType::HalfComplexGrid { dims, comps }, -1.0, 1.0);
         let params = format!(r#"{{"box": [12, 9], "zmin": -2, "zmax": {zmax}}}"#);
         let (got, want) = run_out("chebyshev_bvp", &params, &[("f", f.clone())]);
         let (err, at) = rel_max_err(&got, &want);
         assert!(err <= 2e-5, "bvp {dims:?} x {comps}: {err:e} at {at}");
-        let b = rng.array(ValueType::HalfComplexGrid { dims: [dims[0], dims[1], 2], comps }, -1.0, 1.0);
+        let b = rng.array(
+            ValueType::HalfComplexGrid {
+                dims: [dims[0], dims[1], 2],
+                comps,
+            },
+            -1.0,
+            1.0,
+        );
         let (got, want) = run_out("chebyshev_bvp", &params, &[("f", f), ("boundary", b)]);
         let (err, at) = rel_max_err(&got, &want);
-        assert!(err <= 2e-5, "bvp with boundary {dims:?} x {comps}: {err:e} at {at}");
+        assert!(
+            err <= 2e-5,
+            "bvp with boundary {dims:?} x {comps}: {err:e} at {at}"
+        );
     }
 }
 
@@ -158,7 +205,11 @@ fn the_bvp_node_recovers_a_manufactured_solution() {
     let nk = (hx * dims[1]) as usize;
     let ks: Vec<f64> = (0..dims[1])
         .flat_map(|y| {
-            let fy = if y <= dims[1] / 2 { y as f64 } else { y as f64 - dims[1] as f64 };
+            let fy = if y <= dims[1] / 2 {
+                y as f64
+            } else {
+                y as f64 - dims[1] as f64
+            };
             (0..hx).map(move |x| {
                 let kx = 2.0 * PI * x as f64 / lx;
                 let ky = 2.0 * PI * fy / ly;
@@ -193,19 +244,31 @@ fn the_bvp_node_recovers_a_manufactured_solution() {
             v.iter().map(|&x| x as f32).collect(),
         )
     };
-    let (fc, _) = run_out("chebyshev", r#"{"direction": "forward"}"#, &[("x", spectrum(dims, &fv))]);
+    let (fc, _) = run_out(
+        "chebyshev",
+        r#"{"direction": "forward"}"#,
+        &[("x", spectrum(dims, &fv))],
+    );
     let params = format!(r#"{{"box": [{lx}, {ly}], "zmin": {zmin}, "zmax": {zmax}}}"#);
     let (yc, _) = run_out(
         "chebyshev_bvp",
         &params,
-        &[("f", fc), ("boundary", spectrum([dims[0], dims[1], 2], &bv))],
+        &[
+            ("f", fc),
+            ("boundary", spectrum([dims[0], dims[1], 2], &bv)),
+        ],
     );
     let (values, _) = run_out("chebyshev", r#"{"direction": "inverse"}"#, &[("x", yc)]);
     let values = values.data.to_f64();
     for ki in 0..nk {
         for (j, &z) in zs.iter().enumerate() {
             let got = values[2 * (j * nk + ki)];
-            assert!((got - y(z)).abs() < 2e-4, "k {}: y({z}) = {got}, want {}", ks[ki], y(z));
+            assert!(
+                (got - y(z)).abs() < 2e-4,
+                "k {}: y({z}) = {got}, want {}",
+                ks[ki],
+                y(z)
+            );
             assert!(values[2 * (j * nk + ki) + 1].abs() < 1e-5);
         }
     }

@@ -101,7 +101,10 @@ fn graphs_are_found_by_name_from_any_folder() {
         .expect("run mesoflow");
     let t = text(&o);
     assert!(o.status.success(), "{t}");
-    assert!(t.contains("rpy_open: ok") && t.contains("examples/relax: ok"), "{t}");
+    assert!(
+        t.contains("rpy_open: ok") && t.contains("examples/relax: ok"),
+        "{t}"
+    );
     fails_with(&["validate", "no_such_graph"], &["no_such_graph"]);
 }
 
@@ -943,8 +946,11 @@ fn poisson_and_wall_graphs_run_from_the_command_line() {
     let dir = crate::util::tmpdir("cli-physics");
     let x = positions(&dir, "x.npy", vec![0.0, 0.0, 0.0, 2.0, 0.5, 0.0], 2);
     let q = dir.join("q.npy");
-    mesoflow::npy::write(&q, &HostArray::f32(ValueType::Particles { n: 2, k: 1 }, vec![1.0, -1.0]))
-        .unwrap();
+    mesoflow::npy::write(
+        &q,
+        &HostArray::f32(ValueType::Particles { n: 2, k: 1 }, vec![1.0, -1.0]),
+    )
+    .unwrap();
     let energy = dir.join("energy.npy");
     let o = mesoflow(&[
         "run",
@@ -981,6 +987,9 @@ fn poisson_and_wall_graphs_run_from_the_command_line() {
         ],
         &["row 1", "below the wall"],
     );
-    assert!(!u.exists(), "no output is written when the input is refused");
+    assert!(
+        !u.exists(),
+        "no output is written when the input is refused"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

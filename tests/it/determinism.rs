@@ -113,7 +113,12 @@ const CASES: &[Case] = &[
     },
     Case {
         file: "poisson.json",
-        sets: &[("box", "[8, 8, 8]"), ("width", "0.3"), ("split", "2"), ("grid", "[8, 8, 8]")],
+        sets: &[
+            ("box", "[8, 8, 8]"),
+            ("width", "0.3"),
+            ("split", "2"),
+            ("grid", "[8, 8, 8]"),
+        ],
         steps: 1,
         inputs: &[("positions", 48, 3), ("charges", 48, 1)],
         outputs: None,
@@ -127,7 +132,11 @@ const CASES: &[Case] = &[
     },
     Case {
         file: "rpy_wall.json",
-        sets: &[("temperature", "1"), ("rotation", "true"), ("wall_height", "-3")],
+        sets: &[
+            ("temperature", "1"),
+            ("rotation", "true"),
+            ("wall_height", "-3"),
+        ],
         steps: 1,
         inputs: &[("positions", 48, 3), ("forces", 48, 3), ("torques", 48, 3)],
         outputs: None,

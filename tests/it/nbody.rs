@@ -185,7 +185,10 @@ fn open_grand_rpy_matches_the_closed_forms() {
         return;
     }
     let a = 0.8;
-    let g = load("rpy_open.json", &[("rotation", "true".into()), ("radius", format!("{a}"))]);
+    let g = load(
+        "rpy_open.json",
+        &[("rotation", "true".into()), ("radius", format!("{a}"))],
+    );
     let mut rng = Rng::new(31);
     let x = cluster(&mut rng, 7, 0.0);
     let got = assemble(&g, &x);
@@ -225,9 +228,21 @@ fn wall_self_mobilities_are_swan_and_brady_s() {
         let s = 1.0 / hh.max(1.0);
         let damp = hh.min(1.0).powi(2);
         let want = [
-            (0, 0, t0 * (1.0 - 9.0 / 16.0 * s + s.powi(3) / 8.0 - s.powi(5) / 16.0)),
-            (1, 1, t0 * (1.0 - 9.0 / 16.0 * s + s.powi(3) / 8.0 - s.powi(5) / 16.0)),
-            (2, 2, t0 * (1.0 - 9.0 / 8.0 * s + s.powi(3) / 2.0 - s.powi(5) / 8.0)),
+            (
+                0,
+                0,
+                t0 * (1.0 - 9.0 / 16.0 * s + s.powi(3) / 8.0 - s.powi(5) / 16.0),
+            ),
+            (
+                1,
+                1,
+                t0 * (1.0 - 9.0 / 16.0 * s + s.powi(3) / 8.0 - s.powi(5) / 16.0),
+            ),
+            (
+                2,
+                2,
+                t0 * (1.0 - 9.0 / 8.0 * s + s.powi(3) / 2.0 - s.powi(5) / 8.0),
+            ),
             (3, 3, r0 * (1.0 - 5.0 / 16.0 * s.powi(3))),
             (4, 4, r0 * (1.0 - 5.0 / 16.0 * s.powi(3))),
             (5, 5, r0 * (1.0 - s.powi(3) / 8.0)),
@@ -348,13 +363,18 @@ fn wall_kernel_matches_its_f64_twin() {
     let (a, wall) = (1.0, 0.5);
     let g = load(
         "rpy_wall.json",
-        &[("rotation", "true".into()), ("wall_height", format!("{wall}"))],
+        &[
+            ("rotation", "true".into()),
+            ("wall_height", format!("{wall}")),
+        ],
     );
     let mut rng = Rng::new(17);
     let mut x = cluster(&mut rng, 6, wall + 0.4);
     x.push([x[0][0] + 0.3, x[0][1], x[0][2] + 0.2]);
     let got = assemble(&g, &x);
-    let want = grand_matrix(&x, |xi, xj, f, t, same| blake(xi, xj, f, t, a, 1.0, wall, same));
+    let want = grand_matrix(&x, |xi, xj, f, t, same| {
+        blake(xi, xj, f, t, a, 1.0, wall, same)
+    });
     let err = relative_max(&got, &want);
     assert!(err < 5e-6, "wall kernel against its twin: {err:e}");
 }
@@ -385,7 +405,11 @@ fn grand_mobilities_are_symmetric_and_positive_definite() {
                 asym = asym.max((v - m[j][i]).abs());
             }
         }
-        assert!(asym < 2e-6 * scale, "{name} from z = {low}: asymmetry {:e}", asym / scale);
+        assert!(
+            asym < 2e-6 * scale,
+            "{name} from z = {low}: asymmetry {:e}",
+            asym / scale
+        );
         let sym: Vec<Vec<f64>> = (0..m.len())
             .map(|i| (0..m.len()).map(|j| 0.5 * (m[i][j] + m[j][i])).collect())
             .collect();
@@ -457,7 +481,9 @@ fn noise_covariance_and_drift_match_the_mobility() {
         }
         v
     };
-    let m = grand_matrix(&x, |xi, xj, f, t, same| blake(xi, xj, f, t, a, 1.0, 0.0, same));
+    let m = grand_matrix(&x, |xi, xj, f, t, same| {
+        blake(xi, xj, f, t, a, 1.0, 0.0, same)
+    });
     let mut cov = vec![vec![0.0; 6 * n]; 6 * n];
     for s in 0..steps as usize {
         let v = sample(s);
@@ -500,7 +526,9 @@ fn noise_covariance_and_drift_match_the_mobility() {
     }
     for i in 0..n {
         for c in 0..3 {
-            let samples: Vec<f64> = (0..steps as usize).map(|s| drift[(s * n + i) * 3 + c]).collect();
+            let samples: Vec<f64> = (0..steps as usize)
+                .map(|s| drift[(s * n + i) * 3 + c])
+                .collect();
             let mean = samples.iter().sum::<f64>() / steps as f64;
             let var = samples.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / steps as f64;
             let se = (var / steps as f64).sqrt();

@@ -114,11 +114,19 @@ fn pointwise_kinds_match_their_references() {
 #[test]
 fn columns_and_concat_match_their_references() {
     let cases: &[Case] = &[
-        ("columns", r#"{"first": 3, "count": 3}"#, &[("x", P(301, 6))]),
+        (
+            "columns",
+            r#"{"first": 3, "count": 3}"#,
+            &[("x", P(301, 6))],
+        ),
         ("columns", r#"{"first": 1, "count": 1}"#, &[("x", P(5, 4))]),
         ("columns", r#"{"first": 0, "count": 3}"#, &[("x", P(7, 3))]),
         ("concat", "{}", &[("a", P(301, 3)), ("b", P(301, 3))]),
-        ("concat", r#"{"cols": 4}"#, &[("a", P(9, 1)), ("b", P(9, 3))]),
+        (
+            "concat",
+            r#"{"cols": 4}"#,
+            &[("a", P(9, 1)), ("b", P(9, 3))],
+        ),
         ("concat", r#"{"cols": 6}"#, &[("a", P(33, 3))]),
         ("concat", "{}", &[("a", P(33, 2))]),
     ];

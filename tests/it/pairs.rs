@@ -621,16 +621,27 @@ fn lennard_jones_energies_add_up_to_the_total() {
         let scale_f = force.iter().flatten().fold(1e-30f64, |m, x| m.max(x.abs()));
         for i in 0..n {
             let u = got[cols * i];
-            assert!((u - energy[i]).abs() <= 1e-5 * scale_u, "{outputs}: energy {i}: {u} vs {}", energy[i]);
+            assert!(
+                (u - energy[i]).abs() <= 1e-5 * scale_u,
+                "{outputs}: energy {i}: {u} vs {}",
+                energy[i]
+            );
             if cols == 4 {
                 for a in 0..3 {
                     let f = got[cols * i + 1 + a];
-                    assert!((f - force[i][a]).abs() <= 1e-5 * scale_f, "force {i}.{a}: {f} vs {}", force[i][a]);
+                    assert!(
+                        (f - force[i][a]).abs() <= 1e-5 * scale_f,
+                        "force {i}.{a}: {f} vs {}",
+                        force[i][a]
+                    );
                 }
             }
         }
         let total: f64 = got.iter().step_by(cols).sum();
         let want: f64 = energy.iter().sum();
-        assert!((total - want).abs() <= 1e-5 * scale_u * n as f64, "total {total} vs {want}");
+        assert!(
+            (total - want).abs() <= 1e-5 * scale_u * n as f64,
+            "total {total} vs {want}"
+        );
     }
 }

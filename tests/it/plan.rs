@@ -605,7 +605,11 @@ fn disabled_nodes_are_left_out_with_the_reason() {
     };
     let path = write_graph(&dir, "g.json", &graph(""));
     let (g, p) = plan_file(&path, Some(&["sum"]), false);
-    assert_eq!(node_ids(&g, &p), vec!["a".to_string()], "b left out, c read through");
+    assert_eq!(
+        node_ids(&g, &p),
+        vec!["a".to_string()],
+        "b left out, c read through"
+    );
     let g = load(&path);
     let err = plan::plan(
         &g,
@@ -623,10 +627,18 @@ fn disabled_nodes_are_left_out_with_the_reason() {
         "{err}"
     );
     // A true `enabled` keeps the node; a string is a load error naming it.
-    let on = write_graph(&dir, "on.json", &graph("").replace(r#""default": 0"#, r#""default": true"#));
+    let on = write_graph(
+        &dir,
+        "on.json",
+        &graph("").replace(r#""default": 0"#, r#""default": true"#),
+    );
     let (g, p) = plan_file(&on, Some(&["tripled"]), false);
     assert_eq!(node_ids(&g, &p), vec!["b".to_string()]);
-    let bad = write_graph(&dir, "bad.json", &graph("").replace(r#""default": 0"#, r#""default": "yes""#));
+    let bad = write_graph(
+        &dir,
+        "bad.json",
+        &graph("").replace(r#""default": 0"#, r#""default": "yes""#),
+    );
     let err = match mesoflow::graph::load(&bad, crate::util::registry(), &Default::default()) {
         Ok(_) => panic!("a string `enabled` loaded"),
         Err(e) => e.to_string(),

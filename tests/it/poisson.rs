@@ -12,7 +12,9 @@ use std::f64::consts::PI;
 use mesoflow::graph::Graph;
 use mesoflow::value::HostArray;
 
-use crate::util::{Rng, flat_particles, gpu, load_with, particles, plan_graph, run_cached, types_of};
+use crate::util::{
+    Rng, flat_particles, gpu, load_with, particles, plan_graph, run_cached, types_of,
+};
 
 /// Free-space potential of a unit Gaussian charge (standard deviation a) averaged over
 /// another's cloud, at distance r: erf(r / 2a) / (4 pi eps r), and its r-derivative.
@@ -20,7 +22,8 @@ fn pair_closed_form(r: f64, a: f64, eps: f64) -> (f64, f64) {
     let c = 2.0 * a;
     let e = libm::erf(r / c);
     let phi = e / (4.0 * PI * eps * r);
-    let dphi = (2.0 / (PI.sqrt() * c) * (-(r / c).powi(2)).exp() / r - e / (r * r)) / (4.0 * PI * eps);
+    let dphi =
+        (2.0 / (PI.sqrt() * c) * (-(r / c).powi(2)).exp() / r - e / (r * r)) / (4.0 * PI * eps);
     (phi, dphi)
 }
 
@@ -134,7 +137,13 @@ fn ewald(pos: &[[f64; 3]], q: &[f64], a: f64, eps: f64, l: [f64; 3]) -> Ewald {
 /// neutral pair, -p^2 / (6 eps V) in the energy.
 #[test]
 fn the_reference_ewald_sum_matches_the_closed_form() {
-    for (r, want) in [(0.5, 0.04397871), (1.0, 0.04142006), (2.0, 0.03353000), (4.0, 0.01980131), (8.0, 0.00994718)] {
+    for (r, want) in [
+        (0.5, 0.04397871),
+        (1.0, 0.04142006),
+        (2.0, 0.03353000),
+        (4.0, 0.01980131),
+        (8.0, 0.00994718),
+    ] {
         let (phi, _) = pair_closed_form(r, 1.0, 1.0);
         assert!((phi - want).abs() < 1e-8, "U({r}) = {phi}, want {want}");
     }
@@ -147,7 +156,10 @@ fn the_reference_ewald_sum_matches_the_closed_form() {
         let got = e.energy - self_energy;
         // Past the dipole's term, the periodic images differ from the free pair by
         // O((r / L)^4) relative: 1.3e-5 at r = 4, L = 48.
-        assert!((got - want).abs() < 3e-5 * want.abs(), "r = {r}: {got} vs {want}");
+        assert!(
+            (got - want).abs() < 3e-5 * want.abs(),
+            "r = {r}: {got} vs {want}"
+        );
         // The field at the negative charge from the positive one: -dphi along +x, plus
         // the periodic dipole's uniform field M / (3 eps V), M = sum Q x = -r x^.
         let want_e = -dphi - r / (3.0 * l.powi(3));
@@ -155,10 +167,19 @@ fn the_reference_ewald_sum_matches_the_closed_form() {
         assert!(off < 1e-4, "{} vs {want_e}", e.fields[1][0]);
         // What is left is the images' O((r / L)^4) terms: doubling the box divides it by
         // at least 16 (a wrong dipole term would leave (r / L)^3: 8).
-        let far = ewald(&[[0.0; 3], [r, 0.0, 0.0]], &[1.0, -1.0], 1.0, 1.0, [2.0 * l; 3]);
+        let far = ewald(
+            &[[0.0; 3], [r, 0.0, 0.0]],
+            &[1.0, -1.0],
+            1.0,
+            1.0,
+            [2.0 * l; 3],
+        );
         let want_far = -dphi - r / (3.0 * (2.0 * l).powi(3));
         let off_far = (far.fields[1][0] - want_far).abs() / want_far.abs();
-        assert!(off_far < off / 16.0 + 1e-9, "r = {r}: {off_far:e} at 2L after {off:e} at L");
+        assert!(
+            off_far < off / 16.0 + 1e-9,
+            "r = {r}: {off_far:e} at 2L after {off:e} at L"
+        );
     }
 }
 
@@ -175,12 +196,7 @@ fn inputs(pos: &[[f64; 3]], q: &[f64]) -> BTreeMap<String, HostArray> {
 }
 
 /// Runs poisson.json for the named outputs: (potentials, fields, energy) where asked.
-fn solve(
-    g: &Graph,
-    pos: &[[f64; 3]],
-    q: &[f64],
-    outputs: &[&str],
-) -> BTreeMap<String, Vec<f64>> {
+fn solve(g: &Graph, pos: &[[f64; 3]], q: &[f64], outputs: &[&str]) -> BTreeMap<String, Vec<f64>> {
     let gpu = gpu().expect("a GPU");
     let (out, _) = run_cached(&gpu, g, &inputs(pos, q), Some(outputs), 1, true);
     out.into_iter().map(|(k, v)| (k, v.to_ref().data)).collect()
@@ -215,7 +231,15 @@ fn random_system(rng: &mut Rng, n: usize, l: [f64; 3], neutral: bool) -> (Vec<[f
     (pos, q)
 }
 
-fn check_against_ewald(sets: &[(&str, String)], l: [f64; 3], a: f64, n: usize, neutral: bool, seed: u64, tol: f64) {
+fn check_against_ewald(
+    sets: &[(&str, String)],
+    l: [f64; 3],
+    a: f64,
+    n: usize,
+    neutral: bool,
+    seed: u64,
+    tol: f64,
+) {
     if gpu().is_none() {
         return;
     }
@@ -236,7 +260,11 @@ fn check_against_ewald(sets: &[(&str, String)], l: [f64; 3], a: f64, n: usize, n
     let e_force = rel_err(&out["forces"], &forces);
     let energy = out["energy"][0];
     // The energy relative to the sum of |Q_i phi_i| / 2 (the self energies dominate it).
-    let scale: f64 = 0.5 * q.iter().zip(&want.potentials).map(|(q, p)| (q * p).abs()).sum::<f64>();
+    let scale: f64 = 0.5
+        * q.iter()
+            .zip(&want.potentials)
+            .map(|(q, p)| (q * p).abs())
+            .sum::<f64>();
     let e_energy = (energy - want.energy).abs() / scale;
     eprintln!(
         "poisson {sets:?} box {l:?}: split {} grid {} support {} cutoff {}: potentials {e_pot:.2e} fields {e_field:.2e} forces {e_force:.2e} energy {e_energy:.2e}",
@@ -245,8 +273,16 @@ fn check_against_ewald(sets: &[(&str, String)], l: [f64; 3], a: f64, n: usize, n
         param(&g, "support"),
         param(&g, "cutoff")
     );
-    for (what, e) in [("potentials", e_pot), ("fields", e_field), ("forces", e_force), ("energy", e_energy)] {
-        assert!(e <= tol, "{what}: relative error {e:.3e} over {tol:e} ({sets:?}, box {l:?})");
+    for (what, e) in [
+        ("potentials", e_pot),
+        ("fields", e_field),
+        ("forces", e_force),
+        ("energy", e_energy),
+    ] {
+        assert!(
+            e <= tol,
+            "{what}: relative error {e:.3e} over {tol:e} ({sets:?}, box {l:?})"
+        );
     }
 }
 
@@ -257,7 +293,15 @@ fn random_neutral_systems_match_the_ewald_sum() {
     let s = |t: f64, l: [f64; 3]| vec![("tolerance", format!("{t}")), ("box", format!("{l:?}"))];
     check_against_ewald(&s(1e-3, [16.0; 3]), [16.0; 3], 1.0, 24, true, 3, 1e-3);
     check_against_ewald(&s(1e-4, [16.0; 3]), [16.0; 3], 1.0, 24, true, 4, 1e-4);
-    check_against_ewald(&s(1e-3, [12.0, 16.0, 20.0]), [12.0, 16.0, 20.0], 1.0, 20, true, 5, 1e-3);
+    check_against_ewald(
+        &s(1e-3, [12.0, 16.0, 20.0]),
+        [12.0, 16.0, 20.0],
+        1.0,
+        20,
+        true,
+        5,
+        1e-3,
+    );
 }
 
 /// A non-neutral system follows the uniform-background convention at every split: the
@@ -266,7 +310,11 @@ fn random_neutral_systems_match_the_ewald_sum() {
 fn non_neutral_systems_follow_the_background_convention() {
     let l = [16.0; 3];
     for split in ["0", "0.7"] {
-        let sets = vec![("tolerance", "0.001".to_string()), ("box", format!("{l:?}")), ("split", split.to_string())];
+        let sets = vec![
+            ("tolerance", "0.001".to_string()),
+            ("box", format!("{l:?}")),
+            ("split", split.to_string()),
+        ];
         check_against_ewald(&sets, l, 1.0, 12, false, 6, 1e-3);
     }
 }
@@ -284,7 +332,11 @@ fn results_do_not_depend_on_the_split() {
     let runs: Vec<BTreeMap<String, Vec<f64>>> = ["0", "0.5", "1.2"]
         .iter()
         .map(|s| {
-            let g = load(&[("box", format!("{l:?}")), ("split", s.to_string()), ("tolerance", "0.0001".into())]);
+            let g = load(&[
+                ("box", format!("{l:?}")),
+                ("split", s.to_string()),
+                ("tolerance", "0.0001".into()),
+            ]);
             solve(&g, &pos, &q, &["potentials", "fields", "energy"])
         })
         .collect();
@@ -307,7 +359,11 @@ fn a_pair_in_a_large_box_matches_the_closed_form() {
     }
     let l: f64 = 48.0;
     for (tol, split) in [(1e-3, "0"), (1e-3, "0.5"), (1e-4, "0.6")] {
-        let g = load(&[("box", format!("[{l}, {l}, {l}]")), ("tolerance", format!("{tol}")), ("split", split.into())]);
+        let g = load(&[
+            ("box", format!("[{l}, {l}, {l}]")),
+            ("tolerance", format!("{tol}")),
+            ("split", split.into()),
+        ]);
         for r in [0.5, 2.0, 4.0] {
             let pos = [[-0.3, 0.2, 0.1], [-0.3 + r, 0.2, 0.1]];
             let out = solve(&g, &pos, &[1.0, -1.0], &["energy", "forces"]);
@@ -318,15 +374,24 @@ fn a_pair_in_a_large_box_matches_the_closed_form() {
             // Force on the negative charge (Q = -1): -E, E = -dphi - r / (3 eps V) along x.
             let want_f = dphi + r / (3.0 * l.powi(3));
             let got_f = out["forces"][3];
-            let (e_u, e_f) = ((got - want).abs() / phi, (got_f - want_f).abs() / dphi.abs());
+            let (e_u, e_f) = (
+                (got - want).abs() / phi,
+                (got_f - want_f).abs() / dphi.abs(),
+            );
             eprintln!(
                 "pair at {r}, tolerance {tol} (split {}, grid {}, support {}): energy {e_u:.2e}, force {e_f:.2e}",
                 param(&g, "split"),
                 param(&g, "grid"),
                 param(&g, "support"),
             );
-            assert!(e_u <= tol, "r = {r}: pair energy {got:.8e}, closed form {want:.8e}");
-            assert!(e_f <= tol, "r = {r}: force {got_f:.8e}, closed form {want_f:.8e}");
+            assert!(
+                e_u <= tol,
+                "r = {r}: pair energy {got:.8e}, closed form {want:.8e}"
+            );
+            assert!(
+                e_f <= tol,
+                "r = {r}: force {got_f:.8e}, closed form {want_f:.8e}"
+            );
         }
     }
 }
@@ -359,13 +424,21 @@ fn a_rock_salt_crystal_has_the_madelung_energy() {
         }
     }
     let tol = 1e-4;
-    let g = load(&[("box", format!("[{side}, {side}, {side}]")), ("width", format!("{a}")), ("tolerance", format!("{tol}"))]);
+    let g = load(&[
+        ("box", format!("[{side}, {side}, {side}]")),
+        ("width", format!("{a}")),
+        ("tolerance", format!("{tol}")),
+    ]);
     let out = solve(&g, &pos, &q, &["energy"]);
     let n = q.len() as f64;
     let self_energy = 1.0 / (8.0 * PI.powf(1.5) * a);
     let madelung = -1.747565 / (4.0 * PI * d);
     let got = 2.0 * (out["energy"][0] / n - self_energy);
-    eprintln!("rock salt: {got:.7e} per ion pair, Madelung {madelung:.7e} (split {}, grid {})", param(&g, "split"), param(&g, "grid"));
+    eprintln!(
+        "rock salt: {got:.7e} per ion pair, Madelung {madelung:.7e} (split {}, grid {})",
+        param(&g, "split"),
+        param(&g, "grid")
+    );
     assert!(
         (got - madelung).abs() <= 2.0 * tol * self_energy,
         "energy per ion pair less self {got:.7e}, Madelung {madelung:.7e}"
@@ -378,7 +451,8 @@ fn launches(g: &Graph, plan: &mesoflow::plan::Plan) -> String {
         .lines()
         .filter(|l| {
             let t = l.trim_start();
-            t.split_once(". ").is_some_and(|(n, _)| n.parse::<u32>().is_ok())
+            t.split_once(". ")
+                .is_some_and(|(n, _)| n.parse::<u32>().is_ok())
         })
         .collect::<Vec<_>>()
         .join("\n")
@@ -394,13 +468,24 @@ fn potentials_alone_run_no_field_work() {
     let types = types_of(&inputs(&pos, &[1.0, -1.0]));
     let plan = plan_graph(&caps, &g, types.clone(), Some(&["potentials"]), true);
     let text = launches(&g, &plan);
-    for absent in ["field_spectrum", "electric_field", "far_fields", "near_fields"] {
-        assert!(!text.contains(absent), "{absent} planned for potentials alone:\n{text}");
+    for absent in [
+        "field_spectrum",
+        "electric_field",
+        "far_fields",
+        "near_fields",
+    ] {
+        assert!(
+            !text.contains(absent),
+            "{absent} planned for potentials alone:\n{text}"
+        );
     }
     assert!(text.contains("near_potentials"), "{text}");
     let plan = plan_graph(&caps, &g, types, Some(&["forces"]), true);
     let text = launches(&g, &plan);
-    assert!(text.contains("far_fields") && !text.contains("far_potentials"), "{text}");
+    assert!(
+        text.contains("far_fields") && !text.contains("far_potentials"),
+        "{text}"
+    );
 }
 
 /// Unsplit, the near field is left out and the grid resolves the charges themselves.
@@ -410,7 +495,10 @@ fn unsplit_runs_without_a_near_field() {
     let g = load(&[("box", "[16, 16, 16]".into()), ("split", "0".into())]);
     let types = types_of(&inputs(&[[0.0; 3]], &[1.0]));
     let text = launches(&g, &plan_graph(&caps, &g, types, None, true));
-    assert!(!text.contains("near_potentials") && !text.contains("near_fields"), "{text}");
+    assert!(
+        !text.contains("near_potentials") && !text.contains("near_fields"),
+        "{text}"
+    );
     assert_eq!(param(&g, "cutoff"), "0");
 }
 
@@ -426,7 +514,11 @@ fn bad_poisson_params_are_named() {
 
 /// A neutral system of charged soft spheres on a jittered lattice: positions, velocities
 /// and charges for md_charged.json.
-pub fn charged_lattice(per_side: usize, spacing: f64, seed: u64) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<f64>) {
+pub fn charged_lattice(
+    per_side: usize,
+    spacing: f64,
+    seed: u64,
+) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<f64>) {
     let mut rng = Rng::new(seed);
     let side = spacing * per_side as f64;
     let mut x = Vec::new();
@@ -435,7 +527,10 @@ pub fn charged_lattice(per_side: usize, spacing: f64, seed: u64) -> (Vec<[f64; 3
     for i in 0..per_side {
         for j in 0..per_side {
             for k in 0..per_side {
-                x.push([i, j, k].map(|c| (c as f64 + 0.5) * spacing - side / 2.0 + rng.uniform(-0.2, 0.2)));
+                x.push(
+                    [i, j, k]
+                        .map(|c| (c as f64 + 0.5) * spacing - side / 2.0 + rng.uniform(-0.2, 0.2)),
+                );
                 v.push([0, 1, 2].map(|_| rng.uniform(-1.0, 1.0)));
                 q.push(if (i + j + k) % 2 == 0 { 1.0 } else { -1.0 });
             }
@@ -466,13 +561,29 @@ fn molecular_dynamics_conserves_energy() {
     for (dt, steps) in [(0.02, 200u64), (0.01, 400)] {
         let g = load_with(
             "md_charged.json",
-            &[("box", "[10, 10, 10]"), ("dt", &format!("{dt}")), ("width", "0.5"), ("wca_sigma", "1.2")],
+            &[
+                ("box", "[10, 10, 10]"),
+                ("dt", &format!("{dt}")),
+                ("width", "0.5"),
+                ("wca_sigma", "1.2"),
+            ],
             steps,
             0,
         );
-        let (out, _) = run_cached(&gpu, &g, &data, Some(&["energies", "kinetic_energy"]), steps, true);
+        let (out, _) = run_cached(
+            &gpu,
+            &g,
+            &data,
+            Some(&["energies", "kinetic_energy"]),
+            steps,
+            true,
+        );
         let e = out["energies"].to_ref().data;
-        let (lo, hi) = e.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        let (lo, hi) = e
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
         let drift = (e[e.len() - 1] - e[0]).abs();
         eprintln!(
             "md dt {dt}: energy {:.6} .. {:.6} (spread {:.3e}, drift {:.3e}) kinetic {:.4} (initial {kinetic:.4})",
@@ -482,7 +593,11 @@ fn molecular_dynamics_conserves_energy() {
             drift,
             out["kinetic_energy"].to_ref().data[0]
         );
-        assert!(hi - lo < 2e-3 * kinetic, "dt {dt}: energy spread {:.3e}", hi - lo);
+        assert!(
+            hi - lo < 2e-3 * kinetic,
+            "dt {dt}: energy spread {:.3e}",
+            hi - lo
+        );
         spread.push(hi - lo);
     }
     assert!(spread[1] < 0.5 * spread[0], "second order: {spread:?}");
