@@ -67,6 +67,13 @@ fn check_grid(t: &ValueType) -> Result<(u64, u64, u64), PortError> {
     Ok((c, n, plane))
 }
 
+/// Both nodes' signature: a grid of Chebyshev lines in, the same type out.
+fn same_grid(inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
+    let t = inputs[0].expect("required");
+    check_grid(&t)?;
+    Ok(Signature::outputs(vec![t]))
+}
+
 /// Points along z the dense transform takes (its matrix is n^2 words).
 pub const MAX_POINTS: u32 = 1024;
 
@@ -164,9 +171,7 @@ struct Transform {
 
 impl Node for Transform {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
-        let t = inputs[0].expect("required");
-        check_grid(&t)?;
-        Ok(Signature::outputs(vec![t]))
+        same_grid(inputs)
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -262,9 +267,7 @@ struct Derivative {
 
 impl Node for Derivative {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
-        let t = inputs[0].expect("required");
-        check_grid(&t)?;
-        Ok(Signature::outputs(vec![t]))
+        same_grid(inputs)
     }
 
     fn lowering(&self) -> Lowering<'_> {

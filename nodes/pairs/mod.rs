@@ -378,7 +378,7 @@ impl PairKernel {
                 if !rotation {
                     return v3(u);
                 }
-                let t = [vj4[3], vj4[4], vj4[5]];
+                let t = torque(&vj4, true);
                 let (fr, gr) = rpy::rpy_rotation(d, *radius, *viscosity);
                 let rt = if r2 > 0.0 {
                     (r[0] * t[0] + r[1] * t[1] + r[2] * t[2]) / r2
@@ -404,11 +404,7 @@ impl PairKernel {
                 wall_height,
                 rotation,
             } => {
-                let t = if *rotation {
-                    [vj4[3], vj4[4], vj4[5]]
-                } else {
-                    [0.0; 3]
-                };
+                let t = torque(&vj4, *rotation);
                 let (u, w) = blake::blake(xi, xj, vj, t, *radius, *viscosity, *wall_height, false);
                 [u[0], u[1], u[2], w[0], w[1], w[2], 0.0, 0.0]
             }
@@ -473,11 +469,7 @@ impl PairKernel {
                 rotation,
             } => {
                 let f = [vi[0], vi[1], vi[2]];
-                let t = if *rotation {
-                    [vi[3], vi[4], vi[5]]
-                } else {
-                    [0.0; 3]
-                };
+                let t = torque(&vi, *rotation);
                 let (u, w) = blake::blake(xi, xi, f, t, *radius, *viscosity, *wall_height, true);
                 [u[0], u[1], u[2], w[0], w[1], w[2], 0.0, 0.0]
             }
@@ -679,6 +671,15 @@ fn row(data: &[f64], i: usize) -> [f64; 3] {
 
 /// A kernel's value or result row: 8 words (`shaders/pairs/values.wgsl` `Row`).
 pub type Row = [f64; 8];
+
+/// The torque of a (force, torque) row, zero without `rotation`.
+fn torque(row: &Row, rotation: bool) -> [f64; 3] {
+    if rotation {
+        [row[3], row[4], row[5]]
+    } else {
+        [0.0; 3]
+    }
+}
 
 /// Row i of `comps` columns as a kernel's 8 words (zeros after the row).
 fn row8(data: &[f64], comps: usize, i: usize) -> Row {

@@ -115,7 +115,8 @@ pub(super) fn param(g: &Graph, name: &str) -> Option<ParamValue> {
         .map(|p| p.value.clone())
 }
 
-fn particles(rows: &[[f64; 3]]) -> HostArray {
+/// Rows of 3-vectors as an f32 particle array (N x 3).
+pub(super) fn particles(rows: &[[f64; 3]]) -> HostArray {
     HostArray::f32(
         ValueType::Particles {
             n: rows.len() as u32,

@@ -10,9 +10,9 @@ use std::path::PathBuf;
 
 use mesoflow::expr::ParamValue;
 use mesoflow::gpu::GpuContext;
-use mesoflow::value::{HostArray, ValueType};
+use mesoflow::value::HostArray;
 
-use super::fcm::{Rng, load};
+use super::fcm::{Rng, load, particles};
 use super::{BenchError, end_to_end_clock, ms, time_loaded};
 
 pub struct NbodyBench {
@@ -32,16 +32,6 @@ const FLOPS: [(&str, bool, f64); 4] = [
     ("rpy_wall.json", false, 185.0),
     ("rpy_wall.json", true, 458.0),
 ];
-
-fn rows(v: &[[f64; 3]]) -> HostArray {
-    HostArray::f32(
-        ValueType::Particles {
-            n: v.len() as u32,
-            k: 3,
-        },
-        v.iter().flatten().map(|&x| x as f32).collect(),
-    )
-}
 
 pub fn run(bench: &NbodyBench) -> Result<(), BenchError> {
     if bench.reps == 0 {
@@ -88,14 +78,14 @@ pub fn run(bench: &NbodyBench) -> Result<(), BenchError> {
                 .map(|_| [0, 1, 2].map(|_| rng.uniform() - 0.5))
                 .collect();
             let mut inputs: BTreeMap<String, HostArray> = [
-                ("positions".to_string(), rows(&x)),
-                ("forces".to_string(), rows(&f)),
+                ("positions".to_string(), particles(&x)),
+                ("forces".to_string(), particles(&f)),
             ]
             .into_iter()
             .collect();
             let mut outputs = vec!["velocities".to_string()];
             if rotation {
-                inputs.insert("torques".into(), rows(&f));
+                inputs.insert("torques".into(), particles(&f));
                 outputs.push("angular_velocities".into());
             }
             let run = time_loaded(&gpu, &g, &inputs, Some(outputs), bench.reps, true)?;

@@ -16,7 +16,7 @@ use mesoflow::graph::Graph;
 use mesoflow::node::Registry;
 use mesoflow::value::{HostArray, ValueType};
 
-use super::fcm::{Rng, load, param, timed as fcm_timed};
+use super::fcm::{Rng, load, param, particles, timed as fcm_timed};
 use super::{BenchError, TimedRun, end_to_end_clock, ms, time_loaded};
 
 pub struct PoissonBench {
@@ -29,16 +29,6 @@ pub struct PoissonBench {
     pub reps: u64,
     pub error_box: f64,
     pub sets: Vec<(String, ParamValue)>,
-}
-
-fn host(rows: &[[f64; 3]]) -> HostArray {
-    HostArray::f32(
-        ValueType::Particles {
-            n: rows.len() as u32,
-            k: 3,
-        },
-        rows.iter().flatten().map(|&x| x as f32).collect(),
-    )
 }
 
 fn charges(q: &[f64]) -> HostArray {
@@ -64,7 +54,7 @@ fn system(rng: &mut Rng, n: usize, l: f64) -> (Vec<[f64; 3]>, Vec<f64>) {
 
 fn inputs(x: &[[f64; 3]], q: &[f64]) -> BTreeMap<String, HostArray> {
     [
-        ("positions".to_string(), host(x)),
+        ("positions".to_string(), particles(x)),
         ("charges".to_string(), charges(q)),
     ]
     .into_iter()
