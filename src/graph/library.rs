@@ -31,9 +31,11 @@ pub fn library_folders() -> Vec<PathBuf> {
     if checkout.join("fcm.json").is_file() {
         return vec![checkout];
     }
-    match materialized() {
-        Ok(dir) => vec![dir],
-        Err(_) => vec![checkout],
+    // Written out (and its contents hashed) once per process, not at every load.
+    static WRITTEN: std::sync::OnceLock<Option<PathBuf>> = std::sync::OnceLock::new();
+    match WRITTEN.get_or_init(|| materialized().ok()) {
+        Some(dir) => vec![dir.clone()],
+        None => vec![checkout],
     }
 }
 
