@@ -250,6 +250,12 @@ class _Solver:
     def _check_positions(self, x):
         pass
 
+    def _divergence(self):
+        """div M: zero where the mobility does not depend on the positions."""
+        n = len(self._positions)
+        zero = np.zeros((n, 3), np.float32)
+        return zero, (zero if self.includeAngular else None)
+
     def _shaped(self, u, w, shape, torques):
         u = np.asarray(u, np.float32).reshape(shape)
         if not self.includeAngular:
@@ -308,15 +314,10 @@ class SelfMobility(_Solver):
         w = math.sqrt(self._r) * self._rng.standard_normal((n, 3)) if self.includeAngular else None
         return u, w
 
-    def _divergence(self):
-        n = len(self._positions)
-        return np.zeros((n, 3), np.float32), (np.zeros((n, 3), np.float32) if self.includeAngular else None)
 
 
 class _GraphSolver(_Solver):
     """A solver running one of mesoflow's mobility graphs."""
-
-    _angular_outputs = ("angular_velocities", "angular_noise", "angular_drift")
 
     def _setup(self):
         pass
@@ -354,10 +355,6 @@ class _GraphSolver(_Solver):
         out = self._run("noise", outputs, self._arrays())
         return out["noise"], out.get("angular_noise")
 
-    def _divergence(self):
-        n = len(self._positions)
-        zero = np.zeros((n, 3), np.float32)
-        return zero, (zero if self.includeAngular else None)
 
 
 class NBody(_GraphSolver):
