@@ -15,6 +15,9 @@
 #               where 10^5 at 1e-3 spends its time
 #   nbody       the direct pair mobilities, open and above a wall, translation and grand:
 #               pair interactions per second and GFLOP/s
+#   python      a Python loop of libMobility-style Mdot calls against the GPU time of one
+#               product (benches/python_mdot.py; the package unpacked in .gpu/py), and
+#               `bench fcm` at the same size beside it
 #   mpcd        MPCD particle-steps per second, per dispatch, torch's copy bandwidth
 #   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
 #   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
@@ -34,7 +37,7 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson nbody mpcd spread atomics fft primitives overhead determinism)
+suites=(fcm pse poisson nbody python mpcd spread atomics fft primitives overhead determinism)
 usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
@@ -63,6 +66,11 @@ suite_fcm() {
 
 suite_nbody() {
   run $bin bench nbody --reps 10
+}
+
+suite_python() {
+  PYTHONPATH=.gpu/py run python3 benches/python_mdot.py --calls 1000 --rounds 3
+  run $bin bench fcm --tolerances 1e-3 --sizes 128:100000 --reps 20
 }
 
 suite_poisson() {

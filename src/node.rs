@@ -653,6 +653,12 @@ pub trait Node: Send + Sync {
         Ok(())
     }
 
+    /// Whether `check_input` looks at any data: false lets uploads skip holding the data
+    /// on the host for it (nodes that check return true).
+    fn checks_input(&self) -> bool {
+        false
+    }
+
     /// The f64 CPU reference of one evaluation; `outputs` holds the previous contents of
     /// the node's persistent outputs (zeros at the first step).
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx);

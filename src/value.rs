@@ -255,6 +255,67 @@ pub enum HostData {
     U32(Vec<u32>),
 }
 
+/// Host data borrowed (from a caller's array: Python's numpy), for uploads that need not
+/// own it.
+#[derive(Clone, Copy, Debug)]
+pub enum HostWords<'a> {
+    F32(&'a [f32]),
+    U32(&'a [u32]),
+}
+
+impl HostWords<'_> {
+    pub fn len(&self) -> usize {
+        match self {
+            HostWords::F32(v) => v.len(),
+            HostWords::U32(v) => v.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn elem(&self) -> Elem {
+        match self {
+            HostWords::F32(_) => Elem::F32,
+            HostWords::U32(_) => Elem::U32,
+        }
+    }
+
+    pub fn as_bytes(&self) -> &[u8] {
+        match self {
+            HostWords::F32(v) => bytemuck::cast_slice(v),
+            HostWords::U32(v) => bytemuck::cast_slice(v),
+        }
+    }
+
+    /// An owned copy, typed `ty`.
+    pub fn to_array(&self, ty: ValueType) -> HostArray {
+        match self {
+            HostWords::F32(v) => HostArray::f32(ty, v.to_vec()),
+            HostWords::U32(v) => HostArray::u32(ty, v.to_vec()),
+        }
+    }
+
+    /// Whether every word is finite (index words always are).
+    pub fn all_finite(&self) -> bool {
+        match self {
+            HostWords::F32(v) => all_finite(v),
+            HostWords::U32(_) => true,
+        }
+    }
+}
+
+/// Whether no word is NaN or infinite: an exponent-bits test without branches, which the
+/// compiler vectorises (a fast pass before any search for where).
+pub fn all_finite(v: &[f32]) -> bool {
+    v.chunks(1024).all(|chunk| {
+        chunk.iter().fold(0u32, |acc, x| {
+            acc | u32::from(x.to_bits() & 0x7f80_0000 == 0x7f80_0000)
+        }) == 0
+    })
+}
+
 impl HostData {
     pub fn len(&self) -> usize {
         match self {
@@ -323,6 +384,9 @@ impl HostArray {
         let HostData::F32(v) = &self.data else {
             return None;
         };
+        if all_finite(v) {
+            return None;
+        }
         let mut found: Option<NonFinite> = None;
         for (i, &x) in v.iter().enumerate() {
             if x.is_finite() {

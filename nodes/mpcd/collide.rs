@@ -175,6 +175,10 @@ impl Node for MpcdBin {
         Lowering::Kernels(self)
     }
 
+    fn checks_input(&self) -> bool {
+        true
+    }
+
     fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
         let rows = match port {
             0 => Rows::Positions,
@@ -594,6 +598,10 @@ impl Node for MpcdCollide {
 
     fn lowering(&self) -> Lowering<'_> {
         Lowering::Kernels(self)
+    }
+
+    fn checks_input(&self) -> bool {
+        true
     }
 
     fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {

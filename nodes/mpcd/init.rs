@@ -139,6 +139,10 @@ impl Node for MpcdInit {
         Lowering::Kernels(self)
     }
 
+    fn checks_input(&self) -> bool {
+        true
+    }
+
     fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
         let rows = match port {
             0 => Rows::Positions,

@@ -145,6 +145,10 @@ impl Node for MpcdMeasure {
         Lowering::Kernels(self)
     }
 
+    fn checks_input(&self) -> bool {
+        true
+    }
+
     fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
         // The velocities are summed in fixed point here, those before the collision
         // were in the cell sums.

@@ -148,6 +148,10 @@ impl Node for MpcdBinSolute {
         Lowering::Kernels(self)
     }
 
+    fn checks_input(&self) -> bool {
+        true
+    }
+
     fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
         // Solute velocities enter the sums scaled by M / m as 64-bit fixed point (no
         // tighter range than f32's): finite.

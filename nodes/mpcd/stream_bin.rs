@@ -104,6 +104,10 @@ impl Node for MpcdStreamBin {
         Lowering::Kernels(self)
     }
 
+    fn checks_input(&self) -> bool {
+        true
+    }
+
     fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
         // The positions as the streaming takes them, the velocities as the binning sums
         // them (in the fixed point's range).

@@ -1411,6 +1411,30 @@ impl GpuKernels for NeighbourList {
 /// Particles per tile of shaders/pairs/all_pairs.wgsl (its workgroup size).
 const TILE: u32 = 128;
 
+/// Words of pair params all_pairs.wgsl keeps in registers (its PAIR_PARAMS).
+const ALL_PAIRS_PARAMS: usize = 8;
+
+/// Threads all_pairs aims to launch: several times what a large GPU holds at once (an
+/// H100/H200 holds about 270 000), so that N of a few thousand fills it too.
+const ALL_PAIRS_THREADS: u64 = 1 << 20;
+
+/// The runs of j tiles all_pairs cuts the sums into, and tiles per run: `requested` (at
+/// most one a tile; 0: enough that N threads per run reach ALL_PAIRS_THREADS, each run
+/// keeping at least 2 tiles), so that every run but the last is full.
+fn all_pairs_slices(n: u32, requested: u32) -> (u32, u32) {
+    let tiles = n.div_ceil(TILE).max(1);
+    let slices = if requested > 0 {
+        requested.min(tiles)
+    } else {
+        let wanted = ALL_PAIRS_THREADS
+            .div_ceil(n.max(1) as u64)
+            .min(u32::MAX as u64) as u32;
+        wanted.clamp(1, (tiles / 2).max(1))
+    };
+    let per = tiles.div_ceil(slices);
+    (tiles.div_ceil(per), per)
+}
+
 fn all_pairs_kind() -> NodeKind {
     NodeKind::declare(
         "all_pairs",
@@ -1425,6 +1449,13 @@ fn all_pairs_kind() -> NodeKind {
         f64::MAX,
         "pairs with |r| <= cutoff are summed (default: all)",
     ))
+    .param(ParamSpec::integer(
+        "slices",
+        Some(0.0),
+        0.0,
+        65535.0,
+        "runs of the j tiles summed apart and then added in order (tuning; 0: enough that about 10^6 threads run, each run at least 2 tiles of 128)",
+    ))
     .params(kernel_params())
     .build(|p| {
         let cutoff = p.number("cutoff");
@@ -1434,6 +1465,7 @@ fn all_pairs_kind() -> NodeKind {
         Ok(Box::new(AllPairs {
             kernel: PairKernel::from_params(p, cutoff)?,
             cutoff,
+            slices: p.number("slices") as u32,
         }))
     })
 }
@@ -1441,10 +1473,15 @@ fn all_pairs_kind() -> NodeKind {
 pub struct AllPairs {
     kernel: PairKernel,
     cutoff: f64,
+    slices: u32,
 }
 
 impl Node for AllPairs {
     /// Above a wall, every particle's centre lies above it (as libMobility refuses).
+    fn checks_input(&self) -> bool {
+        true
+    }
+
     fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
         let PairKernel::RpyWall { wall_height, .. } = self.kernel else {
             return Ok(());
@@ -1473,10 +1510,15 @@ impl Node for AllPairs {
 
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let n = check_rows(&self.kernel, inputs)?;
-        Ok(Signature::outputs(vec![ValueType::Particles {
-            n,
-            k: self.kernel.out_comps(),
-        }]))
+        let k = self.kernel.out_comps();
+        let signature = Signature::outputs(vec![ValueType::Particles { n, k }]);
+        let (slices, _) = all_pairs_slices(n, self.slices);
+        Ok(if slices > 1 {
+            // The slices' partial sums.
+            signature.with_scratch(vec![4 * slices as u64 * n as u64 * k as u64])
+        } else {
+            signature
+        })
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -1488,9 +1530,14 @@ impl Node for AllPairs {
             Some(ValueType::Particles { n, .. }) => n as u64,
             _ => 0,
         };
+        let (slices, per) = all_pairs_slices(n as u32, self.slices);
         vec![
             self.kernel.describe(),
-            format!("{} pairs in tiles of {TILE}", n * n.saturating_sub(1)),
+            format!(
+                "{} pairs in tiles of {TILE}, the j tiles in {slices} run{} of {per}",
+                n * n.saturating_sub(1),
+                if slices == 1 { "" } else { "s" }
+            ),
         ]
     }
 
@@ -1517,6 +1564,14 @@ impl GpuKernels for AllPairs {
             unreachable!()
         };
         let values = io.inputs[1].map(|v| v.buffer);
+        // all_pairs.wgsl copies the params into registers, PAIR_PARAMS words of them.
+        if self.kernel.words().len() > ALL_PAIRS_PARAMS {
+            return Err(CompileError::Unsupported(format!(
+                "all_pairs holds {ALL_PAIRS_PARAMS} words of pair params, kernel {} has {}",
+                self.kernel.name(),
+                self.kernel.words().len()
+            )));
+        }
         let source = format!(
             "{}{}",
             self.kernel.source(cx)?,
@@ -1538,23 +1593,52 @@ impl GpuKernels for AllPairs {
             .constant("HAS_VALUES", f64::from(u8::from(values.is_some()))),
         )?;
         let cut = self.cutoff.min(f32::MAX.sqrt() as f64 * 0.5) as f32;
+        let (slices, per) = all_pairs_slices(n, self.slices);
         let shape = cx.uniform(
             "all_pairs shape",
-            bytemuck::cast_slice(&[n, (cut * cut).to_bits()]),
+            bytemuck::cast_slice(&[n, (cut * cut).to_bits(), per, slices]),
         );
         let (params, table) = pair_buffers(cx, &self.kernel);
-        Ok(vec![cx.dispatch(
+        let sums = if slices > 1 {
+            io.scratch[0]
+        } else {
+            io.outputs[0].buffer
+        };
+        let [gx, gy, _] = cx.grid_1d(n as u64, TILE);
+        let mut dispatches = vec![cx.dispatch(
             &kernel,
             &[
                 pos.buffer,
                 values.unwrap_or(pos.buffer),
-                io.outputs[0].buffer,
+                sums,
                 &shape,
                 &params,
                 &table,
             ],
-            cx.grid_1d(n as u64, TILE),
-        )])
+            [gx, gy, slices],
+        )];
+        if slices > 1 {
+            let words = n * self.kernel.out_comps();
+            let sum = cx.kernel(&KernelSpec::new(
+                "all_pairs_sum",
+                cx.shader("pairs/all_pairs_sum.wgsl")?,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                ],
+            ))?;
+            let shape = cx.uniform(
+                "all_pairs_sum shape",
+                bytemuck::cast_slice(&[words, slices]),
+            );
+            dispatches.push(cx.dispatch(
+                &sum,
+                &[sums, io.outputs[0].buffer, &shape],
+                cx.grid_1d(words as u64, 256),
+            ));
+        }
+        Ok(dispatches)
     }
 }
 

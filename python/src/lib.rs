@@ -21,8 +21,8 @@ use mesoflow::expr::ParamValue;
 use mesoflow::gpu::{GpuContext, KernelCache};
 use mesoflow::graph::{self, Graph as EngineGraph, InputShape, LoadOptions};
 use mesoflow::plan::{self, Plan, PlanOptions};
-use mesoflow::value::{HostArray, HostData, ValueType};
-use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods, ToPyArray};
+use mesoflow::value::{HostArray, HostData, HostWords, ValueType};
+use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
@@ -340,6 +340,11 @@ struct Program {
     /// Inputs uploaded since the program was built (a recompile keeps the buffers' data
     /// only for inputs given again).
     given: std::collections::BTreeSet<String>,
+    /// Host time of `run` outside the engine's run: numpy arrays to the engine's, the
+    /// upload, the outputs to numpy (seconds, summed over runs).
+    convert: f64,
+    upload: f64,
+    to_numpy: f64,
 }
 
 impl Program {
@@ -359,6 +364,9 @@ impl Program {
             built: 0,
             left_out: Vec::new(),
             given: Default::default(),
+            convert: 0.0,
+            upload: 0.0,
+            to_numpy: 0.0,
         };
         p.recompile()?;
         Ok(p)
@@ -368,8 +376,9 @@ impl Program {
     /// compiles, with the program's kernel cache.
     fn recompile(&mut self) -> PyResult<()> {
         self.compiled = None;
-        // New buffers: every input must be given again.
+        // New buffers: every input must be given again. Host times count from here.
         self.given.clear();
+        (self.convert, self.upload, self.to_numpy) = (0.0, 0.0, 0.0);
         let optional: Vec<&str> = self.input_types.keys().map(|s| s.as_str()).collect();
         let inputs = self.graph.assumed_input_types(&self.input_types, &optional);
         let opts = PlanOptions {
@@ -415,7 +424,14 @@ impl Program {
 }
 
 /// A numpy array (any float or integer dtype) as the engine's host array of type `ty`.
-fn host_array(name: &str, v: &Bound<'_, PyAny>, ty: ValueType) -> PyResult<HostArray> {
+/// An input as a contiguous numpy array of the program's element type (float32 or
+/// uint32: a copy only where the dtype or layout differs), its size checked.
+enum Contiguous<'py> {
+    F32(Bound<'py, PyArrayDyn<f32>>),
+    U32(Bound<'py, PyArrayDyn<u32>>),
+}
+
+fn contiguous<'py>(name: &str, v: &Bound<'py, PyAny>, ty: ValueType) -> PyResult<Contiguous<'py>> {
     let expected = ty.words() as usize;
     let integer = matches!(ty, ValueType::Indices { .. });
     let np = v.py().import("numpy")?;
@@ -429,22 +445,35 @@ fn host_array(name: &str, v: &Bound<'_, PyAny>, ty: ValueType) -> PyResult<HostA
             "input `{name}`: {size} values where the program was compiled for {ty} ({expected} values)"
         )));
     }
-    let flat = arr.call_method0("ravel")?;
-    if integer {
-        let a = flat.cast::<PyArrayDyn<u32>>()?;
-        Ok(HostArray::u32(ty, a.readonly().as_slice()?.to_vec()))
+    Ok(if integer {
+        Contiguous::U32(arr.cast_into::<PyArrayDyn<u32>>()?)
     } else {
-        let a = flat.cast::<PyArrayDyn<f32>>()?;
-        Ok(HostArray::f32(ty, a.readonly().as_slice()?.to_vec()))
+        Contiguous::F32(arr.cast_into::<PyArrayDyn<f32>>()?)
+    })
+}
+
+/// Read-only views of the contiguous arrays (kept alive while their words are uploaded).
+enum Borrowed<'py> {
+    F32(numpy::PyReadonlyArrayDyn<'py, f32>),
+    U32(numpy::PyReadonlyArrayDyn<'py, u32>),
+}
+
+impl Borrowed<'_> {
+    fn words(&self) -> PyResult<HostWords<'_>> {
+        Ok(match self {
+            Borrowed::F32(a) => HostWords::F32(a.as_slice()?),
+            Borrowed::U32(a) => HostWords::U32(a.as_slice()?),
+        })
     }
 }
 
-/// The engine's output as a numpy array of its NPY shape.
-fn to_numpy<'py>(py: Python<'py>, a: &HostArray) -> PyResult<Bound<'py, PyAny>> {
+/// The engine's output as a numpy array of its NPY shape (the array takes the data over:
+/// no copy).
+fn to_numpy<'py>(py: Python<'py>, a: HostArray) -> PyResult<Bound<'py, PyAny>> {
     let shape: Vec<usize> = a.ty.npy_shape().iter().map(|&d| d as usize).collect();
-    let flat = match &a.data {
-        HostData::F32(v) => v.to_pyarray(py).into_any(),
-        HostData::U32(v) => v.to_pyarray(py).into_any(),
+    let flat = match a.data {
+        HostData::F32(v) => v.into_pyarray(py).into_any(),
+        HostData::U32(v) => v.into_pyarray(py).into_any(),
     };
     flat.call_method1("reshape", (PyTuple::new(py, shape)?,))
 }
@@ -465,6 +494,7 @@ impl Program {
         if steps == 0 {
             return Err(PyValueError::new_err("steps must be at least 1"));
         }
+        let t_convert = std::time::Instant::now();
         // New sizes first: a recompile when a shape differs from the plan's.
         let mut given: Vec<(String, Bound<'py, PyAny>)> = Vec::new();
         let mut resized = false;
@@ -491,14 +521,30 @@ impl Program {
         }
         let optional: Vec<&str> = self.input_types.keys().map(|s| s.as_str()).collect();
         let types = self.graph.assumed_input_types(&self.input_types, &optional);
-        let mut upload = BTreeMap::new();
+        let mut arrays = Vec::new();
         for (name, v) in &given {
             let ty = types.get(name).copied().ok_or_else(|| {
                 PyValueError::new_err(format!("input `{name}` is not one the program reads"))
             })?;
-            upload.insert(name.clone(), host_array(name, v, ty)?);
+            arrays.push((name.clone(), contiguous(name, v, ty)?));
         }
-        self.given.extend(upload.keys().cloned());
+        let borrowed: Vec<(&str, Borrowed<'_>)> = arrays
+            .iter()
+            .map(|(name, a)| {
+                Ok((
+                    name.as_str(),
+                    match a {
+                        Contiguous::F32(a) => Borrowed::F32(a.try_readonly()?),
+                        Contiguous::U32(a) => Borrowed::U32(a.try_readonly()?),
+                    },
+                ))
+            })
+            .collect::<PyResult<_>>()?;
+        let upload: Vec<(&str, HostWords<'_>)> = borrowed
+            .iter()
+            .map(|(name, b)| Ok((*name, b.words()?)))
+            .collect::<PyResult<_>>()?;
+        let uploading: Vec<String> = upload.iter().map(|(name, _)| name.to_string()).collect();
         // Every input the plan reads must have been given (once is enough: the buffers
         // keep it), or the run would read zeros.
         if let Some(c) = &self.compiled {
@@ -507,7 +553,7 @@ impl Program {
                 .inputs
                 .iter()
                 .map(|(i, _)| self.graph.inputs[*i].name.as_str())
-                .filter(|name| !self.given.contains(*name))
+                .filter(|name| !self.given.contains(*name) && !uploading.iter().any(|u| u == *name))
                 .collect();
             if !missing.is_empty() {
                 return Err(PyValueError::new_err(format!(
@@ -522,29 +568,41 @@ impl Program {
                 )));
             }
         }
+        self.convert += t_convert.elapsed().as_secs_f64();
         let compiled = self.compiled()? as *mut Compiled;
         let exclusive = Exclusive(compiled);
+        let mut upload_time = 0.0;
+        let upload_time_ref = &mut upload_time;
         let result = py.detach(move || {
             let exclusive = exclusive;
             // SAFETY: `Exclusive`'s doc; `self` is borrowed mutably for this whole call.
             let c = unsafe { &mut *exclusive.0 };
             if !upload.is_empty() {
-                c.program.upload(&upload).map_err(|e| e.to_string())?;
+                let t = std::time::Instant::now();
+                c.program
+                    .update_input_words(&upload)
+                    .map_err(|e| e.to_string())?;
+                *upload_time_ref = t.elapsed().as_secs_f64();
             }
             c.program
-                .run_on(&RunOptions {
+                .run_on_and_read(&RunOptions {
                     steps,
                     profile: Profile::Off,
                     progress: false,
                 })
-                .map_err(|e| e.to_string())?;
-            c.program.read_outputs().map_err(|e| e.to_string())
+                .map(|(_, outputs)| outputs)
+                .map_err(|e| e.to_string())
         });
+        self.upload += upload_time;
         let outputs = result.map_err(RunError::new_err)?;
+        // Written (the upload comes before the run): later runs may leave them out.
+        self.given.extend(uploading);
+        let t_numpy = std::time::Instant::now();
         let d = PyDict::new(py);
-        for (name, a) in &outputs {
+        for (name, a) in outputs {
             d.set_item(name, to_numpy(py, a)?)?;
         }
+        self.to_numpy += t_numpy.elapsed().as_secs_f64();
         Ok(d)
     }
 
@@ -566,6 +624,24 @@ impl Program {
     #[getter]
     fn compilations(&self) -> usize {
         self.built
+    }
+
+    /// Host time spent in `run` since the last compile, in seconds, by phase: `convert` (the numpy arrays
+    /// given to the engine's, shape checks), `upload`, `submit` (recording and submitting
+    /// the steps), `wait` (for the GPU), `read` (outputs out of the readback buffers),
+    /// `to_numpy`. Where a per-call cost goes; the GPU's own times are `profile()`.
+    #[getter]
+    fn host_times<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let (convert, upload, to_numpy) = (self.convert, self.upload, self.to_numpy);
+        let t = self.compiled()?.program.host_times;
+        let d = PyDict::new(py);
+        d.set_item("convert", convert)?;
+        d.set_item("upload", upload)?;
+        d.set_item("submit", t.submit.as_secs_f64())?;
+        d.set_item("wait", t.wait.as_secs_f64())?;
+        d.set_item("read", t.read.as_secs_f64())?;
+        d.set_item("to_numpy", to_numpy)?;
+        Ok(d)
     }
 
     /// The outputs the program computes.

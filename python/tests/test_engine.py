@@ -99,6 +99,36 @@ def test_repeated_runs_build_no_pipelines_and_new_sizes_build_few():
     assert p.compilations - first < first
 
 
+def test_inputs_given_once_are_kept_and_some_may_be_replaced():
+    rng = np.random.default_rng(5)
+    x, f, g2 = (rng.uniform(-3, 3, (9, 3)) for _ in range(3))
+    p = mesoflow.Graph("rpy_open").compile(outputs=["velocities"], positions=(9, 3), forces=(9, 3))
+    p.run(positions=x, forces=f)
+    only_forces = p.run(forces=g2)["velocities"]
+    assert np.array_equal(only_forces, p.run(positions=x, forces=g2)["velocities"])
+    assert np.abs(only_forces - rpy_reference(x, g2)).max() < 2e-6 * np.abs(only_forces).max()
+    # An upload refused by a node's check is not counted as given.
+    w = mesoflow.Graph("rpy_wall", wall_height=1.0).compile(
+        outputs=["velocities"], positions=(2, 3), forces=(2, 3)
+    )
+    with pytest.raises(mesoflow.RunError, match="below the wall"):
+        w.run(positions=[[0, 0, 2.0], [0, 0, 0.5]], forces=np.ones((2, 3)))
+    with pytest.raises(ValueError, match="`positions` never given"):
+        w.run(forces=np.ones((2, 3)))
+
+
+def test_host_times_count_each_phase_of_run():
+    x = np.random.default_rng(6).uniform(-3, 3, (7, 3))
+    p = mesoflow.Graph("rpy_open").compile(outputs=["velocities"], positions=(7, 3), forces=(7, 3))
+    first = p.host_times
+    assert set(first) == {"convert", "upload", "submit", "wait", "read", "to_numpy"}
+    assert all(v == 0 for v in first.values())
+    p.run(positions=x, forces=x)
+    p.run(forces=x)
+    later = p.host_times
+    assert all(later[k] > 0 for k in later), later
+
+
 def test_draws_are_fresh_every_run_and_reset_repeats_them():
     g = mesoflow.Graph("rpy_open", seed=7)
     x = np.random.default_rng(4).uniform(-3, 3, (6, 3))

@@ -208,6 +208,8 @@ def test_batches_do_not_see_each_other():
     u, _ = s.Mdot(f)
     want = np.concatenate([rpy_reference(x[:4], f[:4]), rpy_reference(x[4:], f[4:])])
     assert np.abs(u - want).max() < 2e-6 * np.abs(want).max()
+    u, _ = s.Mdot(f)  # each batch's positions sent again
+    assert np.abs(u - want).max() < 2e-6 * np.abs(want).max()
     assert s.sqrtMdotW()[0].shape == (8, 3)
 
 

@@ -10,15 +10,15 @@
 // 1 / (8 pi eta a^2), the wall's height.
 #import pairs/rpy_open.wgsl
 
-// Translation correction (units of 6 pi eta a) times v, R = x_i - image of x_j, h = h_j.
-fn wall_uf(r: vec3<f32>, h: f32, v: vec3<f32>) -> vec3<f32> {
+// Translation correction (units of 6 pi eta a) times v, R = x_i - image of x_j; hh = h_j / R_z
+// (the callers share one division for it).
+fn wall_uf(r: vec3<f32>, hh: f32, v: vec3<f32>) -> vec3<f32> {
     let d2 = dot(r, r);
     let i1 = inverseSqrt(d2);
     let i2 = i1 * i1;
     let i3 = i1 * i2;
     let i5 = i3 * i2;
     let e = r * i1;
-    let hh = h / r.z;
     let ez2 = e.z * e.z;
     let f1 = -(3.0 * (1.0 + 2.0 * hh * (1.0 - hh) * ez2) * i1 + 2.0 * (1.0 - 3.0 * ez2) * i3
         - 2.0 * (1.0 - 5.0 * ez2) * i5) * 0.25;
@@ -53,13 +53,13 @@ fn wall_wt(r: vec3<f32>, v: vec3<f32>) -> vec3<f32> {
     return out;
 }
 
-// The rotation-from-force correction's matrix (units of 8 pi eta a^2), rows x, y, z.
-fn wall_wf(r: vec3<f32>, h: f32) -> mat3x3<f32> {
+// The rotation-from-force correction's matrix (units of 8 pi eta a^2), rows x, y, z; hh as
+// in wall_uf.
+fn wall_wf(r: vec3<f32>, hh: f32) -> mat3x3<f32> {
     let i1 = inverseSqrt(dot(r, r));
     let i2 = i1 * i1;
     let i4 = i2 * i2;
     let e = r * i1;
-    let hh = h / r.z;
     let ez2 = e.z * e.z;
     let f1 = i2;
     let f2 = 2.0 * (6.0 * hh * ez2 * i2 + (1.0 - 10.0 * ez2) * i4);
@@ -73,16 +73,19 @@ fn wall_wf(r: vec3<f32>, h: f32) -> mat3x3<f32> {
 }
 
 fn pair_term(xi: vec3<f32>, xj: vec3<f32>, r0: vec3<f32>, r02: f32, vi: Row, vj: Row) -> Row {
+    // Two divisions per pair (1 / a, 1 / (h_i + h_j)): the rest multiplies.
     let a = pair_params[0];
+    let inv_a = 1.0 / a;
     let wall = pair_params[5];
-    let bij = clamp((xi.z - wall) / a, 0.0, 1.0) * clamp((xj.z - wall) / a, 0.0, 1.0);
+    let bij = clamp((xi.z - wall) * inv_a, 0.0, 1.0) * clamp((xj.z - wall) * inv_a, 0.0, 1.0);
     let hi = max(xi.z - wall, a);
     let hj = max(xj.z - wall, a);
     let r = vec3<f32>(xi.x - xj.x, xi.y - xj.y, hi - hj);
     let r2 = dot(r, r);
     let f = first3(vj);
-    // The image of j seen from i, and of i seen from j, in units of a.
-    let rim = vec3<f32>(r.x, r.y, hi + hj) / a;
+    // The image of j seen from i, and of i seen from j, in units of a; h / R_z for each.
+    let rim = vec3<f32>(r.x, r.y, hi + hj) * inv_a;
+    let inv_sum = 1.0 / (hi + hj);
     var u: vec3<f32>;
     var w = vec3<f32>(0.0);
     if (VALUE_COMPS != 6u) {
@@ -92,11 +95,11 @@ fn pair_term(xi: vec3<f32>, xj: vec3<f32>, r0: vec3<f32>, r02: f32, vi: Row, vj:
         let open = rpy_grand(r, r2, f, t);
         u = first3(open);
         w = second3(open);
-        let rim_ji = vec3<f32>(-r.x, -r.y, hi + hj) / a;
-        w += pair_params[3] * wall_wt(rim, t) + pair_params[4] * (wall_wf(rim, hj / a) * f);
-        u += pair_params[4] * (transpose(wall_wf(rim_ji, hi / a)) * t);
+        let rim_ji = vec3<f32>(-rim.x, -rim.y, rim.z);
+        w += pair_params[3] * wall_wt(rim, t) + pair_params[4] * (wall_wf(rim, hj * inv_sum) * f);
+        u += pair_params[4] * (transpose(wall_wf(rim_ji, hi * inv_sum)) * t);
     }
-    u += pair_params[1] * wall_uf(rim, hj / a, f);
+    u += pair_params[1] * wall_uf(rim, hj * inv_sum, f);
     return two3(bij * u, bij * w);
 }
 

@@ -25,7 +25,7 @@ use crate::graph::{Graph, NodeId};
 use crate::ids::IdVec;
 use crate::node::{IterativeKernels, LoopError};
 use crate::plan::{BufferId, Phase, Plan, Storage, ValueId};
-use crate::value::{HostArray, NonFinite};
+use crate::value::{HostArray, HostWords, NonFinite};
 
 #[derive(Debug, Error)]
 #[non_exhaustive]
@@ -138,6 +138,18 @@ pub struct RunOptions {
     pub progress: bool,
 }
 
+/// Host time a program's batched runs spent, summed over its runs (where a per-call cost
+/// goes: Python's `Program.host_times`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct HostTimes {
+    /// Recording the steps' dispatches and submitting them.
+    pub submit: Duration,
+    /// Waiting for the GPU.
+    pub wait: Duration,
+    /// Copying outputs out of the mapped readback buffers.
+    pub read: Duration,
+}
+
 #[derive(Clone, Debug)]
 pub struct RunStats {
     pub steps: u64,
@@ -198,9 +210,13 @@ pub struct Program<'a> {
     steps_done: u64,
     /// Iterations of each loop per step over the last run.
     iterations: Vec<(String, Vec<u32>)>,
-    /// The first uploaded input holding NaN or infinite values, if any: then NaN or
-    /// infinite outputs may come from it, and [`Program::check_finite`] does not judge.
-    non_finite_input: Option<String>,
+    /// The inputs whose last upload held NaN or infinite values: then NaN or infinite
+    /// outputs may come from them, and [`Program::check_finite`] does not judge.
+    non_finite_inputs: std::collections::BTreeSet<String>,
+    /// One host-visible buffer per output, kept between reads (the plan's order).
+    readback: Vec<wgpu::Buffer>,
+    /// Host time of the batched runs so far.
+    pub host_times: HostTimes,
 }
 
 fn storage_buffer(gpu: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
@@ -294,8 +310,27 @@ impl<'a> Program<'a> {
             table_bytes: 0,
             steps_done: 0,
             iterations: Vec::new(),
-            non_finite_input: None,
+            non_finite_inputs: Default::default(),
+            readback: Vec::new(),
+            host_times: HostTimes::default(),
         };
+        program.readback = program
+            .plan
+            .outputs
+            .iter()
+            .map(|(name, v)| {
+                program.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(&format!("readback {name}")),
+                    size: program.plan.values[*v]
+                        .ty
+                        .bytes()
+                        .max(4)
+                        .next_multiple_of(4),
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            })
+            .collect();
         let mut prologue = Vec::new();
         for l in &plan.prologue {
             prologue.push(program.compile_checked(&mut cx, l, 0)?);
@@ -418,16 +453,101 @@ impl<'a> Program<'a> {
     /// Uploads the given graph inputs; their types must be the planned ones, and the
     /// nodes that read them check their data first (`Graph::check_input_data`): nothing is
     /// written unless every input passes. Notes whether any holds NaN or infinite values
-    /// ([`Program::non_finite_input`]).
+    /// ([`Program::non_finite_input`]). Every input the plan reads must be given.
     pub fn upload(&mut self, inputs: &BTreeMap<String, HostArray>) -> Result<(), ExecError> {
-        self.non_finite_input = None;
+        self.write_inputs(inputs, true)
+    }
+
+    /// As [`Program::upload`], for some of the inputs: the others keep what their buffers
+    /// hold (the last upload's data). An input the plan does not read is an error.
+    pub fn update_inputs(&mut self, inputs: &BTreeMap<String, HostArray>) -> Result<(), ExecError> {
+        for name in inputs.keys() {
+            if !self
+                .plan
+                .inputs
+                .iter()
+                .any(|(i, _)| &self.graph.inputs[*i].name == name)
+            {
+                return Err(ExecError::Input {
+                    name: name.clone(),
+                    message: "is not an input the program reads".into(),
+                });
+            }
+        }
+        self.write_inputs(inputs, false)
+    }
+
+    /// As [`Program::update_inputs`], from borrowed words (no host copy unless a node
+    /// checks the input's data): every input named is checked before any is written.
+    pub fn update_input_words(
+        &mut self,
+        inputs: &[(&str, HostWords<'_>)],
+    ) -> Result<(), ExecError> {
+        let mut given = Vec::new();
+        for &(name, words) in inputs {
+            let Some(&(i, t)) = self
+                .plan
+                .inputs
+                .iter()
+                .find(|(i, _)| self.graph.inputs[*i].name == name)
+            else {
+                return Err(ExecError::Input {
+                    name: name.to_string(),
+                    message: "is not an input the program reads".into(),
+                });
+            };
+            if words.len() as u64 != t.words() || words.elem() != t.elem() {
+                return Err(ExecError::Input {
+                    name: name.to_string(),
+                    message: format!(
+                        "planned as {t}, given {} {:?} words",
+                        words.len(),
+                        words.elem()
+                    ),
+                });
+            }
+            if self.graph.input_is_checked(i, &self.plan.pruned) {
+                self.graph
+                    .check_input_data(i, &words.to_array(t), &self.plan.pruned)
+                    .map_err(|e| ExecError::Input {
+                        name: name.to_string(),
+                        message: e.to_string(),
+                    })?;
+            }
+            given.push((i, name, words));
+        }
+        for (i, name, words) in given {
+            if words.all_finite() {
+                self.non_finite_inputs.remove(name);
+            } else {
+                self.non_finite_inputs.insert(name.to_string());
+            }
+            if !words.is_empty() {
+                self.gpu
+                    .queue
+                    .write_buffer(&self.input_buffers[&i], 0, words.as_bytes());
+            }
+        }
+        Ok(())
+    }
+
+    fn write_inputs(
+        &mut self,
+        inputs: &BTreeMap<String, HostArray>,
+        all: bool,
+    ) -> Result<(), ExecError> {
         let mut given = Vec::new();
         for (i, t) in &self.plan.inputs {
             let name = &self.graph.inputs[*i].name;
-            let a = inputs.get(name).ok_or_else(|| ExecError::Input {
-                name: name.clone(),
-                message: "not given".into(),
-            })?;
+            let Some(a) = inputs.get(name) else {
+                if all {
+                    return Err(ExecError::Input {
+                        name: name.clone(),
+                        message: "not given".into(),
+                    });
+                }
+                continue;
+            };
             if a.ty != *t {
                 return Err(ExecError::Input {
                     name: name.clone(),
@@ -442,9 +562,15 @@ impl<'a> Program<'a> {
                 })?;
             given.push((i, a));
         }
+        if all {
+            self.non_finite_inputs.clear();
+        }
         for (i, a) in given {
-            if self.non_finite_input.is_none() && a.non_finite().is_some() {
-                self.non_finite_input = Some(self.graph.inputs[*i].name.clone());
+            let name = &self.graph.inputs[*i].name;
+            if a.non_finite().is_some() {
+                self.non_finite_inputs.insert(name.clone());
+            } else {
+                self.non_finite_inputs.remove(name);
             }
             if !a.data.is_empty() {
                 self.gpu
@@ -457,7 +583,7 @@ impl<'a> Program<'a> {
 
     /// The first input of the last upload that holds NaN or infinite values, if any.
     pub fn non_finite_input(&self) -> Option<&str> {
-        self.non_finite_input.as_deref()
+        self.non_finite_inputs.first().map(|s| s.as_str())
     }
 
     /// Checks outputs read back after a run for NaN and infinite values:
@@ -465,7 +591,7 @@ impl<'a> Program<'a> {
     /// finite. Where an input held NaN or infinite values they may flow to the outputs
     /// legitimately, and nothing is checked (`non_finite_input` says which input).
     pub fn check_finite(&self, outputs: &[(String, HostArray)]) -> Result<(), ExecError> {
-        if self.non_finite_input.is_some() {
+        if !self.non_finite_inputs.is_empty() {
             return Ok(());
         }
         let found: Vec<(String, NonFinite)> = outputs
@@ -487,19 +613,80 @@ impl<'a> Program<'a> {
         Ok(out)
     }
 
-    /// Reads back the requested outputs (their values after the last step run).
+    /// Reads back the requested outputs (their values after the last step run): one
+    /// submission copies them all into the readback buffers, one wait.
     pub fn read_outputs(&self) -> Result<Vec<(String, HostArray)>, ExecError> {
         if self.steps_done == 0 {
             return Err(ExecError::Run("outputs are read after a run".into()));
         }
-        let parity = ((self.steps_done - 1) % 2) as usize;
-        let mut out = Vec::new();
-        for (name, v) in &self.plan.outputs {
-            let ty = self.plan.values[*v].ty;
-            let bytes = self.gpu.read_buffer(self.buffer(*v, parity), ty.bytes())?;
-            out.push((name.clone(), HostArray::from_bytes(ty, &bytes)));
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        self.record_output_copies(&mut enc, self.steps_done - 1);
+        let idx = self.gpu.queue.submit([enc.finish()]);
+        let mapped = self.map_readback();
+        self.gpu.wait(idx)?;
+        self.collect_readback(mapped)
+    }
+
+    /// Records the copies of every output after step `last_step` into the readback
+    /// buffers.
+    fn record_output_copies(&self, enc: &mut wgpu::CommandEncoder, last_step: u64) {
+        let parity = (last_step % 2) as usize;
+        for ((_, v), staging) in self.plan.outputs.iter().zip(&self.readback) {
+            enc.copy_buffer_to_buffer(self.buffer(*v, parity), 0, staging, 0, staging.size());
         }
-        Ok(out)
+    }
+
+    /// Asks for every readback buffer to be mapped once the submitted copies are done:
+    /// the receivers of the map results.
+    fn map_readback(&self) -> Vec<std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>> {
+        self.readback
+            .iter()
+            .map(|staging| {
+                let (tx, rx) = std::sync::mpsc::channel();
+                staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                    let _ = tx.send(r);
+                });
+                rx
+            })
+            .collect()
+    }
+
+    /// The outputs from the mapped readback buffers (after the wait), each copied once.
+    fn collect_readback(
+        &self,
+        mapped: Vec<std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>>,
+    ) -> Result<Vec<(String, HostArray)>, ExecError> {
+        // Every buffer that mapped is unmapped, errors or not, so the next read can map it.
+        let mut out = Vec::new();
+        let mut failed = None;
+        for (((name, v), staging), rx) in self.plan.outputs.iter().zip(&self.readback).zip(mapped) {
+            let read = match rx.recv() {
+                Err(_) => Err(GpuError::Device("buffer map callback never ran".into())),
+                Ok(Err(e)) => Err(GpuError::Device(format!(
+                    "mapping a readback buffer failed: {e}"
+                ))),
+                Ok(Ok(())) => {
+                    let ty = self.plan.values[*v].ty;
+                    let array = staging
+                        .slice(..)
+                        .get_mapped_range()
+                        .map(|bytes| HostArray::from_bytes(ty, &bytes))
+                        .map_err(|e| {
+                            GpuError::Device(format!("reading a mapped buffer failed: {e}"))
+                        });
+                    staging.unmap();
+                    array
+                }
+            };
+            match read {
+                Ok(array) => out.push((name.clone(), array)),
+                Err(e) => failed = failed.or(Some(e)),
+            }
+        }
+        match failed {
+            Some(e) => Err(e.into()),
+            None => Ok(out),
+        }
     }
 
     /// The outputs the program computes, in the plan's order.

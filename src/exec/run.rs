@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use super::{CompiledLoop, ExecError, Profile, Program, RunOptions, RunStats};
 use crate::gpu::{Dispatch, GpuError};
 use crate::node::{Decision, Lowering};
+use crate::value::HostArray;
 
 impl Program<'_> {
     /// Records the dispatches that run on step `step` (see `Period`).
@@ -207,7 +208,7 @@ impl Program<'_> {
     /// `opts.steps` steps after those already run, timed as `opts.profile` says.
     fn run_steps(&mut self, opts: &RunOptions, t0: Instant) -> Result<RunStats, ExecError> {
         let stats = match opts.profile {
-            Profile::Off => self.run_batched(opts)?,
+            Profile::Off => self.run_batched(opts, false)?.0,
             Profile::Launches => self.run_profiled(opts.steps, false)?,
             Profile::Dispatches => self.run_profiled(opts.steps, true)?,
             Profile::Steps => self.run_timed_steps(opts.steps)?,
@@ -234,6 +235,31 @@ impl Program<'_> {
         self.run_steps(opts, Instant::now())
     }
 
+    /// [`Program::run_on`], then the outputs as [`Program::read_outputs`] gives them;
+    /// without profiling or loops the copies to the host ride with the last steps'
+    /// submission (one wait for both).
+    pub fn run_on_and_read(
+        &mut self,
+        opts: &RunOptions,
+    ) -> Result<(RunStats, Vec<(String, HostArray)>), ExecError> {
+        if opts.profile != Profile::Off || self.has_loops() || opts.steps == 0 {
+            let stats = self.run_on(opts)?;
+            return Ok((stats, self.read_outputs()?));
+        }
+        let t0 = Instant::now();
+        if self.steps_done == 0 {
+            self.start()?;
+        }
+        let (stats, outputs) = self.run_batched(opts, true)?;
+        Ok((
+            RunStats {
+                wall: t0.elapsed(),
+                ..stats
+            },
+            outputs.expect("asked for"),
+        ))
+    }
+
     /// The next [`Program::run_on`] starts over: prologue, states from their initial
     /// values, step counter at 0 (the same draws as the first run, for the same seed).
     pub fn reset(&mut self) {
@@ -245,7 +271,14 @@ impl Program<'_> {
         self.steps_done
     }
 
-    fn run_batched(&mut self, opts: &RunOptions) -> Result<RunStats, ExecError> {
+    /// The steps in batches; with `read`, the outputs copied back in the last batch's
+    /// submission.
+    #[allow(clippy::type_complexity)]
+    fn run_batched(
+        &mut self,
+        opts: &RunOptions,
+        read: bool,
+    ) -> Result<(RunStats, Option<Vec<(String, HostArray)>>), ExecError> {
         let per_step: usize = self.step[0]
             .iter()
             .map(|c| c.dispatches.len())
@@ -267,6 +300,7 @@ impl Program<'_> {
             None
         };
         let mut in_flight: Option<(wgpu::SubmissionIndex, u64)> = None;
+        let mut mapped = None;
         let mut done = 0;
         if self.has_loops() {
             // Loops decide on the host, so steps go out one at a time.
@@ -281,6 +315,7 @@ impl Program<'_> {
             }
         }
         while done < opts.steps {
+            let t_submit = Instant::now();
             let n = steps_per_submit.min(opts.steps - done);
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
             {
@@ -294,9 +329,19 @@ impl Program<'_> {
                     Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), step);
                 }
             }
+            let last = done + n == opts.steps;
+            if read && last {
+                self.record_output_copies(&mut enc, self.steps_done + opts.steps - 1);
+            }
             let idx = self.gpu.queue.submit([enc.finish()]);
+            if read && last {
+                mapped = Some(self.map_readback());
+            }
+            let t_wait = Instant::now();
+            self.host_times.submit += t_wait - t_submit;
             if let Some((prev, k)) = in_flight.take() {
                 self.gpu.wait(prev)?;
+                self.host_times.wait += t_wait.elapsed();
                 if let Some(b) = &bar {
                     b.inc(k);
                 }
@@ -305,7 +350,9 @@ impl Program<'_> {
             done += n;
         }
         if let Some((prev, k)) = in_flight {
+            let t_wait = Instant::now();
             self.gpu.wait(prev)?;
+            self.host_times.wait += t_wait.elapsed();
             if let Some(b) = &bar {
                 b.inc(k);
             }
@@ -314,12 +361,21 @@ impl Program<'_> {
             b.finish_and_clear();
         }
         self.steps_done += opts.steps;
-        Ok(RunStats {
-            steps: opts.steps,
-            wall: Duration::ZERO,
-            profile: Vec::new(),
-            timed_by_gpu: false,
-            step_samples: Vec::new(),
-        })
+        let t_read = Instant::now();
+        let outputs = match mapped {
+            Some(m) => Some(self.collect_readback(m)?),
+            None => None,
+        };
+        self.host_times.read += t_read.elapsed();
+        Ok((
+            RunStats {
+                steps: opts.steps,
+                wall: Duration::ZERO,
+                profile: Vec::new(),
+                timed_by_gpu: false,
+                step_samples: Vec::new(),
+            },
+            outputs,
+        ))
     }
 }

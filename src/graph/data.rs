@@ -42,6 +42,14 @@ impl Graph {
     /// Checks the data given for graph input `input` with every node port that reads it
     /// ([`Graph::readers_of_input`]), except the nodes in `skip` (those a plan does not
     /// run); the first refusal, in node order.
+    /// Whether some node reading `input` (outside `skip`) checks the data given for it.
+    pub fn input_is_checked(&self, input: usize, skip: &[NodeId]) -> bool {
+        self.readers_of_input(input).into_iter().any(|(n, _)| {
+            !skip.contains(&n)
+                && matches!(&self.nodes[n].built, Ok(built) if built.node.checks_input())
+        })
+    }
+
     pub fn check_input_data(
         &self,
         input: usize,

@@ -457,16 +457,22 @@ fn all_pairs_match_every_pair() {
         let vals: Vec<f64> = (0..3 * n).map(|_| rng.uniform(-1.0, 1.0)).collect();
         let pos64 = flat_particles(&pos, 3).data.to_f64();
         let vals64 = flat_particles(&vals, 3).data.to_f64();
-        let got = all_pairs(r#"{"kernel": "rpy", "radius": 0.7}"#, &pos, Some(&vals));
         let want = brute_force(&Pair::Rpy(0.7), &pos64, &vals64, &[], [false; 3], f64::MAX);
         let scale = want.iter().fold(1e-30f64, |m, x| m.max(x.abs()));
-        let err = got
-            .iter()
-            .zip(&want)
-            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs() / scale));
-        assert!(err < 2e-5, "all_pairs rpy n = {n}: {err:e}");
+        // One run of j tiles (what small N gets), and the sums cut into runs added after.
+        for params in [
+            r#"{"kernel": "rpy", "radius": 0.7}"#,
+            r#"{"kernel": "rpy", "radius": 0.7, "slices": 3}"#,
+        ] {
+            let got = all_pairs(params, &pos, Some(&vals));
+            let err = got
+                .iter()
+                .zip(&want)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs() / scale));
+            assert!(err < 2e-5, "all_pairs {params} n = {n}: {err:e}");
+        }
         let got = all_pairs(
-            r#"{"kernel": "lj", "sigma": 0.4, "cutoff": 1.0}"#,
+            r#"{"kernel": "lj", "sigma": 0.4, "cutoff": 1.0, "slices": 2}"#,
             &pos,
             None,
         );
