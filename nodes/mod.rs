@@ -4,6 +4,7 @@ pub mod bin_sort;
 pub mod cells;
 pub mod chebyshev;
 pub mod chebyshev_bvp;
+pub mod chebyshev_spread;
 pub mod fcm;
 pub mod fft;
 pub mod lanczos;
@@ -37,6 +38,7 @@ pub fn register_all(r: &mut Registry) {
     bin_sort::register(r);
     chebyshev::register(r);
     chebyshev_bvp::register(r);
+    chebyshev_spread::register(r);
     fft::register(r);
     pointwise::register(r);
     cells::register(r);

@@ -38,6 +38,13 @@ pub fn weight_exponent(gw: &GridWindow, n: u32) -> Result<i32, String> {
             w * ns.div_ceil(gw.cells[a]) as f64,
         )
     });
+    bound_exponent(peak, n, wraps)
+}
+
+/// log2 of PEAK x N x wraps rounded up (`FIXED_EXP`), for any spreading kernel that adds
+/// through add_fixed.wgsl: `peak` its largest weight on one grid word, `wraps` the times
+/// one particle's support can cover a word.
+pub fn bound_exponent(peak: f64, n: u32, wraps: f64) -> Result<i32, String> {
     let bound = peak * n.max(1) as f64 * wraps;
     let exp = bound.log2().ceil();
     if exp.is_nan() || exp > MAX_EXP as f64 {

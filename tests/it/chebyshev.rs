@@ -7,7 +7,10 @@ use std::f64::consts::PI;
 
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{Rng, gpu, rel_max_err, run_out};
+use crate::util::{
+    Rng, compile_cached, f32s, flat_particles, gpu, load_single_node, named, plan_graph, reference,
+    rel_max_err, run_node, run_out, types_of, with_caps,
+};
 
 fn grid(dims: [u32; 3], comps: u32, values: &[f64]) -> HostArray {
     HostArray::f32(
@@ -272,4 +275,310 @@ fn the_bvp_node_recovers_a_manufactured_solution() {
             assert!(values[2 * (j * nk + ki) + 1].abs() < 1e-5);
         }
     }
+}
+
+// ---- spread_chebyshev and interpolate_chebyshev -----------------------------------
+
+/// The params of a Chebyshev grid test: box 8 x 6 on 16 x 12 cells (h = 0.5), z in
+/// [-2, 3] on 33 points, the window and walls given.
+fn cheb_params(window: &str, walls: &str) -> String {
+    format!(
+        r#"{{"box": [8, 6], "grid": [16, 12], "zmin": -2, "zmax": 3, "points": 33, {window}, "walls": "{walls}"}}"#
+    )
+}
+
+const GAUSSIAN: &str = r#""window": "gaussian", "width": 0.5, "tolerance": 1e-6"#;
+const ES: &str = r#""window": "es", "support": 6, "beta": 13.8"#;
+
+/// Positions in the domain with the hard places: on the bottom and top walls, a radius
+/// from them, at mid-height, on the periodic faces and a grid point.
+fn cheb_positions(rng: &mut Rng) -> Vec<f64> {
+    let mut x = vec![
+        0.3, 0.2, -2.0, // on the bottom
+        -4.0, 3.0, 3.0, // on the top, on two periodic faces
+        0.25, 0.25, 0.5, // mid-height, a cell centre in x and y
+        3.99, -2.99, -1.5, // near a face, half a width above the bottom
+        1.1, 0.4, 2.6,
+    ];
+    for _ in 0..20 {
+        x.push(rng.uniform(-4.0, 4.0));
+        x.push(rng.uniform(-3.0, 3.0));
+        x.push(rng.uniform(-2.0, 3.0));
+    }
+    x
+}
+
+/// Both nodes against their f64 references, every wall mode, Gaussian and ES windows.
+#[test]
+fn chebyshev_spreading_and_interpolation_match_their_references() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(8);
+    let pos = cheb_positions(&mut rng);
+    let n = pos.len() / 3;
+    let vals: Vec<f64> = (0..3 * n).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let field = rng.array(
+        ValueType::RealGrid {
+            dims: [16, 12, 33],
+            comps: 3,
+        },
+        -1.0,
+        1.0,
+    );
+    for window in [GAUSSIAN, ES] {
+        for walls in ["none", "bottom", "slit"] {
+            let p = cheb_params(window, walls);
+            let (got, want) = run_out(
+                "spread_chebyshev",
+                &p,
+                &[
+                    ("positions", flat_particles(&pos, 3)),
+                    ("values", flat_particles(&vals, 3)),
+                ],
+            );
+            let (err, at) = rel_max_err(&got, &want);
+            assert!(err <= 2e-6, "spread {window} {walls}: {err:e} at {at}");
+            let (got, want) = run_out(
+                "interpolate_chebyshev",
+                &p,
+                &[
+                    ("grid", field.clone()),
+                    ("positions", flat_particles(&pos, 3)),
+                ],
+            );
+            let (err, at) = rel_max_err(&got, &want);
+            assert!(err <= 2e-6, "interpolate {window} {walls}: {err:e} at {at}");
+        }
+    }
+}
+
+/// Physics of the kernel, against closed forms written here: interpolating a field of
+/// ones integrates delta~ over the domain by the quadrature. Away from walls that is 1
+/// (the window is normalised); a bottom wall's image takes away the part mirrored below
+/// it, erf(d / (sigma sqrt 2)) for a Gaussian at height d (0 on the wall); the slit takes
+/// both walls' images.
+#[test]
+fn chebyshev_kernel_integrates_to_the_closed_forms() {
+    if gpu().is_none() {
+        return;
+    }
+    let sigma = 0.5;
+    let erf = |x: f64| 1.0 - erfc(x);
+    let heights = [0.0, 0.1, 0.25, 0.5, 1.0, 2.5];
+    let mut pos = Vec::new();
+    for (i, d) in heights.iter().enumerate() {
+        pos.extend([0.37 * i as f64 - 2.0, 0.21 * i as f64, -2.0 + d]);
+    }
+    let n = heights.len() as u32;
+    let ones = HostArray::f32(
+        ValueType::RealGrid {
+            dims: [16, 12, 65],
+            comps: 1,
+        },
+        vec![1.0; 16 * 12 * 65],
+    );
+    for walls in ["none", "bottom", "slit"] {
+        let p = format!(
+            r#"{{"box": [8, 6], "grid": [16, 12], "zmin": -2, "zmax": 3, "points": 65, {GAUSSIAN}, "walls": "{walls}"}}"#
+        );
+        let (got, _) = run_out(
+            "interpolate_chebyshev",
+            &p,
+            &[
+                ("grid", ones.clone()),
+                ("positions", flat_particles(&pos, 3)),
+            ],
+        );
+        let got = got.data.to_f64();
+        assert_eq!(got.len(), n as usize);
+        for (d, g) in heights.iter().zip(&got) {
+            // The part of the Gaussian inside [zmin, zmax], minus its images' parts.
+            let inside = |q: f64| {
+                0.5 * (erf((3.0 - q) / (sigma * 2f64.sqrt()))
+                    - erf((-2.0 - q) / (sigma * 2f64.sqrt())))
+            };
+            let q = -2.0 + d;
+            let want = match walls {
+                "none" => inside(q),
+                "bottom" => inside(q) - inside(-4.0 - q),
+                _ => inside(q) - inside(-4.0 - q) - inside(6.0 - q),
+            };
+            assert!(
+                (g - want).abs() < 2e-5,
+                "{walls}, height {d}: {g} against {want}"
+            );
+        }
+    }
+}
+
+/// erfc with relative error below 1.2e-7 (Numerical Recipes' Chebyshev fit).
+fn erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let r = t
+        * (-z * z - 1.26551223
+            + t * (1.00002368
+                + t * (0.37409196
+                    + t * (0.09678418
+                        + t * (-0.18628806
+                            + t * (0.27886807
+                                + t * (-1.13520398
+                                    + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277)))))))))
+            .exp();
+    if x >= 0.0 { r } else { 2.0 - r }
+}
+
+/// Interpolation is the adjoint of spreading in the quadrature's inner product:
+/// sum_grid W S(F) . u = sum_i F_i . J(u)_i, for random F and u, both from the GPU; the
+/// weights W (Clenshaw-Curtis, h_x h_y H/2) written here.
+#[test]
+fn chebyshev_interpolation_is_the_adjoint_of_spreading() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(9);
+    let pos = cheb_positions(&mut rng);
+    let n = pos.len() / 3;
+    let f: Vec<f64> = (0..3 * n).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let u = rng.array(
+        ValueType::RealGrid {
+            dims: [16, 12, 33],
+            comps: 3,
+        },
+        -1.0,
+        1.0,
+    );
+    // Clenshaw-Curtis on 33 points by its defining property: the weights that integrate
+    // T_0 .. T_32 exactly, solved here from the moments (a Vandermonde-free form: the
+    // cosine sums of Trefethen's clencurt are the closed form of that solve).
+    let m = 32usize;
+    let w: Vec<f64> = (0..=m)
+        .map(|i| {
+            let theta = PI * i as f64 / m as f64;
+            let c = if i == 0 || i == m { 0.5 } else { 1.0 };
+            let s: f64 = (0..=m / 2)
+                .map(|k| {
+                    let b = if k == 0 || k == m / 2 { 0.5 } else { 1.0 };
+                    b * 2.0 / (1.0 - 4.0 * (k * k) as f64) * (2.0 * k as f64 * theta).cos()
+                })
+                .sum();
+            c * 2.0 / m as f64 * s
+        })
+        .collect();
+    assert!((w.iter().sum::<f64>() - 2.0).abs() < 1e-12);
+    for walls in ["none", "bottom", "slit"] {
+        let p = cheb_params(GAUSSIAN, walls);
+        let (spread, _) = run_out(
+            "spread_chebyshev",
+            &p,
+            &[
+                ("positions", flat_particles(&pos, 3)),
+                ("values", flat_particles(&f, 3)),
+            ],
+        );
+        let (interp, _) = run_out(
+            "interpolate_chebyshev",
+            &p,
+            &[("grid", u.clone()), ("positions", flat_particles(&pos, 3))],
+        );
+        let (s, uu) = (spread.data.to_f64(), u.data.to_f64());
+        let plane = 16 * 12;
+        let cell = 0.5 * 0.5 * 2.5;
+        let lhs: f64 = (0..3)
+            .map(|c| {
+                (0..33 * plane)
+                    .map(|i| w[i / plane] * cell * s[c * 33 * plane + i] * uu[c * 33 * plane + i])
+                    .sum::<f64>()
+            })
+            .sum();
+        let rhs: f64 = f.iter().zip(interp.data.to_f64()).map(|(a, b)| a * b).sum();
+        assert!(
+            (lhs - rhs).abs() < 1e-5 * lhs.abs().max(rhs.abs()),
+            "{walls}: {lhs} against {rhs}"
+        );
+    }
+}
+
+/// A particle on a wall spreads nothing; one outside [zmin, zmax] is refused by row.
+#[test]
+fn chebyshev_walls_take_particles_on_them_and_refuse_those_through() {
+    if gpu().is_none() {
+        return;
+    }
+    let p = cheb_params(GAUSSIAN, "slit");
+    let on = [0.3, 0.1, -2.0, -1.0, 2.0, 3.0];
+    let (got, _) = run_out(
+        "spread_chebyshev",
+        &p,
+        &[
+            ("positions", flat_particles(&on, 3)),
+            ("values", flat_particles(&[1.0; 6], 3)),
+        ],
+    );
+    assert!(
+        got.data.to_f64().iter().all(|&v| v == 0.0),
+        "a particle on a wall spread something"
+    );
+    let data = named(&[
+        (
+            "positions",
+            flat_particles(&[0.0, 0.0, 1.0, 0.5, 0.5, -2.5], 3),
+        ),
+        ("values", flat_particles(&[1.0; 6], 3)),
+    ]);
+    let types: Vec<(&str, ValueType)> = data.iter().map(|(k, v)| (k.as_str(), v.ty)).collect();
+    let (dir, g) = load_single_node("spread_chebyshev", &p, &types);
+    let gpu = gpu().expect("checked above");
+    let plan = plan_graph(&gpu.caps, &g, types_of(&data), None, true);
+    let mut program = compile_cached(&gpu, &g, &plan);
+    let err = program.upload(&data).unwrap_err().to_string();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(
+        err.contains("row 1") && err.contains("outside") && err.contains("slit"),
+        "{err}"
+    );
+}
+
+/// Deterministic runs add in fixed point: the spread grid is the same bits whatever the
+/// particles' order, and the f64 reference's within f32 rounding.
+#[test]
+fn deterministic_chebyshev_spreading_does_not_depend_on_the_order() {
+    let Some(mut gpu) = gpu() else { return };
+    let mut rng = Rng::new(10);
+    let pos = cheb_positions(&mut rng);
+    let n = pos.len() / 3;
+    let vals: Vec<f64> = (0..3 * n).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let reverse = |v: &[f64]| -> Vec<f64> { v.chunks(3).rev().flatten().copied().collect() };
+    let p = cheb_params(ES, "bottom");
+    let forward = named(&[
+        ("positions", flat_particles(&pos, 3)),
+        ("values", flat_particles(&vals, 3)),
+    ]);
+    let backward = named(&[
+        ("positions", flat_particles(&reverse(&pos), 3)),
+        ("values", flat_particles(&reverse(&vals), 3)),
+    ]);
+    let (a, b) = with_caps(
+        &mut gpu,
+        |c| c.deterministic = true,
+        |gpu| {
+            (
+                run_node(gpu, "spread_chebyshev", &p, &forward)
+                    .remove("out")
+                    .unwrap(),
+                run_node(gpu, "spread_chebyshev", &p, &backward)
+                    .remove("out")
+                    .unwrap(),
+            )
+        },
+    );
+    assert_eq!(f32s(&a), f32s(&b), "the two orders differ");
+    let want = &reference(
+        "spread_chebyshev",
+        &p,
+        &[forward.get("positions"), forward.get("values")],
+    )[0];
+    let (err, at) = rel_max_err(&a, want);
+    assert!(err <= 2e-6, "{err:e} at {at}");
 }

@@ -1,0 +1,72 @@
+// template: imported by spread.wgsl and interpolate.wgsl (nodes/chebyshev_spread.rs): the
+// grid regular in x, y (cells centred at -L/2 + (i + 1/2) h) and Chebyshev in z, the
+// window per axis (window_phi, from shaders/window/), the walls' images.
+struct Geometry {
+    n: vec4<u32>,        // nx, ny, z points, particles
+    shape: vec4<u32>,    // support (cells), components, walls (0 none, 1 bottom, 2 slit), -
+    h: vec4<f32>,        // hx, hy, 1 / hx, 1 / hy
+    box_len: vec4<f32>,  // Lx, Ly, 1 / Lx, 1 / Ly
+    z: vec4<f32>,        // zmin, zmax, zmid, H / 2
+    win_x: vec4<f32>,    // window params for hx (z uses them too, with hx)
+    win_y: vec4<f32>,    // window params for hy
+    radius: vec4<f32>,   // half support in cells, z radius (length)
+}
+
+// table: z of each point (top first), then the quadrature weights h_x h_y (H/2) w_j.
+fn z_point(j: u32) -> f32 {
+    return table[j];
+}
+
+fn z_weight(j: u32) -> f32 {
+    return table[geo.n.z + j];
+}
+
+// Position along x (a = 0) or y (1) in cell-centre units (cell i's centre at i), folded
+// into the box.
+fn centre_units(x: f32, a: u32) -> f32 {
+    let l = geo.box_len[a];
+    let folded = x - l * floor(x * geo.box_len[a + 2u] + 0.5);
+    return (folded + 0.5 * l) * geo.h[a + 2u] - 0.5;
+}
+
+fn wrap_cell(i: i32, n: u32) -> u32 {
+    let m = i32(n);
+    return u32(((i % m) + m) % m);
+}
+
+// phi per unit length at r cells along x or y, zero beyond the support.
+fn phi_x(r: f32) -> f32 {
+    return select(window_phi(r, geo.win_x) * geo.h.z, 0.0, abs(r) > geo.radius.x);
+}
+
+fn phi_y(r: f32) -> f32 {
+    return select(window_phi(r, geo.win_y) * geo.h.w, 0.0, abs(r) > geo.radius.x);
+}
+
+// phi per unit length at distance d along z (in x cells), zero beyond the support.
+fn phi_z(d: f32) -> f32 {
+    return select(window_phi(d * geo.h.z, geo.win_x) * geo.h.z, 0.0, abs(d) > geo.radius.y);
+}
+
+// The z factor with the walls' images subtracted.
+fn z_kernel(z: f32, qz: f32) -> f32 {
+    var w = phi_z(z - qz);
+    if (geo.shape.z >= 1u) {
+        w -= phi_z(z - (2.0 * geo.z.x - qz));
+    }
+    if (geo.shape.z == 2u) {
+        w -= phi_z(z - (2.0 * geo.z.y - qz));
+    }
+    return w;
+}
+
+// The z points within the support of a particle at qz (its images' lie inside it too):
+// j from acos, widened by one point each way (each point is tested exactly after).
+fn z_range(qz: f32) -> vec2<u32> {
+    let last = f32(geo.n.z - 1u);
+    let top = clamp((qz + geo.radius.y - geo.z.z) / geo.z.w, -1.0, 1.0);
+    let bottom = clamp((qz - geo.radius.y - geo.z.z) / geo.z.w, -1.0, 1.0);
+    let lo = max(floor(last * acos(top) / 3.141592653589793) - 1.0, 0.0);
+    let hi = min(ceil(last * acos(bottom) / 3.141592653589793) + 1.0, last);
+    return vec2<u32>(u32(lo), u32(hi));
+}
