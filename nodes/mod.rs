@@ -22,6 +22,7 @@ pub mod scan;
 pub mod sort;
 pub mod spectral;
 pub mod spread;
+pub mod stokes_slab;
 
 use crate::node::Registry;
 
@@ -50,6 +51,7 @@ pub fn register_all(r: &mut Registry) {
     record::register(r);
     reduce::register(r);
     spread::register(r);
+    stokes_slab::register(r);
     scan::register(r);
     sort::register(r);
     spectral::register(r);

@@ -29,6 +29,7 @@ mod scan;
 mod shaders;
 mod sort;
 mod spread;
+mod stokes_slab;
 mod untrusted;
 // Some helpers serve only the MPCD binary (tests/mpcd.rs).
 #[allow(dead_code)]

@@ -1,0 +1,130 @@
+// slab_walls: the no-slip walls of the doubly periodic Stokes solver on the free-space
+// velocity, values along z (j = 0 the top, j = nz - 1 the bottom), per k (digest sections
+// 7.3 and 7.4; nodes/stokes_slab.rs derives the forms). One thread per k.
+//
+// k != 0: u_b = -v(bottom), u_t = -v(top) are cancelled by the homogeneous Stokes solution
+// [a zeta (-i k, |k|) + C] e^{-|k| zeta} + [b zeta (i k, |k|) + D] e^{|k| (zeta - Lz)},
+// zeta = z - zmin, a = C_z - i k.C / |k|, b = -D_z - i k.D / |k| (divergence-free); bottom:
+// C = u_b, D = 0; slit: (C, D) = Minv (u_b, u_t), Minv per k from the host (f64, the
+// growing exponential rescaled so nothing overflows). k = 0: none drops the mode; bottom
+// adds -v(bottom) + s zeta to v_x, v_y with s = -dv/dz(top) (zero at the wall, free above:
+// bounded flow); slit adds the linear function that zeroes both walls; v_z = 0.
+// tables: zeta_j (nz), the weights of dv/dz at the top from the values (nz), then for the
+// slit Minv: word ((r 6 + c) 2 + part) nk + k.
+#import common/index.wgsl
+#import stokes_slab/slab.wgsl
+
+@group(0) @binding(0) var<storage, read> v: array<f32>;
+@group(0) @binding(1) var<storage, read_write> out: array<f32>;
+@group(0) @binding(2) var<storage, read> tables: array<f32>;
+@group(0) @binding(3) var<uniform> s: Slab;
+
+fn load(c: u32, z: u32, k: u32) -> vec2<f32> {
+    let w = slab_word(c, z, k, s.nz, s.nk);
+    return vec2<f32>(v[w], v[w + 1u]);
+}
+
+fn store(c: u32, z: u32, k: u32, x: vec2<f32>) {
+    let w = slab_word(c, z, k, s.nz, s.nk);
+    out[w] = x.x;
+    out[w + 1u] = x.y;
+}
+
+fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
+}
+
+fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
+    let base = 2u * s.nz;
+    let w = ((r * 6u + c) * 2u) * s.nk + k;
+    return vec2<f32>(tables[base + w], tables[base + w + s.nk]);
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let k = flat_index(wid, nwg, lid, 256u);
+    if (k >= s.nk) {
+        return;
+    }
+    let n = s.nz;
+    let q = slab_wave(s, k, false);
+    let kabs = length(q);
+    if (kabs == 0.0) {
+        // Linear functions of z solve the k = 0 problem's homogeneous part: the one that
+        // meets the walls' conditions is added (bottom: zero at zmin, free slope at zmax;
+        // slit: zero at both).
+        var bottom = array<vec2<f32>, 2>(load(0u, n - 1u, k), load(1u, n - 1u, k));
+        var top = array<vec2<f32>, 2>(load(0u, 0u, k), load(1u, 0u, k));
+        var slope = array<vec2<f32>, 2>(vec2<f32>(0.0), vec2<f32>(0.0));
+        if (s.walls == 1u) {
+            for (var j = 0u; j < n; j++) {
+                slope[0] -= tables[n + j] * load(0u, j, k);
+                slope[1] -= tables[n + j] * load(1u, j, k);
+            }
+        }
+        for (var j = 0u; j < n; j++) {
+            let zeta = tables[j];
+            for (var c = 0u; c < 2u; c++) {
+                var x = vec2<f32>(0.0);
+                if (s.walls == 1u) {
+                    x = load(c, j, k) - bottom[c] + zeta * slope[c];
+                } else if (s.walls == 2u) {
+                    let t = zeta / s.height;
+                    x = load(c, j, k) - bottom[c] * (1.0 - t) - top[c] * t;
+                }
+                store(c, j, k, x);
+            }
+            store(2u, j, k, vec2<f32>(0.0));
+        }
+        return;
+    }
+    if (s.walls == 0u) {
+        for (var j = 0u; j < n; j++) {
+            for (var c = 0u; c < 3u; c++) {
+                store(c, j, k, load(c, j, k));
+            }
+        }
+        return;
+    }
+    var big_c: array<vec2<f32>, 3>;
+    var big_d: array<vec2<f32>, 3>;
+    for (var c = 0u; c < 3u; c++) {
+        big_c[c] = -load(c, n - 1u, k);
+        big_d[c] = vec2<f32>(0.0);
+    }
+    if (s.walls == 2u) {
+        var u: array<vec2<f32>, 6>;
+        for (var c = 0u; c < 3u; c++) {
+            u[c] = big_c[c];
+            u[3u + c] = -load(c, 0u, k);
+        }
+        for (var r = 0u; r < 3u; r++) {
+            var x = vec2<f32>(0.0);
+            var y = vec2<f32>(0.0);
+            for (var c = 0u; c < 6u; c++) {
+                x += cmul(minv(r, c, k), u[c]);
+                y += cmul(minv(3u + r, c, k), u[c]);
+            }
+            big_c[r] = x;
+            big_d[r] = y;
+        }
+    }
+    let a = big_c[2] - times_i(q.x * big_c[0] + q.y * big_c[1]) / kabs;
+    let b = -big_d[2] - times_i(q.x * big_d[0] + q.y * big_d[1]) / kabs;
+    for (var j = 0u; j < n; j++) {
+        let zeta = tables[j];
+        let decay = exp(-kabs * zeta);
+        let grow = exp(kabs * (zeta - s.height));
+        let az = a * zeta;
+        let bz = b * zeta;
+        let corr = array<vec2<f32>, 3>(
+            (times_i(-q.x * az) + big_c[0]) * decay + (times_i(q.x * bz) + big_d[0]) * grow,
+            (times_i(-q.y * az) + big_c[1]) * decay + (times_i(q.y * bz) + big_d[1]) * grow,
+            (kabs * az + big_c[2]) * decay + (kabs * bz + big_d[2]) * grow,
+        );
+        for (var c = 0u; c < 3u; c++) {
+            store(c, j, k, load(c, j, k) + corr[c]);
+        }
+    }
+}
