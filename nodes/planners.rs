@@ -135,6 +135,22 @@ fn arity(args: &[ParamValue], n: usize) -> Result<(), String> {
 /// Every host function.
 static FUNCTIONS: &[HostFunction] = &[
     HostFunction {
+        name: "dpstokes_plan",
+        doc: "dpstokes_plan(box, radius, tolerance, zmin, zmax, walls, rotation): the doubly periodic Stokes grid and windows, [nx, ny, points, zlo, zhi, support, torque_support]: Gaussian windows (a / sqrt(pi); torques a / (6 sqrt(pi))^(1/3)), FCM's cells per standard deviation at the tolerance (of the torque width with rotation), FFT-friendly x and y; the Chebyshev domain [zlo, zhi] is [zmin, zmax] padded by the half support on each open side; points so the mid-height spacing is at most the x cell",
+        call: |a| {
+            arity(a, 7)?;
+            let lengths = box_lengths(a, 0)?;
+            let radius = positive(a, 1, "radius")?;
+            let t = tolerance(a, 2)?;
+            let zmin = number(a, 3, "zmin")?;
+            let zmax = number(a, 4, "zmax")?;
+            let walls = text(a, 5, "walls")?;
+            let rotation = flag(a, 6, "rotation")?;
+            crate::nodes::stokes_slab::plan(lengths, radius, t, zmin, zmax, walls, rotation)
+                .map(ParamValue::Numbers)
+        },
+    },
+    HostFunction {
         name: "next_fft",
         doc: "next_fft(n): the smallest size >= n whose prime factors are 2, 3, 5 and 7",
         call: |a| {

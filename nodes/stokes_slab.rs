@@ -558,6 +558,84 @@ impl GpuKernels for Slab {
     }
 }
 
+/// The doubly periodic Stokes plan (graphs/dpstokes.json): Gaussian windows of standard
+/// deviation a / sqrt(pi) for forces (FCM's: self-mobility 1 / (6 pi eta a) exactly) and
+/// a / (6 sqrt(pi))^(1/3) for torques, a grid with FCM's cells per standard deviation at
+/// the tolerance (`fcm::plan::gaussian_upsampling`, of the torque width with `rotation`),
+/// FFT-friendly in x and y; supports by the window library's Gaussian rule; the Chebyshev
+/// domain: [zmin, zmax] padded by the half support on each open side (none: both; bottom:
+/// above), with points so the spacing at mid-height, (Lz / 2) pi / (points - 1), is at most
+/// the x cell. Returns [nx, ny, points, zlo, zhi, support, torque_support].
+pub fn plan(
+    lengths: &[f64],
+    radius: f64,
+    tolerance: f64,
+    zmin: f64,
+    zmax: f64,
+    walls: &str,
+    rotation: bool,
+) -> Result<Vec<f64>, String> {
+    use crate::nodes::fcm::plan::gaussian_upsampling;
+    use crate::nodes::spread::window::gaussian_support;
+    if lengths.len() != 2 {
+        return Err(format!(
+            "box must be [Lx, Ly], got {} lengths",
+            lengths.len()
+        ));
+    }
+    if zmax.partial_cmp(&zmin) != Some(std::cmp::Ordering::Greater) || !(zmax - zmin).is_finite() {
+        return Err(format!("zmax ({zmax}) must lie above zmin ({zmin})"));
+    }
+    let Some(wall_code) = WALLS.iter().position(|w| *w == walls) else {
+        return Err(format!("walls must be none, bottom or slit, got `{walls}`"));
+    };
+    let sigma = radius / std::f64::consts::PI.sqrt();
+    let sigma_t = radius / (6.0 * std::f64::consts::PI.sqrt()).cbrt();
+    let finest = if rotation { sigma_t } else { sigma };
+    let h0 = finest / gaussian_upsampling(tolerance);
+    let mut cells = [0u32; 2];
+    for (a, l) in lengths.iter().enumerate() {
+        let n = (l / h0).ceil();
+        if n > crate::nodes::fft::plan::MAX_LENGTH as f64 {
+            return Err(format!(
+                "box length {l} needs {n} cells of {h0:.4} (radius {radius}, tolerance {tolerance}): over the {} an FFT axis takes",
+                crate::nodes::fft::plan::MAX_LENGTH
+            ));
+        }
+        cells[a] = crate::nodes::fft::next_friendly((n as u32).max(4));
+    }
+    let hx = lengths[0] / cells[0] as f64;
+    let support = gaussian_support(sigma, tolerance, hx);
+    let torque_support = gaussian_support(sigma_t, tolerance, hx);
+    let widest = if rotation {
+        support.max(torque_support)
+    } else {
+        support
+    };
+    let pad = widest as f64 * hx / 2.0;
+    let (zlo, zhi) = match wall_code {
+        0 => (zmin - pad, zmax + pad),
+        1 => (zmin, zmax + pad),
+        _ => (zmin, zmax),
+    };
+    let points = ((std::f64::consts::PI * (zhi - zlo) / (2.0 * hx)).ceil() as u64 + 1).max(5);
+    if points > chebyshev::MAX_POINTS as u64 {
+        return Err(format!(
+            "the z domain [{zlo}, {zhi}] needs {points} Chebyshev points at cell {hx:.4}: over the {} the transforms take",
+            chebyshev::MAX_POINTS
+        ));
+    }
+    Ok(vec![
+        cells[0] as f64,
+        cells[1] as f64,
+        points as f64,
+        zlo,
+        zhi,
+        support as f64,
+        torque_support as f64,
+    ])
+}
+
 fn spectrum_port(name: &'static str, doc: &'static str) -> PortSpec {
     PortSpec::new(name, PortType::HalfComplexGrid, doc)
 }

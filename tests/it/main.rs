@@ -10,6 +10,7 @@ mod cells;
 mod chebyshev;
 mod cli;
 mod determinism;
+mod dpstokes;
 mod fcm;
 mod fft;
 mod fuzz;
