@@ -191,3 +191,294 @@ fn bottom_wall_self_mobilities_approach_rotne_prager_blake() {
         );
     }
 }
+
+/// A slit is symmetric about its mid-plane (a particle and its mirror image move as mirror
+/// images), and a very tall slit approaches the bottom wall alone.
+#[test]
+fn slits_are_symmetric_and_tall_ones_approach_one_wall() {
+    if gpu().is_none() {
+        return;
+    }
+    let slit = load(&[
+        ("box", "[16.0, 16.0]".into()),
+        ("zmin", "-2.0".into()),
+        ("zmax", "4.0".into()),
+        ("walls", "\"slit\"".into()),
+    ]);
+    let f = [0.6, -0.3, 0.8];
+    let low = pulled(&slit, [0.3, 1.1, -0.5], f);
+    let high = pulled(&slit, [0.3, 1.1, 2.5], [f[0], f[1], -f[2]]);
+    for c in 0..3 {
+        let want = if c == 2 { -low[c] } else { low[c] };
+        assert!(
+            (high[c] - want).abs() < 1e-3 * low[0].abs(),
+            "component {c}: {high:?} against the mirror of {low:?}"
+        );
+    }
+    // Mid-height: the perpendicular force moves it along z only.
+    let mid = pulled(&slit, [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]);
+    assert!(mid[0].abs().max(mid[1].abs()) < 1e-6 * mid[2], "{mid:?}");
+    let box_ = ("box", "[24.0, 24.0]".to_string());
+    let tall = load(&[
+        box_.clone(),
+        ("zmin", "0.0".into()),
+        ("zmax", "40.0".into()),
+        ("walls", "\"slit\"".into()),
+    ]);
+    let one = load(&[
+        box_,
+        ("zmin", "0.0".into()),
+        ("zmax", "40.0".into()),
+        ("walls", "\"bottom\"".into()),
+    ]);
+    for f in [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] {
+        let (a, b) = (
+            pulled(&tall, [0.2, 0.1, 2.0], f),
+            pulled(&one, [0.2, 0.1, 2.0], f),
+        );
+        let c = if f[0] == 1.0 { 0 } else { 2 };
+        assert!(
+            (a[c] - b[c]).abs() < 5e-3 * b[c],
+            "{f:?}: tall slit {a:?}, bottom wall {b:?}"
+        );
+    }
+}
+
+/// The mobility matrix is symmetric (to the tolerance: the discrete operator is not
+/// exactly self-adjoint) and positive definite, with a pair that overlaps and
+/// a particle within a radius of the wall; doubling the box with copied particles gives
+/// the same velocities.
+#[test]
+fn the_mobility_matrix_is_spd_and_periodic() {
+    if gpu().is_none() {
+        return;
+    }
+    let x: Vec<V3> = vec![
+        [0.0, 0.0, 2.0],
+        [1.2, 0.3, 2.2],
+        [-3.0, 4.0, 0.6],
+        [7.9, -7.9, 5.0],
+    ];
+    let g = load(&[
+        ("box", "[16.0, 16.0]".into()),
+        ("zmin", "0.0".into()),
+        ("zmax", "6.0".into()),
+        ("walls", "\"bottom\"".into()),
+    ]);
+    let m = mobility(&g, &x);
+    let n = m.len();
+    let scale = m[0][0];
+    for i in 0..n {
+        for j in 0..i {
+            assert!(
+                (m[i][j] - m[j][i]).abs() < 1e-3 * scale,
+                "M[{i}][{j}] = {}, M[{j}][{i}] = {}",
+                m[i][j],
+                m[j][i]
+            );
+        }
+    }
+    // Cholesky of the symmetric part: every pivot positive.
+    let mut l = vec![vec![0.0; n]; n];
+    for i in 0..n {
+        for j in 0..=i {
+            let s: f64 = (0..j).map(|k| l[i][k] * l[j][k]).sum();
+            let mij = 0.5 * (m[i][j] + m[j][i]);
+            if i == j {
+                let d = mij - s;
+                assert!(d > 0.0, "pivot {i}: {d:e}");
+                l[i][i] = d.sqrt();
+            } else {
+                l[i][j] = (mij - s) / l[j][j];
+            }
+        }
+    }
+    // Periodic copies: the box doubled along x with every particle copied 16 along.
+    let wide = load(&[
+        ("box", "[32.0, 16.0]".into()),
+        ("zmin", "0.0".into()),
+        ("zmax", "6.0".into()),
+        ("walls", "\"bottom\"".into()),
+    ]);
+    let gpu = gpu().expect("a GPU");
+    let f: Vec<V3> = vec![
+        [1.0, 0.2, -0.3],
+        [0.0, -1.0, 0.5],
+        [0.3, 0.3, 1.0],
+        [-0.5, 0.0, 0.2],
+    ];
+    let run = |g: &Graph, x: &[V3], f: &[V3]| -> Vec<f64> {
+        let data: BTreeMap<String, HostArray> = [
+            ("positions".to_string(), particles(x)),
+            ("forces".to_string(), particles(f)),
+        ]
+        .into();
+        let plan = plan_graph(&gpu.caps, g, types_of(&data), Some(&["velocities"]), true);
+        let mut program = compile_cached(&gpu, g, &plan);
+        run_program(&mut program, &data, 1)["velocities"]
+            .data
+            .to_f64()
+    };
+    let small = run(&g, &x, &f);
+    let copies: Vec<V3> = x
+        .iter()
+        .chain(x.iter())
+        .enumerate()
+        .map(|(i, p)| {
+            let shift = if i < x.len() { 0.0 } else { 16.0 };
+            [
+                p[0] + shift - if p[0] + shift >= 16.0 { 32.0 } else { 0.0 },
+                p[1],
+                p[2],
+            ]
+        })
+        .collect();
+    let f2: Vec<V3> = f.iter().chain(f.iter()).copied().collect();
+    let big = run(&wide, &copies, &f2);
+    let top = small.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (i, v) in small.iter().enumerate() {
+        for copy in [i, i + small.len()] {
+            assert!(
+                (big[copy] - v).abs() < 1e-3 * top,
+                "word {i}: {v} in the box, {} doubled",
+                big[copy]
+            );
+        }
+    }
+}
+
+/// A particle below the bottom wall or above a slit's top is an error that names it.
+#[test]
+fn particles_through_a_wall_are_refused() {
+    let Some(gpu) = gpu() else { return };
+    for (walls, z) in [("bottom", -0.1), ("slit", 6.5)] {
+        let g = load(&[
+            ("box", "[16.0, 16.0]".into()),
+            ("zmin", "0.0".into()),
+            ("zmax", "6.0".into()),
+            ("walls", format!("\"{walls}\"")),
+        ]);
+        let data: BTreeMap<String, HostArray> = [
+            (
+                "positions".to_string(),
+                particles(&[[0.0, 0.0, 2.0], [1.0, 0.0, z]]),
+            ),
+            ("forces".to_string(), particles(&[[0.0; 3]; 2])),
+        ]
+        .into();
+        let plan = plan_graph(&gpu.caps, &g, types_of(&data), Some(&["velocities"]), true);
+        let mut program = compile_cached(&gpu, &g, &plan);
+        let err = program.upload(&data).unwrap_err().to_string();
+        assert!(
+            err.contains("row 1") && err.contains("positions"),
+            "{walls}: {err}"
+        );
+    }
+}
+
+/// A wrapper graph recording dpstokes.json's noise and drift every step.
+fn recorder(sets: &str, n: usize, steps: u64) -> (std::path::PathBuf, Graph) {
+    let dir = crate::util::tmpdir("dpstokes-stats");
+    let json = format!(
+        r#"{{"mesoflow": 1,
+  "inputs": {{"positions": {{"type": "particles", "rows": {n}, "cols": 3}}}},
+  "nodes": [
+    {{"id": "zero", "kind": "constant", "params": {{"value": 0}}, "inputs": {{"like": "inputs.positions"}}}},
+    {{"id": "m", "graph": "dpstokes.json", "params": {sets}, "inputs": {{"positions": "inputs.positions", "forces": "zero.out"}}}},
+    {{"id": "noise", "kind": "record", "params": {{"frames": {steps}}}, "inputs": {{"x": "m.noise"}}}},
+    {{"id": "drift", "kind": "record", "params": {{"frames": {steps}}}, "inputs": {{"x": "m.drift"}}}}
+  ],
+  "outputs": {{"noise": "noise.out", "drift": "drift.out"}}}}"#
+    );
+    let path = crate::util::write_graph(&dir, "stats.json", &json);
+    let g = mesoflow::graph::load(
+        &path,
+        crate::util::registry(),
+        &mesoflow::graph::LoadOptions {
+            steps,
+            seed: 5,
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    (dir, g)
+}
+
+/// Fluctuation-dissipation near a wall: the noise's covariance is the mobility (assembled
+/// from M F runs), element by element within five standard errors; the drift's mean is
+/// kT div M (central differences of assembled mobilities), within five standard errors,
+/// and points away from the wall.
+#[test]
+fn noise_covariance_and_drift_match_the_mobility() {
+    if gpu().is_none() {
+        return;
+    }
+    let sets =
+        r#"{"box": [8.0, 8.0], "zmin": 0.0, "zmax": 3.0, "walls": "bottom", "temperature": 1.0}"#;
+    let x: Vec<V3> = vec![[0.0, 0.0, 1.3], [1.5, 0.5, 2.0]];
+    let n = x.len();
+    let steps = 1000u64;
+    let (dir, g) = recorder(sets, n, steps);
+    let out = {
+        let gpu = gpu().expect("a GPU");
+        let data: BTreeMap<String, HostArray> = [("positions".to_string(), particles(&x))].into();
+        let plan = plan_graph(&gpu.caps, &g, types_of(&data), None, true);
+        let mut program = compile_cached(&gpu, &g, &plan);
+        run_program(&mut program, &data, steps)
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    let noise = out["noise"].to_ref().data;
+    let drift = out["drift"].to_ref().data;
+    let single = load(&[
+        ("box", "[8.0, 8.0]".into()),
+        ("zmin", "0.0".into()),
+        ("zmax", "3.0".into()),
+        ("walls", "\"bottom\"".into()),
+    ]);
+    let m = mobility(&single, &x);
+    let dim = 3 * n;
+    for p in 0..dim {
+        for q in 0..dim {
+            let cov: f64 = (0..steps as usize)
+                .map(|s| noise[s * dim + p] * noise[s * dim + q])
+                .sum::<f64>()
+                / steps as f64;
+            let se = ((m[p][p] * m[q][q] + m[p][q] * m[p][q]) / steps as f64).sqrt();
+            assert!(
+                (cov - m[p][q]).abs() < 5.0 * se,
+                "noise covariance [{p}][{q}] = {cov:e}, M = {:e} (standard error {se:e})",
+                m[p][q]
+            );
+        }
+    }
+    // kT div M: (div M)_i = sum_j d M_ij / d x_j, by central differences of assembled
+    // matrices (kT = 1).
+    let delta = 0.02;
+    let mut div = vec![0.0; dim];
+    for j in 0..dim {
+        let at = |d: f64| {
+            let mut y = x.clone();
+            y[j / 3][j % 3] += d;
+            mobility(&single, &y)
+        };
+        let (up, down) = (at(delta), at(-delta));
+        for i in 0..dim {
+            div[i] += (up[i][j] - down[i][j]) / (2.0 * delta);
+        }
+    }
+    for i in 0..dim {
+        let samples: Vec<f64> = (0..steps as usize).map(|s| drift[s * dim + i]).collect();
+        let mean = samples.iter().sum::<f64>() / steps as f64;
+        let var = samples.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / steps as f64;
+        let se = (var / steps as f64).sqrt();
+        assert!(
+            (mean - div[i]).abs() < 5.0 * se + 2e-3 * div[i].abs(),
+            "drift word {i}: {mean:e} against kT div M {:e} (standard error {se:e})",
+            div[i]
+        );
+    }
+    assert!(
+        div[2] > 0.0 && div[5] > 0.0,
+        "the drift points away from the wall: {div:?}"
+    );
+}
