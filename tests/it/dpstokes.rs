@@ -249,6 +249,7 @@ fn slits_are_symmetric_and_tall_ones_approach_one_wall() {
 /// a particle within a radius of the wall; doubling the box with copied particles gives
 /// the same velocities.
 #[test]
+#[allow(clippy::needless_range_loop)]
 fn the_mobility_matrix_is_spd_and_periodic() {
     if gpu().is_none() {
         return;
