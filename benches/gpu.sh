@@ -13,6 +13,9 @@
 #   pse         PSE per split with noise, where split 0.5 at 10^5 spends its time
 #   poisson     Poisson per tolerance and size (fastest split, errors, fcm.json beside it),
 #               where 10^5 at 1e-3 spends its time
+#   dpstokes    doubly periodic Stokes per wall mode at 10^4, 10^5, 10^6 (errors, fcm.json
+#               on a grid of the same points beside it), where bottom 10^5 spends its time
+#               (the boundary-value solves' GB/s), torch's copy bandwidth
 #   nbody       the direct pair mobilities, open and above a wall, translation and grand:
 #               pair interactions per second and GFLOP/s
 #   python      a Python loop of libMobility-style Mdot calls against the GPU time of one
@@ -37,8 +40,8 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson nbody python mpcd spread atomics fft primitives overhead determinism)
-usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; }
+suites=(fcm pse poisson dpstokes nbody python mpcd spread atomics fft primitives overhead determinism)
+usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
   case " ${suites[*]} all compare " in
@@ -62,6 +65,12 @@ suite_fcm() {
     run $bin run graphs/examples/colloids.json --set n=${size%:*} --set side=${size#*:} \
       --steps 500 --seed 1 --output diffusion --output theory
   done
+}
+
+suite_dpstokes() {
+  run $bin bench dpstokes --reps 10
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes --walls bottom --sizes 100000 --reps 10
+  run python3 benches/torch_reduce.py
 }
 
 suite_nbody() {

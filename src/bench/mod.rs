@@ -13,6 +13,7 @@
 //! Nothing here depends on the command line: `cli` parses the arguments into a
 //! [`BenchCommand`] and wraps [`BenchError`].
 
+mod dpstokes;
 mod fcm;
 mod fft;
 mod mpcd;
@@ -414,6 +415,26 @@ pub enum BenchCommand {
         #[arg(long = "set")]
         sets: Vec<String>,
     },
+    /// Doubly periodic Stokes (dpstokes.json) per wall mode and size: M F end to end, grid,
+    /// memory, the self-mobility error, and fcm.json on a grid of the same points beside it.
+    Dpstokes {
+        /// The DP Stokes graph file.
+        #[arg(long, default_value = "graphs/dpstokes.json")]
+        graph: PathBuf,
+        /// The FCM graph timed beside it.
+        #[arg(long, default_value = "graphs/fcm.json")]
+        fcm_graph: PathBuf,
+        /// Wall modes.
+        #[arg(long, value_delimiter = ',', default_values_t = ["bottom".to_string(), "slit".to_string(), "none".to_string()])]
+        walls: Vec<String>,
+        /// Particle counts (box side 128 sqrt(N / 10^5)).
+        #[arg(long, value_delimiter = ',', default_values_t = [10000u32, 100000, 1000000])]
+        sizes: Vec<u32>,
+        #[arg(long, default_value_t = 1e-3)]
+        tolerance: f64,
+        #[arg(long, default_value_t = 10)]
+        reps: u64,
+    },
     /// Direct pair mobilities (rpy_open.json, rpy_wall.json; translation and grand):
     /// time, pair interactions per second and GFLOP/s at the kernels' flop counts.
     Nbody {
@@ -577,6 +598,21 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             density,
             reps,
             sets: parse_sets(&sets)?,
+        }),
+        BenchCommand::Dpstokes {
+            graph,
+            fcm_graph,
+            walls,
+            sizes,
+            tolerance,
+            reps,
+        } => dpstokes::run(&dpstokes::DpStokesBench {
+            graph,
+            fcm_graph,
+            walls,
+            sizes,
+            tolerance,
+            reps,
         }),
         BenchCommand::Nbody {
             graphs,

@@ -483,3 +483,51 @@ fn noise_covariance_and_drift_match_the_mobility() {
         "the drift points away from the wall: {div:?}"
     );
 }
+
+/// The sedimentation example at kT = 0: a lone sphere's first step falls by dt times its
+/// weight times the perpendicular mobility dpstokes.json gives at its height.
+#[test]
+fn the_sedimentation_example_falls_at_the_wall_mobility() {
+    if gpu().is_none() {
+        return;
+    }
+    let (dt, weight, h) = (0.5, 2.0, 6.0);
+    let sets = [
+        ("n", "1".to_string()),
+        ("side", "32.0".into()),
+        ("start_low", format!("{h}")),
+        ("start_high", format!("{h}")),
+        ("temperature", "0.0".into()),
+        ("weight", format!("{weight}")),
+        ("dt", format!("{dt}")),
+        ("save_every", "1".into()),
+    ];
+    let sets: Vec<(&str, &str)> = sets.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let steps = 2;
+    let g = load_with("examples/sediment.json", &sets, steps, 3);
+    let out = {
+        let gpu = gpu().expect("a GPU");
+        let data = BTreeMap::new();
+        let plan = plan_graph(&gpu.caps, &g, types_of(&data), None, true);
+        let mut program = compile_cached(&gpu, &g, &plan);
+        run_program(&mut program, &data, steps)
+    };
+    let heights = out["mean_height"].data.to_f64();
+    let wall = load(&[
+        ("box", "[32.0, 32.0]".into()),
+        ("zmin", "0.0".into()),
+        ("zmax", "16.0".into()),
+        ("walls", "\"bottom\"".into()),
+    ]);
+    let u = pulled(&wall, [1.0, -2.0, h], [0.0, 0.0, -weight]);
+    let want = h + dt * u[2];
+    assert!(
+        (heights[0] - want).abs() < 1e-4 * (h - want).abs().max(1e-3),
+        "first step to {}, want {want}",
+        heights[0]
+    );
+    assert!(
+        heights[1] < heights[0],
+        "the sphere stopped falling: {heights:?}"
+    );
+}

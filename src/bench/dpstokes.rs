@@ -1,0 +1,262 @@
+//! `mesoflow bench dpstokes`: the doubly periodic Stokes mobility (graphs/dpstokes.json)
+//! per wall mode and size: one M F end to end, its grid and memory, the error it reaches,
+//! and fcm.json's M F on a periodic grid of (at least) the same number of points at the
+//! same tolerance, timed in the same run. N particles, a = 1, heights uniform in
+//! [1.5 a, 10 a] (zmin = 0, zmax = 11.5: a slit's top wall 1.5 a above the highest), box
+//! side 128 sqrt(N / 10^5). The error: one particle at 2 a and 6 a in a box of side 128,
+//! its parallel and perpendicular self-mobility against Rotne-Prager-Blake (bottom wall),
+//! against the doubly periodic sum of FCM's Gaussian (no wall; `open_self`, f64), none for
+//! the slit (no closed form), as the largest relative difference. With
+//! MESOFLOW_BENCH_DISPATCHES the per-dispatch times, and the two boundary-value solves'
+//! rate: the words they must read and write once (f and y, the per-k tables) over their
+//! time, in GB/s.
+
+use std::collections::BTreeMap;
+use std::f64::consts::PI;
+use std::path::PathBuf;
+
+use mesoflow::expr::ParamValue;
+use mesoflow::gpu::GpuContext;
+use mesoflow::graph::Graph;
+use mesoflow::node::Registry;
+use mesoflow::value::HostArray;
+
+use super::fcm::{Rng, load, param, particles, velocities};
+use super::{BenchError, end_to_end_clock, ms, time_loaded};
+
+pub struct DpStokesBench {
+    pub graph: PathBuf,
+    pub fcm_graph: PathBuf,
+    pub walls: Vec<String>,
+    pub sizes: Vec<u32>,
+    pub tolerance: f64,
+    pub reps: u64,
+}
+
+const ZMAX: f64 = 11.5;
+
+fn numbers(g: &Graph, name: &str) -> Vec<f64> {
+    match param(g, name) {
+        Some(ParamValue::Numbers(v)) => v,
+        Some(ParamValue::Number(x)) => vec![x],
+        _ => Vec::new(),
+    }
+}
+
+/// The self-mobility (xx, zz; eta = 1) of FCM's Gaussian (standard deviation sigma) in a
+/// fluid periodic in x, y (sides lx, ly), unbounded in z, without the in-plane k = 0 mode:
+/// (1 / (lx ly)) sum over k_par != 0 of int dkz / (2 pi) e^{-sigma^2 k^2} (1 - k_a^2 / k^2)
+/// / k^2 (f64; the kz integral by the trapezoid rule).
+pub fn open_self(sigma: f64, lx: f64, ly: f64) -> (f64, f64) {
+    let kmax = 37f64.sqrt() / sigma;
+    let nx = (kmax * lx / (2.0 * PI)).ceil() as i64;
+    let ny = (kmax * ly / (2.0 * PI)).ceil() as i64;
+    let nz = 2000;
+    let dkz = kmax / nz as f64;
+    let (mut xx, mut zz) = (0.0, 0.0);
+    for i in -nx..=nx {
+        for j in -ny..=ny {
+            let (kx, ky) = (2.0 * PI * i as f64 / lx, 2.0 * PI * j as f64 / ly);
+            let q2 = kx * kx + ky * ky;
+            if (i == 0 && j == 0) || q2 > kmax * kmax {
+                continue;
+            }
+            for m in 0..=nz {
+                let kz = m as f64 * dkz;
+                let k2 = q2 + kz * kz;
+                let w = if m == 0 { 0.5 } else { 1.0 } * dkz / PI;
+                let g = (-sigma * sigma * k2).exp() / k2 * w;
+                xx += g * (1.0 - kx * kx / k2);
+                zz += g * (1.0 - kz * kz / k2);
+            }
+        }
+    }
+    (xx / (lx * ly), zz / (lx * ly))
+}
+
+/// The largest relative self-mobility error at 2 a and 6 a (None for the slit).
+fn accuracy(
+    gpu: &GpuContext,
+    bench: &DpStokesBench,
+    registry: &Registry,
+    walls: &str,
+) -> Result<Option<f64>, BenchError> {
+    if walls == "slit" {
+        return Ok(None);
+    }
+    let l = 128.0;
+    let g = load(&bench.graph, &sets(walls, l, bench.tolerance), registry)?;
+    let x = [[0.3, -0.2, 2.0]];
+    let inputs: BTreeMap<String, HostArray> = [
+        ("positions".to_string(), particles(&x)),
+        ("forces".to_string(), particles(&[[1.0, 0.0, 0.0]])),
+    ]
+    .into_iter()
+    .collect();
+    let opts = mesoflow::plan::PlanOptions {
+        outputs: Some(vec!["velocities".into()]),
+        inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
+        fuse: true,
+    };
+    let plan = mesoflow::plan::plan(&g, &opts, &gpu.caps)?;
+    let mut cache = mesoflow::gpu::KernelCache::default();
+    let mut program = mesoflow::exec::Program::compile(gpu, &g, &plan, &mut cache)?;
+    let t0 = 1.0 / (6.0 * PI);
+    let open = (walls == "none").then(|| open_self(1.0 / PI.sqrt(), l, l));
+    let mut worst: f64 = 0.0;
+    for h in [2.0, 6.0] {
+        let p = [[0.3, -0.2, h]];
+        let par = velocities(&mut program, &p, &[[1.0, 0.0, 0.0]])?[0][0];
+        let perp = velocities(&mut program, &p, &[[0.0, 0.0, 1.0]])?[0][2];
+        let want = match open {
+            Some((xx, zz)) => (xx, zz),
+            None => {
+                let s = 1.0 / h;
+                (
+                    t0 * (1.0 - 9.0 / 16.0 * s + s.powi(3) / 8.0 - s.powi(5) / 16.0),
+                    t0 * (1.0 - 9.0 / 8.0 * s + s.powi(3) / 2.0 - s.powi(5) / 8.0),
+                )
+            }
+        };
+        worst = worst
+            .max((par - want.0).abs() / want.0)
+            .max((perp - want.1).abs() / want.1);
+    }
+    Ok(Some(worst))
+}
+
+fn sets(walls: &str, l: f64, tolerance: f64) -> Vec<(&'static str, ParamValue)> {
+    vec![
+        ("box", ParamValue::Numbers(vec![l, l])),
+        ("zmin", ParamValue::Number(0.0)),
+        ("zmax", ParamValue::Number(ZMAX)),
+        ("walls", ParamValue::Text(walls.to_string())),
+        ("tolerance", ParamValue::Number(tolerance)),
+    ]
+}
+
+pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
+    if bench.reps == 0 {
+        return Err(BenchError::Args("--reps must be positive".into()));
+    }
+    let gpu = GpuContext::new()?;
+    let registry = mesoflow::nodes::registry();
+    outln!("adapter: {}", gpu.caps.summary());
+    outln!(
+        "dpstokes.json M F at tolerance {}: a = 1, eta = 1, heights uniform in [1.5, 10], zmin 0, zmax {ZMAX}, box side 128 sqrt(N / 10^5); time: median over {} runs end to end ({}); fcm.json (Gaussian, same tolerance) on a periodic grid of at least the same points, same N; error: the largest relative self-mobility error at h = 2 a and 6 a (L = 128; bottom: against Rotne-Prager-Blake, none: against the doubly periodic f64 sum, slit: -)",
+        bench.tolerance,
+        bench.reps,
+        end_to_end_clock(&gpu)
+    );
+    outln!(
+        "{:>7} {:>8} {:>7} {:>16} {:>10} {:>10} {:>16} {:>10} {:>6} {:>9}",
+        "walls",
+        "N",
+        "L",
+        "grid",
+        "memory MB",
+        "e2e ms",
+        "fcm grid",
+        "fcm ms",
+        "ratio",
+        "error"
+    );
+    for walls in &bench.walls {
+        let error = accuracy(&gpu, bench, &registry, walls)?;
+        for &n in &bench.sizes {
+            let l = 128.0 * (n as f64 / 1e5).sqrt();
+            let g = load(&bench.graph, &sets(walls, l, bench.tolerance), &registry)?;
+            let grid = numbers(&g, "grid");
+            let points = numbers(&g, "points").first().copied().unwrap_or(0.0);
+            let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ n as u64);
+            let x: Vec<[f64; 3]> = (0..n)
+                .map(|_| {
+                    let mut p = [0, 1].map(|_| (rng.uniform() - 0.5) * l);
+                    p.iter_mut().for_each(|v| *v = v.clamp(-0.5 * l, 0.5 * l));
+                    [p[0], p[1], 1.5 + 8.5 * rng.uniform()]
+                })
+                .collect();
+            let f: Vec<[f64; 3]> = (0..n)
+                .map(|_| [0, 1, 2].map(|_| rng.uniform() - 0.5))
+                .collect();
+            let inputs: BTreeMap<String, HostArray> = [
+                ("positions".to_string(), particles(&x)),
+                ("forces".to_string(), particles(&f)),
+            ]
+            .into_iter()
+            .collect();
+            let run = time_loaded(
+                &gpu,
+                &g,
+                &inputs,
+                Some(vec!["velocities".into()]),
+                bench.reps,
+                true,
+            )?;
+            // fcm.json on a periodic grid of at least as many points: the DP grid's x, y
+            // and the FFT-friendly size above its Chebyshev points along z.
+            let nz = mesoflow::nodes::fft::next_friendly(points as u32) as f64;
+            let hx = l / grid[0];
+            let fcm = load(
+                &bench.fcm_graph,
+                &[
+                    ("box", ParamValue::Numbers(vec![l, l, nz * hx])),
+                    ("grid", ParamValue::Numbers(vec![grid[0], grid[1], nz])),
+                    ("tolerance", ParamValue::Number(bench.tolerance)),
+                ],
+                &registry,
+            )?;
+            let fcm_x: Vec<[f64; 3]> = x
+                .iter()
+                .map(|p| [p[0], p[1], p[2] - 0.5 * nz * hx])
+                .collect();
+            let fcm_inputs: BTreeMap<String, HostArray> = [
+                ("positions".to_string(), particles(&fcm_x)),
+                ("forces".to_string(), particles(&f)),
+            ]
+            .into_iter()
+            .collect();
+            let fcm_run = time_loaded(
+                &gpu,
+                &fcm,
+                &fcm_inputs,
+                Some(vec!["velocities".into()]),
+                bench.reps,
+                true,
+            )?;
+            let (t, tf) = (run.end_to_end(), fcm_run.end_to_end());
+            outln!(
+                "{:>7} {:>8} {:>7.1} {:>16} {:>10.1} {:>10.4} {:>16} {:>10.4} {:>6.2} {:>9}",
+                walls,
+                n,
+                l,
+                format!("{}x{}x{}", grid[0], grid[1], points),
+                run.memory as f64 / 1e6,
+                ms(t),
+                format!("{}x{}x{}", grid[0], grid[1], nz),
+                ms(tf),
+                t.as_secs_f64() / tf.as_secs_f64(),
+                error.map_or("-".to_string(), |e| format!("{e:.2e}"))
+            );
+            if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
+                for timing in &run.timings {
+                    out!("{}", timing.breakdown());
+                    // The boundary-value solves: f and y (2 words per complex value, nk
+                    // values per z level), the per-k tables (5 nz + 6 words per k).
+                    let nk = (grid[0] / 2.0).floor() + 1.0;
+                    let nk = nk * grid[1];
+                    let solves = timing.dispatches.iter().filter(|d| d.0.contains("bvp"));
+                    // In graph order: the pressure (1 component), then the velocity (3).
+                    for ((kernel, median, _), comps) in solves.zip([1.0, 3.0]) {
+                        let words = nk * (2.0 * 2.0 * comps * points + 5.0 * points + 6.0);
+                        outln!(
+                            "      {kernel} ({comps} components): {:.1} GB/s at the words it reads and writes once",
+                            4.0 * words / median.as_secs_f64() / 1e9
+                        );
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
