@@ -17,7 +17,8 @@ Solvers and the graphs behind them:
   ``wallHeight``), every pair.
 - ``PSE`` ("periodic" x3): ``pse.json``, ``psi`` the Ewald split.
 - ``FCM`` ("periodic" x3, not in libMobility): ``fcm.json``.
-- ``DPStokes``: not yet; constructing it raises a RuntimeError saying so.
+- ``DPStokes`` ("periodic", "periodic", "open", "single_wall" or "two_walls"):
+  ``dpstokes.json`` (Fourier in x, y, Chebyshev in z; walls at ``zmin`` and ``zmax``).
 
 Where mesoflow differs from libMobility: ``precision`` is always "float" (the GPU
 computes in f32; arrays of any float dtype are taken and float32 is returned);
@@ -514,13 +515,62 @@ class FCM(_GraphSolver):
         return dict(self._periodic_params(), rotation=self.includeAngular)
 
 
-class DPStokes:
-    """Not in mesoflow yet (the doubly periodic Stokes graph is still to come): the name
-    exists so that scripts importing it load, and constructing it says why it fails."""
+class DPStokes(_GraphSolver):
+    """Doubly periodic Stokes (``dpstokes.json``): periodic in x and y (``Lx``, ``Ly``),
+    open in z ("open"), above a wall at ``zmin`` ("single_wall") or between walls at
+    ``zmin`` and ``zmax`` ("two_walls"); every particle within [zmin, zmax]. ``delta`` is
+    the random finite difference's step over the radius (divM). mesoflow never changes the
+    box: ``allowChangingBoxSize`` is accepted and has no effect (the grid follows the box
+    as given, FFT-friendly in x and y)."""
 
-    precision = "float"
+    _allowed = (
+        ("periodic", "periodic", "open"),
+        ("periodic", "periodic", "single_wall"),
+        ("periodic", "periodic", "two_walls"),
+    )
+    _parameter_names = ("Lx", "Ly", "zmin", "zmax", "allowChangingBoxSize", "delta")
+    _supports_angular = True
+    _graph_name = "dpstokes"
+    _walls = {"open": "none", "single_wall": "bottom", "two_walls": "slit"}
 
-    def __init__(self, *periodicity):
-        raise RuntimeError(
-            "[Mobility] DPStokes is not available in mesoflow yet: graphs/dpstokes.json does not exist"
-        )
+    def _check_parameters(self, p):
+        for name in ("Lx", "Ly", "zmin", "zmax"):
+            if name not in p:
+                raise _error(f"[Mobility] DPStokes needs the parameter {name}")
+        if not (float(p["Lx"]) > 0 and float(p["Ly"]) > 0):
+            raise _error(f"[Mobility] DPStokes: Lx and Ly must be positive, got {p['Lx']}, {p['Ly']}")
+        if not float(p["zmax"]) > float(p["zmin"]):
+            raise _error(f"[Mobility] DPStokes: zmax ({p['zmax']}) must be above zmin ({p['zmin']})")
+
+    def _setup(self):
+        self._check_parameters(self._parameters)
+
+    def _graph_params(self):
+        p = self._parameters
+        return {
+            "viscosity": self.viscosity,
+            "radius": self.hydrodynamicRadius,
+            "box": [float(p["Lx"]), float(p["Ly"])],
+            "zmin": float(p["zmin"]),
+            "zmax": float(p["zmax"]),
+            "walls": self._walls[self.periodicity[2]],
+            "rotation": self.includeAngular,
+            "tolerance": min(max(self.tolerance, 1e-6), 0.1),
+            "rfd_delta": float(p.get("delta", 1e-3)),
+        }
+
+    def _check_positions(self, x):
+        p = self._parameters
+        zmin, zmax = float(p["zmin"]), float(p["zmax"])
+        out = np.nonzero((x[:, 2] < zmin) | (x[:, 2] > zmax))[0]
+        if out.size:
+            i = out[0]
+            raise _error(
+                f"[Mobility] DPStokes: particle {i} is at z = {x[i, 2]}, outside [zmin, zmax] = "
+                f"[{zmin}, {zmax}] (the walls, or the extent of the grid in open mode)"
+            )
+
+    def _divergence(self):
+        outputs = ["drift"] + (["angular_drift"] if self.includeAngular else [])
+        out = self._run("drift", outputs, self._arrays(), temperature=1.0)
+        return out["drift"], out.get("angular_drift")

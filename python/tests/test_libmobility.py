@@ -1,5 +1,5 @@
 """libMobility's interface (as libMobility's own tests use it) on SelfMobility, NBody
-(open and above a wall), PSE and FCM: shapes, errors, and the mobilities against f64
+(open and above a wall), PSE, FCM and DPStokes: shapes, errors, and the mobilities against f64
 references written here."""
 
 import math
@@ -27,6 +27,7 @@ CONFIGS = [
     (lm.NBody, ("open", "open", "single_wall"), {"algorithm": "advise", "wallHeight": 0.0, "delta": 1e-3}),
     (lm.PSE, ("periodic", "periodic", "periodic"), {"psi": 1.0, "Lx": 16, "Ly": 16, "Lz": 16, "shearStrain": 0.0}),
     (lm.FCM, ("periodic", "periodic", "periodic"), {"Lx": 16, "Ly": 16, "Lz": 16}),
+    (lm.DPStokes, ("periodic", "periodic", "single_wall"), {"Lx": 16, "Ly": 16, "zmin": 0.0, "zmax": 9.0}),
 ]
 
 
@@ -223,6 +224,31 @@ def test_outputs_come_back_as_the_positions_came():
     assert type(s.LangevinVelocities(1.0, 1.0)[0]) is type(x)
 
 
-def test_dpstokes_is_named_but_not_there_yet():
-    with pytest.raises(RuntimeError, match="DPStokes is not available"):
-        lm.DPStokes("periodic", "periodic", "single_wall")
+def test_dpstokes_above_a_wall_is_rotne_prager_blake_s():
+    """libMobility's DPStokes geometry: a wall at zmin; far from the periodic images
+    (h << L) the self-mobilities are Swan and Brady's within the Gaussian's percent."""
+    s = lm.DPStokes("periodic", "periodic", "single_wall")
+    s.setParameters(Lx=32.0, Ly=32.0, zmin=0.0, zmax=6.0)
+    s.initialize(viscosity=1.0, hydrodynamicRadius=1.0, tolerance=1e-3, seed=3)
+    for h in [2.0, 3.0]:
+        s.setPositions([[0.4, -0.3, h]])
+        ux, _ = s.Mdot([[1.0, 0, 0]])
+        uz, _ = s.Mdot([[0, 0, 1.0]])
+        q = 1 / h
+        par = (1 - 9 / 16 * q + q**3 / 8 - q**5 / 16) / (6 * math.pi)
+        perp = (1 - 9 / 8 * q + q**3 / 2 - q**5 / 8) / (6 * math.pi)
+        assert abs(ux[0, 0] - par) < 0.02 * par
+        assert abs(uz[0, 2] - perp) < 0.02 * perp
+        assert abs(ux[0, 1]) + abs(ux[0, 2]) < 1e-6 * ux[0, 0]
+    # Below the wall: an exception naming the particle.
+    with pytest.raises(RuntimeError, match="particle 1"):
+        s.setPositions([[0, 0, 2.0], [0, 0, -0.5]])
+    # Two walls: symmetric about the mid-plane.
+    t = lm.DPStokes("periodic", "periodic", "two_walls")
+    t.setParameters(16.0, 16.0, -2.0, 4.0)
+    t.initialize(viscosity=1.0, hydrodynamicRadius=1.0, tolerance=1e-3, seed=3)
+    t.setPositions([[0.1, 0.2, -0.5]])
+    low, _ = t.Mdot([[0.3, 0.0, 1.0]])
+    t.setPositions([[0.1, 0.2, 2.5]])
+    high, _ = t.Mdot([[0.3, 0.0, -1.0]])
+    assert np.allclose(high[0] * [1, 1, -1], low[0], rtol=0, atol=1e-3 * abs(low[0, 0]))
