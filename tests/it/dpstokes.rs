@@ -531,3 +531,109 @@ fn the_sedimentation_example_falls_at_the_wall_mobility() {
         "the sphere stopped falling: {heights:?}"
     );
 }
+
+/// (velocity, angular velocity) of one particle at x under a force f and a torque t, with
+/// rotation.
+fn grand_one(g: &Graph, x: V3, f: V3, t: V3) -> (V3, V3) {
+    let gpu = gpu().expect("a GPU");
+    let data: BTreeMap<String, HostArray> = [
+        ("positions".to_string(), particles(&[x])),
+        ("forces".to_string(), particles(&[f])),
+        ("torques".to_string(), particles(&[t])),
+    ]
+    .into();
+    let plan = plan_graph(
+        &gpu.caps,
+        g,
+        types_of(&data),
+        Some(&["velocities", "angular_velocities"]),
+        true,
+    );
+    let mut program = compile_cached(&gpu, g, &plan);
+    let out = run_program(&mut program, &data, 1);
+    let (u, w) = (
+        out["velocities"].data.to_f64(),
+        out["angular_velocities"].data.to_f64(),
+    );
+    ([u[0], u[1], u[2]], [w[0], w[1], w[2]])
+}
+
+/// Torques: far from everything the rotational self-mobility is 1 / (8 pi eta a^3) (the
+/// torque Gaussian's), and above a wall it follows Rotne-Prager-Blake's rotational and
+/// coupling terms (1 - 5/16 s^3, 1 - 1/8 s^3, and a force along x turning the sphere about
+/// y by s^4 / 8 of 1 / (8 pi eta a^2), as if it rolled); torques only and forces only.
+#[test]
+fn torques_turn_the_spheres_as_rotne_prager_blake() {
+    if gpu().is_none() {
+        return;
+    }
+    let a: f64 = 1.0;
+    let r0 = 1.0 / (8.0 * PI * a.powi(3));
+    let rt0 = 1.0 / (8.0 * PI * a * a);
+    let open = load(&[
+        ("box", "[32.0, 32.0]".into()),
+        ("zmin", "-2.0".into()),
+        ("zmax", "2.0".into()),
+        ("walls", "\"none\"".into()),
+        ("rotation", "true".into()),
+    ]);
+    let (u, w) = grand_one(&open, [0.2, 0.1, 0.3], [0.0; 3], [1.0, 0.0, 0.0]);
+    assert!(
+        (w[0] - r0).abs() < 5e-3 * r0,
+        "open rotation {} against {r0}",
+        w[0]
+    );
+    assert!(
+        u.iter().all(|v| v.abs() < 1e-3 * rt0),
+        "a torque alone moved the sphere: {u:?}"
+    );
+    let (_, w) = grand_one(&open, [0.2, 0.1, 0.3], [0.0; 3], [0.0, 0.0, 1.0]);
+    assert!(
+        (w[2] - r0).abs() < 5e-3 * r0,
+        "open rotation about z {} against {r0}",
+        w[2]
+    );
+    let wall = load(&[
+        ("box", "[64.0, 64.0]".into()),
+        ("zmin", "0.0".into()),
+        ("zmax", "5.0".into()),
+        ("walls", "\"bottom\"".into()),
+        ("rotation", "true".into()),
+    ]);
+    for h in [2.0, 4.0] {
+        let s = a / h;
+        let x = [0.3, -0.2, h];
+        let (_, wx) = grand_one(&wall, x, [0.0; 3], [1.0, 0.0, 0.0]);
+        let (_, wz) = grand_one(&wall, x, [0.0; 3], [0.0, 0.0, 1.0]);
+        let (_, wf) = grand_one(&wall, x, [1.0, 0.0, 0.0], [0.0; 3]);
+        let (par, perp, roll) = (
+            r0 * (1.0 - 5.0 / 16.0 * s.powi(3)),
+            r0 * (1.0 - s.powi(3) / 8.0),
+            rt0 * s.powi(4) / 8.0,
+        );
+        eprintln!(
+            "h {h}: rot par {:.5} ({:.5}) perp {:.5} ({:.5}) roll {:.3e} ({:.3e})",
+            wx[0] / r0,
+            par / r0,
+            wz[2] / r0,
+            perp / r0,
+            wf[1] / rt0,
+            roll / rt0
+        );
+        assert!(
+            (wx[0] - par).abs() < 0.02 * r0,
+            "h {h}: rotation about x {} against {par}",
+            wx[0]
+        );
+        assert!(
+            (wz[2] - perp).abs() < 0.02 * r0,
+            "h {h}: rotation about z {} against {perp}",
+            wz[2]
+        );
+        assert!(
+            (wf[1] - roll).abs() < 0.01 * rt0,
+            "h {h}: rolling {} against {roll}",
+            wf[1]
+        );
+    }
+}
