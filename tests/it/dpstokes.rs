@@ -637,3 +637,49 @@ fn torques_turn_the_spheres_as_rotne_prager_blake() {
         );
     }
 }
+
+/// Extreme boxes: a very tall domain (hundreds of Chebyshev points) gives the short one's
+/// mobility near the wall; a very flat slit (Lx = 16 H) stays finite, slows the sphere
+/// more than one wall does, and more across the slit than along it.
+#[test]
+fn very_tall_and_very_flat_boxes_stay_accurate() {
+    if gpu().is_none() {
+        return;
+    }
+    let make = |zmax: f64, walls: &str, side: f64| {
+        load(&[
+            ("box", format!("[{side}, {side}]")),
+            ("zmin", "0.0".into()),
+            ("zmax", format!("{zmax}")),
+            ("walls", format!("\"{walls}\"")),
+        ])
+    };
+    let x = [0.3, 0.2, 2.0];
+    let (short, tall) = (make(6.0, "bottom", 16.0), make(120.0, "bottom", 16.0));
+    for f in [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] {
+        let (a, b) = (pulled(&short, x, f), pulled(&tall, x, f));
+        let c = if f[0] == 1.0 { 0 } else { 2 };
+        assert!(
+            (a[c] - b[c]).abs() < 2e-3 * a[c],
+            "{f:?}: short {a:?}, tall {b:?}"
+        );
+    }
+    let flat = make(4.0, "slit", 64.0);
+    let one = make(4.0, "bottom", 64.0);
+    let (sx, sz) = (
+        pulled(&flat, x, [1.0, 0.0, 0.0]),
+        pulled(&flat, x, [0.0, 0.0, 1.0]),
+    );
+    let bx = pulled(&one, x, [1.0, 0.0, 0.0]);
+    assert!(
+        sx[0] > 0.0 && sz[2] > 0.0 && sx[0].is_finite(),
+        "{sx:?} {sz:?}"
+    );
+    assert!(
+        sx[0] < bx[0],
+        "the slit {} against one wall {}",
+        sx[0],
+        bx[0]
+    );
+    assert!(sz[2] < sx[0], "across {} against along {}", sz[2], sx[0]);
+}
