@@ -20,9 +20,6 @@
 //! thread: [Y0, P0] = S^-1 (G f - [alpha, beta]), A a = f - B [Y0, P0], then y from a. The
 //! tables are strided (entry i of every k contiguous), so neighbouring threads read
 //! neighbouring words.
-
-use std::f64::consts::PI;
-
 use crate::gpu::{
     Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo, WG_1D,
 };
@@ -264,21 +261,10 @@ pub fn solve(fac: &Factors, f: &[f64], kappa: f64, alpha: f64, beta: f64) -> Vec
 
 /// |k| of every (x, y) index of the half spectrum of a grid of `dims` over [Lx, Ly].
 fn wave_numbers(dims: [u32; 3], lengths: [f64; 2]) -> Vec<f64> {
-    let h = half_dims(dims);
-    let mut k = Vec::with_capacity((h[0] * h[1]) as usize);
-    for y in 0..h[1] {
-        let fy = if y <= dims[1] / 2 {
-            y as f64
-        } else {
-            y as f64 - dims[1] as f64
-        };
-        for x in 0..h[0] {
-            let kx = 2.0 * PI * x as f64 / lengths[0];
-            let ky = 2.0 * PI * fy / lengths[1];
-            k.push((kx * kx + ky * ky).sqrt());
-        }
-    }
-    k
+    crate::nodes::stokes_slab::plane_waves(dims, lengths)
+        .into_iter()
+        .map(|(k, _)| (k[0] * k[0] + k[1] * k[1]).sqrt())
+        .collect()
 }
 
 fn bvp_kind() -> NodeKind {

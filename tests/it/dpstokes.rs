@@ -10,13 +10,12 @@ use std::f64::consts::PI;
 use mesoflow::graph::Graph;
 use mesoflow::value::HostArray;
 
-use crate::util::{compile_cached, gpu, load_with, plan_graph, run_program, types_of};
+use crate::util::mobility::cholesky_min_pivot;
+use crate::util::{
+    compile_cached, gpu, load_with, mobility_recorder, particles, plan_graph, run_program, types_of,
+};
 
 type V3 = [f64; 3];
-
-fn particles(v: &[V3]) -> HostArray {
-    crate::util::flat_particles(&v.iter().flatten().copied().collect::<Vec<_>>(), 3)
-}
 
 fn load(sets: &[(&str, String)]) -> Graph {
     let sets: Vec<(&str, &str)> = sets.iter().map(|(k, v)| (*k, v.as_str())).collect();
@@ -279,21 +278,14 @@ fn the_mobility_matrix_is_spd_and_periodic() {
             );
         }
     }
-    // Cholesky of the symmetric part: every pivot positive.
-    let mut l = vec![vec![0.0; n]; n];
-    for i in 0..n {
-        for j in 0..=i {
-            let s: f64 = (0..j).map(|k| l[i][k] * l[j][k]).sum();
-            let mij = 0.5 * (m[i][j] + m[j][i]);
-            if i == j {
-                let d = mij - s;
-                assert!(d > 0.0, "pivot {i}: {d:e}");
-                l[i][i] = d.sqrt();
-            } else {
-                l[i][j] = (mij - s) / l[j][j];
-            }
-        }
-    }
+    let sym: Vec<Vec<f64>> = (0..n)
+        .map(|i| (0..n).map(|j| 0.5 * (m[i][j] + m[j][i])).collect())
+        .collect();
+    let pivot = cholesky_min_pivot(&sym);
+    assert!(
+        pivot.is_some_and(|p| p > 0.0),
+        "not positive definite: smallest pivot {pivot:?}"
+    );
     // Periodic copies: the box doubled along x with every particle copied 16 along.
     let wide = load(&[
         ("box", "[32.0, 16.0]".into()),
@@ -377,34 +369,6 @@ fn particles_through_a_wall_are_refused() {
     }
 }
 
-/// A wrapper graph recording dpstokes.json's noise and drift every step.
-fn recorder(sets: &str, n: usize, steps: u64) -> (std::path::PathBuf, Graph) {
-    let dir = crate::util::tmpdir("dpstokes-stats");
-    let json = format!(
-        r#"{{"mesoflow": 1,
-  "inputs": {{"positions": {{"type": "particles", "rows": {n}, "cols": 3}}}},
-  "nodes": [
-    {{"id": "zero", "kind": "constant", "params": {{"value": 0}}, "inputs": {{"like": "inputs.positions"}}}},
-    {{"id": "m", "graph": "dpstokes.json", "params": {sets}, "inputs": {{"positions": "inputs.positions", "forces": "zero.out"}}}},
-    {{"id": "noise", "kind": "record", "params": {{"frames": {steps}}}, "inputs": {{"x": "m.noise"}}}},
-    {{"id": "drift", "kind": "record", "params": {{"frames": {steps}}}, "inputs": {{"x": "m.drift"}}}}
-  ],
-  "outputs": {{"noise": "noise.out", "drift": "drift.out"}}}}"#
-    );
-    let path = crate::util::write_graph(&dir, "stats.json", &json);
-    let g = mesoflow::graph::load(
-        &path,
-        crate::util::registry(),
-        &mesoflow::graph::LoadOptions {
-            steps,
-            seed: 5,
-            ..Default::default()
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    (dir, g)
-}
-
 /// Fluctuation-dissipation near a wall: the noise's covariance is the mobility (assembled
 /// from M F runs), element by element within five standard errors; the drift's mean is
 /// kT div M (central differences of assembled mobilities), within five standard errors,
@@ -419,7 +383,7 @@ fn noise_covariance_and_drift_match_the_mobility() {
     let x: Vec<V3> = vec![[0.0, 0.0, 1.3], [1.5, 0.5, 2.0]];
     let n = x.len();
     let steps = 1000u64;
-    let (dir, g) = recorder(sets, n, steps);
+    let (dir, g) = mobility_recorder("dpstokes.json", sets, n, steps, &["noise", "drift"], 5);
     let out = {
         let gpu = gpu().expect("a GPU");
         let data: BTreeMap<String, HostArray> = [("positions".to_string(), particles(&x))].into();

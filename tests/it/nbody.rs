@@ -17,8 +17,8 @@ use mesoflow::value::HostArray;
 
 use crate::util::mobility::cholesky_min_pivot;
 use crate::util::{
-    Rng, compile_cached, gpu, load_with, particles, plan_graph, run_program, tmpdir, types_of,
-    vectors, write_graph,
+    Rng, compile_cached, gpu, load_with, mobility_recorder, particles, plan_graph, run_program,
+    types_of, vectors,
 };
 
 type V3 = [f64; 3];
@@ -420,35 +420,6 @@ fn grand_mobilities_are_symmetric_and_positive_definite() {
     }
 }
 
-/// A wrapper graph recording the noise and the drift of rpy_wall.json every step.
-fn recorder(sets: &str, n: usize, steps: u64) -> (std::path::PathBuf, Graph) {
-    let dir = tmpdir("wall-stats");
-    let json = format!(
-        r#"{{"mesoflow": 1,
-  "inputs": {{"positions": {{"type": "particles", "rows": {n}, "cols": 3}}}},
-  "nodes": [
-    {{"id": "zero", "kind": "constant", "params": {{"value": 0}}, "inputs": {{"like": "inputs.positions"}}}},
-    {{"id": "m", "graph": "rpy_wall.json", "params": {sets}, "inputs": {{"positions": "inputs.positions", "forces": "zero.out"}}}},
-    {{"id": "noise", "kind": "record", "params": {{"frames": {steps}}}, "inputs": {{"x": "m.noise"}}}},
-    {{"id": "angular_noise", "kind": "record", "params": {{"frames": {steps}}}, "inputs": {{"x": "m.angular_noise"}}}},
-    {{"id": "drift", "kind": "record", "params": {{"frames": {steps}}}, "inputs": {{"x": "m.drift"}}}}
-  ],
-  "outputs": {{"noise": "noise.out", "angular_noise": "angular_noise.out", "drift": "drift.out"}}}}"#
-    );
-    let path = write_graph(&dir, "stats.json", &json);
-    let g = mesoflow::graph::load(
-        &path,
-        crate::util::registry(),
-        &mesoflow::graph::LoadOptions {
-            steps,
-            seed: 11,
-            ..Default::default()
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    (dir, g)
-}
-
 /// Fluctuation-dissipation: the noise's covariance is the grand mobility, element by
 /// element within five standard errors; and the drift's mean is kT div M, the divergence
 /// by central differences of the f64 twin, within five standard errors.
@@ -459,7 +430,14 @@ fn noise_covariance_and_drift_match_the_mobility() {
     let x: Vec<V3> = vec![[0.0, 0.0, 1.3], [1.6, 0.4, 1.1], [0.3, 1.9, 2.2]];
     let n = x.len();
     let steps = 3000u64;
-    let (dir, g) = recorder(r#"{"rotation": true, "temperature": 1}"#, n, steps);
+    let (dir, g) = mobility_recorder(
+        "rpy_wall.json",
+        r#"{"rotation": true, "temperature": 1}"#,
+        n,
+        steps,
+        &["noise", "angular_noise", "drift"],
+        11,
+    );
     let data: BTreeMap<String, HostArray> = [("positions".to_string(), particles(&x))].into();
     let plan = plan_graph(&gpu.caps, &g, types_of(&data), None, true);
     let mut program = compile_cached(&gpu, &g, &plan);

@@ -191,3 +191,52 @@ pub fn chain_graph(n: usize) -> String {
         n - 1
     )
 }
+
+/// A wrapper graph around the mobility graph `graphs/<mobility>` (params `sets`, a JSON
+/// object; zero forces) for n positions, recording each of its outputs in `record` every
+/// step for `steps` steps, with this seed: the folder it was written in and the graph.
+pub fn mobility_recorder(
+    mobility: &str,
+    sets: &str,
+    n: usize,
+    steps: u64,
+    record: &[&str],
+    seed: u64,
+) -> (PathBuf, Graph) {
+    let dir = tmpdir("mobility-stats");
+    let records: String = record
+        .iter()
+        .map(|o| {
+            format!(
+                r#",
+    {{"id": "{o}", "kind": "record", "params": {{"frames": {steps}}}, "inputs": {{"x": "m.{o}"}}}}"#
+            )
+        })
+        .collect();
+    let outputs: Vec<String> = record
+        .iter()
+        .map(|o| format!(r#""{o}": "{o}.out""#))
+        .collect();
+    let json = format!(
+        r#"{{"mesoflow": 1,
+  "inputs": {{"positions": {{"type": "particles", "rows": {n}, "cols": 3}}}},
+  "nodes": [
+    {{"id": "zero", "kind": "constant", "params": {{"value": 0}}, "inputs": {{"like": "inputs.positions"}}}},
+    {{"id": "m", "graph": "{mobility}", "params": {sets}, "inputs": {{"positions": "inputs.positions", "forces": "zero.out"}}}}{records}
+  ],
+  "outputs": {{{}}}}}"#,
+        outputs.join(", ")
+    );
+    let path = write_graph(&dir, "stats.json", &json);
+    let g = graph::load(
+        &path,
+        registry(),
+        &LoadOptions {
+            steps,
+            seed,
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    (dir, g)
+}
