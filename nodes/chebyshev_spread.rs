@@ -70,6 +70,10 @@ pub struct ChebyshevGrid {
     pub points: u32,
     pub window: Window,
     pub walls: Walls,
+    /// Where particles may lie in z: [zmin, zmax], or the narrower range of a padded grid
+    /// (`particle_zmin`, `particle_zmax`: the physical domain, its open sides padded so a
+    /// particle's support stays inside).
+    pub particle_z: [f64; 2],
 }
 
 impl ChebyshevGrid {
@@ -192,14 +196,18 @@ impl ChebyshevGrid {
                 return Err(RowError::new(row, format!("position {x:?} is not finite")));
             }
             let z = x[2] as f64;
-            if z < self.zmin || z > self.zmax {
+            let [lo, hi] = self.particle_z;
+            if z < lo || z > hi {
+                let what = if (lo, hi) == (self.zmin, self.zmax) {
+                    "the grid's [zmin, zmax]"
+                } else {
+                    "the particles' [particle_zmin, particle_zmax]"
+                };
                 return Err(RowError::new(
                     row,
                     format!(
-                        "z = {} is outside the grid's [zmin, zmax] = [{}, {}]{}",
+                        "z = {} is outside {what} = [{lo}, {hi}]{}",
                         x[2],
-                        self.zmin,
-                        self.zmax,
                         match self.walls {
                             Walls::None => "",
                             Walls::Bottom => " (below the bottom wall, or above the domain)",
@@ -376,6 +384,20 @@ fn grid_params() -> Vec<ParamSpec> {
             &["none", "bottom", "slit"],
             "walls whose images are subtracted in the kernel: none, bottom (at zmin), slit (zmin and zmax)",
         ),
+        ParamSpec::number(
+            "particle_zmin",
+            Some(-f64::MAX),
+            -f64::MAX,
+            f64::MAX,
+            "particles below this are refused by row (the physical domain's bottom inside a padded grid; never below zmin)",
+        ),
+        ParamSpec::number(
+            "particle_zmax",
+            Some(f64::MAX),
+            -f64::MAX,
+            f64::MAX,
+            "particles above this are refused by row (the physical domain's top inside a padded grid; never above zmax)",
+        ),
     ]
 }
 
@@ -422,6 +444,10 @@ fn grid_of(p: &Params) -> Result<ChebyshevGrid, String> {
         points: p.number("points") as u32,
         window,
         walls,
+        particle_z: [
+            p.number("particle_zmin").max(zmin),
+            p.number("particle_zmax").min(zmax),
+        ],
     })
 }
 

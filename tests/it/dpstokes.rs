@@ -340,11 +340,18 @@ fn the_mobility_matrix_is_spd_and_periodic() {
     }
 }
 
-/// A particle below the bottom wall or above a slit's top is an error that names it.
+/// A particle below the bottom wall, above a slit's top or out of [zmin, zmax] on an open
+/// side is an error that names it.
 #[test]
 fn particles_through_a_wall_are_refused() {
     let Some(gpu) = gpu() else { return };
-    for (walls, z) in [("bottom", -0.1), ("slit", 6.5)] {
+    // Open sides are padded in the grid, but the particles' domain stays [zmin, zmax].
+    for (walls, z) in [
+        ("bottom", -0.1),
+        ("slit", 6.5),
+        ("bottom", 6.5),
+        ("none", -0.5),
+    ] {
         let g = load(&[
             ("box", "[16.0, 16.0]".into()),
             ("zmin", "0.0".into()),
