@@ -654,3 +654,35 @@ fn very_tall_and_very_flat_boxes_stay_accurate() {
     );
     assert!(sz[2] < sx[0], "across {} against along {}", sz[2], sx[0]);
 }
+
+/// Two spheres at the same height above a wall, in a wide box: the pair mobility (the
+/// velocity of one under a force on the other, along the line, across it and normal to
+/// the wall) is rpy_wall.json's Rotne-Prager-Blake pair mobility (itself checked against
+/// its f64 twin and Blake's solution in tests/it/nbody.rs) to a few 1e-3 of the self
+/// mobility.
+#[test]
+fn pair_mobilities_at_one_height_follow_rotne_prager_blake() {
+    if gpu().is_none() {
+        return;
+    }
+    let dp = load(&[
+        ("box", "[96.0, 96.0]".into()),
+        ("zmin", "0.0".into()),
+        ("zmax", "5.0".into()),
+        ("walls", "\"bottom\"".into()),
+    ]);
+    let rpb = load_with("rpy_wall.json", &[("wall_height", "0.0")], 1, 0);
+    let t0 = 1.0 / (6.0 * PI);
+    for (h, r) in [(2.0, 3.0), (3.0, 6.0)] {
+        let x = [[-r / 2.0, 0.3, h], [r / 2.0, 0.3, h]];
+        let (m, want) = (mobility(&dp, &x), mobility(&rpb, &x));
+        for (row, col) in [(3, 0), (4, 1), (5, 2), (0, 0), (2, 2)] {
+            assert!(
+                (m[row][col] - want[row][col]).abs() < 5e-3 * t0,
+                "h {h}, r {r}: M[{row}][{col}] = {:.5e}, Rotne-Prager-Blake {:.5e}",
+                m[row][col],
+                want[row][col]
+            );
+        }
+    }
+}
