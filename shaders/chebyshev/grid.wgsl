@@ -70,3 +70,41 @@ fn z_range(qz: f32) -> vec2<u32> {
     let hi = min(ceil(last * acos(bottom) / 3.141592653589793) + 1.0, last);
     return vec2<u32>(u32(lo), u32(hi));
 }
+
+// The per-particle factors, computed once by the workgroup: phi_x and phi_y of the
+// (support + 1) cells of each axis (support at most 32), and the z factor (images
+// subtracted) of the first Z_CACHE z points in the support; points past those (a support
+// spanning more than Z_CACHE Chebyshev points) are computed where they are used.
+const Z_CACHE: u32 = 256u;
+var<workgroup> factor_x: array<f32, 33>;
+var<workgroup> factor_y: array<f32, 33>;
+var<workgroup> factor_z: array<f32, Z_CACHE>;
+
+// Fills the factors of a particle at (ux, uy) in cell units and qz, its first cells
+// x0, y0 and z range zr; every thread of the 64 calls it (it ends on a barrier).
+fn fill_factors(lid: u32, ux: f32, uy: f32, qz: f32, x0: i32, y0: i32, zr: vec2<u32>, weighted: bool) {
+    let side = geo.shape.x + 1u;
+    if (lid < side) {
+        factor_x[lid] = phi_x(f32(x0 + i32(lid)) - ux);
+        factor_y[lid] = phi_y(f32(y0 + i32(lid)) - uy);
+    }
+    let count = min(zr.y - zr.x + 1u, Z_CACHE);
+    for (var t = lid; t < count; t += 64u) {
+        factor_z[t] = z_factor(zr.x + t, qz, weighted);
+    }
+    workgroupBarrier();
+}
+
+// The z factor of point j (times its quadrature weight when `weighted`).
+fn z_factor(j: u32, qz: f32, weighted: bool) -> f32 {
+    let w = z_kernel(z_point(j), qz);
+    return select(w, w * z_weight(j), weighted);
+}
+
+// The z factor of the t-th point of the range, from the cache where it is there.
+fn cached_z(t: u32, zr: vec2<u32>, qz: f32, weighted: bool) -> f32 {
+    if (t < Z_CACHE) {
+        return factor_z[t];
+    }
+    return z_factor(zr.x + t, qz, weighted);
+}

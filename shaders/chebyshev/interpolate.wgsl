@@ -1,8 +1,9 @@
 // template: composed after a window (shaders/window/). nodes/chebyshev_spread.rs.
 //
-// One workgroup per particle; its threads take the (support + 1)^2 columns in turn and
-// sum u delta~ times the quadrature weight over each column's z points; the 64 partial
-// sums are added in a fixed tree order.
+// One workgroup per particle: the window's factors per axis (z's times the quadrature
+// weight) are computed once into workgroup memory, then its threads take the (column,
+// z point) items of the support in turn and sum u delta~; the 64 partial sums are added in
+// a fixed tree order.
 #import common/index.wgsl
 
 @group(0) @binding(0) var<storage, read> pos: array<f32>;
@@ -30,25 +31,25 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let x0 = i32(ceil(ux - geo.radius.x));
     let y0 = i32(ceil(uy - geo.radius.x));
     let zr = z_range(qz);
+    fill_factors(lid, ux, uy, qz, x0, y0, zr, true);
     let side = s + 1u;
+    let columns = side * side;
     let plane = geo.n.x * geo.n.y;
     var acc = vec4<f32>(0.0);
-    for (var c = lid; c < side * side; c += 64u) {
-        let ix = x0 + i32(c % side);
-        let iy = y0 + i32(c / side);
-        let wxy = phi_x(f32(ix) - ux) * phi_y(f32(iy) - uy);
-        if (wxy == 0.0) {
+    // Items (column, z point), columns fastest: neighbouring threads read neighbouring
+    // cells of one level.
+    let items = columns * (zr.y - zr.x + 1u);
+    for (var t = lid; t < items; t += 64u) {
+        let c = t % columns;
+        let jt = t / columns;
+        let w = factor_x[c % side] * factor_y[c / side] * cached_z(jt, zr, qz, true);
+        if (w == 0.0) {
             continue;
         }
-        let cell = wrap_cell(ix, geo.n.x) + geo.n.x * wrap_cell(iy, geo.n.y);
-        for (var j = zr.x; j <= zr.y; j++) {
-            let w = wxy * z_kernel(z_point(j), qz) * z_weight(j);
-            if (w == 0.0) {
-                continue;
-            }
-            for (var k = 0u; k < comps; k++) {
-                acc[k] += w * grid[(k * geo.n.z + j) * plane + cell];
-            }
+        let cell = wrap_cell(x0 + i32(c % side), geo.n.x) + geo.n.x * wrap_cell(y0 + i32(c / side), geo.n.y);
+        let j = zr.x + jt;
+        for (var k = 0u; k < comps; k++) {
+            acc[k] += w * grid[(k * geo.n.z + j) * plane + cell];
         }
     }
     partial[lid] = acc;

@@ -1,8 +1,9 @@
 // template: composed after a window (shaders/window/) and an add (shaders/spread/add_*.wgsl,
 // which binds `grid` at 2 and defines grid_add). nodes/chebyshev_spread.rs.
 //
-// One workgroup per particle; its threads take the (support + 1)^2 columns in turn, each
-// column its z points within the support: grid += v delta~ (a density).
+// One workgroup per particle: the window's factors per axis are computed once into
+// workgroup memory, then its threads take the (column, z point) items of the support in
+// turn: grid += v delta~ (a density).
 #import common/index.wgsl
 
 @group(0) @binding(0) var<storage, read> pos: array<f32>;
@@ -27,24 +28,28 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let x0 = i32(ceil(ux - geo.radius.x));
     let y0 = i32(ceil(uy - geo.radius.x));
     let zr = z_range(qz);
+    fill_factors(lid, ux, uy, qz, x0, y0, zr, false);
     let side = s + 1u;
+    let columns = side * side;
     let plane = geo.n.x * geo.n.y;
-    for (var c = lid; c < side * side; c += 64u) {
-        let ix = x0 + i32(c % side);
-        let iy = y0 + i32(c / side);
-        let wxy = phi_x(f32(ix) - ux) * phi_y(f32(iy) - uy);
-        if (wxy == 0.0) {
+    var v = vec4<f32>(0.0);
+    for (var k = 0u; k < comps; k++) {
+        v[k] = vals[comps * p + k];
+    }
+    // Items (column, z point), columns fastest: neighbouring threads touch neighbouring
+    // cells of one level.
+    let items = columns * (zr.y - zr.x + 1u);
+    for (var t = lid; t < items; t += 64u) {
+        let c = t % columns;
+        let jt = t / columns;
+        let w = factor_x[c % side] * factor_y[c / side] * cached_z(jt, zr, qz, false);
+        if (w == 0.0) {
             continue;
         }
-        let cell = wrap_cell(ix, geo.n.x) + geo.n.x * wrap_cell(iy, geo.n.y);
-        for (var j = zr.x; j <= zr.y; j++) {
-            let w = wxy * z_kernel(z_point(j), qz);
-            if (w == 0.0) {
-                continue;
-            }
-            for (var k = 0u; k < comps; k++) {
-                grid_add((k * geo.n.z + j) * plane + cell, w * vals[comps * p + k]);
-            }
+        let cell = wrap_cell(x0 + i32(c % side), geo.n.x) + geo.n.x * wrap_cell(y0 + i32(c / side), geo.n.y);
+        let j = zr.x + jt;
+        for (var k = 0u; k < comps; k++) {
+            grid_add((k * geo.n.z + j) * plane + cell, w * v[k]);
         }
     }
 }

@@ -245,14 +245,20 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
                     // values per z level), the per-k tables (5 nz + 6 words per k).
                     let nk = (grid[0] / 2.0).floor() + 1.0;
                     let nk = nk * grid[1];
-                    let solves = timing.dispatches.iter().filter(|d| d.0.contains("bvp"));
-                    // In graph order: the pressure (1 component), then the velocity (3).
-                    for ((kernel, median, _), comps) in solves.zip([1.0, 3.0]) {
-                        let words = nk * (2.0 * 2.0 * comps * points + 5.0 * points + 6.0);
-                        outln!(
-                            "      {kernel} ({comps} components): {:.1} GB/s at the words it reads and writes once",
-                            4.0 * words / median.as_secs_f64() / 1e9
-                        );
+                    // The pressure's solve has 1 component, the velocity's 3.
+                    let comps = if timing.label.contains("pressure") {
+                        1.0
+                    } else {
+                        3.0
+                    };
+                    for (kernel, median, _) in &timing.dispatches {
+                        if kernel.contains("bvp") {
+                            let words = nk * (2.0 * 2.0 * comps * points + 5.0 * points + 6.0);
+                            outln!(
+                                "      {kernel} ({comps} components): {:.1} GB/s at the words it reads and writes once",
+                                4.0 * words / median.as_secs_f64() / 1e9
+                            );
+                        }
                     }
                 }
             }
