@@ -1,8 +1,8 @@
 // template: composed after a window (shaders/window/). nodes/chebyshev_spread.rs.
 //
 // One workgroup per particle: the window's factors per axis (z's times the quadrature
-// weight) are computed once into workgroup memory, then its threads take the (column,
-// z point) items of the support in turn and sum u delta~; the 64 partial sums are added in
+// weight) are computed once into workgroup memory, then its threads take the support's columns,
+// each its z points, and sum u delta~; the 64 partial sums are added in
 // a fixed tree order.
 #import common/index.wgsl
 
@@ -36,20 +36,23 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let columns = side * side;
     let plane = geo.n.x * geo.n.y;
     var acc = vec4<f32>(0.0);
-    // Items (column, z point), columns fastest: neighbouring threads read neighbouring
-    // cells of one level.
-    let items = columns * (zr.y - zr.x + 1u);
-    for (var t = lid; t < items; t += 64u) {
-        let c = t % columns;
-        let jt = t / columns;
-        let w = factor_x[c % side] * factor_y[c / side] * cached_z(jt, zr, qz, true);
-        if (w == 0.0) {
+    // One column per thread, its z points in turn (the factors from workgroup memory).
+    let nz_support = zr.y - zr.x + 1u;
+    for (var c = lid; c < columns; c += 64u) {
+        let wxy = factor_x[c % side] * factor_y[c / side];
+        if (wxy == 0.0) {
             continue;
         }
         let cell = wrap_cell(x0 + i32(c % side), geo.n.x) + geo.n.x * wrap_cell(y0 + i32(c / side), geo.n.y);
-        let j = zr.x + jt;
-        for (var k = 0u; k < comps; k++) {
-            acc[k] += w * grid[(k * geo.n.z + j) * plane + cell];
+        for (var jt = 0u; jt < nz_support; jt++) {
+            let w = wxy * cached_z(jt, zr, qz, true);
+            if (w == 0.0) {
+                continue;
+            }
+            let j = zr.x + jt;
+            for (var k = 0u; k < comps; k++) {
+                acc[k] += w * grid[(k * geo.n.z + j) * plane + cell];
+            }
         }
     }
     partial[lid] = acc;

@@ -2,8 +2,7 @@
 // which binds `grid` at 2 and defines grid_add). nodes/chebyshev_spread.rs.
 //
 // One workgroup per particle: the window's factors per axis are computed once into
-// workgroup memory, then its threads take the (column, z point) items of the support in
-// turn: grid += v delta~ (a density).
+// workgroup memory, then its threads take the support's columns, each its z points: grid += v delta~ (a density).
 #import common/index.wgsl
 
 @group(0) @binding(0) var<storage, read> pos: array<f32>;
@@ -36,20 +35,23 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     for (var k = 0u; k < comps; k++) {
         v[k] = vals[comps * p + k];
     }
-    // Items (column, z point), columns fastest: neighbouring threads touch neighbouring
-    // cells of one level.
-    let items = columns * (zr.y - zr.x + 1u);
-    for (var t = lid; t < items; t += 64u) {
-        let c = t % columns;
-        let jt = t / columns;
-        let w = factor_x[c % side] * factor_y[c / side] * cached_z(jt, zr, qz, false);
-        if (w == 0.0) {
+    // One column per thread, its z points in turn (the factors from workgroup memory).
+    let nz_support = zr.y - zr.x + 1u;
+    for (var c = lid; c < columns; c += 64u) {
+        let wxy = factor_x[c % side] * factor_y[c / side];
+        if (wxy == 0.0) {
             continue;
         }
         let cell = wrap_cell(x0 + i32(c % side), geo.n.x) + geo.n.x * wrap_cell(y0 + i32(c / side), geo.n.y);
-        let j = zr.x + jt;
-        for (var k = 0u; k < comps; k++) {
-            grid_add((k * geo.n.z + j) * plane + cell, w * v[k]);
+        for (var jt = 0u; jt < nz_support; jt++) {
+            let w = wxy * cached_z(jt, zr, qz, false);
+            if (w == 0.0) {
+                continue;
+            }
+            let j = zr.x + jt;
+            for (var k = 0u; k < comps; k++) {
+                grid_add((k * geo.n.z + j) * plane + cell, w * v[k]);
+            }
         }
     }
 }
