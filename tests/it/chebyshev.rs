@@ -8,8 +8,8 @@ use std::f64::consts::PI;
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::{
-    Rng, compile_cached, f32s, flat_particles, gpu, load_single_node, named, plan_graph, reference,
-    rel_max_err, run_node, run_out, types_of, with_caps,
+    Rng, compile_cached, erfc, f32s, flat_particles, gpu, load_single_node, named, plan_graph,
+    reference, rel_max_err, run_node, run_out, types_of, with_caps,
 };
 
 fn grid(dims: [u32; 3], comps: u32, values: &[f64]) -> HostArray {
@@ -410,23 +410,6 @@ fn chebyshev_kernel_integrates_to_the_closed_forms() {
             );
         }
     }
-}
-
-/// erfc with relative error below 1.2e-7 (Numerical Recipes' Chebyshev fit).
-fn erfc(x: f64) -> f64 {
-    let z = x.abs();
-    let t = 1.0 / (1.0 + 0.5 * z);
-    let r = t
-        * (-z * z - 1.26551223
-            + t * (1.00002368
-                + t * (0.37409196
-                    + t * (0.09678418
-                        + t * (-0.18628806
-                            + t * (0.27886807
-                                + t * (-1.13520398
-                                    + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277)))))))))
-            .exp();
-    if x >= 0.0 { r } else { 2.0 - r }
 }
 
 /// Interpolation is the adjoint of spreading in the quadrature's inner product:

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use mesoflow::nodes::random;
 use mesoflow::value::HostArray;
 
-use crate::util::{f32s, gpu, load, run_graph, tmpdir, u32s, write_graph};
+use crate::util::{erfc, f32s, gpu, load, run_graph, tmpdir, u32s, write_graph};
 
 fn graph(nodes: &str, outputs: &str) -> String {
     format!(r#"{{"mesoflow": 1, "nodes": [{nodes}], "outputs": {{{outputs}}}}}"#)
@@ -114,24 +114,6 @@ fn draws_depend_on_step_and_stream_and_not_on_fusion() {
         f32s(&run(&json, 3, true)["g"]),
         "steps differ"
     );
-}
-
-/// erfc with relative error below 1.2e-7 (Numerical Recipes, Chebyshev fit): enough for a
-/// KS distance resolved at 1e-3.
-fn erfc(x: f64) -> f64 {
-    let z = x.abs();
-    let t = 1.0 / (1.0 + 0.5 * z);
-    let r = t
-        * (-z * z - 1.26551223
-            + t * (1.00002368
-                + t * (0.37409196
-                    + t * (0.09678418
-                        + t * (-0.18628806
-                            + t * (0.27886807
-                                + t * (-1.13520398
-                                    + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277)))))))))
-            .exp();
-    if x >= 0.0 { r } else { 2.0 - r }
 }
 
 #[test]
