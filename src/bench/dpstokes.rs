@@ -11,17 +11,16 @@
 //! rate: the words they must read and write once (f and y, the per-k tables) over their
 //! time, in GB/s.
 
-use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::PathBuf;
 
+use mesoflow::exec::Program;
 use mesoflow::expr::ParamValue;
-use mesoflow::gpu::GpuContext;
+use mesoflow::gpu::{GpuContext, KernelCache};
 use mesoflow::graph::Graph;
 use mesoflow::node::Registry;
-use mesoflow::value::HostArray;
 
-use super::fcm::{Rng, load, param, particles, velocities};
+use super::fcm::{Rng, load, mobility_inputs, param, plan_for, velocities};
 use super::{BenchError, end_to_end_clock, ms, time_loaded};
 
 pub struct DpStokesBench {
@@ -86,21 +85,8 @@ fn accuracy(
     }
     let l = 128.0;
     let g = load(&bench.graph, &sets(walls, l, bench.tolerance), registry)?;
-    let x = [[0.3, -0.2, 2.0]];
-    let inputs: BTreeMap<String, HostArray> = [
-        ("positions".to_string(), particles(&x)),
-        ("forces".to_string(), particles(&[[1.0, 0.0, 0.0]])),
-    ]
-    .into_iter()
-    .collect();
-    let opts = mesoflow::plan::PlanOptions {
-        outputs: Some(vec!["velocities".into()]),
-        inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
-        fuse: true,
-    };
-    let plan = mesoflow::plan::plan(&g, &opts, &gpu.caps)?;
-    let mut cache = mesoflow::gpu::KernelCache::default();
-    let mut program = mesoflow::exec::Program::compile(gpu, &g, &plan, &mut cache)?;
+    let plan = plan_for(gpu, &g, 1)?;
+    let mut program = Program::compile(gpu, &g, &plan, &mut KernelCache::default())?;
     let t0 = 1.0 / (6.0 * PI);
     let open = (walls == "none").then(|| open_self(1.0 / PI.sqrt(), l, l));
     let mut worst: f64 = 0.0;
@@ -171,20 +157,14 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
             let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ n as u64);
             let x: Vec<[f64; 3]> = (0..n)
                 .map(|_| {
-                    let mut p = [0, 1].map(|_| (rng.uniform() - 0.5) * l);
-                    p.iter_mut().for_each(|v| *v = v.clamp(-0.5 * l, 0.5 * l));
+                    let p = [0, 1].map(|_| (rng.uniform() - 0.5) * l);
                     [p[0], p[1], 1.5 + 8.5 * rng.uniform()]
                 })
                 .collect();
             let f: Vec<[f64; 3]> = (0..n)
                 .map(|_| [0, 1, 2].map(|_| rng.uniform() - 0.5))
                 .collect();
-            let inputs: BTreeMap<String, HostArray> = [
-                ("positions".to_string(), particles(&x)),
-                ("forces".to_string(), particles(&f)),
-            ]
-            .into_iter()
-            .collect();
+            let inputs = mobility_inputs(&x, &f);
             let run = time_loaded(
                 &gpu,
                 &g,
@@ -210,12 +190,7 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
                 .iter()
                 .map(|p| [p[0], p[1], p[2] - 0.5 * nz * hx])
                 .collect();
-            let fcm_inputs: BTreeMap<String, HostArray> = [
-                ("positions".to_string(), particles(&fcm_x)),
-                ("forces".to_string(), particles(&f)),
-            ]
-            .into_iter()
-            .collect();
+            let fcm_inputs = mobility_inputs(&fcm_x, &f);
             let fcm_run = time_loaded(
                 &gpu,
                 &fcm,
@@ -239,12 +214,11 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
                 error.map_or("-".to_string(), |e| format!("{e:.2e}"))
             );
             if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
+                // The boundary-value solves: f and y (2 words per complex value, nk values
+                // per z level), the per-k tables (5 nz + 6 words per k).
+                let nk = ((grid[0] / 2.0).floor() + 1.0) * grid[1];
                 for timing in &run.timings {
                     out!("{}", timing.breakdown());
-                    // The boundary-value solves: f and y (2 words per complex value, nk
-                    // values per z level), the per-k tables (5 nz + 6 words per k).
-                    let nk = (grid[0] / 2.0).floor() + 1.0;
-                    let nk = nk * grid[1];
                     // The pressure's solve has 1 component, the velocity's 3.
                     let comps = if timing.label.contains("pressure") {
                         1.0

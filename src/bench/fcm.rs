@@ -126,19 +126,23 @@ pub(super) fn particles(rows: &[[f64; 3]]) -> HostArray {
     )
 }
 
+/// The inputs of a mobility graph: positions and forces, N x 3 each.
+pub(super) fn mobility_inputs(x: &[[f64; 3]], f: &[[f64; 3]]) -> BTreeMap<String, HostArray> {
+    [
+        ("positions".to_string(), particles(x)),
+        ("forces".to_string(), particles(f)),
+    ]
+    .into_iter()
+    .collect()
+}
+
 /// Velocities of `x` under forces `f`, one evaluation of a compiled graph.
 pub(super) fn velocities(
     program: &mut Program,
     x: &[[f64; 3]],
     f: &[[f64; 3]],
 ) -> Result<Vec<[f64; 3]>, BenchError> {
-    let data = [
-        ("positions".to_string(), particles(x)),
-        ("forces".to_string(), particles(f)),
-    ]
-    .into_iter()
-    .collect();
-    program.upload(&data)?;
+    program.upload(&mobility_inputs(x, f))?;
     program.run(&RunOptions {
         steps: 1,
         profile: Profile::Off,
@@ -284,12 +288,7 @@ pub(super) fn timed(
     let f: Vec<[f64; 3]> = (0..n)
         .map(|_| [0, 1, 2].map(|_| rng.uniform() - 0.5))
         .collect();
-    let inputs: BTreeMap<String, HostArray> = [
-        ("positions".to_string(), particles(&x)),
-        ("forces".to_string(), particles(&f)),
-    ]
-    .into_iter()
-    .collect();
+    let inputs = mobility_inputs(&x, &f);
     let run = time_loaded(gpu, g, &inputs, Some(vec![output.into()]), reps, true)?;
     if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
         for t in &run.timings {

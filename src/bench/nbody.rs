@@ -5,14 +5,12 @@
 //! every add, multiply, divide and square root one flop), to set against the adapter's
 //! f32 peak (an H200's is 67 TFLOP/s).
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use mesoflow::expr::ParamValue;
 use mesoflow::gpu::GpuContext;
-use mesoflow::value::HostArray;
 
-use super::fcm::{Rng, load, particles};
+use super::fcm::{Rng, load, mobility_inputs, particles};
 use super::{BenchError, end_to_end_clock, ms, time_loaded};
 
 pub struct NbodyBench {
@@ -77,12 +75,7 @@ pub fn run(bench: &NbodyBench) -> Result<(), BenchError> {
             let f: Vec<[f64; 3]> = (0..n)
                 .map(|_| [0, 1, 2].map(|_| rng.uniform() - 0.5))
                 .collect();
-            let mut inputs: BTreeMap<String, HostArray> = [
-                ("positions".to_string(), particles(&x)),
-                ("forces".to_string(), particles(&f)),
-            ]
-            .into_iter()
-            .collect();
+            let mut inputs = mobility_inputs(&x, &f);
             let mut outputs = vec!["velocities".to_string()];
             if rotation {
                 inputs.insert("torques".into(), particles(&f));
