@@ -491,8 +491,8 @@ impl GpuKernels for Slab {
     ) -> Result<Vec<Dispatch>, CompileError> {
         let first = io.inputs[0].expect("required");
         let (dims, _) = half_spectrum(&Some(first.ty)).expect("checked");
-        let waves = self.waves(dims);
-        let (nk, nz) = (waves.len(), dims[2] as usize);
+        let half = half_dims(dims);
+        let (nk, nz) = ((half[0] * half[1]) as usize, dims[2] as usize);
         let tau = 2.0 * std::f64::consts::PI;
         let uniform = SlabUniform {
             nx: dims[0],
@@ -530,7 +530,7 @@ impl GpuKernels for Slab {
                 let base = words.len();
                 words.resize(base + 72 * nk, 0.0);
                 let height = self.zmax - self.zmin;
-                for (kk, &(k, _)) in waves.iter().enumerate() {
+                for (kk, (k, _)) in self.waves(dims).into_iter().enumerate() {
                     if k == [0.0, 0.0] {
                         continue;
                     }

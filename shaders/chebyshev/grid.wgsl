@@ -108,3 +108,34 @@ fn cached_z(t: u32, zr: vec2<u32>, qz: f32, weighted: bool) -> f32 {
     }
     return z_factor(zr.x + t, qz, weighted);
 }
+
+// A particle's place on the grid: x, y in cell-centre units, z, the first cells of its
+// support and its range of z points.
+struct Support {
+    u: vec2<f32>,
+    qz: f32,
+    first: vec2<i32>,
+    zr: vec2<u32>,
+}
+
+// Particle p's support, with its factors filled in workgroup memory (every thread of the
+// workgroup calls it: it ends on a barrier). `pos` is the kernel's positions binding.
+fn particle_support(p: u32, lid: u32, weighted: bool) -> Support {
+    let u = vec2<f32>(centre_units(pos[3u * p], 0u), centre_units(pos[3u * p + 1u], 1u));
+    let qz = pos[3u * p + 2u];
+    let first = vec2<i32>(ceil(u - vec2<f32>(geo.radius.x)));
+    let zr = z_range(qz);
+    fill_factors(lid, u.x, u.y, qz, first.x, first.y, zr, weighted);
+    return Support(u, qz, first, zr);
+}
+
+// Column c (x fastest) of the support: its x, y window weight and its cell in a level.
+fn column_weight(c: u32) -> f32 {
+    let side = geo.shape.x + 1u;
+    return factor_x[c % side] * factor_y[c / side];
+}
+
+fn column_cell(c: u32, sp: Support) -> u32 {
+    let side = geo.shape.x + 1u;
+    return wrap_cell(sp.first.x + i32(c % side), geo.n.x) + geo.n.x * wrap_cell(sp.first.y + i32(c / side), geo.n.y);
+}

@@ -19,36 +19,28 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     if (p >= geo.n.w) {
         return;
     }
-    let s = geo.shape.x;
     let comps = geo.shape.y;
-    let ux = centre_units(pos[3u * p], 0u);
-    let uy = centre_units(pos[3u * p + 1u], 1u);
-    let qz = pos[3u * p + 2u];
-    let x0 = i32(ceil(ux - geo.radius.x));
-    let y0 = i32(ceil(uy - geo.radius.x));
-    let zr = z_range(qz);
-    fill_factors(lid, ux, uy, qz, x0, y0, zr, false);
-    let side = s + 1u;
-    let columns = side * side;
+    let sp = particle_support(p, lid, false);
+    let side = geo.shape.x + 1u;
     let plane = geo.n.x * geo.n.y;
     var v = vec4<f32>(0.0);
     for (var k = 0u; k < comps; k++) {
         v[k] = vals[comps * p + k];
     }
     // One column per thread, its z points in turn (the factors from workgroup memory).
-    let nz_support = zr.y - zr.x + 1u;
-    for (var c = lid; c < columns; c += 64u) {
-        let wxy = factor_x[c % side] * factor_y[c / side];
+    let nz_support = sp.zr.y - sp.zr.x + 1u;
+    for (var c = lid; c < side * side; c += 64u) {
+        let wxy = column_weight(c);
         if (wxy == 0.0) {
             continue;
         }
-        let cell = wrap_cell(x0 + i32(c % side), geo.n.x) + geo.n.x * wrap_cell(y0 + i32(c / side), geo.n.y);
+        let cell = column_cell(c, sp);
         for (var jt = 0u; jt < nz_support; jt++) {
-            let w = wxy * cached_z(jt, zr, qz, false);
+            let w = wxy * cached_z(jt, sp.zr, sp.qz, false);
             if (w == 0.0) {
                 continue;
             }
-            let j = zr.x + jt;
+            let j = sp.zr.x + jt;
             for (var k = 0u; k < comps; k++) {
                 grid_add((k * geo.n.z + j) * plane + cell, w * v[k]);
             }
