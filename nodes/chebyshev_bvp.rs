@@ -261,7 +261,7 @@ pub fn solve(fac: &Factors, f: &[f64], kappa: f64, alpha: f64, beta: f64) -> Vec
 
 /// |k| of every (x, y) index of the half spectrum of a grid of `dims` over [Lx, Ly].
 fn wave_numbers(dims: [u32; 3], lengths: [f64; 2]) -> Vec<f64> {
-    crate::nodes::stokes_slab::plane_waves(dims, lengths)
+    crate::nodes::spectral::plane_waves(dims, lengths)
         .into_iter()
         .map(|(k, _)| (k[0] * k[0] + k[1] * k[1]).sqrt())
         .collect()

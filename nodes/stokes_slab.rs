@@ -46,7 +46,6 @@ use crate::node::{
 use crate::value::{PortType, RefArray, ValueType, half_dims};
 
 use super::chebyshev;
-use super::spectral::wave_number;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Step {
@@ -111,7 +110,7 @@ impl Slab {
     }
 
     fn waves(&self, dims: [u32; 3]) -> Vec<([f64; 2], [bool; 2])> {
-        plane_waves(dims, self.lengths)
+        super::spectral::plane_waves(dims, self.lengths)
     }
 
     /// zeta_j = z_j - zmin at the Chebyshev points of `n`.
@@ -132,26 +131,6 @@ impl Slab {
             .map(|j| (0..n).map(|k| (k * k) as f64 * m[k * n + j]).sum::<f64>() * scale)
             .collect()
     }
-}
-
-/// The in-plane wave vector (kx, ky) = 2 pi (x / Lx, y / Ly) of every k of a half
-/// spectrum of `dims` (x fastest, y signed), and whether each axis is an unpaired Nyquist
-/// index there.
-pub fn plane_waves(dims: [u32; 3], lengths: [f64; 2]) -> Vec<([f64; 2], [bool; 2])> {
-    let h = half_dims(dims);
-    let mut out = Vec::with_capacity((h[0] * h[1]) as usize);
-    for y in 0..h[1] {
-        for x in 0..h[0] {
-            let w = [wave_number(x, dims[0]), wave_number(y, dims[1])];
-            let k = [0, 1].map(|a| 2.0 * std::f64::consts::PI * w[a] as f64 / lengths[a]);
-            let nyq = [0, 1].map(|a| {
-                let n = dims[a] as i64;
-                n % 2 == 0 && n > 1 && w[a].abs() == n / 2
-            });
-            out.push((k, nyq));
-        }
-    }
-    out
 }
 
 /// The 6 x 6 map of the slit's unknowns (C, D) to the wall values (bottom, top) at one k,
