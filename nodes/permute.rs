@@ -69,6 +69,10 @@ impl Node for Gather {
         (!self.enabled).then_some(0)
     }
 
+    fn passes_rows(&self, port: usize) -> Option<usize> {
+        (port == 0).then_some(0)
+    }
+
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let values = inputs[0].expect("required");
         let Some(ValueType::Indices { n }) = inputs[1] else {

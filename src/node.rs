@@ -642,6 +642,16 @@ pub trait Node: Send + Sync {
         None
     }
 
+    /// `Some(output)` when every row of that output is a row of input `port` unchanged or
+    /// a row of zeros (a gather, enabled or not): the checks of the nodes that read the
+    /// output then apply to the data given for the input (`Graph::check_input_data`), so
+    /// that sorting particles does not hide one outside a wall from the node that refuses
+    /// it. Default: none.
+    fn passes_rows(&self, port: usize) -> Option<usize> {
+        let _ = port;
+        None
+    }
+
     /// Checks data given from the host for input `port` before it is uploaded: a graph
     /// input wired to the port, or the initial value of a state the port reads
     /// (`Graph::check_input_data`). For what the node's kernels cannot take and no type

@@ -20,13 +20,38 @@ pub struct InputDataError {
 impl Graph {
     /// The node ports (node, input port) that read graph input `input` as given: wired to
     /// it, or reading a state whose initial value it is (the first step reads the data;
-    /// later steps read what nodes computed).
+    /// later steps read what nodes computed), directly or through nodes that pass its
+    /// rows on unchanged (`Node::passes_rows`: a gather that sorts particles).
     pub fn readers_of_input(&self, input: usize) -> Vec<(NodeId, usize)> {
-        let reads = |s: &Source| match *s {
+        let direct = |s: &Source| match *s {
             Source::Input(i) => i == input,
             Source::State(k) => self.states[k].init == Source::Input(input),
             _ => false,
         };
+        let mut readers: Vec<(NodeId, usize)> = self.readers_where(direct);
+        // Follow pass-through nodes; each (node, port) is added once, so this ends.
+        let mut next = 0;
+        while next < readers.len() {
+            let (n, port) = readers[next];
+            next += 1;
+            let Ok(built) = &self.nodes[n].built else {
+                continue;
+            };
+            let Some(out) = built.node.passes_rows(port) else {
+                continue;
+            };
+            let through = |s: &Source| *s == Source::Node { node: n, port: out };
+            for reader in self.readers_where(through) {
+                if !readers.contains(&reader) {
+                    readers.push(reader);
+                }
+            }
+        }
+        readers
+    }
+
+    /// The node ports whose source satisfies `reads`, in node order.
+    fn readers_where(&self, reads: impl Fn(&Source) -> bool + Copy) -> Vec<(NodeId, usize)> {
         self.nodes
             .iter_enumerated()
             .flat_map(|(n, inst)| {
