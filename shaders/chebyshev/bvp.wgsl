@@ -2,7 +2,8 @@
 // real or imaginary part). f, y: Chebyshev coefficients along z of a half spectrum,
 // word 2 ((c n + z) nk + k) + part. tables: per k, strided (entry i of every k contiguous):
 // l, q, u (Thomas factors of A), g0, g1 (rows of C A^-1), s_inv (2 x 2), kappa^2, k = 0.
-// line: this thread's a_n (n words, `threads` apart).
+// line: this thread's a_n in workgroup memory (n words, WG apart). nodes/chebyshev_bvp.rs
+// prepends WG (threads per workgroup) and POINTS (n), chosen so the lines fit.
 #import common/index.wgsl
 
 struct Shape { nk: u32, n: u32, comps: u32, has_boundary: u32, f_scale: f32, bc_scale: f32, pad0: u32, pad1: u32 }
@@ -12,18 +13,19 @@ struct Shape { nk: u32, n: u32, comps: u32, has_boundary: u32, f_scale: f32, bc_
 @group(0) @binding(2) var<storage, read_write> y: array<f32>;
 @group(0) @binding(3) var<storage, read> tables: array<f32>;
 @group(0) @binding(4) var<uniform> shape: Shape;
-@group(0) @binding(5) var<storage, read_write> line: array<f32>;
+
+var<workgroup> line: array<f32, WG * POINTS>;
 
 fn entry(row: u32, k: u32) -> f32 {
     return tables[row * shape.nk + k];
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let t = flat_index(wid, nwg, lid, 256u);
-    let threads = shape.nk * shape.comps * 2u;
-    if (t >= threads) {
+    let t = flat_index(wid, nwg, lid, WG);
+    // No barriers: each thread touches only its own line, so threads past the end leave.
+    if (t >= shape.nk * shape.comps * 2u) {
         return;
     }
     let part = t % 2u;
@@ -45,28 +47,28 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     var r1 = -beta;
     for (var z = 0u; z < n; z++) {
         let v = shape.f_scale * f[2u * ((c * n + z) * shape.nk + k) + part];
-        line[z * threads + t] = v;
+        line[z * WG + lid] = v;
         r0 += entry(3u * n + z, k) * v;
         r1 += entry(4u * n + z, k) * v;
     }
     let y0 = entry(5u * n, k) * r0 + entry(5u * n + 1u, k) * r1;
     let p0 = entry(5u * n + 2u, k) * r0 + entry(5u * n + 3u, k) * r1;
     // A a = f - B (Y0, P0): B is -kappa^2 at (0, Y0) and (1, P0).
-    line[t] += kappa2 * y0;
+    line[lid] += kappa2 * y0;
     if (n > 1u) {
-        line[threads + t] += kappa2 * p0;
+        line[WG + lid] += kappa2 * p0;
     }
     // Thomas on the parities: forward elimination, then back substitution (in place).
     for (var z = 2u; z < n; z++) {
-        line[z * threads + t] -= entry(z, k) * line[(z - 2u) * threads + t];
+        line[z * WG + lid] -= entry(z, k) * line[(z - 2u) * WG + lid];
     }
     for (var i = 0u; i < n; i++) {
         let z = n - 1u - i;
         var up = 0.0;
         if (z + 2u < n) {
-            up = entry(2u * n + z, k) * line[(z + 2u) * threads + t];
+            up = entry(2u * n + z, k) * line[(z + 2u) * WG + lid];
         }
-        line[z * threads + t] = (line[z * threads + t] - up) * entry(n + z, k);
+        line[z * WG + lid] = (line[z * WG + lid] - up) * entry(n + z, k);
     }
     // y from a: y'_0 = P0, y'_1 = (2 a_0 - a_2) / 2, y'_m = (a_{m-1} - a_{m+1}) / 2m
     // (m < n; 0 past), y_0 = Y0, y_1 = P0 - y'_2 / 2, y_m = (y'_{m-1} - y'_{m+1}) / 2m.
@@ -75,24 +77,24 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         if (m == 0u) {
             v = y0;
         } else if (m == 1u) {
-            v = p0 - 0.5 * derivative(2u, n, threads, t, p0);
+            v = p0 - 0.5 * derivative(2u, n, lid, p0);
         } else {
-            v = (derivative(m - 1u, n, threads, t, p0) - derivative(m + 1u, n, threads, t, p0)) / (2.0 * f32(m));
+            v = (derivative(m - 1u, n, lid, p0) - derivative(m + 1u, n, lid, p0)) / (2.0 * f32(m));
         }
         y[2u * ((c * n + m) * shape.nk + k) + part] = v;
     }
 }
 
 // a_j of this thread's line (0 past the end).
-fn a_at(j: u32, n: u32, threads: u32, t: u32) -> f32 {
+fn a_at(j: u32, n: u32, lid: u32) -> f32 {
     if (j >= n) {
         return 0.0;
     }
-    return line[j * threads + t];
+    return line[j * WG + lid];
 }
 
 // y'_m from the a's (0 for m >= n).
-fn derivative(m: u32, n: u32, threads: u32, t: u32, p0: f32) -> f32 {
+fn derivative(m: u32, n: u32, lid: u32, p0: f32) -> f32 {
     if (m >= n) {
         return 0.0;
     }
@@ -100,7 +102,7 @@ fn derivative(m: u32, n: u32, threads: u32, t: u32, p0: f32) -> f32 {
         return p0;
     }
     if (m == 1u) {
-        return a_at(0u, n, threads, t) - 0.5 * a_at(2u, n, threads, t);
+        return a_at(0u, n, lid) - 0.5 * a_at(2u, n, lid);
     }
-    return (a_at(m - 1u, n, threads, t) - a_at(m + 1u, n, threads, t)) / (2.0 * f32(m));
+    return (a_at(m - 1u, n, lid) - a_at(m + 1u, n, lid)) / (2.0 * f32(m));
 }

@@ -170,6 +170,8 @@ fn the_bvp_node_matches_its_dense_reference() {
         ([8u32, 6, 17], 1u32, 3.0),
         ([4, 4, 9], 2, 1.0),
         ([6, 5, 33], 1, 10.0),
+        // Long lines: fewer threads a workgroup (line_workgroup).
+        ([4, 3, 300], 1, 10.0),
     ] {
         let f = rng.array(ValueType::HalfComplexGrid { dims, comps }, -1.0, 1.0);
         let params = format!(r#"{{"box": [12, 9], "zmin": -2, "zmax": {zmax}}}"#);
