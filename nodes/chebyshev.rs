@@ -222,9 +222,16 @@ impl GpuKernels for Transform {
             .iter()
             .map(|&v| v as f32)
             .collect();
+        let wg = line_workgroup(s.n, cx.caps().max_workgroup_storage);
+        let chunk = transform_chunk(s.n);
+        let source = format!(
+            "const WG: u32 = {wg}u;\nconst POINTS: u32 = {}u;\nconst CHUNK: u32 = {chunk}u;\n{}",
+            s.n,
+            cx.shader("chebyshev/transform.wgsl")?
+        );
         let kernel = cx.kernel(&KernelSpec::new(
             "chebyshev transform",
-            cx.shader("chebyshev/transform.wgsl")?,
+            source,
             &[
                 Binding::StorageRead,
                 Binding::StorageReadWrite,
@@ -237,9 +244,28 @@ impl GpuKernels for Transform {
         Ok(vec![cx.dispatch(
             &kernel,
             &[x.buffer, io.outputs[0].buffer, &table, &u],
-            cx.grid_1d(x.ty.words(), WG_1D),
+            cx.grid_1d(
+                s.comps as u64 * s.plane as u64 * s.n.div_ceil(chunk) as u64,
+                wg,
+            ),
         )])
     }
+}
+
+/// Outputs per thread of the transform: all n where a thread's loops (n loads, n
+/// products of n terms per output) stay within 32768 iterations, fewer for long lines
+/// (lavapipe stops a thread after 65535 loop iterations).
+fn transform_chunk(n: u32) -> u32 {
+    (32768 / n.max(1)).saturating_sub(1).clamp(1, n.max(1))
+}
+
+/// Threads per workgroup of a kernel that keeps one line of `n` f32 words per thread in
+/// workgroup memory (the transform here, chebyshev_bvp's solve): the largest power of two
+/// up to 64 whose lines fit in `storage` bytes (at least 1: n is at most MAX_POINTS, whose
+/// line fits the 16 KiB every adapter has).
+pub fn line_workgroup(n: u32, storage: u32) -> u32 {
+    let fit = (storage / (4 * n.max(1))).clamp(1, 64);
+    1 << (31 - fit.leading_zeros())
 }
 
 fn derivative_kind() -> NodeKind {
@@ -317,6 +343,30 @@ pub fn register(r: &mut Registry) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A thread's loops stay within 32768 iterations, and short lines take one chunk.
+    #[test]
+    fn long_transforms_are_cut_into_chunks() {
+        assert_eq!(transform_chunk(34), 34);
+        assert_eq!(transform_chunk(180), 180);
+        for n in [2u32, 181, 300, 1024] {
+            let c = transform_chunk(n);
+            assert!(c >= 1 && c <= n && n + c * n <= 32768, "n {n}: {c}");
+        }
+    }
+
+    /// Workgroups shrink by powers of two as lines grow, never below one thread.
+    #[test]
+    fn lines_fit_the_workgroup_memory() {
+        assert_eq!(line_workgroup(34, 32768), 64);
+        assert_eq!(line_workgroup(300, 32768), 16);
+        assert_eq!(line_workgroup(1024, 16384), 4);
+        assert_eq!(line_workgroup(1024, 100), 1);
+        for n in [2, 33, 129, 1000] {
+            let wg = line_workgroup(n, 16384);
+            assert!(wg.is_power_of_two() && wg * n * 4 <= 16384, "n {n}: {wg}");
+        }
+    }
 
     /// The forward matrix inverts the inverse one, in f64.
     #[test]

@@ -20,9 +20,7 @@
 //! thread: [Y0, P0] = S^-1 (G f - [alpha, beta]), A a = f - B [Y0, P0], then y from a. The
 //! tables are strided (entry i of every k contiguous), so neighbouring threads read
 //! neighbouring words.
-use crate::gpu::{
-    Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo,
-};
+use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, PortError, PortSpec, RefCtx,
     Registry, Signature,
@@ -454,7 +452,7 @@ impl GpuKernels for Bvp {
         // Each thread (k, component, real or imaginary part) keeps its line of n words in
         // workgroup memory: up to 64 threads a workgroup, fewer where long lines would not
         // fit (n = 1024 in 16 KiB: 4).
-        let wg = line_workgroup(n as u32, cx.caps().max_workgroup_storage);
+        let wg = crate::nodes::chebyshev::line_workgroup(n as u32, cx.caps().max_workgroup_storage);
         let source = format!(
             "const WG: u32 = {wg}u;\nconst POINTS: u32 = {n}u;\n{}",
             cx.shader("chebyshev/bvp.wgsl")?
@@ -475,24 +473,10 @@ impl GpuKernels for Bvp {
         let boundary = io.inputs[1].map(|b| b.buffer).unwrap_or(f.buffer);
         Ok(vec![cx.dispatch(
             &kernel,
-            &[
-                f.buffer,
-                boundary,
-                io.outputs[0].buffer,
-                &tables,
-                &u,
-            ],
+            &[f.buffer, boundary, io.outputs[0].buffer, &tables, &u],
             cx.grid_1d(nk as u64 * comps as u64 * 2, wg),
         )])
     }
-}
-
-/// Threads per workgroup of the solve: the largest power of two up to 64 whose lines of
-/// `n` f32 words fit in `storage` bytes of workgroup memory (at least 1: n is at most
-/// MAX_POINTS, whose line fits the 16 KiB every adapter has).
-fn line_workgroup(n: u32, storage: u32) -> u32 {
-    let fit = (storage / (4 * n.max(1))).clamp(1, 64);
-    1 << (31 - fit.leading_zeros())
 }
 
 pub fn register(r: &mut Registry) {
@@ -502,19 +486,6 @@ pub fn register(r: &mut Registry) {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Workgroups shrink by powers of two as lines grow, never below one thread.
-    #[test]
-    fn lines_fit_the_workgroup_memory() {
-        assert_eq!(line_workgroup(34, 32768), 64);
-        assert_eq!(line_workgroup(300, 32768), 16);
-        assert_eq!(line_workgroup(1024, 16384), 4);
-        assert_eq!(line_workgroup(1024, 100), 1);
-        for n in [2, 33, 129, 1000] {
-            let wg = line_workgroup(n, 16384);
-            assert!(wg.is_power_of_two() && wg * n * 4 <= 16384, "n {n}: {wg}");
-        }
-    }
 
     /// The factored solve agrees with the dense system, k = 0 and k > 0, small and large.
     #[test]

@@ -1,6 +1,11 @@
 // The Chebyshev transform along z (nodes/chebyshev.rs): out[c][k][p] = sum_j T[k][j] x[c][j][p]
 // for every component c, output level k and word p of a z level (words `plane` apart).
-// One thread per output word; neighbouring threads read neighbouring words of a level.
+// One thread per line (c, p) and chunk of CHUNK outputs: it reads its line once into
+// workgroup memory (n words, WG apart) and writes the chunk's outputs; neighbouring threads
+// take neighbouring words, and all threads of a workgroup read the same matrix entry at
+// once. Long lines take several chunks, because lavapipe stops a thread after 65535 loop
+// iterations. nodes/chebyshev.rs prepends WG, POINTS (n) and CHUNK, chosen so the lines
+// fit and a thread loops at most 32768 times.
 #import common/index.wgsl
 
 struct Shape { comps: u32, n: u32, plane: u32, scale: f32 }
@@ -10,20 +15,30 @@ struct Shape { comps: u32, n: u32, plane: u32, scale: f32 }
 @group(0) @binding(2) var<storage, read> matrix: array<f32>;
 @group(0) @binding(3) var<uniform> shape: Shape;
 
-@compute @workgroup_size(256)
+var<workgroup> line: array<f32, WG * POINTS>;
+
+@compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let i = flat_index(wid, nwg, lid, 256u);
-    if (i >= shape.comps * shape.n * shape.plane) {
+    let t = flat_index(wid, nwg, lid, WG);
+    let lines = shape.comps * shape.plane;
+    // No barriers: each thread touches only its own line, so threads past the end leave.
+    if (t >= lines * ((shape.n + CHUNK - 1u) / CHUNK)) {
         return;
     }
-    let p = i % shape.plane;
-    let level = i / shape.plane;
-    let k = level % shape.n;
-    let base = (level - k) * shape.plane + p;
-    var acc = 0.0;
-    for (var j = 0u; j < shape.n; j++) {
-        acc += matrix[k * shape.n + j] * x[base + j * shape.plane];
+    let line_index = t % lines;
+    let first = (t / lines) * CHUNK;
+    let p = line_index % shape.plane;
+    let base = (line_index - p) * shape.n + p;
+    let n = shape.n;
+    for (var j = 0u; j < n; j++) {
+        line[j * WG + lid] = x[base + j * shape.plane];
     }
-    out[i] = acc;
+    for (var k = first; k < min(first + CHUNK, n); k++) {
+        var acc = 0.0;
+        for (var j = 0u; j < n; j++) {
+            acc += matrix[k * n + j] * line[j * WG + lid];
+        }
+        out[base + k * shape.plane] = acc;
+    }
 }

@@ -47,6 +47,11 @@ fn chebyshev_nodes_match_their_references() {
             dims: [1, 1, 65],
             comps: 1,
         },
+        // Long lines: fewer threads a workgroup (line_workgroup).
+        ValueType::RealGrid {
+            dims: [3, 2, 300],
+            comps: 2,
+        },
     ] {
         let x = rng.array(ty, -1.0, 1.0);
         for (kind, params, tol) in [
