@@ -34,7 +34,8 @@
 #   compare     the FCM, PSE, spread, FFT and MPCD rows timed with $BEFORE (another
 #               release binary, e.g. .gpu/mesoflow-before) and with .gpu/mesoflow,
 #               alternating ROUNDS times (2): that a change left the speed as it was
-#               (not in `all`)
+#               (not in `all`); COMPARE_SET=dpstokes times the DP Stokes bottom-wall
+#               rows instead
 #
 # Each suite is sized for one device call (ten minutes at most). The log, headed once by
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
@@ -130,9 +131,14 @@ suite_primitives() {
   run python3 benches/torch_primitives.py --sort-n 10000000 --scan-n 100000000 --reps 20
 }
 
-# Rows that every binary since the session-6 one understands (per-launch medians).
+# Rows that every binary since the session-6 one understands (per-launch medians);
+# COMPARE_SET=dpstokes: the DP Stokes bottom-wall rows instead (binaries since 2026-12-05).
 compare_rows() {
   local b=$1
+  if [ "${COMPARE_SET:-}" = dpstokes ]; then
+    run $b bench dpstokes --walls bottom --sizes 10000,100000,1000000 --reps 10
+    return
+  fi
   run $b bench fcm --tolerances 1e-2,1e-3,1e-4 --sizes 128:100000 --reps 20
   run $b bench pse --splits 0.5 --sizes 128:100000 --reps 20
   run $b bench spread --cells 128 --reps 10

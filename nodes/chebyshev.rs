@@ -10,16 +10,16 @@
 //! - `chebyshev` (`direction`: forward, values to coefficients, or inverse): the DCT-I
 //!   c_k = (2 / (n - 1)) (1 / kappa_k) sum_j'' f_j cos(pi j k / (n - 1)) (the end terms
 //!   halved, kappa_0 = kappa_{n-1} = 2, else 1) and f_j = sum_k c_k cos(pi j k / (n - 1)),
-//!   as a dense n x n matrix computed in f64 on the host (a dedicated pass: n reads per
-//!   output word, for the tens to a few hundred points these solvers take).
-//! - `chebyshev_derivative`: the coefficients of df/dz = (2 / (zmax - zmin)) df/dxi by the
-//!   backward recurrence c'_{k-1} = c'_{k+1} + 2 k c_k (c'_0 halved), one thread a line.
+//!   as a dense n x n matrix computed in f64 on the host, for the tens to a few hundred
+//!   points these solvers take: one thread per line (held in registers, n fixed when the
+//!   kernel is built) and chunk of outputs (`line_product`).
+//! - `chebyshev_derivative`: the coefficients of df/dz = (2 / (zmax - zmin)) df/dxi, the
+//!   backward recurrence c'_{k-1} = c'_{k+1} + 2 k c_k (c'_0 halved) written as its matrix
+//!   and run as the same dense product (every output in parallel).
 
 use std::f64::consts::PI;
 
-use crate::gpu::{
-    Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo, WG_1D,
-};
+use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Registry,
     Signature,
@@ -197,17 +197,69 @@ struct Shape {
     comps: u32,
     n: u32,
     plane: u32,
-    scale: f32,
+    pad: u32,
 }
 
-fn shape(t: &ValueType, scale: f64) -> Shape {
-    let (comps, n, plane) = lines(t).expect("checked in infer");
-    Shape {
+/// Threads per workgroup of the kernels that give each thread a z line (the dense
+/// products here, chebyshev_bvp's solve).
+pub const LINE_WG: u32 = 64;
+
+/// Threads a dense line product is spread over at least, where the grid has fewer lines:
+/// enough to fill a large GPU (an H100 holds 270k), so small grids do not leave it idle
+/// behind n serial sums per thread.
+const FILL_THREADS: u64 = 1 << 17;
+
+/// Outputs per thread of a dense product along `lines` lines of n points: all n where the
+/// lines alone give FILL_THREADS threads, fewer for small grids, and never so many that a
+/// thread loops more than 32768 times (n loads, n terms per output; lavapipe stops a
+/// thread after 65535 loop iterations).
+fn product_chunk(n: u32, lines: u64) -> u32 {
+    let n = n.max(1);
+    let bound = (32768 / n).saturating_sub(1).clamp(1, n);
+    let chunks = FILL_THREADS.div_ceil(lines.max(1)).min(n as u64) as u32;
+    bound.min(n.div_ceil(chunks.max(1))).max(1)
+}
+
+/// Records out = M x along every z line of input 0 (M: n x n, row-major, computed in f64
+/// on the host and used in f32). One thread per line and chunk of outputs
+/// (shaders/chebyshev/transform.wgsl).
+fn line_product(
+    cx: &mut CompileCtx<'_>,
+    io: &NodeIo<'_>,
+    label: &str,
+    m: &[f64],
+) -> Result<Vec<Dispatch>, CompileError> {
+    let x = io.inputs[0].expect("required");
+    let (comps, n, plane) = lines(&x.ty).expect("checked in infer");
+    let shape = Shape {
         comps: comps as u32,
         n: n as u32,
         plane: plane as u32,
-        scale: scale as f32,
-    }
+        pad: 0,
+    };
+    let chunk = product_chunk(n as u32, comps * plane);
+    let source = format!(
+        "const WG: u32 = {LINE_WG}u;\nconst POINTS: u32 = {n}u;\nconst CHUNK: u32 = {chunk}u;\n{}",
+        cx.shader("chebyshev/transform.wgsl")?
+    );
+    let kernel = cx.kernel(&KernelSpec::new(
+        label,
+        source,
+        &[
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+            Binding::StorageRead,
+            Binding::Uniform,
+        ],
+    ))?;
+    let m32: Vec<f32> = m.iter().map(|&v| v as f32).collect();
+    let table = cx.table(label, bytemuck::cast_slice(&m32));
+    let u = cx.uniform(label, bytemuck::bytes_of(&shape));
+    Ok(vec![cx.dispatch(
+        &kernel,
+        &[x.buffer, io.outputs[0].buffer, &table, &u],
+        cx.grid_1d(comps * plane * n.div_ceil(chunk as u64), LINE_WG),
+    )])
 }
 
 impl GpuKernels for Transform {
@@ -216,56 +268,14 @@ impl GpuKernels for Transform {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        let x = io.inputs[0].expect("required");
-        let s = shape(&x.ty, 1.0);
-        let m: Vec<f32> = matrix(s.n as usize, self.forward)
-            .iter()
-            .map(|&v| v as f32)
-            .collect();
-        let wg = line_workgroup(s.n, cx.caps().max_workgroup_storage);
-        let chunk = transform_chunk(s.n);
-        let source = format!(
-            "const WG: u32 = {wg}u;\nconst POINTS: u32 = {}u;\nconst CHUNK: u32 = {chunk}u;\n{}",
-            s.n,
-            cx.shader("chebyshev/transform.wgsl")?
-        );
-        let kernel = cx.kernel(&KernelSpec::new(
+        let (_, n, _) = lines(&io.inputs[0].expect("required").ty).expect("checked in infer");
+        line_product(
+            cx,
+            io,
             "chebyshev transform",
-            source,
-            &[
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::StorageRead,
-                Binding::Uniform,
-            ],
-        ))?;
-        let table = cx.table("chebyshev matrix", bytemuck::cast_slice(&m));
-        let u = cx.uniform("chebyshev shape", bytemuck::bytes_of(&s));
-        Ok(vec![cx.dispatch(
-            &kernel,
-            &[x.buffer, io.outputs[0].buffer, &table, &u],
-            cx.grid_1d(
-                s.comps as u64 * s.plane as u64 * s.n.div_ceil(chunk) as u64,
-                wg,
-            ),
-        )])
+            &matrix(n as usize, self.forward),
+        )
     }
-}
-
-/// Outputs per thread of the transform: all n where a thread's loops (n loads, n
-/// products of n terms per output) stay within 32768 iterations, fewer for long lines
-/// (lavapipe stops a thread after 65535 loop iterations).
-fn transform_chunk(n: u32) -> u32 {
-    (32768 / n.max(1)).saturating_sub(1).clamp(1, n.max(1))
-}
-
-/// Threads per workgroup of a kernel that keeps one line of `n` f32 words per thread in
-/// workgroup memory (the transform here, chebyshev_bvp's solve): the largest power of two
-/// up to 64 whose lines fit in `storage` bytes (at least 1: n is at most MAX_POINTS, whose
-/// line fits the 16 KiB every adapter has).
-pub fn line_workgroup(n: u32, storage: u32) -> u32 {
-    let fit = (storage / (4 * n.max(1))).clamp(1, 64);
-    1 << (31 - fit.leading_zeros())
 }
 
 fn derivative_kind() -> NodeKind {
@@ -314,25 +324,28 @@ impl GpuKernels for Derivative {
         cx: &mut CompileCtx<'_>,
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
-        let x = io.inputs[0].expect("required");
-        let s = shape(&x.ty, self.scale);
-        let kernel = cx.kernel(&KernelSpec::new(
+        let (_, n, _) = lines(&io.inputs[0].expect("required").ty).expect("checked in infer");
+        line_product(
+            cx,
+            io,
             "chebyshev derivative",
-            cx.shader("chebyshev/derivative.wgsl")?,
-            &[
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::Uniform,
-            ],
-        ))?;
-        let u = cx.uniform("chebyshev shape", bytemuck::bytes_of(&s));
-        let lines = s.comps as u64 * s.plane as u64;
-        Ok(vec![cx.dispatch(
-            &kernel,
-            &[x.buffer, io.outputs[0].buffer, &u],
-            cx.grid_1d(lines, WG_1D),
-        )])
+            &derivative_matrix(n as usize, self.scale),
+        )
     }
+}
+
+/// The recurrence as a matrix: c'_k = scale (1 / kappa_k) sum over j > k with j - k odd of
+/// 2 j c_j (kappa_0 = 2, else 1), so the derivative runs as a dense product (every output
+/// in parallel) rather than n serial steps per line.
+fn derivative_matrix(n: usize, scale: f64) -> Vec<f64> {
+    let mut m = vec![0.0; n * n];
+    for k in 0..n {
+        let half = if k == 0 { 0.5 } else { 1.0 };
+        for j in (k + 1..n).step_by(2) {
+            m[k * n + j] = scale * half * 2.0 * j as f64;
+        }
+    }
+    m
 }
 
 pub fn register(r: &mut Registry) {
@@ -344,27 +357,36 @@ pub fn register(r: &mut Registry) {
 mod tests {
     use super::*;
 
-    /// A thread's loops stay within 32768 iterations, and short lines take one chunk.
+    /// Small grids take short chunks (more threads), large grids whole lines, and no
+    /// thread loops more than 32768 times.
     #[test]
-    fn long_transforms_are_cut_into_chunks() {
-        assert_eq!(transform_chunk(34), 34);
-        assert_eq!(transform_chunk(180), 180);
-        for n in [2u32, 181, 300, 1024] {
-            let c = transform_chunk(n);
-            assert!(c >= 1 && c <= n && n + c * n <= 32768, "n {n}: {c}");
+    fn line_products_fill_the_gpu_and_stay_under_lavapipes_loop_limit() {
+        assert_eq!(product_chunk(33, 1 << 20), 33);
+        assert_eq!(product_chunk(33, 11160), 3);
+        assert_eq!(product_chunk(33, 1), 1);
+        for n in [2u32, 33, 181, 300, 1024] {
+            for lines in [1u64, 1000, 1 << 17, 1 << 22] {
+                let c = product_chunk(n, lines);
+                assert!(
+                    c >= 1 && c <= n && n + c * n <= 32768,
+                    "n {n} lines {lines}: {c}"
+                );
+            }
         }
     }
 
-    /// Workgroups shrink by powers of two as lines grow, never below one thread.
+    /// The derivative's matrix is its recurrence.
     #[test]
-    fn lines_fit_the_workgroup_memory() {
-        assert_eq!(line_workgroup(34, 32768), 64);
-        assert_eq!(line_workgroup(300, 32768), 16);
-        assert_eq!(line_workgroup(1024, 16384), 4);
-        assert_eq!(line_workgroup(1024, 100), 1);
-        for n in [2, 33, 129, 1000] {
-            let wg = line_workgroup(n, 16384);
-            assert!(wg.is_power_of_two() && wg * n * 4 <= 16384, "n {n}: {wg}");
+    fn the_derivative_matrix_is_the_recurrence() {
+        let n = 9;
+        let m = derivative_matrix(n, 0.7);
+        for e in 0..n {
+            let mut c = vec![0.0; n];
+            c[e] = 1.0;
+            let want = derivative(&c, 0.7);
+            for k in 0..n {
+                assert!((m[k * n + e] - want[k]).abs() < 1e-12, "({k}, {e})");
+            }
         }
     }
 

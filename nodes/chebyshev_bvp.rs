@@ -450,9 +450,9 @@ impl GpuKernels for Bvp {
             pad: [0; 2],
         };
         // Each thread (k, component, real or imaginary part) keeps its line of n words in
-        // workgroup memory: up to 64 threads a workgroup, fewer where long lines would not
-        // fit (n = 1024 in 16 KiB: 4).
-        let wg = crate::nodes::chebyshev::line_workgroup(n as u32, cx.caps().max_workgroup_storage);
+        // a private array whose size is fixed when the kernel is built, so the loops
+        // unroll and the line stays in registers (spilled for long lines).
+        let wg = crate::nodes::chebyshev::LINE_WG;
         let source = format!(
             "const WG: u32 = {wg}u;\nconst POINTS: u32 = {n}u;\n{}",
             cx.shader("chebyshev/bvp.wgsl")?

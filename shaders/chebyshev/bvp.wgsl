@@ -2,8 +2,8 @@
 // real or imaginary part). f, y: Chebyshev coefficients along z of a half spectrum,
 // word 2 ((c n + z) nk + k) + part. tables: per k, strided (entry i of every k contiguous):
 // l, q, u (Thomas factors of A), g0, g1 (rows of C A^-1), s_inv (2 x 2), kappa^2, k = 0.
-// line: this thread's a_n in workgroup memory (n words, WG apart). nodes/chebyshev_bvp.rs
-// prepends WG (threads per workgroup) and POINTS (n), chosen so the lines fit.
+// line: this thread's a_n. nodes/chebyshev_bvp.rs prepends WG (threads per workgroup) and
+// POINTS (n).
 #import common/index.wgsl
 
 struct Shape { nk: u32, n: u32, comps: u32, has_boundary: u32, f_scale: f32, bc_scale: f32, pad0: u32, pad1: u32 }
@@ -14,7 +14,8 @@ struct Shape { nk: u32, n: u32, comps: u32, has_boundary: u32, f_scale: f32, bc_
 @group(0) @binding(3) var<storage, read> tables: array<f32>;
 @group(0) @binding(4) var<uniform> shape: Shape;
 
-var<workgroup> line: array<f32, WG * POINTS>;
+// This thread's line (POINTS = n, so its loops unroll and it stays in registers).
+var<private> line: array<f32, POINTS>;
 
 fn entry(row: u32, k: u32) -> f32 {
     return tables[row * shape.nk + k];
@@ -31,7 +32,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let part = t % 2u;
     let k = (t / 2u) % shape.nk;
     let c = t / (2u * shape.nk);
-    let n = shape.n;
+    let n = POINTS;
     let zero_mode = entry(5u * n + 5u, k) != 0.0;
     let kappa2 = entry(5u * n + 4u, k);
     // The boundary values (H/2 on a derivative condition; a Dirichlet value as it is).
@@ -47,28 +48,28 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     var r1 = -beta;
     for (var z = 0u; z < n; z++) {
         let v = shape.f_scale * f[2u * ((c * n + z) * shape.nk + k) + part];
-        line[z * WG + lid] = v;
+        line[z] = v;
         r0 += entry(3u * n + z, k) * v;
         r1 += entry(4u * n + z, k) * v;
     }
     let y0 = entry(5u * n, k) * r0 + entry(5u * n + 1u, k) * r1;
     let p0 = entry(5u * n + 2u, k) * r0 + entry(5u * n + 3u, k) * r1;
     // A a = f - B (Y0, P0): B is -kappa^2 at (0, Y0) and (1, P0).
-    line[lid] += kappa2 * y0;
+    line[0] += kappa2 * y0;
     if (n > 1u) {
-        line[WG + lid] += kappa2 * p0;
+        line[1] += kappa2 * p0;
     }
     // Thomas on the parities: forward elimination, then back substitution (in place).
     for (var z = 2u; z < n; z++) {
-        line[z * WG + lid] -= entry(z, k) * line[(z - 2u) * WG + lid];
+        line[z] -= entry(z, k) * line[(z - 2u)];
     }
     for (var i = 0u; i < n; i++) {
         let z = n - 1u - i;
         var up = 0.0;
         if (z + 2u < n) {
-            up = entry(2u * n + z, k) * line[(z + 2u) * WG + lid];
+            up = entry(2u * n + z, k) * line[(z + 2u)];
         }
-        line[z * WG + lid] = (line[z * WG + lid] - up) * entry(n + z, k);
+        line[z] = (line[z] - up) * entry(n + z, k);
     }
     // y from a: y'_0 = P0, y'_1 = (2 a_0 - a_2) / 2, y'_m = (a_{m-1} - a_{m+1}) / 2m
     // (m < n; 0 past), y_0 = Y0, y_1 = P0 - y'_2 / 2, y_m = (y'_{m-1} - y'_{m+1}) / 2m.
@@ -90,7 +91,7 @@ fn a_at(j: u32, n: u32, lid: u32) -> f32 {
     if (j >= n) {
         return 0.0;
     }
-    return line[j * WG + lid];
+    return line[j];
 }
 
 // y'_m from the a's (0 for m >= n).

@@ -139,3 +139,19 @@ fn column_cell(c: u32, sp: Support) -> u32 {
     let side = geo.shape.x + 1u;
     return wrap_cell(sp.first.x + i32(c % side), geo.n.x) + geo.n.x * wrap_cell(sp.first.y + i32(c / side), geo.n.y);
 }
+
+// The offsets [first, end) into a particle's z range of the points whose factor is not zero:
+// the range from z_range is widened by a point each way, and a point on a wall has a zero
+// factor (its image cancels it); trimming the ends here keeps the column loops free of
+// tests.
+fn nonzero_z(sp: Support, weighted: bool) -> vec2<u32> {
+    var first = 0u;
+    var end = sp.zr.y - sp.zr.x + 1u;
+    while (first < end && cached_z(first, sp.zr, sp.qz, weighted) == 0.0) {
+        first++;
+    }
+    while (end > first && cached_z(end - 1u, sp.zr, sp.qz, weighted) == 0.0) {
+        end--;
+    }
+    return vec2<u32>(first, end);
+}

@@ -29,22 +29,28 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let plane = geo.n.x * geo.n.y;
     var acc = vec4<f32>(0.0);
     // One column per thread, its z points in turn (the factors from workgroup memory).
-    let nz_support = sp.zr.y - sp.zr.x + 1u;
+    // No test in the z loop, so its loads can be issued together.
+    let zt = nonzero_z(sp, true);
+    let comp_stride = geo.n.z * plane;
     for (var c = lid; c < side * side; c += 64u) {
         let wxy = column_weight(c);
         if (wxy == 0.0) {
             continue;
         }
-        let cell = column_cell(c, sp);
-        for (var jt = 0u; jt < nz_support; jt++) {
+        var at = (sp.zr.x + zt.x) * plane + column_cell(c, sp);
+        for (var jt = zt.x; jt < zt.y; jt++) {
             let w = wxy * cached_z(jt, sp.zr, sp.qz, true);
-            if (w == 0.0) {
-                continue;
+            acc.x += w * grid[at];
+            if (comps > 1u) {
+                acc.y += w * grid[at + comp_stride];
             }
-            let j = sp.zr.x + jt;
-            for (var k = 0u; k < comps; k++) {
-                acc[k] += w * grid[(k * geo.n.z + j) * plane + cell];
+            if (comps > 2u) {
+                acc.z += w * grid[at + 2u * comp_stride];
             }
+            if (comps > 3u) {
+                acc.w += w * grid[at + 3u * comp_stride];
+            }
+            at += plane;
         }
     }
     partial[lid] = acc;

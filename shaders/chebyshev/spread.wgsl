@@ -28,22 +28,28 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         v[k] = vals[comps * p + k];
     }
     // One column per thread, its z points in turn (the factors from workgroup memory).
-    let nz_support = sp.zr.y - sp.zr.x + 1u;
+    // No test in the z loop but the components'.
+    let zt = nonzero_z(sp, false);
+    let comp_stride = geo.n.z * plane;
     for (var c = lid; c < side * side; c += 64u) {
         let wxy = column_weight(c);
         if (wxy == 0.0) {
             continue;
         }
-        let cell = column_cell(c, sp);
-        for (var jt = 0u; jt < nz_support; jt++) {
+        var at = (sp.zr.x + zt.x) * plane + column_cell(c, sp);
+        for (var jt = zt.x; jt < zt.y; jt++) {
             let w = wxy * cached_z(jt, sp.zr, sp.qz, false);
-            if (w == 0.0) {
-                continue;
+            grid_add(at, w * v.x);
+            if (comps > 1u) {
+                grid_add(at + comp_stride, w * v.y);
             }
-            let j = sp.zr.x + jt;
-            for (var k = 0u; k < comps; k++) {
-                grid_add((k * geo.n.z + j) * plane + cell, w * v[k]);
+            if (comps > 2u) {
+                grid_add(at + 2u * comp_stride, w * v.z);
             }
+            if (comps > 3u) {
+                grid_add(at + 3u * comp_stride, w * v.w);
+            }
+            at += plane;
         }
     }
 }
