@@ -15,7 +15,7 @@
 #               where 10^5 at 1e-3 spends its time
 #   dpstokes    doubly periodic Stokes per wall mode at 10^4, 10^5, 10^6 (errors, fcm.json
 #               on a grid of the same points beside it), where bottom 10^5 spends its time
-#               (the boundary-value solves' GB/s), torch's copy bandwidth
+#               and 10^4, 10^6 (the boundary-value solves' GB/s), torch's copy bandwidth
 #   nbody       the direct pair mobilities, open and above a wall, translation and grand:
 #               pair interactions per second and GFLOP/s
 #   python      a Python loop of libMobility-style Mdot calls against the GPU time of one
@@ -70,7 +70,7 @@ suite_fcm() {
 
 suite_dpstokes() {
   run $bin bench dpstokes --reps 10
-  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes --walls bottom --sizes 100000 --reps 10
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes --walls bottom --sizes 10000,100000,1000000 --reps 10
   run python3 benches/torch_reduce.py
 }
 

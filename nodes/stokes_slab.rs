@@ -530,10 +530,8 @@ impl GpuKernels for Slab {
         bindings.push(Binding::Uniform);
         buffers.push(&u);
         let kernel = cx.kernel(&KernelSpec::new(name, cx.shader(file)?, &bindings))?;
-        let threads = match self.step {
-            Step::PressureSource | Step::Curl => (nk * nz) as u64,
-            Step::VelocitySource | Step::Walls => nk as u64,
-        };
+        // One thread per (z, k) in every step.
+        let threads = (nk * nz) as u64;
         Ok(vec![cx.dispatch(
             &kernel,
             &buffers,

@@ -2,7 +2,8 @@
 // ((i k p - f) / eta, (dp/dz - f_z) / eta), and their boundary values from the pressure at
 // the ends of the domain (digest section 7.2): alpha = (-i k_par p(top) / (2 eta |k|),
 // p(top) / (2 eta)), beta = (i k_par p(bottom) / (2 eta |k|), p(bottom) / (2 eta)); zero at
-// k = 0 (Dirichlet zero: the k = 0 mode is the walls' business). One thread per k.
+// k = 0 (Dirichlet zero: the k = 0 mode is the walls' business). One thread per (z, k),
+// neighbouring threads at neighbouring k; the threads at z = 0 sum their k's boundary values.
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
 
@@ -22,31 +23,39 @@ fn put_boundary(c: u32, end: u32, k: u32, v: vec2<f32>) {
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let k = flat_index(wid, nwg, lid, 256u);
-    if (k >= s.nk) {
+    let t = flat_index(wid, nwg, lid, 256u);
+    if (t >= s.nk * s.nz) {
         return;
     }
+    let k = t % s.nk;
+    let z = t / s.nk;
     let q = slab_wave(s, k, true);
+    let w = slab_word(0u, z, k, s.nz, s.nk);
+    let ipz = times_i(vec2<f32>(p[w], p[w + 1u]));
+    for (var c = 0u; c < 3u; c++) {
+        let wc = slab_word(c, z, k, s.nz, s.nk);
+        var drive: vec2<f32>;
+        if (c == 2u) {
+            drive = vec2<f32>(dp[w], dp[w + 1u]);
+        } else {
+            drive = q[c] * ipz;
+        }
+        let v = (drive - vec2<f32>(f[wc], f[wc + 1u])) * s.inv_eta;
+        rhs[wc] = v.x;
+        rhs[wc + 1u] = v.y;
+    }
+    if (z != 0u) {
+        return;
+    }
+    // The pressure at the ends from its coefficients: p(top) = sum p_z, p(bottom) =
+    // sum (-1)^z p_z.
     var top = vec2<f32>(0.0);
     var bottom = vec2<f32>(0.0);
-    for (var z = 0u; z < s.nz; z++) {
-        let w = slab_word(0u, z, k, s.nz, s.nk);
-        let pz = vec2<f32>(p[w], p[w + 1u]);
+    for (var i = 0u; i < s.nz; i++) {
+        let wi = slab_word(0u, i, k, s.nz, s.nk);
+        let pz = vec2<f32>(p[wi], p[wi + 1u]);
         top += pz;
-        bottom += select(pz, -pz, z % 2u == 1u);
-        let ipz = times_i(pz);
-        for (var c = 0u; c < 3u; c++) {
-            let wc = slab_word(c, z, k, s.nz, s.nk);
-            var drive: vec2<f32>;
-            if (c == 2u) {
-                drive = vec2<f32>(dp[w], dp[w + 1u]);
-            } else {
-                drive = q[c] * ipz;
-            }
-            let v = (drive - vec2<f32>(f[wc], f[wc + 1u])) * s.inv_eta;
-            rhs[wc] = v.x;
-            rhs[wc + 1u] = v.y;
-        }
+        bottom += select(pz, -pz, i % 2u == 1u);
     }
     let kk = slab_wave(s, k, false);
     let kabs = length(kk);

@@ -1,6 +1,8 @@
 // slab_walls: the no-slip walls of the doubly periodic Stokes solver on the free-space
 // velocity, values along z (j = 0 the top, j = nz - 1 the bottom), per k (digest sections
-// 7.3 and 7.4; nodes/stokes_slab.rs derives the forms). One thread per k.
+// 7.3 and 7.4; nodes/stokes_slab.rs derives the forms). One thread per (z, k), neighbouring
+// threads at neighbouring k: each finds its k's homogeneous flow from the end values (the
+// threads of a k read the same few words) and adds it at its z.
 //
 // k != 0: u_b = -v(bottom), u_t = -v(top) are cancelled by the homogeneous Stokes solution
 // [a zeta (-i k, |k|) + C] e^{-|k| zeta} + [b zeta (i k, |k|) + D] e^{|k| (zeta - Lz)},
@@ -43,47 +45,41 @@ fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
 @compute @workgroup_size(256)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let k = flat_index(wid, nwg, lid, 256u);
-    if (k >= s.nk) {
+    let t = flat_index(wid, nwg, lid, 256u);
+    if (t >= s.nk * s.nz) {
         return;
     }
+    let k = t % s.nk;
+    let j = t / s.nk;
     let n = s.nz;
+    let zeta = tables[j];
     let q = slab_wave(s, k, false);
     let kabs = length(q);
     if (kabs == 0.0) {
         // Linear functions of z solve the k = 0 problem's homogeneous part: the one that
         // meets the walls' conditions is added (bottom: zero at zmin, free slope at zmax;
         // slit: zero at both).
-        var bottom = array<vec2<f32>, 2>(load(0u, n - 1u, k), load(1u, n - 1u, k));
-        var top = array<vec2<f32>, 2>(load(0u, 0u, k), load(1u, 0u, k));
-        var slope = array<vec2<f32>, 2>(vec2<f32>(0.0), vec2<f32>(0.0));
-        if (s.walls == 1u) {
-            for (var j = 0u; j < n; j++) {
-                slope[0] -= tables[n + j] * load(0u, j, k);
-                slope[1] -= tables[n + j] * load(1u, j, k);
-            }
-        }
-        for (var j = 0u; j < n; j++) {
-            let zeta = tables[j];
-            for (var c = 0u; c < 2u; c++) {
-                var x = vec2<f32>(0.0);
-                if (s.walls == 1u) {
-                    x = load(c, j, k) - bottom[c] + zeta * slope[c];
-                } else if (s.walls == 2u) {
-                    let t = zeta / s.height;
-                    x = load(c, j, k) - bottom[c] * (1.0 - t) - top[c] * t;
+        for (var c = 0u; c < 2u; c++) {
+            let bottom = load(c, n - 1u, k);
+            var x = vec2<f32>(0.0);
+            if (s.walls == 1u) {
+                var slope = vec2<f32>(0.0);
+                for (var i = 0u; i < n; i++) {
+                    slope -= tables[n + i] * load(c, i, k);
                 }
-                store(c, j, k, x);
+                x = load(c, j, k) - bottom + zeta * slope;
+            } else if (s.walls == 2u) {
+                let h = zeta / s.height;
+                x = load(c, j, k) - bottom * (1.0 - h) - load(c, 0u, k) * h;
             }
-            store(2u, j, k, vec2<f32>(0.0));
+            store(c, j, k, x);
         }
+        store(2u, j, k, vec2<f32>(0.0));
         return;
     }
     if (s.walls == 0u) {
-        for (var j = 0u; j < n; j++) {
-            for (var c = 0u; c < 3u; c++) {
-                store(c, j, k, load(c, j, k));
-            }
+        for (var c = 0u; c < 3u; c++) {
+            store(c, j, k, load(c, j, k));
         }
         return;
     }
@@ -112,19 +108,16 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     let a = big_c[2] - times_i(q.x * big_c[0] + q.y * big_c[1]) / kabs;
     let b = -big_d[2] - times_i(q.x * big_d[0] + q.y * big_d[1]) / kabs;
-    for (var j = 0u; j < n; j++) {
-        let zeta = tables[j];
-        let decay = exp(-kabs * zeta);
-        let grow = exp(kabs * (zeta - s.height));
-        let az = a * zeta;
-        let bz = b * zeta;
-        let corr = array<vec2<f32>, 3>(
-            (times_i(-q.x * az) + big_c[0]) * decay + (times_i(q.x * bz) + big_d[0]) * grow,
-            (times_i(-q.y * az) + big_c[1]) * decay + (times_i(q.y * bz) + big_d[1]) * grow,
-            (kabs * az + big_c[2]) * decay + (kabs * bz + big_d[2]) * grow,
-        );
-        for (var c = 0u; c < 3u; c++) {
-            store(c, j, k, load(c, j, k) + corr[c]);
-        }
+    let decay = exp(-kabs * zeta);
+    let grow = exp(kabs * (zeta - s.height));
+    let az = a * zeta;
+    let bz = b * zeta;
+    let corr = array<vec2<f32>, 3>(
+        (times_i(-q.x * az) + big_c[0]) * decay + (times_i(q.x * bz) + big_d[0]) * grow,
+        (times_i(-q.y * az) + big_c[1]) * decay + (times_i(q.y * bz) + big_d[1]) * grow,
+        (kabs * az + big_c[2]) * decay + (kabs * bz + big_d[2]) * grow,
+    );
+    for (var c = 0u; c < 3u; c++) {
+        store(c, j, k, load(c, j, k) + corr[c]);
     }
 }
