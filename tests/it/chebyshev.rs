@@ -47,9 +47,14 @@ fn chebyshev_nodes_match_their_references() {
             dims: [1, 1, 65],
             comps: 1,
         },
-        // Long lines: fewer threads a workgroup (line_workgroup).
+        // Long lines: several chunks of outputs a line.
         ValueType::RealGrid {
             dims: [3, 2, 300],
+            comps: 2,
+        },
+        // Many lines: the derivative by its recurrence (DerivativePlan).
+        ValueType::RealGrid {
+            dims: [128, 128, 5],
             comps: 2,
         },
     ] {
@@ -175,7 +180,7 @@ fn the_bvp_node_matches_its_dense_reference() {
         ([8u32, 6, 17], 1u32, 3.0),
         ([4, 4, 9], 2, 1.0),
         ([6, 5, 33], 1, 10.0),
-        // Long lines: fewer threads a workgroup (line_workgroup).
+        // Long lines: chebyshev_bvp in its private array beyond registers.
         ([4, 3, 300], 1, 10.0),
     ] {
         let f = rng.array(ValueType::HalfComplexGrid { dims, comps }, -1.0, 1.0);
