@@ -3,7 +3,7 @@
 // One workgroup per particle: the window's factors per axis (z's times the quadrature
 // weight) are computed once into workgroup memory, then its threads take the support's columns,
 // each its z points, and sum u delta~; the 64 partial sums are added in
-// a fixed order.
+// a fixed tree order.
 #import common/index.wgsl
 
 @group(0) @binding(0) var<storage, read> pos: array<f32>;
@@ -53,24 +53,17 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             at += plane;
         }
     }
-    // Two levels of eight in a fixed order (two barriers rather than a tree's six).
     partial[lid] = acc;
     workgroupBarrier();
-    if (lid < 8u) {
-        var sum = partial[8u * lid];
-        for (var i = 1u; i < 8u; i++) {
-            sum += partial[8u * lid + i];
+    for (var stride = 32u; stride > 0u; stride >>= 1u) {
+        if (lid < stride) {
+            partial[lid] += partial[lid + stride];
         }
-        partial[8u * lid] = sum;
+        workgroupBarrier();
     }
-    workgroupBarrier();
     if (lid == 0u && inside) {
-        var sum = partial[0];
-        for (var i = 1u; i < 8u; i++) {
-            sum += partial[8u * i];
-        }
         for (var k = 0u; k < comps; k++) {
-            out[comps * p + k] = sum[k];
+            out[comps * p + k] = partial[0][k];
         }
     }
 }
