@@ -241,8 +241,13 @@ fn line_product(
         pad: 0,
     };
     let chunk = product_chunk(n as u32, comps * plane);
+    // The matrix in workgroup memory where it fits the 16 KiB every adapter has (n up to
+    // 64; H100, 33 points: 0.044 -> 0.027 ms at 10^5 lines, 0.255 -> 0.176 at 10^6).
+    let shared = n * n * 4 <= 16 << 10;
+    let words = if shared { n * n } else { 1 };
     let source = format!(
-        "const WG: u32 = {LINE_WG}u;\nconst POINTS: u32 = {n}u;\nconst CHUNK: u32 = {chunk}u;\n{}",
+        "const WG: u32 = {LINE_WG}u;\nconst POINTS: u32 = {n}u;\nconst CHUNK: u32 = {chunk}u;\n\
+         const SHARED_MATRIX: bool = {shared};\nconst MATRIX_WORDS: u32 = {words}u;\n{}",
         cx.shader("chebyshev/transform.wgsl")?
     );
     let kernel = cx.kernel(&KernelSpec::new(

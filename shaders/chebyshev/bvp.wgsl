@@ -2,8 +2,8 @@
 // real or imaginary part). f, y: Chebyshev coefficients along z of a half spectrum,
 // word 2 ((c n + z) nk + k) + part. tables: per k, strided (entry i of every k contiguous):
 // l, q, u (Thomas factors of A), g0, g1 (rows of C A^-1), s_inv (2 x 2), kappa^2, k = 0.
-// line: this thread's a_n. nodes/chebyshev_bvp.rs prepends WG (threads per workgroup) and
-// POINTS (n).
+// line: this thread's a_n. nodes/chebyshev_bvp.rs prepends WG (threads per workgroup),
+// POINTS (n) and K_MAJOR.
 #import common/index.wgsl
 
 struct Shape { nk: u32, n: u32, comps: u32, has_boundary: u32, f_scale: f32, bc_scale: f32, pad0: u32, pad1: u32 }
@@ -29,9 +29,16 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     if (t >= shape.nk * shape.comps * 2u) {
         return;
     }
+    // K_MAJOR (tables larger than the cache): the components of a k in one warp, so its
+    // tables are read once from memory; else each component's k in a row, so the lines'
+    // reads and writes are contiguous.
     let part = t % 2u;
-    let k = (t / 2u) % shape.nk;
-    let c = t / (2u * shape.nk);
+    var k = (t / 2u) % shape.nk;
+    var c = t / (2u * shape.nk);
+    if (K_MAJOR) {
+        c = (t / 2u) % shape.comps;
+        k = t / (2u * shape.comps);
+    }
     let n = POINTS;
     let zero_mode = entry(5u * n + 5u, k) != 0.0;
     let kappa2 = entry(5u * n + 4u, k);

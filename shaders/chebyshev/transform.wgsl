@@ -3,10 +3,11 @@
 // level k and word p of a z level (words `plane` apart). One thread per line (c, p) and
 // chunk of CHUNK outputs: it reads its line once into a private array (POINTS = n is
 // fixed when the kernel is built, so the loops unroll and the line stays in registers)
-// and writes the chunk's outputs; neighbouring threads take neighbouring words, and the
-// threads of a workgroup read the same matrix entry at once. Chunks give small grids
-// more threads, and keep a thread under lavapipe's 65535 loop iterations. nodes/chebyshev.rs
-// prepends WG, POINTS and CHUNK.
+// and writes the chunk's outputs; neighbouring threads take neighbouring words. With
+// SHARED_MATRIX (n^2 words fit 16 KiB) the workgroup first copies M into workgroup
+// memory, else every thread reads it from the buffer. Chunks give small grids more
+// threads, and keep a thread under lavapipe's 65535 loop iterations. nodes/chebyshev.rs
+// prepends WG, POINTS, CHUNK, SHARED_MATRIX and MATRIX_WORDS (n^2, or 1 without it).
 #import common/index.wgsl
 
 struct Shape { comps: u32, n: u32, plane: u32, pad: u32 }
@@ -16,11 +17,26 @@ struct Shape { comps: u32, n: u32, plane: u32, pad: u32 }
 @group(0) @binding(2) var<storage, read> matrix: array<f32>;
 @group(0) @binding(3) var<uniform> shape: Shape;
 
+var<workgroup> shared_matrix: array<f32, MATRIX_WORDS>;
+
+fn m_entry(i: u32) -> f32 {
+    if (SHARED_MATRIX) {
+        return shared_matrix[i];
+    }
+    return matrix[i];
+}
+
 @compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let t = flat_index(wid, nwg, lid, WG);
     let lines = shape.comps * shape.plane;
+    if (SHARED_MATRIX) {
+        for (var i = lid; i < MATRIX_WORDS; i += WG) {
+            shared_matrix[i] = matrix[i];
+        }
+        workgroupBarrier();
+    }
     if (t >= lines * ((POINTS + CHUNK - 1u) / CHUNK)) {
         return;
     }
@@ -35,7 +51,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     for (var k = first; k < min(first + CHUNK, POINTS); k++) {
         var acc = 0.0;
         for (var j = 0u; j < POINTS; j++) {
-            acc += matrix[k * POINTS + j] * v[j];
+            acc += m_entry(k * POINTS + j) * v[j];
         }
         out[base + k * shape.plane] = acc;
     }

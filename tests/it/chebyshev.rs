@@ -184,10 +184,18 @@ fn the_bvp_node_matches_its_dense_reference() {
         ([4, 3, 300], 1, 10.0),
     ] {
         let f = rng.array(ValueType::HalfComplexGrid { dims, comps }, -1.0, 1.0);
+        // Both thread orders (auto takes `components` at these sizes).
+        for order in ["components", "waves"] {
+            let params =
+                format!(r#"{{"box": [12, 9], "zmin": -2, "zmax": {zmax}, "order": "{order}"}}"#);
+            let (got, want) = run_out("chebyshev_bvp", &params, &[("f", f.clone())]);
+            let (err, at) = rel_max_err(&got, &want);
+            assert!(
+                err <= 2e-5,
+                "bvp {dims:?} x {comps} {order}: {err:e} at {at}"
+            );
+        }
         let params = format!(r#"{{"box": [12, 9], "zmin": -2, "zmax": {zmax}}}"#);
-        let (got, want) = run_out("chebyshev_bvp", &params, &[("f", f.clone())]);
-        let (err, at) = rel_max_err(&got, &want);
-        assert!(err <= 2e-5, "bvp {dims:?} x {comps}: {err:e} at {at}");
         let b = rng.array(
             ValueType::HalfComplexGrid {
                 dims: [dims[0], dims[1], 2],
