@@ -200,7 +200,8 @@ struct Shape {
     comps: u32,
     n: u32,
     plane: u32,
-    pad: u32,
+    /// Words of x before the first component taken.
+    x_offset: u32,
 }
 
 /// Threads per workgroup of the kernels that give each thread a z line (the dense
@@ -223,22 +224,23 @@ fn product_chunk(n: u32, lines: u64) -> u32 {
     bound.min(n.div_ceil(chunks.max(1))).max(1)
 }
 
-/// Records out = M x along every z line of input 0 (M: n x n, row-major, computed in f64
-/// on the host and used in f32). One thread per line and chunk of outputs
-/// (shaders/chebyshev/transform.wgsl).
+/// Records out = M x along every z line of the output, read from input 0 from word
+/// `x_offset` on (M: n x n, row-major, computed in f64 on the host and used in f32). One
+/// thread per line and chunk of outputs (shaders/chebyshev/transform.wgsl).
 fn line_product(
     cx: &mut CompileCtx<'_>,
     io: &NodeIo<'_>,
     label: &str,
     m: &[f64],
+    x_offset: u32,
 ) -> Result<Vec<Dispatch>, CompileError> {
     let x = io.inputs[0].expect("required");
-    let (comps, n, plane) = lines(&x.ty).expect("checked in infer");
+    let (comps, n, plane) = lines(&io.outputs[0].ty).expect("checked in infer");
     let shape = Shape {
         comps: comps as u32,
         n: n as u32,
         plane: plane as u32,
-        pad: 0,
+        x_offset,
     };
     let chunk = product_chunk(n as u32, comps * plane);
     // The matrix in workgroup memory where it fits the 16 KiB every adapter has (n up to
@@ -282,6 +284,7 @@ impl GpuKernels for Transform {
             io,
             "chebyshev transform",
             &matrix(n as usize, self.forward),
+            0,
         )
     }
 }
@@ -289,24 +292,64 @@ impl GpuKernels for Transform {
 fn derivative_kind() -> NodeKind {
     NodeKind::declare(
         "chebyshev_derivative",
-        "the Chebyshev coefficients of df/dz from those of f (along z of a grid, every line and component alone): the recurrence c'_{k-1} = c'_{k+1} + 2 k c_k, times 2 / (zmax - zmin)",
+        "the Chebyshev coefficients of df/dz from those of f (along z of a grid, every line and component alone; `count` components from `first`, all by default): the recurrence c'_{k-1} = c'_{k+1} + 2 k c_k, times 2 / (zmax - zmin)",
     )
     .input(PortSpec::new("x", PortType::Linear, "Chebyshev coefficients along z (a real, complex or half-complex grid)"))
-    .output(PortSpec::new("out", PortType::Linear, "the derivative's coefficients, the same type"))
+    .output(PortSpec::new("out", PortType::Linear, "the derivative's coefficients, the same type with the components taken"))
     .param(ParamSpec::f32_positive(
         "height",
         Some(2.0),
         "zmax - zmin, the domain's extent in z (2: the derivative on [-1, 1])",
     ))
+    .param(ParamSpec::integer(
+        "first",
+        Some(0.0),
+        0.0,
+        1024.0,
+        "the first component differentiated",
+    ))
+    .param(ParamSpec::integer(
+        "count",
+        Some(0.0),
+        0.0,
+        1024.0,
+        "how many components (0: all from `first`)",
+    ))
     .build(|p| {
         Ok(Box::new(Derivative {
             scale: 2.0 / p.number("height"),
+            first: p.number("first") as u64,
+            count: p.number("count") as u64,
         }))
     })
 }
 
 struct Derivative {
     scale: f64,
+    /// The components differentiated: `count` from `first` (0: all the rest).
+    first: u64,
+    count: u64,
+}
+
+impl Derivative {
+    /// The components taken from an input of `comps`.
+    fn taken(&self, comps: u64) -> u64 {
+        if self.count == 0 {
+            comps.saturating_sub(self.first)
+        } else {
+            self.count
+        }
+    }
+}
+
+/// The same grid with `comps` components.
+fn with_comps(t: ValueType, comps: u32) -> ValueType {
+    match t {
+        ValueType::RealGrid { dims, .. } => ValueType::RealGrid { dims, comps },
+        ValueType::ComplexGrid { dims, .. } => ValueType::ComplexGrid { dims, comps },
+        ValueType::HalfComplexGrid { dims, .. } => ValueType::HalfComplexGrid { dims, comps },
+        other => other,
+    }
 }
 
 /// How `chebyshev_derivative` runs, decided from the number of lines: the recurrence (n
@@ -334,13 +377,27 @@ const RECURRENCE_LINES: u64 = 1 << 15;
 
 impl Node for Derivative {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
-        let (comps, _, plane) = check_grid(&inputs[0].expect("required"))?;
-        let plan = if comps * plane >= RECURRENCE_LINES {
+        let t = inputs[0].expect("required");
+        let (comps, _, plane) = check_grid(&t)?;
+        let taken = self.taken(comps);
+        if taken == 0 || self.first + taken > comps {
+            return Err(PortError::new(
+                "x",
+                format!(
+                    "has {comps} components: components {} to {} cannot be taken (params `first` {}, `count` {})",
+                    self.first,
+                    self.first + taken.max(1) - 1,
+                    self.first,
+                    self.count
+                ),
+            ));
+        }
+        let plan = if taken * plane >= RECURRENCE_LINES {
             DerivativePlan::Recurrence
         } else {
             DerivativePlan::Dense
         };
-        Ok(same_grid(inputs)?.with_plan(plan))
+        Ok(Signature::outputs(vec![with_comps(t, taken as u32)]).with_plan(plan))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -349,9 +406,17 @@ impl Node for Derivative {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let x = inputs[0].as_ref().expect("required");
-        per_line(&x.ty, &x.data, &mut outputs[0].data, |c| {
-            derivative(c, self.scale)
-        });
+        let (comps, n, plane) = lines(&x.ty).expect("checked in infer");
+        let taken = self.taken(comps);
+        let block = (n * plane) as usize;
+        let from = self.first as usize * block;
+        let part = &x.data[from..from + taken as usize * block];
+        per_line(
+            &with_comps(x.ty, taken as u32),
+            part,
+            &mut outputs[0].data,
+            |c| derivative(c, self.scale),
+        );
     }
 }
 
@@ -362,13 +427,16 @@ impl GpuKernels for Derivative {
         io: &NodeIo<'_>,
     ) -> Result<Vec<Dispatch>, CompileError> {
         let x = io.inputs[0].expect("required");
-        let (comps, n, plane) = lines(&x.ty).expect("checked in infer");
+        let (_, n, plane) = lines(&x.ty).expect("checked in infer");
+        let (comps, _, _) = lines(&io.outputs[0].ty).expect("checked in infer");
+        let x_offset = (self.first * n * plane) as u32;
         if *io.plan::<DerivativePlan>() == DerivativePlan::Dense {
             return line_product(
                 cx,
                 io,
                 "chebyshev derivative",
                 &derivative_matrix(n as usize, self.scale),
+                x_offset,
             );
         }
         let shape = RecurrenceShape {
@@ -376,6 +444,8 @@ impl GpuKernels for Derivative {
             n: n as u32,
             plane: plane as u32,
             scale: self.scale as f32,
+            x_offset,
+            pad: [0; 3],
         };
         let kernel = cx.kernel(&KernelSpec::new(
             "chebyshev derivative",
@@ -402,6 +472,9 @@ struct RecurrenceShape {
     n: u32,
     plane: u32,
     scale: f32,
+    /// Words of x before the first component taken.
+    x_offset: u32,
+    pad: [u32; 3],
 }
 
 /// The recurrence as a matrix: c'_k = scale (1 / kappa_k) sum over j > k with j - k odd of

@@ -230,7 +230,7 @@ impl Slab {
     /// The components each input must have.
     fn input_comps(&self) -> &'static [u32] {
         match self.step {
-            Step::PressureSource => &[3, 3],
+            Step::PressureSource => &[3, 1],
             Step::VelocitySource => &[3, 1, 1],
             Step::Walls => &[3],
             Step::Curl => &[3, 3],
@@ -257,7 +257,7 @@ impl Slab {
                     let q = paired(k, nyq);
                     for z in 0..nz {
                         let v =
-                            i * (q[0] * f.at(0, z, kk) + q[1] * f.at(1, z, kk)) + df.at(2, z, kk);
+                            i * (q[0] * f.at(0, z, kk) + q[1] * f.at(1, z, kk)) + df.at(0, z, kk);
                         put(&mut outputs[0].data, nz, nk, 0, z, kk, v);
                     }
                 }
@@ -639,7 +639,7 @@ pub fn register(r: &mut Registry) {
         kind(
             "slab_pressure_source",
             "the source of the doubly periodic Stokes pressure, i k.f + d f_z/dz, from the forcing's Chebyshev coefficients along z (half spectrum in x, y) and its z derivative's (`chebyshev_derivative`)",
-            &[("f", "the forcing's coefficients (3 components)"), ("df", "the coefficients of its z derivative (3 components; z's is read)")],
+            &[("f", "the forcing's coefficients (3 components)"), ("df", "the coefficients of the z derivative of its z component (1 component: chebyshev_derivative with first 2, count 1)")],
         )
         .output(spectrum_port("out", "the source's coefficients (1 component)"))
         .build(|p| Ok(Box::new(Slab::from_params(Step::PressureSource, p)?))),

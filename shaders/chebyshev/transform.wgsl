@@ -1,6 +1,6 @@
 // A dense product along z (nodes/chebyshev.rs: the Chebyshev transforms and the
 // derivative): out[c][k][p] = sum_j M[k][j] x[c][j][p] for every component c, output
-// level k and word p of a z level (words `plane` apart). One thread per line (c, p) and
+// level k and word p of a z level (words `plane` apart), x read from word x_offset on. One thread per line (c, p) and
 // chunk of CHUNK outputs: it reads its line once into a private array (POINTS = n is
 // fixed when the kernel is built, so the loops unroll and the line stays in registers)
 // and writes the chunk's outputs; neighbouring threads take neighbouring words. With
@@ -10,7 +10,7 @@
 // prepends WG, POINTS, CHUNK, SHARED_MATRIX and MATRIX_WORDS (n^2, or 1 without it).
 #import common/index.wgsl
 
-struct Shape { comps: u32, n: u32, plane: u32, pad: u32 }
+struct Shape { comps: u32, n: u32, plane: u32, x_offset: u32 }
 
 @group(0) @binding(0) var<storage, read> x: array<f32>;
 @group(0) @binding(1) var<storage, read_write> out: array<f32>;
@@ -46,7 +46,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let base = (line_index - p) * POINTS + p;
     var v: array<f32, POINTS>;
     for (var j = 0u; j < POINTS; j++) {
-        v[j] = x[base + j * shape.plane];
+        v[j] = x[shape.x_offset + base + j * shape.plane];
     }
     for (var k = first; k < min(first + CHUNK, POINTS); k++) {
         var acc = 0.0;

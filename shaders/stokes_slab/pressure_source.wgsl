@@ -1,5 +1,6 @@
 // slab_pressure_source: s = i kx f_x + i ky f_y + (d/dz f)_z per (z, k), the source of the
-// pressure's boundary-value problem (digest section 7.2). One thread per (z, k).
+// pressure's boundary-value problem (digest section 7.2); df holds (d/dz f)_z alone. One
+// thread per (z, k).
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
 
@@ -23,7 +24,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let k = t % s.nk;
     let z = t / s.nk;
     let q = slab_wave(s, k, true);
-    let wz = slab_word(2u, z, k, s.nz, s.nk);
+    let wz = slab_word(0u, z, k, s.nz, s.nk);
     let v = times_i(q.x * load(0u, z, k) + q.y * load(1u, z, k)) + vec2<f32>(df[wz], df[wz + 1u]);
     let w = slab_word(0u, z, k, s.nz, s.nk);
     out[w] = v.x;

@@ -166,6 +166,51 @@ fn chebyshev_nodes_refuse_what_they_cannot_transform() {
         )],
     );
     assert!(e.contains("at least 2"), "{e}");
+    let e = crate::util::validation_error(
+        "chebyshev_derivative",
+        r#"{"first": 2, "count": 2}"#,
+        &[(
+            "x",
+            ValueType::RealGrid {
+                dims: [4, 4, 5],
+                comps: 3,
+            },
+        )],
+    );
+    assert!(e.contains("components 2 to 3 cannot be taken"), "{e}");
+}
+
+/// `chebyshev_derivative` of some components only (`first`, `count`), by both strategies
+/// (the dense product on few lines, the recurrence on many), against its reference.
+#[test]
+fn the_derivative_of_some_components_matches_its_reference() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(47);
+    for (dims, comps) in [([6u32, 5, 9], 3u32), ([256, 128, 5], 2)] {
+        let x = rng.array(ValueType::RealGrid { dims, comps }, -1.0, 1.0);
+        for params in [
+            r#"{"height": 3.0, "first": 1, "count": 1}"#,
+            r#"{"height": 3.0, "first": 1}"#,
+        ] {
+            let (got, want) = run_out("chebyshev_derivative", params, &[("x", x.clone())]);
+            assert_eq!(got.ty, want.ty, "{params}");
+            assert_eq!(
+                got.ty,
+                ValueType::RealGrid {
+                    dims,
+                    comps: comps - 1 - u32::from(comps == 3 && params.contains("count")),
+                },
+                "{params}"
+            );
+            let (err, at) = rel_max_err(&got, &want);
+            assert!(
+                err <= 2e-6,
+                "{params} on {dims:?} x {comps}: {err:e} at {at}"
+            );
+        }
+    }
 }
 
 /// `chebyshev_bvp` against its f64 reference (a dense solve of the whole system per k),
