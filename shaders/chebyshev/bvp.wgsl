@@ -1,3 +1,5 @@
+// template: nodes/chebyshev_bvp.rs prepends the constants WG, POINTS and K_MAJOR.
+//
 // The per-k boundary-value solve of nodes/chebyshev_bvp.rs: one thread per (k, component,
 // real or imaginary part). f, y: Chebyshev coefficients along z of a half spectrum,
 // word 2 ((c n + z) nk + k) + part. tables: per k, strided (entry i of every k contiguous):

@@ -1,3 +1,6 @@
+// template: nodes/chebyshev.rs prepends the constants WG, POINTS, CHUNK, SHARED_MATRIX
+// and MATRIX_WORDS.
+//
 // A dense product along z (nodes/chebyshev.rs: the Chebyshev transforms and the
 // derivative): out[c][k][p] = sum_j M[k][j] x[c][j][p] for every component c, output
 // level k and word p of a z level (words `plane` apart), x read from word x_offset on. One thread per line (c, p) and
