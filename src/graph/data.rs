@@ -64,9 +64,6 @@ impl Graph {
             .collect()
     }
 
-    /// Checks the data given for graph input `input` with every node port that reads it
-    /// ([`Graph::readers_of_input`]), except the nodes in `skip` (those a plan does not
-    /// run); the first refusal, in node order.
     /// Whether some node reading `input` (outside `skip`) checks the data given for it.
     pub fn input_is_checked(&self, input: usize, skip: &[NodeId]) -> bool {
         self.readers_of_input(input).into_iter().any(|(n, _)| {
@@ -75,6 +72,10 @@ impl Graph {
         })
     }
 
+    /// Checks the data given for graph input `input` with every node port that reads it
+    /// ([`Graph::readers_of_input`]), except the nodes in `skip` (those a plan does not
+    /// run); the first refusal, in the order of `readers_of_input` (direct readers in
+    /// node order, then those behind pass-through nodes).
     pub fn check_input_data(
         &self,
         input: usize,
