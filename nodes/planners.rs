@@ -367,11 +367,14 @@ static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "fcm_width",
-        doc: "fcm_width(radius, kernel): the Gaussian window's standard deviation radius / sqrt(pi) for FCM forces (0 for other windows, which ignore it)",
+        doc: "fcm_width(radius, kernel): the Gaussian window's standard deviation radius / sqrt(pi) for FCM forces (0 for other windows, which ignore it); kernel may be left out: the Gaussian",
         call: |a| {
-            arity(a, 2)?;
+            if a.len() != 1 {
+                arity(a, 2)?;
+            }
             let r = number(a, 0, "radius")?;
-            Ok(ParamValue::Number(if text(a, 1, "kernel")? == "gaussian" {
+            let gaussian = a.len() == 1 || text(a, 1, "kernel")? == "gaussian";
+            Ok(ParamValue::Number(if gaussian {
                 plan::gaussian_width(r)
             } else {
                 0.0

@@ -557,7 +557,7 @@ pub fn plan(
     walls: &str,
     rotation: bool,
 ) -> Result<Vec<f64>, String> {
-    use crate::nodes::fcm::plan::gaussian_upsampling;
+    use crate::nodes::fcm::plan::{gaussian_upsampling, gaussian_width, torque_width};
     use crate::nodes::spread::window::gaussian_support;
     if lengths.len() != 2 {
         return Err(format!(
@@ -571,8 +571,8 @@ pub fn plan(
     let Some(wall_code) = WALLS.iter().position(|w| *w == walls) else {
         return Err(format!("walls must be none, bottom or slit, got `{walls}`"));
     };
-    let sigma = radius / std::f64::consts::PI.sqrt();
-    let sigma_t = radius / (6.0 * std::f64::consts::PI.sqrt()).cbrt();
+    let sigma = gaussian_width(radius);
+    let sigma_t = torque_width(radius);
     let finest = if rotation { sigma_t } else { sigma };
     let h0 = finest / gaussian_upsampling(tolerance);
     let mut cells = [0u32; 2];

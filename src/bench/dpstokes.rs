@@ -19,9 +19,10 @@ use mesoflow::expr::ParamValue;
 use mesoflow::gpu::{GpuContext, KernelCache};
 use mesoflow::graph::Graph;
 use mesoflow::node::Registry;
+use mesoflow::nodes::fcm::plan::gaussian_width;
 
 use super::fcm::{Rng, load, mobility_inputs, param, plan_for, velocities};
-use super::{BenchError, end_to_end_clock, ms, time_loaded};
+use super::{BenchError, end_to_end_clock, ms, open_gpu, time_loaded};
 
 pub struct DpStokesBench {
     pub graph: PathBuf,
@@ -88,7 +89,7 @@ fn accuracy(
     let plan = plan_for(gpu, &g, 1)?;
     let mut program = Program::compile(gpu, &g, &plan, &mut KernelCache::default())?;
     let t0 = 1.0 / (6.0 * PI);
-    let open = (walls == "none").then(|| open_self(1.0 / PI.sqrt(), l, l));
+    let open = (walls == "none").then(|| open_self(gaussian_width(1.0), l, l));
     let mut worst: f64 = 0.0;
     for h in [2.0, 6.0] {
         let p = [[0.3, -0.2, h]];
@@ -122,12 +123,8 @@ fn sets(walls: &str, l: f64, tolerance: f64) -> Vec<(&'static str, ParamValue)> 
 }
 
 pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
-    if bench.reps == 0 {
-        return Err(BenchError::Args("--reps must be positive".into()));
-    }
-    let gpu = GpuContext::new()?;
+    let gpu = open_gpu(bench.reps)?;
     let registry = mesoflow::nodes::registry();
-    outln!("adapter: {}", gpu.caps.summary());
     outln!(
         "dpstokes.json M F at tolerance {}: a = 1, eta = 1, heights uniform in [1.5, 10], zmin 0, zmax {ZMAX}, box side 128 sqrt(N / 10^5); time: median over {} runs end to end ({}); fcm.json (Gaussian, same tolerance) on a periodic grid of at least the same points, same N; error: the largest relative self-mobility error at h = 2 a and 6 a (L = 128; bottom: against Rotne-Prager-Blake, none: against the doubly periodic f64 sum, slit: -)",
         bench.tolerance,
