@@ -70,13 +70,6 @@ fn check_grid(t: &ValueType) -> Result<(u64, u64, u64), PortError> {
     Ok((c, n, plane))
 }
 
-/// Both nodes' signature: a grid of Chebyshev lines in, the same type out.
-fn same_grid(inputs: &[Option<ValueType>]) -> Result<Signature, PortError> {
-    let t = inputs[0].expect("required");
-    check_grid(&t)?;
-    Ok(Signature::outputs(vec![t]))
-}
-
 /// Points along z the dense transform takes (its matrix is n^2 words).
 pub const MAX_POINTS: u32 = 1024;
 
@@ -174,7 +167,9 @@ struct Transform {
 
 impl Node for Transform {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
-        same_grid(inputs)
+        let t = inputs[0].expect("required");
+        check_grid(&t)?;
+        Ok(Signature::outputs(vec![t]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -196,12 +191,16 @@ impl Node for Transform {
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+/// The uniform of both line kernels (transform.wgsl, derivative.wgsl): `lines` of the
+/// output, the factor the recurrence scales by (unused by the dense product).
 struct Shape {
     comps: u32,
     n: u32,
     plane: u32,
+    scale: f32,
     /// Words of x before the first component taken.
     x_offset: u32,
+    pad: [u32; 3],
 }
 
 /// Threads per workgroup of the kernels that give each thread a z line (the dense
@@ -240,7 +239,9 @@ fn line_product(
         comps: comps as u32,
         n: n as u32,
         plane: plane as u32,
+        scale: 1.0,
         x_offset,
+        pad: [0; 3],
     };
     let chunk = product_chunk(n as u32, comps * plane);
     // The matrix in workgroup memory where it fits the 16 KiB every adapter has (n up to
@@ -439,7 +440,7 @@ impl GpuKernels for Derivative {
                 x_offset,
             );
         }
-        let shape = RecurrenceShape {
+        let shape = Shape {
             comps: comps as u32,
             n: n as u32,
             plane: plane as u32,
@@ -463,18 +464,6 @@ impl GpuKernels for Derivative {
             cx.grid_1d(comps * plane, WG_1D),
         )])
     }
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct RecurrenceShape {
-    comps: u32,
-    n: u32,
-    plane: u32,
-    scale: f32,
-    /// Words of x before the first component taken.
-    x_offset: u32,
-    pad: [u32; 3],
 }
 
 /// The recurrence as a matrix: c'_k = scale (1 / kappa_k) sum over j > k with j - k odd of

@@ -87,16 +87,16 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         if (m == 0u) {
             v = y0;
         } else if (m == 1u) {
-            v = p0 - 0.5 * derivative(2u, n, lid, p0);
+            v = p0 - 0.5 * derivative(2u, n, p0);
         } else {
-            v = (derivative(m - 1u, n, lid, p0) - derivative(m + 1u, n, lid, p0)) / (2.0 * f32(m));
+            v = (derivative(m - 1u, n, p0) - derivative(m + 1u, n, p0)) / (2.0 * f32(m));
         }
         y[2u * ((c * n + m) * shape.nk + k) + part] = v;
     }
 }
 
 // a_j of this thread's line (0 past the end).
-fn a_at(j: u32, n: u32, lid: u32) -> f32 {
+fn a_at(j: u32, n: u32) -> f32 {
     if (j >= n) {
         return 0.0;
     }
@@ -104,7 +104,7 @@ fn a_at(j: u32, n: u32, lid: u32) -> f32 {
 }
 
 // y'_m from the a's (0 for m >= n).
-fn derivative(m: u32, n: u32, lid: u32, p0: f32) -> f32 {
+fn derivative(m: u32, n: u32, p0: f32) -> f32 {
     if (m >= n) {
         return 0.0;
     }
@@ -112,7 +112,7 @@ fn derivative(m: u32, n: u32, lid: u32, p0: f32) -> f32 {
         return p0;
     }
     if (m == 1u) {
-        return a_at(0u, n, lid) - 0.5 * a_at(2u, n, lid);
+        return a_at(0u, n) - 0.5 * a_at(2u, n);
     }
-    return (a_at(m - 1u, n, lid) - a_at(m + 1u, n, lid)) / (2.0 * f32(m));
+    return (a_at(m - 1u, n) - a_at(m + 1u, n)) / (2.0 * f32(m));
 }

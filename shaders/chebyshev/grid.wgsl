@@ -109,10 +109,9 @@ fn cached_z(t: u32, zr: vec2<u32>, qz: f32, weighted: bool) -> f32 {
     return z_factor(zr.x + t, qz, weighted);
 }
 
-// A particle's place on the grid: x, y in cell-centre units, z, the first cells of its
-// support and its range of z points.
+// A particle's place on the grid: its z, the first cells of its support and its range of
+// z points.
 struct Support {
-    u: vec2<f32>,
     qz: f32,
     first: vec2<i32>,
     zr: vec2<u32>,
@@ -126,7 +125,7 @@ fn particle_support(p: u32, lid: u32, weighted: bool) -> Support {
     let first = vec2<i32>(ceil(u - vec2<f32>(geo.radius.x)));
     let zr = z_range(qz);
     fill_factors(lid, u.x, u.y, qz, first.x, first.y, zr, weighted);
-    return Support(u, qz, first, zr);
+    return Support(qz, first, zr);
 }
 
 // Column c (x fastest) of the support: its x, y window weight and its cell in a level.

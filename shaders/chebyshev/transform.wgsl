@@ -13,7 +13,7 @@
 // prepends WG, POINTS, CHUNK, SHARED_MATRIX and MATRIX_WORDS (n^2, or 1 without it).
 #import common/index.wgsl
 
-struct Shape { comps: u32, n: u32, plane: u32, x_offset: u32 }
+struct Shape { comps: u32, n: u32, plane: u32, scale: f32, x_offset: u32, pad0: u32, pad1: u32, pad2: u32 }
 
 @group(0) @binding(0) var<storage, read> x: array<f32>;
 @group(0) @binding(1) var<storage, read_write> out: array<f32>;
