@@ -167,6 +167,16 @@ impl TimedRun {
     }
 }
 
+/// The GPU of a bench timed `reps` times (refused when 0), its adapter line printed.
+fn open_gpu(reps: u64) -> Result<GpuContext, BenchError> {
+    if reps == 0 {
+        return Err(BenchError::Args("--reps must be positive".into()));
+    }
+    let gpu = GpuContext::new()?;
+    outln!("adapter: {}", gpu.caps.summary());
+    Ok(gpu)
+}
+
 /// How end-to-end figures of loop-free graphs are taken on this device, for table
 /// headers (a graph with loops is timed on the host clock anyway: `TimedRun::steps`).
 fn end_to_end_clock(gpu: &GpuContext) -> &'static str {

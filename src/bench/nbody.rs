@@ -8,10 +8,9 @@
 use std::path::PathBuf;
 
 use mesoflow::expr::ParamValue;
-use mesoflow::gpu::GpuContext;
 
 use super::fcm::{Rng, load, mobility_inputs, particles};
-use super::{BenchError, end_to_end_clock, ms, time_loaded};
+use super::{BenchError, end_to_end_clock, ms, open_gpu, time_loaded};
 
 pub struct NbodyBench {
     pub graphs_dir: PathBuf,
@@ -32,12 +31,8 @@ const FLOPS: [(&str, bool, f64); 4] = [
 ];
 
 pub fn run(bench: &NbodyBench) -> Result<(), BenchError> {
-    if bench.reps == 0 {
-        return Err(BenchError::Args("--reps must be positive".into()));
-    }
-    let gpu = GpuContext::new()?;
+    let gpu = open_gpu(bench.reps)?;
     let registry = mesoflow::nodes::registry();
-    outln!("adapter: {}", gpu.caps.summary());
     outln!(
         "one mobility product (all_pairs), a = 1, eta = 1, N particles uniform in a cube of \
          side (N / 0.05)^(1/3) (above the wall at z = 0 for rpy_wall); time: median over {} \

@@ -17,7 +17,7 @@ use mesoflow::node::Registry;
 use mesoflow::value::{HostArray, ValueType};
 
 use super::fcm::{Rng, load, param, particles, timed as fcm_timed};
-use super::{BenchError, TimedRun, end_to_end_clock, ms, time_loaded};
+use super::{BenchError, TimedRun, end_to_end_clock, ms, open_gpu, time_loaded};
 
 pub struct PoissonBench {
     pub graph: PathBuf,
@@ -133,12 +133,8 @@ fn timed(gpu: &GpuContext, g: &Graph, l: f64, n: u32, reps: u64) -> Result<Timed
 }
 
 pub fn run(bench: &PoissonBench) -> Result<(), BenchError> {
-    if bench.reps == 0 {
-        return Err(BenchError::Args("--reps must be positive".into()));
-    }
-    let gpu = GpuContext::new()?;
+    let gpu = open_gpu(bench.reps)?;
     let registry = mesoflow::nodes::registry();
-    outln!("adapter: {}", gpu.caps.summary());
     outln!(
         "graph {}; width 1, permittivity 1; potentials and fields of N random neutral charges, \
          time: median of one evaluation over {} runs end to end ({}), launches: sum of the \

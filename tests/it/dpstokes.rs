@@ -10,7 +10,7 @@ use std::f64::consts::PI;
 use mesoflow::graph::Graph;
 use mesoflow::value::HostArray;
 
-use crate::util::mobility::cholesky_min_pivot;
+use crate::util::mobility::{cholesky_min_pivot, eval, mobility_plan};
 use crate::util::{
     compile_cached, gpu, load_with, mobility_recorder, particles, plan_graph, run_program, types_of,
 };
@@ -26,20 +26,15 @@ fn load(sets: &[(&str, String)]) -> Graph {
 fn mobility(g: &Graph, x: &[V3]) -> Vec<Vec<f64>> {
     let gpu = gpu().expect("a GPU");
     let n = x.len();
-    let mut data: BTreeMap<String, HostArray> = BTreeMap::new();
-    data.insert("positions".into(), particles(x));
-    data.insert("forces".into(), particles(&vec![[0.0; 3]; n]));
-    let plan = plan_graph(&gpu.caps, g, types_of(&data), Some(&["velocities"]), true);
+    let plan = mobility_plan(&gpu, g, n as u32, false, &["velocities"]);
     let mut program = compile_cached(&gpu, g, &plan);
     let mut m = vec![vec![0.0; 3 * n]; 3 * n];
     for col in 0..3 * n {
         let mut f = vec![[0.0; 3]; n];
         f[col / 3][col % 3] = 1.0;
-        data.insert("forces".into(), particles(&f));
-        let out = run_program(&mut program, &data, 1);
-        let u = out["velocities"].data.to_f64();
-        for (row, v) in u.iter().enumerate() {
-            m[row][col] = *v;
+        let u = &eval(&mut program, x, &f, None)["velocities"];
+        for (row, m_row) in m.iter_mut().enumerate() {
+            m_row[col] = u[row / 3][row % 3];
         }
     }
     m
@@ -93,23 +88,11 @@ fn blake_self(a: f64, h: f64) -> (f64, f64) {
 }
 
 /// The velocity of one particle at x under a force f.
-fn pulled(program_graph: &Graph, x: V3, f: V3) -> V3 {
+fn pulled(g: &Graph, x: V3, f: V3) -> V3 {
     let gpu = gpu().expect("a GPU");
-    let mut data: BTreeMap<String, HostArray> = BTreeMap::new();
-    data.insert("positions".into(), particles(&[x]));
-    data.insert("forces".into(), particles(&[f]));
-    let plan = plan_graph(
-        &gpu.caps,
-        program_graph,
-        types_of(&data),
-        Some(&["velocities"]),
-        true,
-    );
-    let mut program = compile_cached(&gpu, program_graph, &plan);
-    let u = run_program(&mut program, &data, 1)["velocities"]
-        .data
-        .to_f64();
-    [u[0], u[1], u[2]]
+    let plan = mobility_plan(&gpu, g, 1, false, &["velocities"]);
+    let mut program = compile_cached(&gpu, g, &plan);
+    eval(&mut program, &[x], &[f], None)["velocities"][0]
 }
 
 /// Open z: the self-mobility matches the doubly periodic sum of the Gaussian's Green
@@ -592,26 +575,10 @@ fn the_sedimentation_example_falls_at_the_wall_mobility() {
 /// rotation.
 fn grand_one(g: &Graph, x: V3, f: V3, t: V3) -> (V3, V3) {
     let gpu = gpu().expect("a GPU");
-    let data: BTreeMap<String, HostArray> = [
-        ("positions".to_string(), particles(&[x])),
-        ("forces".to_string(), particles(&[f])),
-        ("torques".to_string(), particles(&[t])),
-    ]
-    .into();
-    let plan = plan_graph(
-        &gpu.caps,
-        g,
-        types_of(&data),
-        Some(&["velocities", "angular_velocities"]),
-        true,
-    );
+    let plan = mobility_plan(&gpu, g, 1, true, &["velocities", "angular_velocities"]);
     let mut program = compile_cached(&gpu, g, &plan);
-    let out = run_program(&mut program, &data, 1);
-    let (u, w) = (
-        out["velocities"].data.to_f64(),
-        out["angular_velocities"].data.to_f64(),
-    );
-    ([u[0], u[1], u[2]], [w[0], w[1], w[2]])
+    let out = eval(&mut program, &[x], &[f], Some(&[t]));
+    (out["velocities"][0], out["angular_velocities"][0])
 }
 
 /// Torques: far from everything the rotational self-mobility is 1 / (8 pi eta a^3) (the

@@ -15,7 +15,7 @@ use mesoflow::graph::Graph;
 use mesoflow::nodes::pairs::blake::blake;
 use mesoflow::value::HostArray;
 
-use crate::util::mobility::cholesky_min_pivot;
+use crate::util::mobility::{cholesky_min_pivot, eval, mobility_plan};
 use crate::util::{
     Rng, compile_cached, gpu, load_with, mobility_recorder, particles, plan_graph, run_program,
     types_of, vectors,
@@ -82,25 +82,19 @@ fn load(name: &str, sets: &[(&str, String)]) -> Graph {
 /// (velocities, angular velocities) of graph `g` (rotation on) for these inputs.
 fn grand(g: &Graph, x: &[V3], f: &[V3], t: &[V3]) -> (Vec<V3>, Vec<V3>) {
     let gpu = gpu().expect("a GPU");
-    let data: BTreeMap<String, HostArray> = [
-        ("positions".to_string(), particles(x)),
-        ("forces".to_string(), particles(f)),
-        ("torques".to_string(), particles(t)),
-    ]
-    .into_iter()
-    .collect();
-    let plan = plan_graph(
-        &gpu.caps,
+    let plan = mobility_plan(
+        &gpu,
         g,
-        types_of(&data),
-        Some(&["velocities", "angular_velocities"]),
+        x.len() as u32,
         true,
+        &["velocities", "angular_velocities"],
     );
     let mut program = compile_cached(&gpu, g, &plan);
-    let out = run_program(&mut program, &data, 1);
+    let mut out = eval(&mut program, x, f, Some(t));
     (
-        vectors(&out["velocities"]),
-        vectors(&out["angular_velocities"]),
+        out.remove("velocities").expect("velocities"),
+        out.remove("angular_velocities")
+            .expect("angular velocities"),
     )
 }
 

@@ -24,6 +24,17 @@ pub fn load(path: &Path) -> Graph {
     graph::load(path, registry(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// Loads a graph file for a run of `steps` steps with this seed, panicking with the
+/// loader's report.
+pub fn load_for(path: &Path, steps: u64, seed: u64) -> Graph {
+    let opts = LoadOptions {
+        steps,
+        seed,
+        ..Default::default()
+    };
+    graph::load(path, registry(), &opts).unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// `--set` values given as JSON literals, as the loader takes them.
 fn overrides(sets: &[(&str, &str)]) -> BTreeMap<String, ParamValue> {
     sets.iter()
@@ -227,16 +238,6 @@ pub fn mobility_recorder(
   "outputs": {{{}}}}}"#,
         outputs.join(", ")
     );
-    let path = write_graph(&dir, "stats.json", &json);
-    let g = graph::load(
-        &path,
-        registry(),
-        &LoadOptions {
-            steps,
-            seed,
-            ..Default::default()
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let g = load_for(&write_graph(&dir, "stats.json", &json), steps, seed);
     (dir, g)
 }

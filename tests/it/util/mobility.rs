@@ -9,12 +9,12 @@ use std::path::{Path, PathBuf};
 
 use mesoflow::exec::Program;
 use mesoflow::gpu::GpuContext;
-use mesoflow::graph::{self, Graph, LoadOptions};
+use mesoflow::graph::Graph;
 use mesoflow::plan::Plan;
 use mesoflow::value::{HostArray, ValueType};
 
 use super::{
-    Rng, compile_cached, particles, plan_graph, random_points, registry, run_program, tmpdir,
+    Rng, compile_cached, load_for, particles, plan_graph, random_points, run_program, tmpdir,
     vectors, write_graph,
 };
 
@@ -235,16 +235,7 @@ pub fn noise_statistics(
 ) -> (Vec<[f64; 3]>, [f64; 3]) {
     let dir = tmpdir(&format!("noise-{}", name.replace('.', "-")));
     let path = noise_statistics_graph(&dir, name, x.len(), sets);
-    let g = graph::load(
-        &path,
-        registry(),
-        &LoadOptions {
-            steps,
-            seed,
-            ..Default::default()
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let g = load_for(&path, steps, seed);
     let positions = particles(x);
     let plan = plan_graph(
         &gpu.caps,
