@@ -13,8 +13,9 @@
 #   pse         PSE per split with noise, where split 0.5 at 10^5 spends its time
 #   poisson     Poisson per tolerance and size (fastest split, errors, fcm.json beside it),
 #               where 10^5 at 1e-3 spends its time
-#   dpstokes    doubly periodic Stokes per wall mode at 10^4, 10^5, 10^6 (errors, fcm.json
-#               on a grid of the same points beside it), where bottom 10^5 spends its time
+#   dpstokes    doubly periodic Stokes per wall mode at 10^4, 10^5, 10^6, ES windows then
+#               Gaussian (errors, fcm.json on a grid of the same points beside it), where
+#               bottom spends its time
 #               and 10^4, 10^6 (the boundary-value solves' GB/s), torch's copy bandwidth
 #   nbody       the direct pair mobilities, open and above a wall, translation and grand:
 #               pair interactions per second and GFLOP/s
@@ -70,6 +71,7 @@ suite_fcm() {
 
 suite_dpstokes() {
   run $bin bench dpstokes --reps 10
+  run $bin bench dpstokes --kernel gaussian --reps 10
   MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes --walls bottom --sizes 10000,100000,1000000 --reps 10
   run python3 benches/torch_reduce.py
 }

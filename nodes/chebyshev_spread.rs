@@ -81,13 +81,14 @@ impl ChebyshevGrid {
         self.lengths[a] / self.cells[a] as f64
     }
 
-    /// Half the support, in cells (x, y) and as a length (z, with the x cell size).
-    fn half_support(&self) -> f64 {
-        self.window.support() as f64 / 2.0
+    /// Where the window ends along x (a = 0) or y (1), in cells.
+    fn half_support(&self, a: usize) -> f64 {
+        self.window.half_support_cells(self.h(a))
     }
 
+    /// Where the window ends along z, as a length (z is measured in x cells).
     pub fn z_radius(&self) -> f64 {
-        self.half_support() * self.h(0)
+        self.half_support(0) * self.h(0)
     }
 
     /// The z of each Chebyshev point, top first.
@@ -110,7 +111,7 @@ impl ChebyshevGrid {
 
     /// phi per unit length along x or y at `r` cells, zero beyond the support.
     fn phi_xy(&self, r: f64, a: usize) -> f64 {
-        if r.abs() > self.half_support() {
+        if r.abs() > self.half_support(a) {
             0.0
         } else {
             self.window.phi(r, self.h(a)) / self.h(a)
@@ -151,7 +152,7 @@ impl ChebyshevGrid {
             let l = self.lengths[a];
             let folded = q[a] - l * (q[a] / l + 0.5).floor();
             u[a] = (folded + 0.5 * l) / self.h(a) - 0.5;
-            first[a] = (u[a] - self.half_support()).ceil() as i64;
+            first[a] = (u[a] - self.half_support(a)).ceil() as i64;
         }
         for dy in 0..=s {
             for dx in 0..=s {
@@ -241,7 +242,12 @@ impl ChebyshevGrid {
             ],
             win_x: self.window.gpu_params(h0),
             win_y: self.window.gpu_params(h1),
-            radius: [self.half_support() as f32, self.z_radius() as f32, 0.0, 0.0],
+            radius: [
+                self.half_support(0) as f32,
+                self.z_radius() as f32,
+                self.half_support(1) as f32,
+                0.0,
+            ],
         }
     }
 
@@ -355,7 +361,7 @@ fn grid_params() -> Vec<ParamSpec> {
         ParamSpec::f32_nonnegative(
             "width",
             Some(0.0),
-            "Gaussian: standard deviation (length units)",
+            "Gaussian: standard deviation (length units); ES: its half-width (length units; 0: support / 2 cells, tied to the cell)",
         ),
         ParamSpec::integer(
             "support",
@@ -369,7 +375,7 @@ fn grid_params() -> Vec<ParamSpec> {
             Some(0.0),
             0.0,
             f64::MAX,
-            "ES: shape parameter (0: 2.3 x support)",
+            "ES: shape parameter (0: 2.3 x the cells the window spans)",
         ),
         ParamSpec::number(
             "tolerance",

@@ -136,9 +136,9 @@ fn arity(args: &[ParamValue], n: usize) -> Result<(), String> {
 static FUNCTIONS: &[HostFunction] = &[
     HostFunction {
         name: "dpstokes_plan",
-        doc: "dpstokes_plan(box, radius, tolerance, zmin, zmax, walls, rotation): the doubly periodic Stokes grid and windows, [nx, ny, points, zlo, zhi, support, torque_support]: Gaussian windows (a / sqrt(pi); torques a / (6 sqrt(pi))^(1/3)), FCM's cells per standard deviation at the tolerance (of the torque width with rotation), FFT-friendly x and y; the Chebyshev domain [zlo, zhi] is [zmin, zmax] padded by the half support on each open side; points so the mid-height spacing is at most the x cell",
+        doc: "dpstokes_plan(box, radius, tolerance, zmin, zmax, walls, rotation, kernel): the doubly periodic Stokes grid and windows, [nx, ny, points, zlo, zhi, support, torque_support, width, torque_width, beta, torque_beta]. kernel es: ES windows with a half-width as a length (radius exactly a on any grid), FCM's ES cells and beta at the tolerance for forces, a cell more for torques; kernel gaussian: FCM's Gaussians (a / sqrt(pi); torques a / (6 sqrt(pi))^(1/3)) at FCM's cells per standard deviation. FFT-friendly x and y (fine enough for the torque window with rotation); the Chebyshev domain [zlo, zhi] is [zmin, zmax] padded by the half support on each open side; points so the mid-height spacing is at most the x cell",
         call: |a| {
-            arity(a, 7)?;
+            arity(a, 8)?;
             let lengths = box_lengths(a, 0)?;
             let radius = positive(a, 1, "radius")?;
             let t = tolerance(a, 2)?;
@@ -146,7 +146,8 @@ static FUNCTIONS: &[HostFunction] = &[
             let zmax = number(a, 4, "zmax")?;
             let walls = text(a, 5, "walls")?;
             let rotation = flag(a, 6, "rotation")?;
-            crate::nodes::stokes_slab::plan(lengths, radius, t, zmin, zmax, walls, rotation)
+            let kernel = text(a, 7, "kernel")?;
+            crate::nodes::stokes_slab::plan(lengths, radius, t, zmin, zmax, walls, rotation, kernel)
                 .map(ParamValue::Numbers)
         },
     },

@@ -540,14 +540,114 @@ impl GpuKernels for Slab {
     }
 }
 
-/// The doubly periodic Stokes plan (graphs/dpstokes.json): Gaussian windows of standard
-/// deviation a / sqrt(pi) for forces (FCM's: self-mobility 1 / (6 pi eta a) exactly) and
-/// a / (6 sqrt(pi))^(1/3) for torques, a grid with FCM's cells per standard deviation at
-/// the tolerance (`fcm::plan::gaussian_upsampling`, of the torque width with `rotation`),
-/// FFT-friendly in x and y; supports by the window library's Gaussian rule; the Chebyshev
-/// domain: [zmin, zmax] padded by the half support on each open side (none: both; bottom:
-/// above), with points so the spacing at mid-height, (Lz / 2) pi / (points - 1), is at most
-/// the x cell. Returns [nx, ny, points, zlo, zhi, support, torque_support].
+/// The radius of the ES shape of unit half-width and shape `beta`, a / alpha: its
+/// free-space self-mobility (`fcm::plan::window_radius_cells`, f64), computed once per
+/// beta (about 0.1 s) and kept.
+pub fn es_radius_per_half_width(beta: f64) -> f64 {
+    use crate::nodes::spread::window::{es_integral, es_shape};
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    static KNOWN: OnceLock<Mutex<HashMap<u64, f64>>> = OnceLock::new();
+    let known = KNOWN.get_or_init(Default::default);
+    if let Some(r) = known
+        .lock()
+        .map(|m| m.get(&beta.to_bits()).copied())
+        .ok()
+        .flatten()
+    {
+        return r;
+    }
+    let integral = es_integral(beta, 1.0);
+    let r =
+        crate::nodes::fcm::plan::window_radius_cells(|x| es_shape(x, beta, 1.0) / integral, 1.0);
+    if let Ok(mut m) = known.lock() {
+        m.insert(beta.to_bits(), r);
+    }
+    r
+}
+
+/// The half-width of the ES window (shape `beta`) whose rotational self-mobility is
+/// 1 / (8 pi eta a^3): with the torque spread as half the curl of the window, mu_r =
+/// (1 / (6 eta)) int phi^2 d^3x (Parseval), and a unit-integral ES of half-width alpha has
+/// int phi_1d^2 dx = I(2 beta) / (alpha I(beta)^2), I the shape's integral over a unit
+/// half-width (its square is the shape of 2 beta); so alpha = a (4 pi / 3)^(1/3) I(2 beta)
+/// / I(beta)^2. (The Gaussian's twin is a / (6 sqrt(pi))^(1/3).)
+pub fn es_torque_half_width(radius: f64, beta: f64) -> f64 {
+    use crate::nodes::spread::window::es_integral;
+    let i = es_integral(beta, 1.0);
+    radius * (4.0 * std::f64::consts::PI / 3.0).cbrt() * es_integral(2.0 * beta, 1.0) / (i * i)
+}
+
+/// The reference for the open mode (no wall): the self-mobility (xx, zz; eta = 1) of a
+/// separable window in a fluid periodic in x, y (sides lx, ly) and unbounded in z,
+/// without the in-plane k = 0 mode, (1 / (lx ly)) sum over k_par != 0 of int dkz / (2 pi)
+/// |phi^(k)|^2 (1 - k_a^2 / k^2) / k^2, with phi^ the window's 1-D transform (`phi_hat`,
+/// negligible beyond `kmax`); f64, the kz integral by the trapezoid rule on 4000 steps.
+pub fn open_self_mobility(phi_hat: impl Fn(f64) -> f64, kmax: f64, lx: f64, ly: f64) -> (f64, f64) {
+    use std::f64::consts::PI;
+    let (nx, ny) = (
+        (kmax * lx / (2.0 * PI)).ceil() as i64,
+        (kmax * ly / (2.0 * PI)).ceil() as i64,
+    );
+    let nz = 4000;
+    let dkz = kmax / nz as f64;
+    let square = |k: f64| phi_hat(k).powi(2);
+    let along_z: Vec<f64> = (0..=nz).map(|m| square(m as f64 * dkz)).collect();
+    let along = |n: i64, l: f64| -> Vec<f64> {
+        (-n..=n).map(|i| square(2.0 * PI * i as f64 / l)).collect()
+    };
+    let (sx, sy) = (along(nx, lx), along(ny, ly));
+    let (mut xx, mut zz) = (0.0, 0.0);
+    for i in -nx..=nx {
+        for j in -ny..=ny {
+            let (kx, ky) = (2.0 * PI * i as f64 / lx, 2.0 * PI * j as f64 / ly);
+            let q2 = kx * kx + ky * ky;
+            if (i == 0 && j == 0) || q2 > kmax * kmax {
+                continue;
+            }
+            let plane = sx[(i + nx) as usize] * sy[(j + ny) as usize];
+            for (m, sz) in along_z.iter().enumerate() {
+                let kz = m as f64 * dkz;
+                let k2 = q2 + kz * kz;
+                let w = if m == 0 { 0.5 } else { 1.0 } * dkz / PI;
+                let g = plane * sz / k2 * w;
+                xx += g * (1.0 - kx * kx / k2);
+                zz += g * (1.0 - kz * kz / k2);
+            }
+        }
+    }
+    (xx / (lx * ly), zz / (lx * ly))
+}
+
+/// The ES shape per cell the window spans, beta / w, of the doubly periodic windows. With
+/// the half-width a length the grid resolves the window at exactly w cells (FCM's ES
+/// ties the cell to the window instead), and a softer shape than FCM's 2.3 aliases less:
+/// the open-mode self-mobility at 1e-3 (w = 5, box 16, tests/it/dpstokes.rs's three
+/// placements, on a cell face and near the padded top among them) was off by at most
+/// 2.2e-3 at 2.3, 2.7e-4 at 1.7, 1.8e-4 at 1.8, 1.1e-4 at 1.9 and 3e-4 at 2.0 and 2.1
+/// (lavapipe, f32). libMobility's DPStokes uses 1.714 at w = 6.
+pub const ES_BETA_PER_CELL: f64 = 1.9;
+
+/// The doubly periodic Stokes plan (graphs/dpstokes.json). Windows, forces and torques
+/// apart (the torques' narrower, and resolved by the grid only with `rotation`):
+/// - `es` (the default): exponential-of-semicircle windows with a half-width as a length,
+///   so the hydrodynamic radius is exactly a on whatever grid the FFT-friendly rounding
+///   gives. Forces: w = `fcm::plan::es_support` cells across (FCM's ES rule: 5 at 1e-3)
+///   at beta = `ES_BETA_PER_CELL` w, the half-width a / (a / alpha of that shape,
+///   `es_radius_per_half_width`); torques: w + 1 cells (rotation has no 1/k^2 to damp
+///   aliasing), the half-width from the rotational mobility (`es_torque_half_width`). The
+///   cell is the width over its cells.
+/// - `gaussian`: FCM's Gaussians, a / sqrt(pi) (forces) and a / (6 sqrt(pi))^(1/3)
+///   (torques), FCM's cells per standard deviation at the tolerance
+///   (`fcm::plan::gaussian_upsampling`, of the torque width with `rotation`), supports by
+///   the window library's Gaussian rule.
+/// Then: cells FFT-friendly in x and y, at most the cell above; the Chebyshev domain
+/// [zmin, zmax] padded by the half support on each open side (none: both; bottom: above);
+/// points so the spacing at mid-height, (Lz / 2) pi / (points - 1), is at most the x
+/// cell. Returns [nx, ny, points, zlo, zhi, support, torque_support, width,
+/// torque_width, beta, torque_beta]: width the Gaussian's standard deviation or the ES
+/// half-width, beta 0 for the Gaussian.
+#[allow(clippy::too_many_arguments)]
 pub fn plan(
     lengths: &[f64],
     radius: f64,
@@ -556,8 +656,9 @@ pub fn plan(
     zmax: f64,
     walls: &str,
     rotation: bool,
+    kernel: &str,
 ) -> Result<Vec<f64>, String> {
-    use crate::nodes::fcm::plan::{gaussian_upsampling, gaussian_width, torque_width};
+    use crate::nodes::fcm::plan::{es_support, gaussian_upsampling, gaussian_width, torque_width};
     use crate::nodes::spread::window::gaussian_support;
     if lengths.len() != 2 {
         return Err(format!(
@@ -571,10 +672,39 @@ pub fn plan(
     let Some(wall_code) = WALLS.iter().position(|w| *w == walls) else {
         return Err(format!("walls must be none, bottom or slit, got `{walls}`"));
     };
-    let sigma = gaussian_width(radius);
-    let sigma_t = torque_width(radius);
-    let finest = if rotation { sigma_t } else { sigma };
-    let h0 = finest / gaussian_upsampling(tolerance);
+    // Per window: width, beta, and the cell it asks for.
+    let (width, torque, beta, torque_beta, h_force, h_torque) = match kernel {
+        "es" => {
+            let w = es_support(tolerance);
+            let (beta, torque_beta) = (
+                ES_BETA_PER_CELL * w as f64,
+                ES_BETA_PER_CELL * (w + 1) as f64,
+            );
+            let alpha = radius / es_radius_per_half_width(beta);
+            let alpha_t = es_torque_half_width(radius, torque_beta);
+            (
+                alpha,
+                alpha_t,
+                beta,
+                torque_beta,
+                2.0 * alpha / w as f64,
+                2.0 * alpha_t / (w + 1) as f64,
+            )
+        }
+        "gaussian" => {
+            let (sigma, sigma_t) = (gaussian_width(radius), torque_width(radius));
+            let g = gaussian_upsampling(tolerance);
+            (sigma, sigma_t, 0.0, 0.0, sigma / g, sigma_t / g)
+        }
+        other => {
+            return Err(format!("kernel must be es or gaussian, got `{other}`"));
+        }
+    };
+    let h0 = if rotation {
+        h_force.min(h_torque)
+    } else {
+        h_force
+    };
     let mut cells = [0u32; 2];
     for (a, l) in lengths.iter().enumerate() {
         let n = (l / h0).ceil();
@@ -587,14 +717,19 @@ pub fn plan(
         cells[a] = crate::nodes::fft::next_friendly((n as u32).max(4));
     }
     let hx = lengths[0] / cells[0] as f64;
-    let support = gaussian_support(sigma, tolerance, hx);
-    let torque_support = gaussian_support(sigma_t, tolerance, hx);
-    let widest = if rotation {
-        support.max(torque_support)
+    let h_min = hx.min(lengths[1] / cells[1] as f64);
+    // Cells visited per axis, and the half support as a length (the z padding).
+    let (support, torque_support, half, half_t) = if kernel == "es" {
+        let cells_of = |w: f64| (2.0 * w / h_min - 1e-9).ceil() as u32;
+        (cells_of(width), cells_of(torque), width, torque)
     } else {
-        support
+        let (s, st) = (
+            gaussian_support(width, tolerance, hx),
+            gaussian_support(torque, tolerance, hx),
+        );
+        (s, st, s as f64 * hx / 2.0, st as f64 * hx / 2.0)
     };
-    let pad = widest as f64 * hx / 2.0;
+    let pad = if rotation { half.max(half_t) } else { half };
     let (zlo, zhi) = match wall_code {
         0 => (zmin - pad, zmax + pad),
         1 => (zmin, zmax + pad),
@@ -615,6 +750,10 @@ pub fn plan(
         zhi,
         support as f64,
         torque_support as f64,
+        width,
+        torque,
+        beta,
+        torque_beta,
     ])
 }
 

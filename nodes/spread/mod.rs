@@ -182,7 +182,7 @@ fn grid_params() -> Vec<ParamSpec> {
         ParamSpec::f32_nonnegative(
             "width",
             Some(0.0),
-            "Gaussian: standard deviation (length units)",
+            "Gaussian: standard deviation (length units); ES: its half-width (length units; 0: support / 2 cells, tied to the cell)",
         ),
         ParamSpec::integer(
             "support",
@@ -196,7 +196,7 @@ fn grid_params() -> Vec<ParamSpec> {
             Some(0.0),
             0.0,
             f64::MAX,
-            "ES: shape parameter (0: 2.3 x support)",
+            "ES: shape parameter (0: 2.3 x the cells the window spans)",
         ),
         ParamSpec::number(
             "tolerance",

@@ -16,12 +16,16 @@ pub enum Window {
         sigma: f64,
         support: u32,
     },
-    /// Exponential of semicircle over `support` cells with shape `beta`; `scale` is
-    /// 1 / its integral (in units of h), computed once.
+    /// Exponential of semicircle with shape `beta`, zero beyond its half-width: `support`
+    /// / 2 cells (tied to the cell, FCM's), or `half_width` as a length (the same window
+    /// on any cell, so one radius whatever the grid: the doubly periodic solvers); the
+    /// loops visit `support` cells, at least its width. `unit_integral` is the integral of
+    /// its shape over a unit half-width, computed once.
     Es {
         beta: f64,
         support: u32,
-        scale: f64,
+        half_width: Option<f64>,
+        unit_integral: f64,
     },
     Peskin3,
     Peskin4,
@@ -72,6 +76,24 @@ impl Window {
                     support,
                 }
             }
+            "es" if width > 0.0 => {
+                // A half-width as a length: the support is the cells it spans on the
+                // finest axis, the default shape Barnett's 2.3 per cell spanned.
+                let cells = 2.0 * width / h_min;
+                if !(cells.is_finite() && cells <= MAX_SUPPORT as f64) {
+                    return Err(format!(
+                        "the ES window's half-width `width` = {width} spans {cells:.4} cells of {h_min:.6}: more than the {MAX_SUPPORT} supported"
+                    ));
+                }
+                let needed = (cells - 1e-9).ceil().max(2.0) as u32;
+                if support > 0 && support < needed {
+                    return Err(format!(
+                        "support = {support} cells is narrower than the ES window's width, 2 `width` / h = {cells:.4} cells"
+                    ));
+                }
+                let beta = if beta > 0.0 { beta } else { 2.3 * cells };
+                Window::es_with_half_width(beta, support.max(needed), width)
+            }
             "es" => {
                 let support = if support > 0 {
                     support
@@ -110,12 +132,35 @@ impl Window {
         Ok(w)
     }
 
-    /// The ES window with its normalisation.
+    /// The ES window over `support` cells (its half-width support / 2 cells).
     pub fn es(beta: f64, support: u32) -> Window {
         Window::Es {
             beta,
             support,
-            scale: 1.0 / es_integral(beta, support as f64 / 2.0),
+            half_width: None,
+            unit_integral: es_integral(beta, 1.0),
+        }
+    }
+
+    /// The ES window of half-width `half_width` (a length), visited over `support` cells.
+    pub fn es_with_half_width(beta: f64, support: u32, half_width: f64) -> Window {
+        Window::Es {
+            beta,
+            support,
+            half_width: Some(half_width),
+            unit_integral: es_integral(beta, 1.0),
+        }
+    }
+
+    /// Where the window ends, in cells of size h: half the support, or the ES window's
+    /// half-width over h.
+    pub fn half_support_cells(&self, h: f64) -> f64 {
+        match self {
+            Window::Es {
+                half_width: Some(w),
+                ..
+            } => w / h,
+            _ => self.support() as f64 / 2.0,
         }
     }
 
@@ -146,9 +191,17 @@ impl Window {
             Window::Gaussian { sigma, .. } => [(sigma / h) as f32, 0.0, 0.0, 0.0],
             Window::Es {
                 beta,
-                support,
-                scale,
-            } => [*beta as f32, *support as f32 / 2.0, *scale as f32, 0.0],
+                unit_integral,
+                ..
+            } => {
+                let alpha = self.half_support_cells(h);
+                [
+                    *beta as f32,
+                    alpha as f32,
+                    (1.0 / (alpha * unit_integral)) as f32,
+                    0.0,
+                ]
+            }
             _ => [0.0; 4],
         }
     }
@@ -162,13 +215,41 @@ impl Window {
             }
             Window::Es {
                 beta,
-                support,
-                scale,
-            } => es_shape(r, *beta, *support as f64 / 2.0) * scale,
+                unit_integral,
+                ..
+            } => {
+                let alpha = self.half_support_cells(h);
+                es_shape(r, *beta, alpha) / (alpha * unit_integral)
+            }
             Window::Peskin3 => peskin3(r),
             Window::Peskin4 => peskin4(r),
             Window::Peskin6 => peskin6(r),
         }
+    }
+
+    /// The Fourier transform of phi per unit length, int phi(x) cos(k x) dx, at wave number
+    /// k (inverse length) on cells of size h, in f64: exact for the Gaussian, Simpson's
+    /// rule over the support (4000 intervals) for the others. For the references.
+    pub fn transform(&self, k: f64, h: f64) -> f64 {
+        if let Window::Gaussian { sigma, .. } = self {
+            return (-0.5 * sigma * sigma * k * k).exp();
+        }
+        let half = self.half_support_cells(h) * h;
+        let n = 4000;
+        let dx = 2.0 * half / n as f64;
+        let mut s = 0.0;
+        for i in 0..=n {
+            let x = -half + i as f64 * dx;
+            let w = if i == 0 || i == n {
+                1.0
+            } else if i % 2 == 1 {
+                4.0
+            } else {
+                2.0
+            };
+            s += w * self.phi(x / h, h) / h * (k * x).cos();
+        }
+        s * dx / 3.0
     }
 
     /// One line for `mesoflow inspect`.
@@ -177,8 +258,21 @@ impl Window {
             Window::Gaussian { sigma, support } => {
                 format!("Gaussian window, sigma = {sigma}, support {support} cells")
             }
-            Window::Es { beta, support, .. } => {
+            Window::Es {
+                beta,
+                support,
+                half_width: None,
+                ..
+            } => {
                 format!("ES window, beta = {beta}, support {support} cells")
+            }
+            Window::Es {
+                beta,
+                support,
+                half_width: Some(w),
+                ..
+            } => {
+                format!("ES window, beta = {beta}, half-width {w} (over {support} cells)")
             }
             Window::Peskin3 => "Peskin 3-point window".into(),
             Window::Peskin4 => "Peskin 4-point window".into(),
@@ -205,7 +299,7 @@ pub fn es_support(tolerance: f64) -> u32 {
     ((-tolerance.log10()).ceil() as u32 + 1).max(2)
 }
 
-fn es_shape(r: f64, beta: f64, alpha: f64) -> f64 {
+pub fn es_shape(r: f64, beta: f64, alpha: f64) -> f64 {
     let z = r / alpha;
     if z.abs() >= 1.0 {
         0.0
@@ -386,6 +480,46 @@ mod tests {
         ] {
             assert_eq!(gaussian_support(gu, eps, 1.0), ns, "tolerance {eps}");
         }
+    }
+
+    /// An ES window with a half-width as a length is the same function of length on any
+    /// cell (one integral, one transform), visits the cells it spans, and refuses a support
+    /// narrower than itself.
+    #[test]
+    fn es_half_width_is_a_length() {
+        let w = Window::from_params("es", 1.3, 0, 11.5, 1e-3, 0.5).unwrap();
+        assert_eq!(w.support(), 6, "2 x 1.3 / 0.5 = 5.2 cells");
+        for h in [0.5, 0.37, 0.8] {
+            let n = 20_000;
+            let dx = 2.6 / n as f64;
+            let integral: f64 = (0..n)
+                .map(|i| w.phi((-1.3 + (i as f64 + 0.5) * dx) / h, h) / h * dx)
+                .sum();
+            assert!((integral - 1.0).abs() < 1e-6, "h {h}: integral {integral}");
+            assert_eq!(w.phi(1.3 / h, h), 0.0);
+            let p = w.gpu_params(h);
+            assert!((p[1] as f64 - 1.3 / h).abs() < 1e-6 && p[0] == 11.5);
+            assert!((p[2] as f64 - w.phi(0.0, h)).abs() < 1e-6 * w.phi(0.0, h));
+        }
+        assert!((w.transform(0.0, 0.5) - 1.0).abs() < 1e-6);
+        assert!((w.transform(2.0, 0.5) - w.transform(2.0, 0.3)).abs() < 1e-12);
+        let err = Window::from_params("es", 1.3, 5, 0.0, 1e-3, 0.5).unwrap_err();
+        assert!(err.contains("narrower"), "{err}");
+        let g = Window::Gaussian {
+            sigma: 0.7,
+            support: 12,
+        };
+        // The Gaussian's transform by the quadrature the others use.
+        let n = 40_000;
+        let dx = 16.0 / n as f64;
+        let k = 1.7;
+        let q: f64 = (0..n)
+            .map(|i| {
+                let x = -8.0 + (i as f64 + 0.5) * dx;
+                g.phi(x, 1.0) * (k * x).cos() * dx
+            })
+            .sum();
+        assert!((g.transform(k, 1.0) - q).abs() < 1e-9);
     }
 
     #[test]

@@ -9,7 +9,7 @@ struct Geometry {
     z: vec4<f32>,        // zmin, zmax, zmid, H / 2
     win_x: vec4<f32>,    // window params for hx (z uses them too, with hx)
     win_y: vec4<f32>,    // window params for hy
-    radius: vec4<f32>,   // half support in cells, z radius (length)
+    radius: vec4<f32>,   // where the window ends: x (cells), z (length), y (cells), -
 }
 
 // table: z of each point (top first), then the quadrature weights h_x h_y (H/2) w_j.
@@ -40,7 +40,7 @@ fn phi_x(r: f32) -> f32 {
 }
 
 fn phi_y(r: f32) -> f32 {
-    return select(window_phi(r, geo.win_y) * geo.h.w, 0.0, abs(r) > geo.radius.x);
+    return select(window_phi(r, geo.win_y) * geo.h.w, 0.0, abs(r) > geo.radius.z);
 }
 
 // phi per unit length at distance d along z (in x cells), zero beyond the support.
@@ -122,7 +122,7 @@ struct Support {
 fn particle_support(p: u32, lid: u32, weighted: bool) -> Support {
     let u = vec2<f32>(centre_units(pos[3u * p], 0u), centre_units(pos[3u * p + 1u], 1u));
     let qz = pos[3u * p + 2u];
-    let first = vec2<i32>(ceil(u - vec2<f32>(geo.radius.x)));
+    let first = vec2<i32>(ceil(u - geo.radius.xz));
     let zr = z_range(qz);
     fill_factors(lid, u.x, u.y, qz, first.x, first.y, zr, weighted);
     return Support(qz, first, zr);

@@ -1,11 +1,11 @@
 //! `mesoflow bench dpstokes`: the doubly periodic Stokes mobility (graphs/dpstokes.json)
 //! per wall mode and size: one M F end to end, its grid and memory, the error it reaches,
-//! and fcm.json's M F on a periodic grid of (at least) the same number of points at the
-//! same tolerance, timed in the same run. N particles, a = 1, heights uniform in
-//! [1.5 a, 10 a] (zmin = 0, zmax = 11.5: a slit's top wall 1.5 a above the highest), box
+//! and fcm.json's M F on a periodic grid of (at least) the same number of points with the
+//! same window family and tolerance, timed in the same run. N particles, a = 1, heights
+//! uniform in [1.5 a, 10 a] (zmin = 0, zmax = 11.5: a slit's top wall 1.5 a above the highest), box
 //! side 128 sqrt(N / 10^5). The error: one particle at 2 a and 6 a in a box of side 128,
 //! its parallel and perpendicular self-mobility against Rotne-Prager-Blake (bottom wall),
-//! against the doubly periodic sum of FCM's Gaussian (no wall; `open_self`, f64), none for
+//! against the doubly periodic sum of its window (no wall; `open_self`, f64), none for
 //! the slit (no closed form), as the largest relative difference. With
 //! MESOFLOW_BENCH_DISPATCHES the per-dispatch times, and the two boundary-value solves'
 //! rate: the words they must read and write once (f and y, the per-k tables) over their
@@ -19,7 +19,8 @@ use mesoflow::expr::ParamValue;
 use mesoflow::gpu::{GpuContext, KernelCache};
 use mesoflow::graph::Graph;
 use mesoflow::node::Registry;
-use mesoflow::nodes::fcm::plan::gaussian_width;
+use mesoflow::nodes::spread::window::Window;
+use mesoflow::nodes::stokes_slab::open_self_mobility;
 
 use super::fcm::{Rng, load, mobility_inputs, param, plan_for, velocities};
 use super::{BenchError, end_to_end_clock, ms, open_gpu, time_loaded};
@@ -30,6 +31,7 @@ pub struct DpStokesBench {
     pub walls: Vec<String>,
     pub sizes: Vec<u32>,
     pub tolerance: f64,
+    pub kernel: String,
     pub reps: u64,
 }
 
@@ -43,35 +45,28 @@ fn numbers(g: &Graph, name: &str) -> Vec<f64> {
     }
 }
 
-/// The self-mobility (xx, zz; eta = 1) of FCM's Gaussian (standard deviation sigma) in a
-/// fluid periodic in x, y (sides lx, ly), unbounded in z, without the in-plane k = 0 mode:
-/// (1 / (lx ly)) sum over k_par != 0 of int dkz / (2 pi) e^{-sigma^2 k^2} (1 - k_a^2 / k^2)
-/// / k^2 (f64; the kz integral by the trapezoid rule).
-pub fn open_self(sigma: f64, lx: f64, ly: f64) -> (f64, f64) {
-    let kmax = 37f64.sqrt() / sigma;
-    let nx = (kmax * lx / (2.0 * PI)).ceil() as i64;
-    let ny = (kmax * ly / (2.0 * PI)).ceil() as i64;
-    let nz = 2000;
-    let dkz = kmax / nz as f64;
-    let (mut xx, mut zz) = (0.0, 0.0);
-    for i in -nx..=nx {
-        for j in -ny..=ny {
-            let (kx, ky) = (2.0 * PI * i as f64 / lx, 2.0 * PI * j as f64 / ly);
-            let q2 = kx * kx + ky * ky;
-            if (i == 0 && j == 0) || q2 > kmax * kmax {
-                continue;
-            }
-            for m in 0..=nz {
-                let kz = m as f64 * dkz;
-                let k2 = q2 + kz * kz;
-                let w = if m == 0 { 0.5 } else { 1.0 } * dkz / PI;
-                let g = (-sigma * sigma * k2).exp() / k2 * w;
-                xx += g * (1.0 - kx * kx / k2);
-                zz += g * (1.0 - kz * kz / k2);
-            }
+/// The open mode's reference for graph `g` in a box of side l: the doubly periodic sum
+/// of its force window's Green function (`stokes_slab::open_self_mobility`, f64).
+fn open_self(g: &Graph, l: f64) -> (f64, f64) {
+    let width = numbers(g, "width")[0];
+    let support = numbers(g, "support")[0] as u32;
+    let (window, kmax) = match param(g, "kernel") {
+        Some(ParamValue::Text(k)) if k == "gaussian" => (
+            Window::Gaussian {
+                sigma: width,
+                support,
+            },
+            37f64.sqrt() / width,
+        ),
+        _ => {
+            let beta = numbers(g, "beta")[0];
+            (
+                Window::es_with_half_width(beta, support, width),
+                3.0 * beta / width,
+            )
         }
-    }
-    (xx / (lx * ly), zz / (lx * ly))
+    };
+    open_self_mobility(|k| window.transform(k, 1.0), kmax, l, l)
 }
 
 /// The largest relative self-mobility error at 2 a and 6 a (None for the slit).
@@ -85,11 +80,11 @@ fn accuracy(
         return Ok(None);
     }
     let l = 128.0;
-    let g = load(&bench.graph, &sets(walls, l, bench.tolerance), registry)?;
+    let g = load(&bench.graph, &sets(walls, l, bench), registry)?;
     let plan = plan_for(gpu, &g, 1)?;
     let mut program = Program::compile(gpu, &g, &plan, &mut KernelCache::default())?;
     let t0 = 1.0 / (6.0 * PI);
-    let open = (walls == "none").then(|| open_self(gaussian_width(1.0), l, l));
+    let open = (walls == "none").then(|| open_self(&g, l));
     let mut worst: f64 = 0.0;
     for h in [2.0, 6.0] {
         let p = [[0.3, -0.2, h]];
@@ -112,13 +107,14 @@ fn accuracy(
     Ok(Some(worst))
 }
 
-fn sets(walls: &str, l: f64, tolerance: f64) -> Vec<(&'static str, ParamValue)> {
+fn sets(walls: &str, l: f64, bench: &DpStokesBench) -> Vec<(&'static str, ParamValue)> {
     vec![
+        ("kernel", ParamValue::Text(bench.kernel.clone())),
         ("box", ParamValue::Numbers(vec![l, l])),
         ("zmin", ParamValue::Number(0.0)),
         ("zmax", ParamValue::Number(ZMAX)),
         ("walls", ParamValue::Text(walls.to_string())),
-        ("tolerance", ParamValue::Number(tolerance)),
+        ("tolerance", ParamValue::Number(bench.tolerance)),
     ]
 }
 
@@ -126,8 +122,9 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
     let gpu = open_gpu(bench.reps)?;
     let registry = mesoflow::nodes::registry();
     outln!(
-        "dpstokes.json M F at tolerance {}: a = 1, eta = 1, heights uniform in [1.5, 10], zmin 0, zmax {ZMAX}, box side 128 sqrt(N / 10^5); time: median over {} runs end to end ({}); fcm.json (Gaussian, same tolerance) on a periodic grid of at least the same points, same N; error: the largest relative self-mobility error at h = 2 a and 6 a (L = 128; bottom: against Rotne-Prager-Blake, none: against the doubly periodic f64 sum, slit: -)",
+        "dpstokes.json M F at tolerance {}, {} windows: a = 1, eta = 1, heights uniform in [1.5, 10], zmin 0, zmax {ZMAX}, box side 128 sqrt(N / 10^5); time: median over {} runs end to end ({}); fcm.json (the same window family and tolerance) on a periodic grid of at least the same points, same N; error: the largest relative self-mobility error at h = 2 a and 6 a (L = 128; bottom: against Rotne-Prager-Blake, none: against the doubly periodic f64 sum, slit: -)",
         bench.tolerance,
+        bench.kernel,
         bench.reps,
         end_to_end_clock(&gpu)
     );
@@ -148,7 +145,7 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
         let error = accuracy(&gpu, bench, &registry, walls)?;
         for &n in &bench.sizes {
             let l = 128.0 * (n as f64 / 1e5).sqrt();
-            let g = load(&bench.graph, &sets(walls, l, bench.tolerance), &registry)?;
+            let g = load(&bench.graph, &sets(walls, l, bench), &registry)?;
             let grid = numbers(&g, "grid");
             let points = numbers(&g, "points").first().copied().unwrap_or(0.0);
             let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ n as u64);
@@ -171,7 +168,9 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
                 true,
             )?;
             // fcm.json on a periodic grid of at least as many points: the DP grid's x, y
-            // and the FFT-friendly size above its Chebyshev points along z.
+            // and the FFT-friendly size above its Chebyshev points along z; the same
+            // window family (FCM's ES at the tolerance ties its radius to this grid, so
+            // it runs on any; its Gaussian needs a grid as fine as its own rule's).
             let nz = mesoflow::nodes::fft::next_friendly(points as u32) as f64;
             let hx = l / grid[0];
             let fcm = load(
@@ -180,6 +179,7 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
                     ("box", ParamValue::Numbers(vec![l, l, nz * hx])),
                     ("grid", ParamValue::Numbers(vec![grid[0], grid[1], nz])),
                     ("tolerance", ParamValue::Number(bench.tolerance)),
+                    ("kernel", ParamValue::Text(bench.kernel.clone())),
                 ],
                 &registry,
             )?;

@@ -442,6 +442,9 @@ pub enum BenchCommand {
         sizes: Vec<u32>,
         #[arg(long, default_value_t = 1e-3)]
         tolerance: f64,
+        /// dpstokes.json's windows: es or gaussian.
+        #[arg(long, default_value = "es")]
+        kernel: String,
         #[arg(long, default_value_t = 10)]
         reps: u64,
     },
@@ -615,6 +618,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             walls,
             sizes,
             tolerance,
+            kernel,
             reps,
         } => dpstokes::run(&dpstokes::DpStokesBench {
             graph,
@@ -622,6 +626,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             walls,
             sizes,
             tolerance,
+            kernel,
             reps,
         }),
         BenchCommand::Nbody {
