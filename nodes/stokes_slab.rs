@@ -641,6 +641,7 @@ pub const ES_BETA_PER_CELL: f64 = 1.9;
 ///   (torques), FCM's cells per standard deviation at the tolerance
 ///   (`fcm::plan::gaussian_upsampling`, of the torque width with `rotation`), supports by
 ///   the window library's Gaussian rule.
+///
 /// Then: cells FFT-friendly in x and y, at most the cell above; the Chebyshev domain
 /// [zmin, zmax] padded by the half support on each open side (none: both; bottom: above);
 /// points so the spacing at mid-height, (Lz / 2) pi / (points - 1), is at most the x

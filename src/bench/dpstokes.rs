@@ -2,8 +2,8 @@
 //! per wall mode and size: one M F end to end, its grid and memory, the error it reaches,
 //! and fcm.json's M F on a periodic grid of (at least) the same number of points with the
 //! same window family and tolerance, timed in the same run. N particles, a = 1, heights
-//! uniform in [1.5 a, 10 a] (zmin = 0, zmax = 11.5: a slit's top wall 1.5 a above the highest), box
-//! side 128 sqrt(N / 10^5). The error: one particle at 2 a and 6 a in a box of side 128,
+//! uniform in [1.5 a, 10 a] (zmin = 0, zmax = 11.5: a slit's top wall 1.5 a above the
+//! highest), box side 128 sqrt(N / 10^5). The error: one particle at 2 a and 6 a in a box of side 128,
 //! its parallel and perpendicular self-mobility against Rotne-Prager-Blake (bottom wall),
 //! against the doubly periodic sum of its window (no wall; `open_self`, f64), none for
 //! the slit (no closed form), as the largest relative difference. With
