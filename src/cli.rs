@@ -42,7 +42,9 @@ pub enum Command {
         /// Give a graph input from an NPY file: NAME=FILE.npy.
         #[arg(long = "input", value_name = "NAME=FILE")]
         inputs: Vec<String>,
-        /// Request an output, and write it to an NPY file when =FILE is given: NAME[=FILE.npy].
+        /// Request an output, and write it to a file when =FILE is given: NAME[=FILE.npy]
+        /// or NAME[=FILE.gsd] (a HOOMD-schema trajectory; outputs may share one: positions
+        /// and velocities become particles/position and /velocity, others go under log/).
         /// Without any --output, every output the inputs and params allow is computed and
         /// summarised (the others are named, with why).
         #[arg(long = "output", value_name = "NAME[=FILE]")]
@@ -50,6 +52,11 @@ pub enum Command {
         /// Number of time steps.
         #[arg(long, default_value_t = 1)]
         steps: u64,
+        /// Write a frame of each output given a file every K steps (and after the last),
+        /// streamed to disk while the run goes on: FILE.npy holds (frames, ...), FILE.gsd
+        /// one frame each. The steps and random draws are those of one run.
+        #[arg(long, value_name = "K")]
+        every: Option<u64>,
         /// Random seed (the built-in param `seed`).
         #[arg(long)]
         seed: Option<u64>,
@@ -170,6 +177,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             inputs,
             outputs,
             steps,
+            every,
             seed,
             profile,
             profile_dispatches,
@@ -188,6 +196,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
                 &inputs,
                 &outputs,
                 steps,
+                every,
                 seed,
                 profile,
                 !no_fuse,
@@ -286,6 +295,7 @@ fn run(
     input_args: &[String],
     output_args: &[String],
     steps: u64,
+    every: Option<u64>,
     seed: Option<u64>,
     profile: Profile,
     fuse: bool,
@@ -293,6 +303,14 @@ fn run(
 ) -> Result<(), CliError> {
     if steps == 0 {
         return Err(CliError::Input("--steps must be at least 1".into()));
+    }
+    if every == Some(0) {
+        return Err(CliError::Input("--every must be at least 1".into()));
+    }
+    if every.is_some() && profile != Profile::Off {
+        return Err(CliError::Input(
+            "--every streams frames between chunks of steps: profile a run without it".into(),
+        ));
     }
     let overrides = parse_sets(sets)?;
     let seed = match (seed, overrides.get("seed")) {
@@ -351,12 +369,52 @@ fn run(
     let mut program = Program::compile(&gpu, &g, &p, &mut cache)?;
     program.upload(&data)?;
     let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
-    let stats = program.run(&RunOptions {
-        steps,
-        profile,
-        progress,
-    })?;
-    let results = program.read_outputs()?;
+    let files: Vec<(String, PathBuf)> = requested
+        .iter()
+        .filter_map(|(name, file)| Some((name.clone(), file.clone()?)))
+        .collect();
+    // Frames: with --every, or where a GSD file is asked for (one frame at the end).
+    let streamed = every.is_some() || files.iter().any(|(_, f)| crate::frames::is_gsd(f));
+    let (stats, results, streamed_files) = if streamed {
+        let every = every.unwrap_or(steps).min(steps);
+        let mut sinks = crate::frames::FrameSinks::open(&files, steps.div_ceil(every))
+            .map_err(CliError::Runtime)?;
+        let cx = crate::frames::FrameContext::of(&g);
+        let mut stats: Option<RunStats> = None;
+        let mut results = Vec::new();
+        let mut done = 0;
+        while done < steps {
+            let k = every.min(steps - done);
+            let opts = RunOptions {
+                steps: k,
+                profile,
+                progress,
+            };
+            let (chunk, outputs) = program.run_on_and_read(&opts)?;
+            done += k;
+            sinks
+                .frame(done, &outputs, &cx)
+                .map_err(CliError::Runtime)?;
+            stats = Some(match stats {
+                None => chunk,
+                Some(s) => RunStats {
+                    steps: done,
+                    wall: s.wall + chunk.wall,
+                    ..chunk
+                },
+            });
+            results = outputs;
+        }
+        let written = sinks.finish().map_err(CliError::Runtime)?;
+        (stats.expect("at least one step"), results, written)
+    } else {
+        let stats = program.run(&RunOptions {
+            steps,
+            profile,
+            progress,
+        })?;
+        (stats, program.read_outputs()?, Vec::new())
+    };
     // Judged now, reported after the files: a user debugging NaN wants to see them.
     let non_finite = program.check_finite(&results).err();
     if let Some(input) = program.non_finite_input() {
@@ -379,9 +437,10 @@ fn run(
             note!("mesoflow: loop `{node}`: {mean:.1} iterations per step (min {lo}, max {hi})");
         }
     }
-    // Every file first, all or none; then the report.
+    // Every file first, all or none; then the report. Streamed files are in place.
     let files: BTreeMap<&str, &Path> = requested
         .iter()
+        .filter(|_| !streamed)
         .filter_map(|(name, file)| Some((name.as_str(), file.as_deref()?)))
         .collect();
     let to_write: Vec<(&str, &Path, &HostArray)> = results
@@ -406,9 +465,18 @@ fn run(
         print_profile(&stats);
     }
     for (name, arr) in &results {
-        match files.get(name.as_str()) {
-            Some(f) => outln!("{name}: {} -> {}", arr.ty, f.display()),
-            None => outln!("{name}: {}", summary(arr)),
+        let streamed_to = streamed_files
+            .iter()
+            .find(|(names, _)| names.contains(name));
+        match (files.get(name.as_str()), streamed_to) {
+            (Some(f), _) => outln!("{name}: {} -> {}", arr.ty, f.display()),
+            (None, Some((_, f))) => outln!(
+                "{name}: {} -> {} ({} frames)",
+                arr.ty,
+                f.display(),
+                steps.div_ceil(every.unwrap_or(steps).min(steps))
+            ),
+            (None, None) => outln!("{name}: {}", summary(arr)),
         }
     }
     match non_finite {
@@ -480,7 +548,9 @@ fn output_requests(
                     f.display()
                 )));
             }
-            if let Some((_, other)) = targets.iter().find(|(t, _)| *t == canonical_dir) {
+            // One GSD trajectory may hold several outputs; any other file holds one.
+            let shared = crate::frames::is_gsd(f);
+            if let Some((_, other)) = targets.iter().find(|(t, _)| *t == canonical_dir && !shared) {
                 return Err(CliError::Input(format!(
                     "--output {name}: {} is also the file of --output {other}",
                     f.display()

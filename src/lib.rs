@@ -9,6 +9,7 @@ pub mod exec;
 pub mod expr;
 pub mod gpu;
 pub mod graph;
+pub mod gsd;
 pub mod ids;
 pub mod node;
 pub mod npy;

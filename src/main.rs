@@ -7,6 +7,7 @@ mod out;
 
 mod bench;
 mod cli;
+mod frames;
 
 use std::process::ExitCode;
 

@@ -313,6 +313,38 @@ pub fn abandon_writes() {
     }
 }
 
+/// Opens the hidden temporary a file streamed over a run is written to (see
+/// [`write_all`]); registered, so an interrupt removes it.
+pub fn begin_temporary(path: &Path) -> std::io::Result<PathBuf> {
+    let mut files = pending();
+    if ABANDONED.load(Ordering::SeqCst) {
+        return Err(std::io::Error::other("interrupted"));
+    }
+    if path.is_dir() {
+        return Err(std::io::Error::other("it is a folder"));
+    }
+    let tmp = temporary(path);
+    files.push(tmp.clone());
+    Ok(tmp)
+}
+
+/// Renames a finished temporary into place (it was synced by its writer).
+pub fn finish_temporary(tmp: &Path, path: &Path) -> std::io::Result<()> {
+    let mut files = pending();
+    let renamed = std::fs::rename(tmp, path);
+    files.retain(|f| f != tmp);
+    renamed
+}
+
+/// Removes a temporary that will not be finished (a no-op once it was renamed).
+pub fn abandon_temporary(tmp: &Path) {
+    let mut files = pending();
+    if files.iter().any(|f| f == tmp) {
+        let _ = std::fs::remove_file(tmp);
+        files.retain(|f| f != tmp);
+    }
+}
+
 /// A failure of [`write_all`]: which output (its index) and why.
 #[derive(Debug, Error)]
 #[error("{source}")]

@@ -993,3 +993,99 @@ fn poisson_and_wall_graphs_run_from_the_command_line() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// An NPY file's shape and f32 values (npyz).
+fn read_f32_npy(path: &Path) -> (Vec<u64>, Vec<f32>) {
+    let bytes = std::fs::read(path).unwrap();
+    let npy = npyz::NpyFile::new(&bytes[..]).unwrap();
+    let shape = npy.shape().to_vec();
+    (shape, npy.into_vec::<f32>().unwrap())
+}
+
+/// `--every K` streams frames while the run goes on: an NPY of (frames, ...) whose last
+/// frame is the one-shot run's result bit for bit (the chunks run the same steps and
+/// draws), a GSD trajectory two outputs share (its structure: tests in src/gsd.rs and,
+/// with the `gsd` package, python/tests/test_gsd.py), and clear errors for K = 0, for
+/// --profile with it, and for an NPY file asked for by two outputs.
+#[test]
+fn every_k_steps_streams_frames_to_npy_and_gsd() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-every");
+    let vals: Vec<f32> = (0..12).map(|i| (i as f32 * 0.37).sin()).collect();
+    let input = format!("positions={}", positions(&dir, "x.npy", vals, 4));
+    let graph = relax();
+    let file = |name: &str| dir.join(name).display().to_string();
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", graph.as_str(), "--input", &input, "--steps", "5"];
+        args.extend(extra);
+        let o = mesoflow(&args);
+        assert!(o.status.success(), "{extra:?}: {}", text(&o));
+        text(&o)
+    };
+    run(&["--output", &format!("positions={}", file("once.npy"))]);
+    let t = run(&[
+        "--every",
+        "2",
+        "--output",
+        &format!("positions={}", file("frames.npy")),
+    ]);
+    assert!(t.contains("(3 frames)"), "{t}");
+    let (shape, frames) = read_f32_npy(&dir.join("frames.npy"));
+    let (_, once) = read_f32_npy(&dir.join("once.npy"));
+    assert_eq!(shape, vec![3, 4, 3], "frames after steps 2, 4 and 5");
+    assert_eq!(
+        &frames[24..],
+        &once[..],
+        "the last frame is the one-shot result"
+    );
+    assert_ne!(&frames[..12], &once[..], "the first frame is earlier");
+    run(&[
+        "--every",
+        "2",
+        "--output",
+        &format!("positions={}", file("t.gsd")),
+        "--output",
+        &format!("force={}", file("t.gsd")),
+    ]);
+    let gsd = std::fs::read(dir.join("t.gsd")).unwrap();
+    assert_eq!(&gsd[0..8], &0x65DF_65DF_65DF_65DFu64.to_le_bytes());
+    let names = String::from_utf8_lossy(&gsd);
+    for chunk in ["particles/position", "log/particles/force", "log/time"] {
+        assert!(names.contains(chunk), "no {chunk} in the GSD file");
+    }
+    fails_with(
+        &["run", &graph, "--input", &input, "--every", "0"],
+        &["--every must be at least 1"],
+    );
+    fails_with(
+        &[
+            "run",
+            &graph,
+            "--input",
+            &input,
+            "--every",
+            "2",
+            "--profile",
+        ],
+        &["profile a run without it"],
+    );
+    fails_with(
+        &[
+            "run",
+            &graph,
+            "--input",
+            &input,
+            "--every",
+            "2",
+            "--output",
+            &format!("positions={}", file("two.npy")),
+            "--output",
+            &format!("force={}", file("two.npy")),
+        ],
+        &["also the file of --output positions"],
+    );
+    assert!(temporaries(&dir).is_empty(), "{:?}", temporaries(&dir));
+    assert!(!dir.join("two.npy").exists());
+}

@@ -1,0 +1,285 @@
+//! A GSD file writer (HOOMD-blue's trajectory format, read by OVITO, freud, MDAnalysis and
+//! the `gsd` Python package), enough to stream frames: chunks are appended as they come,
+//! and the namelist, the index and the header are written when the file is finished. The
+//! file is written to a hidden temporary next to it (`npy`'s, removed on an interrupt) and
+//! renamed into place at [`GsdFile::finish`]: a run that fails leaves no half-written file.
+//!
+//! The layout (GSD 2.0, `gsd.c`): a 256-byte header (magic, the index's and the namelist's
+//! locations and sizes, schema and file versions, application and schema names), chunks of
+//! data anywhere, an index of 32-byte entries (frame, N, location, M, name id, type, flags)
+//! sorted by frame then name id, and a namelist: the names packed, each ending in a NUL,
+//! in blocks of 64 bytes (a name's id is its place).
+//! Schema `hoomd` 1.4: `configuration/step`, `configuration/dimensions`,
+//! `configuration/box`, `particles/N`, `particles/position`, `particles/velocity`, and
+//! `log/...` for anything else (per-particle values under `log/particles/`).
+
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+const MAGIC: u64 = 0x65DF_65DF_65DF_65DF;
+const HEADER_BYTES: u64 = 256;
+const NAME_BYTES: usize = 64;
+
+/// Element types of a chunk (gsd.h's numbering).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GsdType {
+    U8 = 1,
+    U32 = 3,
+    U64 = 4,
+    F32 = 9,
+    F64 = 10,
+}
+
+impl GsdType {
+    fn size(self) -> u64 {
+        match self {
+            GsdType::U8 => 1,
+            GsdType::U32 | GsdType::F32 => 4,
+            GsdType::U64 | GsdType::F64 => 8,
+        }
+    }
+}
+
+fn version(major: u32, minor: u32) -> u32 {
+    (major << 16) | minor
+}
+
+struct IndexEntry {
+    frame: u64,
+    n: u64,
+    location: u64,
+    m: u32,
+    id: u16,
+    ty: GsdType,
+}
+
+/// A GSD file being written, frame by frame.
+pub struct GsdFile {
+    path: PathBuf,
+    temporary: PathBuf,
+    out: BufWriter<File>,
+    at: u64,
+    names: Vec<String>,
+    index: Vec<IndexEntry>,
+    frame: u64,
+    frame_names: Vec<u16>,
+}
+
+impl GsdFile {
+    /// Starts a HOOMD-schema file for `path` (written to a temporary until finished).
+    pub fn create(path: &Path) -> std::io::Result<GsdFile> {
+        let temporary = crate::npy::begin_temporary(path)?;
+        let file = File::create(&temporary)?;
+        let mut out = BufWriter::new(file);
+        // The header is written last; its place is kept.
+        out.write_all(&[0u8; HEADER_BYTES as usize])?;
+        Ok(GsdFile {
+            path: path.to_path_buf(),
+            temporary,
+            out,
+            at: HEADER_BYTES,
+            names: Vec::new(),
+            index: Vec::new(),
+            frame: 0,
+            frame_names: Vec::new(),
+        })
+    }
+
+    /// Frames ended so far.
+    pub fn frames(&self) -> u64 {
+        self.frame
+    }
+
+    /// Appends one chunk of the current frame: `n` rows of `m` elements of `ty`, `bytes`
+    /// little-endian. A name at most once per frame.
+    pub fn chunk(
+        &mut self,
+        name: &str,
+        ty: GsdType,
+        n: u64,
+        m: u32,
+        bytes: &[u8],
+    ) -> std::io::Result<()> {
+        let invalid = |what: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, what);
+        if name.is_empty() || name.len() >= NAME_BYTES {
+            return Err(invalid(format!(
+                "GSD chunk name `{name}`: 1 to {} bytes",
+                NAME_BYTES - 1
+            )));
+        }
+        if n * m as u64 * ty.size() != bytes.len() as u64 || m == 0 {
+            return Err(invalid(format!(
+                "GSD chunk `{name}`: {} bytes for {n} x {m} elements of {} bytes",
+                bytes.len(),
+                ty.size()
+            )));
+        }
+        let id = match self.names.iter().position(|s| s == name) {
+            Some(i) => i,
+            None => {
+                if self.names.len() >= u16::MAX as usize {
+                    return Err(invalid("GSD: too many chunk names".into()));
+                }
+                self.names.push(name.to_string());
+                self.names.len() - 1
+            }
+        } as u16;
+        if self.frame_names.contains(&id) {
+            return Err(invalid(format!(
+                "GSD chunk `{name}` twice in frame {}",
+                self.frame
+            )));
+        }
+        self.frame_names.push(id);
+        self.out.write_all(bytes)?;
+        self.index.push(IndexEntry {
+            frame: self.frame,
+            n,
+            location: self.at,
+            m,
+            id,
+            ty,
+        });
+        self.at += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// Ends the current frame (the next chunks belong to the next).
+    pub fn end_frame(&mut self) {
+        self.frame += 1;
+        self.frame_names.clear();
+    }
+
+    /// Writes the namelist, the index and the header, syncs the file to disk and renames
+    /// it into place.
+    pub fn finish(mut self) -> std::io::Result<PathBuf> {
+        if !self.frame_names.is_empty() {
+            self.end_frame();
+        }
+        // Sorted by frame, then name id, as the readers' binary search needs.
+        self.index.sort_by_key(|e| (e.frame, e.id));
+        // GSD 2's namelist: the names packed, each ending in a NUL, then NULs to a whole
+        // number of 64-byte entries (an empty name ends the list; the last byte is NUL).
+        let namelist_location = self.at;
+        let mut namelist: Vec<u8> = Vec::new();
+        for name in &self.names {
+            namelist.extend_from_slice(name.as_bytes());
+            namelist.push(0);
+        }
+        let namelist_entries = (namelist.len() as u64 + 1).div_ceil(NAME_BYTES as u64);
+        namelist.resize(namelist_entries as usize * NAME_BYTES, 0);
+        self.out.write_all(&namelist)?;
+        self.at += namelist.len() as u64;
+        let index_location = self.at;
+        let index_entries = (self.index.len() as u64).max(1);
+        for e in &self.index {
+            let mut entry = [0u8; 32];
+            entry[0..8].copy_from_slice(&e.frame.to_le_bytes());
+            entry[8..16].copy_from_slice(&e.n.to_le_bytes());
+            entry[16..24].copy_from_slice(&(e.location as i64).to_le_bytes());
+            entry[24..28].copy_from_slice(&e.m.to_le_bytes());
+            entry[28..30].copy_from_slice(&e.id.to_le_bytes());
+            entry[30] = e.ty as u8;
+            self.out.write_all(&entry)?;
+        }
+        if self.index.is_empty() {
+            self.out.write_all(&[0u8; 32])?;
+        }
+        let mut header = [0u8; HEADER_BYTES as usize];
+        header[0..8].copy_from_slice(&MAGIC.to_le_bytes());
+        header[8..16].copy_from_slice(&index_location.to_le_bytes());
+        header[16..24].copy_from_slice(&index_entries.to_le_bytes());
+        header[24..32].copy_from_slice(&namelist_location.to_le_bytes());
+        header[32..40].copy_from_slice(&namelist_entries.to_le_bytes());
+        header[40..44].copy_from_slice(&version(1, 4).to_le_bytes());
+        header[44..48].copy_from_slice(&version(2, 0).to_le_bytes());
+        let application = format!("mesoflow {}", env!("CARGO_PKG_VERSION"));
+        header[48..48 + application.len()].copy_from_slice(application.as_bytes());
+        header[112..117].copy_from_slice(b"hoomd");
+        self.out.seek(SeekFrom::Start(0))?;
+        self.out.write_all(&header)?;
+        self.out.flush()?;
+        self.out.get_ref().sync_all()?;
+        crate::npy::finish_temporary(&self.temporary, &self.path)?;
+        Ok(self.path.clone())
+    }
+}
+
+impl Drop for GsdFile {
+    /// A file dropped unfinished (an error on the way) leaves nothing behind.
+    fn drop(&mut self) {
+        crate::npy::abandon_temporary(&self.temporary);
+    }
+}
+
+/// Little-endian bytes of f32 values.
+pub fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn u64_at(b: &[u8], at: usize) -> u64 {
+        u64::from_le_bytes(b[at..at + 8].try_into().unwrap())
+    }
+
+    /// The file's structure, read back by hand: header, namelist, index sorted by frame
+    /// and id, chunks where the index says. (tests/python's test_gsd.py reads it with the
+    /// `gsd` package.)
+    #[test]
+    fn frames_round_trip_through_the_index() {
+        let dir = std::env::temp_dir().join(format!("mesoflow-gsd-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.gsd");
+        let mut f = GsdFile::create(&path).unwrap();
+        for frame in 0..3u64 {
+            f.chunk(
+                "configuration/step",
+                GsdType::U64,
+                1,
+                1,
+                &(frame * 10).to_le_bytes(),
+            )
+            .unwrap();
+            let x: Vec<f32> = (0..6).map(|i| (frame * 6 + i) as f32).collect();
+            f.chunk("particles/position", GsdType::F32, 2, 3, &f32_bytes(&x))
+                .unwrap();
+            assert!(
+                f.chunk("particles/position", GsdType::F32, 2, 3, &f32_bytes(&x))
+                    .is_err()
+            );
+            f.end_frame();
+        }
+        assert!(f.chunk("bad", GsdType::F32, 2, 3, &[0u8; 5]).is_err());
+        assert!(!path.exists(), "written to a temporary until finished");
+        f.finish().unwrap();
+        let b = std::fs::read(&path).unwrap();
+        assert_eq!(u64_at(&b, 0), MAGIC);
+        let (index, entries) = (u64_at(&b, 8) as usize, u64_at(&b, 16) as usize);
+        let namelist = u64_at(&b, 24) as usize;
+        assert_eq!(entries, 6);
+        assert_eq!(
+            &b[namelist..namelist + 38],
+            b"configuration/step\0particles/position\0"
+        );
+        assert_eq!(b[namelist + 38], 0, "an empty name ends the list");
+        assert_eq!(&b[112..117], b"hoomd");
+        for k in 0..entries {
+            let e = &b[index + 32 * k..index + 32 * (k + 1)];
+            let (frame, id) = (u64_at(e, 0), u16::from_le_bytes([e[28], e[29]]));
+            assert_eq!((frame, id), ((k / 2) as u64, (k % 2) as u16));
+            let at = u64_at(e, 16) as usize;
+            if id == 1 {
+                assert_eq!(u64_at(e, 8), 2);
+                let first = f32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+                assert_eq!(first, (frame * 6) as f32);
+            } else {
+                assert_eq!(u64_at(&b, at), frame * 10);
+            }
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
