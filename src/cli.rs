@@ -377,9 +377,10 @@ fn run(
     let streamed = every.is_some() || files.iter().any(|(_, f)| crate::frames::is_gsd(f));
     let (stats, results, streamed_files) = if streamed {
         let every = every.unwrap_or(steps).min(steps);
-        let mut sinks = crate::frames::FrameSinks::open(&files, steps.div_ceil(every))
+        let sinks = crate::frames::FrameSinks::open(&files, steps.div_ceil(every))
             .map_err(CliError::Runtime)?;
-        let cx = crate::frames::FrameContext::of(&g);
+        // Frames go to disk on a thread of their own while the next steps run.
+        let writer = crate::frames::FrameWriter::start(sinks, crate::frames::FrameContext::of(&g));
         let mut stats: Option<RunStats> = None;
         let mut results = Vec::new();
         let mut done = 0;
@@ -392,9 +393,9 @@ fn run(
             };
             let (chunk, outputs) = program.run_on_and_read(&opts)?;
             done += k;
-            sinks
-                .frame(done, &outputs, &cx)
-                .map_err(CliError::Runtime)?;
+            if !writer.frame(done, outputs.clone()) {
+                break; // the writer failed: its error comes from finish
+            }
             stats = Some(match stats {
                 None => chunk,
                 Some(s) => RunStats {
@@ -405,7 +406,7 @@ fn run(
             });
             results = outputs;
         }
-        let written = sinks.finish().map_err(CliError::Runtime)?;
+        let written = writer.finish().map_err(CliError::Runtime)?;
         (stats.expect("at least one step"), results, written)
     } else {
         let stats = program.run(&RunOptions {

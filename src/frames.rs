@@ -123,6 +123,71 @@ impl FrameSinks {
     }
 }
 
+/// What the run sends the writer thread.
+enum Message {
+    Frame(u64, Vec<(String, HostArray)>),
+    Finish,
+}
+
+/// [`FrameSinks`] on a thread of their own: frames are written while the next steps run.
+/// One frame waits at most (a slow disk holds the run back rather than filling memory).
+pub struct FrameWriter {
+    to_writer: Option<std::sync::mpsc::SyncSender<Message>>,
+    thread: Option<std::thread::JoinHandle<Result<Vec<(Vec<String>, PathBuf)>, String>>>,
+}
+
+impl FrameWriter {
+    pub fn start(mut sinks: FrameSinks, cx: FrameContext) -> FrameWriter {
+        let (to_writer, from_run) = std::sync::mpsc::sync_channel(1);
+        let thread = std::thread::spawn(move || {
+            for message in from_run {
+                match message {
+                    Message::Frame(step, outputs) => sinks.frame(step, &outputs, &cx)?,
+                    Message::Finish => return sinks.finish(),
+                }
+            }
+            // The run stopped without finishing: the sinks are dropped, their
+            // temporaries removed.
+            Err("the run stopped before its last frame".into())
+        });
+        FrameWriter {
+            to_writer: Some(to_writer),
+            thread: Some(thread),
+        }
+    }
+
+    /// Queues a frame; false when the writer has stopped on an error.
+    pub fn frame(&self, step: u64, outputs: Vec<(String, HostArray)>) -> bool {
+        self.to_writer
+            .as_ref()
+            .is_some_and(|w| w.send(Message::Frame(step, outputs)).is_ok())
+    }
+
+    /// Waits for every frame, finishes the files and renames them into place.
+    pub fn finish(mut self) -> Result<Vec<(Vec<String>, PathBuf)>, String> {
+        if let Some(w) = self.to_writer.take() {
+            let _ = w.send(Message::Finish);
+        }
+        self.thread
+            .take()
+            .map_or(Err("the frame writer is gone".into()), |t| {
+                t.join()
+                    .unwrap_or_else(|_| Err("the frame writer failed".into()))
+            })
+    }
+}
+
+impl Drop for FrameWriter {
+    /// A run that failed: the writer stops and removes its temporaries before the
+    /// process goes on (to its exit).
+    fn drop(&mut self) {
+        self.to_writer.take();
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
 pub fn is_gsd(path: &Path) -> bool {
     path.extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("gsd"))
