@@ -17,6 +17,8 @@
 #               Gaussian (errors, fcm.json on a grid of the same points beside it), where
 #               bottom spends its time
 #               and 10^4, 10^6 (the boundary-value solves' GB/s), torch's copy bandwidth
+#   stream      bd_fcm.json at 10^6 for 1000 steps, with and without a frame every 100
+#               steps streamed to GSD and NPY (`run --every`): the run's wall time
 #   nbody       the direct pair mobilities, open and above a wall, translation and grand:
 #               pair interactions per second and GFLOP/s
 #   python      a Python loop of libMobility-style Mdot calls against the GPU time of one
@@ -42,7 +44,7 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson dpstokes nbody python mpcd spread atomics fft primitives overhead determinism)
+suites=(fcm pse poisson dpstokes nbody python mpcd spread atomics fft primitives overhead determinism stream)
 usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
@@ -185,6 +187,27 @@ suite_determinism() {
         "$dir/$graph-$mode-2.npy" "$graph.json N=10^5 L=$side $mode"
     done
   done
+  rm -rf "$dir"
+}
+
+# Streaming frames (`run --every`): bd_fcm.json, 10^6 spheres in a box of 256 (a = 1,
+# tolerance 1e-3), 1000 steps, without frames and with a frame every 100 steps to GSD and
+# to NPY (to the machine's /tmp); twice each, alternating; the run's wall time.
+suite_stream() {
+  local dir=/tmp/mesoflow-stream
+  mkdir -p "$dir"
+  python3 -c "import numpy as np; np.save('$dir/x.npy', np.random.default_rng(1).uniform(-128, 128, (1000000, 3)).astype(np.float32))"
+  local common=(graphs/bd_fcm.json --set "box=[256,256,256]" --set temperature=1 --input positions="$dir/x.npy" --steps 1000)
+  for round in 1 2; do
+    for mode in none gsd npy; do
+      local extra=(--output positions="$dir/end.npy")
+      [ "$mode" = gsd ] && extra=(--every 100 --output positions="$dir/t.gsd")
+      [ "$mode" = npy ] && extra=(--every 100 --output positions="$dir/t.npy")
+      echo "== stream $mode round $round" | tee -a "$log"
+      $bin run "${common[@]}" "${extra[@]}" 2>&1 | grep -E "steps in|frames|->" | tee -a "$log"
+    done
+  done
+  ls -la "$dir" | tee -a "$log"
   rm -rf "$dir"
 }
 
