@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use clap::{Parser, Subcommand};
 use thiserror::Error;
 
-use mesoflow::exec::{ExecError, Profile, Program, RunOptions, RunStats};
+use mesoflow::exec::{Checkpoint, ExecError, Profile, Program, RunOptions, RunStats};
 use mesoflow::expr::{self, ParamValue};
 use mesoflow::gpu::{DeviceCaps, GpuContext, GpuError, KernelCache};
 use mesoflow::graph::{self, Graph, LoadOptions};
@@ -57,6 +57,15 @@ pub enum Command {
         /// one frame each. The steps and random draws are those of one run.
         #[arg(long, value_name = "K")]
         every: Option<u64>,
+        /// Write a checkpoint at the end of the run (a GSD file of the states, the step
+        /// count and what else the steps carry), from which --resume goes on.
+        #[arg(long, value_name = "FILE")]
+        checkpoint: Option<PathBuf>,
+        /// Go on from a checkpoint: --steps more steps, bit for bit as if the run that
+        /// wrote it had not stopped. Give the same graph, --set params, --seed and inputs
+        /// (checked: a difference is an error that names it).
+        #[arg(long, value_name = "FILE")]
+        resume: Option<PathBuf>,
         /// Random seed (the built-in param `seed`).
         #[arg(long)]
         seed: Option<u64>,
@@ -178,6 +187,8 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             outputs,
             steps,
             every,
+            checkpoint,
+            resume,
             seed,
             profile,
             profile_dispatches,
@@ -197,6 +208,10 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
                 &outputs,
                 steps,
                 every,
+                Continuation {
+                    checkpoint: checkpoint.as_deref(),
+                    resume: resume.as_deref(),
+                },
                 seed,
                 profile,
                 !no_fuse,
@@ -296,6 +311,7 @@ fn run(
     output_args: &[String],
     steps: u64,
     every: Option<u64>,
+    continuation: Continuation,
     seed: Option<u64>,
     profile: Profile,
     fuse: bool,
@@ -368,6 +384,28 @@ fn run(
     let mut cache = KernelCache::default();
     let mut program = Program::compile(&gpu, &g, &p, &mut cache)?;
     program.upload(&data)?;
+    let description = run_description(path, sets, seed, &data);
+    if let Some(file) = continuation.resume {
+        let (cp, theirs) =
+            Checkpoint::read(file).map_err(|e| CliError::Input(format!("--resume: {e}")))?;
+        if theirs != description {
+            let differs: Vec<String> = description
+                .lines()
+                .zip(theirs.lines())
+                .filter(|(a, b)| a != b)
+                .map(|(here, there)| format!("`{there}` there, `{here}` here"))
+                .collect();
+            return Err(CliError::Input(format!(
+                "--resume {}: the checkpoint was written by another run: {}",
+                file.display(),
+                differs.join("; ")
+            )));
+        }
+        program
+            .restore(&cp)
+            .map_err(|e| CliError::Input(format!("--resume {}: {e}", file.display())))?;
+    }
+    let first_step = program.steps_done();
     let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
     let files: Vec<(String, PathBuf)> = requested
         .iter()
@@ -393,7 +431,7 @@ fn run(
             };
             let (chunk, outputs) = program.run_on_and_read(&opts)?;
             done += k;
-            if !writer.frame(done, outputs.clone()) {
+            if !writer.frame(first_step + done, outputs.clone()) {
                 break; // the writer failed: its error comes from finish
             }
             stats = Some(match stats {
@@ -409,7 +447,8 @@ fn run(
         let written = writer.finish().map_err(CliError::Runtime)?;
         (stats.expect("at least one step"), results, written)
     } else {
-        let stats = program.run(&RunOptions {
+        // From the prologue, or from a restored checkpoint.
+        let stats = program.run_on(&RunOptions {
             steps,
             profile,
             progress,
@@ -462,6 +501,22 @@ fn run(
             }
         )));
     }
+    if let Some(file) = continuation.checkpoint {
+        program
+            .checkpoint()?
+            .write(file, &description)
+            .map_err(|e| {
+                CliError::Runtime(format!(
+                    "--checkpoint: cannot write {}: {e}",
+                    file.display()
+                ))
+            })?;
+        note!(
+            "mesoflow: checkpoint after step {} -> {}",
+            program.steps_done(),
+            file.display()
+        );
+    }
     if profile != Profile::Off {
         print_profile(&stats);
     }
@@ -491,6 +546,50 @@ fn run(
             }
         ))),
     }
+}
+
+/// Where a run starts from and what it leaves for the next.
+pub struct Continuation<'a> {
+    checkpoint: Option<&'a Path>,
+    resume: Option<&'a Path>,
+}
+
+/// What a resumed run must share with the one that wrote its checkpoint: the graph file,
+/// the --set params, the seed and the inputs (a hash of each), one per line.
+fn run_description(
+    path: &Path,
+    sets: &[String],
+    seed: u64,
+    data: &BTreeMap<String, HostArray>,
+) -> String {
+    let mut sets = sets.to_vec();
+    sets.sort();
+    let graph = path.canonicalize().unwrap_or_else(|_| path.to_path_buf());
+    let inputs: Vec<String> = data
+        .iter()
+        .map(|(name, a)| {
+            // FNV-1a over the type and the words.
+            let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+            let words: Vec<u32> = match &a.data {
+                HostData::F32(v) => v.iter().map(|x| x.to_bits()).collect(),
+                HostData::U32(v) => v.clone(),
+            };
+            for b in
+                a.ty.to_string()
+                    .bytes()
+                    .chain(words.iter().flat_map(|w| w.to_le_bytes()))
+            {
+                h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+            }
+            format!("{name}={h:016x}")
+        })
+        .collect();
+    format!(
+        "graph {}\nset {}\nseed {seed}\ninputs {}",
+        graph.display(),
+        sets.join(" "),
+        inputs.join(" ")
+    )
 }
 
 /// The `--output NAME[=FILE.npy]` arguments: each output at most once, each file for one

@@ -109,7 +109,7 @@ impl FrameSinks {
     }
 
     /// Finishes every file (all frames written) and renames each into place.
-    pub fn finish(self) -> Result<Vec<(Vec<String>, PathBuf)>, String> {
+    pub fn finish(self) -> Result<Written, String> {
         let mut done = Vec::new();
         for (path, names, sink) in self.sinks {
             let finished = match sink {
@@ -123,6 +123,9 @@ impl FrameSinks {
     }
 }
 
+/// The files written, each with the outputs it holds.
+pub type Written = Vec<(Vec<String>, PathBuf)>;
+
 /// What the run sends the writer thread.
 enum Message {
     Frame(u64, Vec<(String, HostArray)>),
@@ -133,7 +136,7 @@ enum Message {
 /// One frame waits at most (a slow disk holds the run back rather than filling memory).
 pub struct FrameWriter {
     to_writer: Option<std::sync::mpsc::SyncSender<Message>>,
-    thread: Option<std::thread::JoinHandle<Result<Vec<(Vec<String>, PathBuf)>, String>>>,
+    thread: Option<std::thread::JoinHandle<Result<Written, String>>>,
 }
 
 impl FrameWriter {
@@ -164,7 +167,7 @@ impl FrameWriter {
     }
 
     /// Waits for every frame, finishes the files and renames them into place.
-    pub fn finish(mut self) -> Result<Vec<(Vec<String>, PathBuf)>, String> {
+    pub fn finish(mut self) -> Result<Written, String> {
         if let Some(w) = self.to_writer.take() {
             let _ = w.send(Message::Finish);
         }

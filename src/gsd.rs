@@ -41,7 +41,7 @@ impl GsdType {
     }
 }
 
-fn version(major: u32, minor: u32) -> u32 {
+pub fn version(major: u32, minor: u32) -> u32 {
     (major << 16) | minor
 }
 
@@ -59,6 +59,8 @@ pub struct GsdFile {
     path: PathBuf,
     temporary: PathBuf,
     out: BufWriter<File>,
+    schema: String,
+    schema_version: u32,
     at: u64,
     names: Vec<String>,
     index: Vec<IndexEntry>,
@@ -69,6 +71,22 @@ pub struct GsdFile {
 impl GsdFile {
     /// Starts a HOOMD-schema file for `path` (written to a temporary until finished).
     pub fn create(path: &Path) -> std::io::Result<GsdFile> {
+        GsdFile::create_with_schema(path, "hoomd", version(1, 4))
+    }
+
+    /// Starts a file of another schema (name at most 63 bytes, version major << 16 |
+    /// minor).
+    pub fn create_with_schema(
+        path: &Path,
+        schema: &str,
+        schema_version: u32,
+    ) -> std::io::Result<GsdFile> {
+        if schema.is_empty() || schema.len() >= NAME_BYTES {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!("GSD schema name `{schema}`: 1 to 63 bytes"),
+            ));
+        }
         let temporary = crate::npy::begin_temporary(path)?;
         let file = File::create(&temporary)?;
         let mut out = BufWriter::new(file);
@@ -78,6 +96,8 @@ impl GsdFile {
             path: path.to_path_buf(),
             temporary,
             out,
+            schema: schema.to_string(),
+            schema_version,
             at: HEADER_BYTES,
             names: Vec::new(),
             index: Vec::new(),
@@ -192,11 +212,11 @@ impl GsdFile {
         header[16..24].copy_from_slice(&index_entries.to_le_bytes());
         header[24..32].copy_from_slice(&namelist_location.to_le_bytes());
         header[32..40].copy_from_slice(&namelist_entries.to_le_bytes());
-        header[40..44].copy_from_slice(&version(1, 4).to_le_bytes());
+        header[40..44].copy_from_slice(&self.schema_version.to_le_bytes());
         header[44..48].copy_from_slice(&version(2, 0).to_le_bytes());
         let application = format!("mesoflow {}", env!("CARGO_PKG_VERSION"));
         header[48..48 + application.len()].copy_from_slice(application.as_bytes());
-        header[112..117].copy_from_slice(b"hoomd");
+        header[112..112 + self.schema.len()].copy_from_slice(self.schema.as_bytes());
         self.out.seek(SeekFrom::Start(0))?;
         self.out.write_all(&header)?;
         self.out.flush()?;
@@ -210,6 +230,116 @@ impl Drop for GsdFile {
     /// A file dropped unfinished (an error on the way) leaves nothing behind.
     fn drop(&mut self) {
         crate::npy::abandon_temporary(&self.temporary);
+    }
+}
+
+/// A GSD file read back: its schema and every chunk's place, for [`GsdRead::chunk`].
+pub struct GsdRead {
+    bytes: Vec<u8>,
+    pub schema: String,
+    /// (frame, name) -> (type, N, M, location).
+    chunks: std::collections::BTreeMap<(u64, String), (u8, u64, u32, u64)>,
+    /// (frame, name) in the index's order (frame, then name id: the order of first use).
+    order: Vec<(u64, String)>,
+}
+
+impl GsdRead {
+    /// Reads and checks a GSD 2 file written by [`GsdFile`] (or by the `gsd` package).
+    pub fn open(path: &Path) -> Result<GsdRead, String> {
+        let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let corrupt = |what: &str| format!("{}: not a GSD file ({what})", path.display());
+        let u64_at = |at: usize| -> Option<u64> {
+            Some(u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().ok()?))
+        };
+        if bytes.len() < HEADER_BYTES as usize || u64_at(0) != Some(MAGIC) {
+            return Err(corrupt("no GSD header"));
+        }
+        let gsd_version = u32::from_le_bytes(bytes[44..48].try_into().expect("4 bytes"));
+        if gsd_version >> 16 != 2 {
+            return Err(corrupt(&format!("file version {}", gsd_version >> 16)));
+        }
+        let text = |b: &[u8]| {
+            String::from_utf8_lossy(b.split(|&c| c == 0).next().unwrap_or(&[])).to_string()
+        };
+        let schema = text(&bytes[112..176]);
+        let field = |at: usize| {
+            u64_at(at)
+                .map(|v| v as usize)
+                .ok_or_else(|| corrupt("header"))
+        };
+        let (index, entries) = (field(8)?, field(16)?);
+        let (namelist, name_entries) = (field(24)?, field(32)?);
+        let names_end = name_entries
+            .checked_mul(NAME_BYTES)
+            .and_then(|n| n.checked_add(namelist))
+            .filter(|&e| e <= bytes.len())
+            .ok_or_else(|| corrupt("namelist"))?;
+        let names: Vec<String> = bytes[namelist..names_end]
+            .split(|&c| c == 0)
+            .take_while(|n| !n.is_empty())
+            .map(|n| String::from_utf8_lossy(n).to_string())
+            .collect();
+        let index_end = entries
+            .checked_mul(32)
+            .and_then(|n| n.checked_add(index))
+            .filter(|&e| e <= bytes.len())
+            .ok_or_else(|| corrupt("index"))?;
+        let mut chunks = std::collections::BTreeMap::new();
+        let mut order = Vec::new();
+        for e in bytes[index..index_end].chunks_exact(32) {
+            let location = u64::from_le_bytes(e[16..24].try_into().expect("8 bytes"));
+            if location == 0 {
+                break;
+            }
+            let frame = u64::from_le_bytes(e[0..8].try_into().expect("8 bytes"));
+            let n = u64::from_le_bytes(e[8..16].try_into().expect("8 bytes"));
+            let m = u32::from_le_bytes(e[24..28].try_into().expect("4 bytes"));
+            let id = u16::from_le_bytes([e[28], e[29]]) as usize;
+            let name = names.get(id).ok_or_else(|| corrupt("a chunk's name"))?;
+            chunks.insert((frame, name.clone()), (e[30], n, m, location));
+            order.push((frame, name.clone()));
+        }
+        Ok(GsdRead {
+            bytes,
+            schema,
+            chunks,
+            order,
+        })
+    }
+
+    /// A chunk's bytes, with its N and M; None where the frame has no such chunk or it
+    /// lies outside the file.
+    pub fn chunk(&self, frame: u64, name: &str) -> Option<(u64, u32, &[u8])> {
+        let &(ty, n, m, location) = self.chunks.get(&(frame, name.to_string()))?;
+        let size = match ty {
+            1 | 5 | 11 => 1,
+            2 | 6 => 2,
+            3 | 7 | 9 => 4,
+            4 | 8 | 10 => 8,
+            _ => return None,
+        };
+        let len = n.checked_mul(m as u64)?.checked_mul(size)?;
+        let end = location.checked_add(len)?;
+        let bytes = self.bytes.get(location as usize..end as usize)?;
+        Some((n, m, bytes))
+    }
+
+    /// The names of a frame's chunks in the order their names were first used.
+    pub fn names_in_order(&self, frame: u64) -> Vec<&str> {
+        self.order
+            .iter()
+            .filter(|(f, _)| *f == frame)
+            .map(|(_, n)| n.as_str())
+            .collect()
+    }
+
+    /// The names of a frame's chunks.
+    pub fn names(&self, frame: u64) -> Vec<&str> {
+        self.chunks
+            .keys()
+            .filter(|(f, _)| *f == frame)
+            .map(|(_, n)| n.as_str())
+            .collect()
     }
 }
 
@@ -280,6 +410,18 @@ mod tests {
                 assert_eq!(u64_at(&b, at), frame * 10);
             }
         }
+        let read = GsdRead::open(&path).unwrap();
+        assert_eq!(read.schema, "hoomd");
+        let (n, m, bytes) = read.chunk(2, "particles/position").unwrap();
+        assert_eq!((n, m, bytes.len()), (2, 3, 24));
+        assert_eq!(&bytes[..4], &12f32.to_le_bytes());
+        assert!(read.chunk(3, "particles/position").is_none());
+        assert_eq!(
+            read.names(1),
+            vec!["configuration/step", "particles/position"]
+        );
+        std::fs::write(dir.join("bad.gsd"), b"not a gsd file").unwrap();
+        assert!(GsdRead::open(&dir.join("bad.gsd")).is_err());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use thiserror::Error;
 
+mod checkpoint;
 mod compile;
 mod profile;
 mod run;
@@ -26,6 +27,8 @@ use crate::ids::IdVec;
 use crate::node::{IterativeKernels, LoopError};
 use crate::plan::{BufferId, Phase, Plan, Storage, ValueId};
 use crate::value::{HostArray, HostWords, NonFinite};
+
+pub use checkpoint::Checkpoint;
 
 #[derive(Debug, Error)]
 #[non_exhaustive]

@@ -23,7 +23,7 @@ impl Program<'_> {
     }
 
     /// Resets persistent values and the clock, then runs the prologue.
-    fn start(&mut self) -> Result<(), ExecError> {
+    pub(super) fn start(&mut self) -> Result<(), ExecError> {
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         for (b, info) in self.buffers.iter().zip(&self.plan.buffers) {
             if info.role == crate::plan::BufferRole::Persistent {

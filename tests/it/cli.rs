@@ -1089,3 +1089,105 @@ fn every_k_steps_streams_frames_to_npy_and_gsd() {
     assert!(temporaries(&dir).is_empty(), "{:?}", temporaries(&dir));
     assert!(!dir.join("two.npy").exists());
 }
+
+/// `--checkpoint` then `--resume`: 4 steps, a checkpoint, 2 more steps from it give the
+/// positions of 6 steps in one run bit for bit (Brownian noise included: the draws are
+/// keyed by the restored step), frames streamed after a resume count on from its step;
+/// a resume with another seed, or of a file that is not a checkpoint, is an error that
+/// says so and writes nothing.
+#[test]
+fn a_run_resumed_from_its_checkpoint_goes_on_bit_for_bit() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-resume");
+    let vals: Vec<f32> = (0..30).map(|i| 3.0 * (i as f32 * 0.61).sin()).collect();
+    let input = format!("positions={}", positions(&dir, "x.npy", vals, 10));
+    let graph = root().join("graphs/bd_fcm.json").display().to_string();
+    let file = |name: &str| dir.join(name).display().to_string();
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "run",
+            graph.as_str(),
+            "--set",
+            "box=[8,8,8]",
+            "--set",
+            "temperature=1",
+            "--input",
+            &input,
+        ];
+        args.extend(extra);
+        mesoflow(&args)
+    };
+    let ok = |o: Output| assert!(o.status.success(), "{}", text(&o));
+    ok(run(&[
+        "--steps",
+        "6",
+        "--output",
+        &format!("positions={}", file("once.npy")),
+    ]));
+    // The same outputs as the runs that go on from it (the plan is what is checkpointed).
+    ok(run(&[
+        "--steps",
+        "4",
+        "--output",
+        "positions",
+        "--checkpoint",
+        &file("ck.gsd"),
+    ]));
+    ok(run(&[
+        "--steps",
+        "2",
+        "--resume",
+        &file("ck.gsd"),
+        "--output",
+        &format!("positions={}", file("resumed.npy")),
+    ]));
+    let (_, once) = read_f32_npy(&dir.join("once.npy"));
+    let (_, resumed) = read_f32_npy(&dir.join("resumed.npy"));
+    assert_eq!(
+        once, resumed,
+        "the resumed run differs from the one-shot run"
+    );
+    ok(run(&[
+        "--steps",
+        "2",
+        "--every",
+        "1",
+        "--resume",
+        &file("ck.gsd"),
+        "--output",
+        &format!("positions={}", file("t.gsd")),
+    ]));
+    let t = mesoflow::gsd::GsdRead::open(&dir.join("t.gsd")).unwrap();
+    let step = |frame| {
+        let (_, _, b) = t.chunk(frame, "configuration/step").unwrap();
+        u64::from_le_bytes(b.try_into().unwrap())
+    };
+    assert_eq!((step(0), step(1)), (5, 6));
+    let other_seed = run(&[
+        "--seed",
+        "7",
+        "--steps",
+        "2",
+        "--resume",
+        &file("ck.gsd"),
+        "--output",
+        &format!("positions={}", file("no.npy")),
+    ]);
+    assert_eq!(other_seed.status.code(), Some(2), "{}", text(&other_seed));
+    assert!(
+        text(&other_seed).contains("`seed 0` there, `seed 7` here"),
+        "{}",
+        text(&other_seed)
+    );
+    let not_one = run(&["--steps", "2", "--resume", &file("once.npy")]);
+    assert_eq!(not_one.status.code(), Some(2), "{}", text(&not_one));
+    assert!(
+        text(&not_one).contains("not a GSD file"),
+        "{}",
+        text(&not_one)
+    );
+    assert!(!dir.join("no.npy").exists());
+    assert!(temporaries(&dir).is_empty(), "{:?}", temporaries(&dir));
+}
