@@ -366,11 +366,6 @@ impl<'r> Loader<'r> {
         );
         if is_root {
             self.root.doc = file.doc.clone();
-        } else if !file.state.is_empty() {
-            self.problems.push(Problem::file(
-                path,
-                "state is only allowed in the top-level graph; this file is used as a subgraph",
-            ));
         }
         self.nodes(path, scope, &file.nodes, &scope_values);
         if is_root && file.outputs.is_empty() {
@@ -394,23 +389,25 @@ impl<'r> Loader<'r> {
                 self.sub_outputs.insert((scope.into(), name.clone()), r);
             }
         }
-        if is_root {
-            for (name, s) in &file.state {
-                let mk = |text: &str, what: &str| PendingRef {
-                    scope: String::new(),
-                    text: text.into(),
-                    file: path.into(),
-                    node: None,
-                    port: None,
-                    place: format!("state `{name}`, {what}: "),
-                };
-                self.root.states.push((
-                    name.clone(),
-                    mk(&s.init, "init"),
-                    mk(&s.next, "next"),
-                    s.doc.clone(),
-                ));
-            }
+        // States of a subgraph belong to its instance: named by its scope (`step/x` for
+        // state `x` of the node `step`), their references resolved in it, so a parent may
+        // use one stateful subgraph several times, each with state of its own.
+        for (name, s) in &file.state {
+            let full = format!("{scope}{name}");
+            let mk = |text: &str, what: &str| PendingRef {
+                scope: scope.into(),
+                text: text.into(),
+                file: path.into(),
+                node: None,
+                port: None,
+                place: format!("state `{full}`, {what}: "),
+            };
+            self.root.states.push((
+                full.clone(),
+                mk(&s.init, "init"),
+                mk(&s.next, "next"),
+                s.doc.clone(),
+            ));
         }
         self.stack.pop();
         true
@@ -1084,10 +1081,9 @@ impl<'r> Loader<'r> {
                 None => Err(r.problem(format!("no graph input `{port}`"))),
             },
             "state" => {
-                if !r.scope.is_empty() {
-                    return Err(r.problem("state is only available in the top-level graph".into()));
-                }
-                match self.root.states.iter().position(|s| s.0 == port) {
+                // A file's own states only: a subgraph's are namespaced by its scope.
+                let full = format!("{}{port}", r.scope);
+                match self.root.states.iter().position(|s| s.0 == full) {
                     Some(i) => Ok(Source::State(i)),
                     None => Err(r.problem(format!("no state `{port}`"))),
                 }

@@ -81,6 +81,46 @@ fn subgraphs_expand_with_their_own_params() {
     }
 }
 
+/// A subgraph may keep state: each use of it has its own, namespaced by the node that
+/// uses it (`soft/x`, `stiff/x`) beside the parent's `x`. Both start from the same input;
+/// each relaxes at its own rate, x0 (1 - k dt)^steps, and the parent's state doubles.
+#[test]
+fn stateful_subgraphs_keep_a_state_per_use() {
+    let Some(gpu) = gpu() else { return };
+    let g = load(&root().join("graphs/fixtures/stateful_parent.json"));
+    let names: Vec<&str> = g.states.iter().map(|s| s.name.as_str()).collect();
+    for want in ["x", "soft/x", "stiff/x"] {
+        assert!(names.contains(&want), "state {want} in {names:?}");
+    }
+    let x = Rng::new(5).array(ValueType::Particles { n: 20, k: 3 }, -1.0, 1.0);
+    for steps in [1u64, 4] {
+        let out = run_graph(&gpu, &g, &named(&[("x", x.clone())]), None, steps, true);
+        let n = steps as i32;
+        for (((soft, stiff), own), x0) in f32s(&out["soft"])
+            .iter()
+            .zip(f32s(&out["stiff"]))
+            .zip(f32s(&out["x"]))
+            .zip(f32s(&x))
+        {
+            let x0 = x0 as f64;
+            let want_soft = x0 * (1.0 - 0.5 * 0.1f64).powi(n);
+            let want_stiff = x0 * (1.0 - 2.0 * 0.1f64).powi(n);
+            assert!(
+                (*soft as f64 - want_soft).abs() < 1e-6,
+                "{steps} steps: soft {soft} against {want_soft}"
+            );
+            assert!(
+                (stiff as f64 - want_stiff).abs() < 1e-6,
+                "{steps} steps: stiff {stiff} against {want_stiff}"
+            );
+            assert!(
+                (own as f64 - x0 * 2f64.powi(n)).abs() < 1e-5,
+                "{steps} steps: own {own}"
+            );
+        }
+    }
+}
+
 #[test]
 fn states_carry_across_steps_including_copies_and_swaps() {
     let Some(gpu) = gpu() else { return };
