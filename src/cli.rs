@@ -58,7 +58,8 @@ pub enum Command {
         #[arg(long, value_name = "K")]
         every: Option<u64>,
         /// Write a checkpoint at the end of the run (a GSD file of the states, the step
-        /// count and what else the steps carry), from which --resume goes on.
+        /// count and what else the steps carry), from which --resume goes on; with
+        /// --every, also after every frame (each replacing the one before).
         #[arg(long, value_name = "FILE")]
         checkpoint: Option<PathBuf>,
         /// Go on from a checkpoint: --steps more steps, bit for bit as if the run that
@@ -434,6 +435,13 @@ fn run(
             if !writer.frame(first_step + done, outputs.clone()) {
                 break; // the writer failed: its error comes from finish
             }
+            // With frames, the checkpoint follows them: a run that stops on the way can
+            // go on from its last frame (the one after the last step is written below).
+            if let Some(file) = continuation.checkpoint
+                && done < steps
+            {
+                write_checkpoint(&program, file, &description)?;
+            }
             stats = Some(match stats {
                 None => chunk,
                 Some(s) => RunStats {
@@ -502,15 +510,7 @@ fn run(
         )));
     }
     if let Some(file) = continuation.checkpoint {
-        program
-            .checkpoint()?
-            .write(file, &description)
-            .map_err(|e| {
-                CliError::Runtime(format!(
-                    "--checkpoint: cannot write {}: {e}",
-                    file.display()
-                ))
-            })?;
+        write_checkpoint(&program, file, &description)?;
         note!(
             "mesoflow: checkpoint after step {} -> {}",
             program.steps_done(),
@@ -552,6 +552,16 @@ fn run(
 pub struct Continuation<'a> {
     checkpoint: Option<&'a Path>,
     resume: Option<&'a Path>,
+}
+
+/// Writes the program's checkpoint to `file` (replacing the one before, whole).
+fn write_checkpoint(program: &Program, file: &Path, description: &str) -> Result<(), CliError> {
+    program.checkpoint()?.write(file, description).map_err(|e| {
+        CliError::Runtime(format!(
+            "--checkpoint: cannot write {}: {e}",
+            file.display()
+        ))
+    })
 }
 
 /// What a resumed run must share with the one that wrote its checkpoint: the graph file,

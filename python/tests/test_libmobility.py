@@ -226,7 +226,7 @@ def test_outputs_come_back_as_the_positions_came():
 
 def test_dpstokes_above_a_wall_is_rotne_prager_blake_s():
     """libMobility's DPStokes geometry: a wall at zmin; far from the periodic images
-    (h << L) the self-mobilities are Swan and Brady's within the Gaussian's percent."""
+    (h << L) the self-mobilities are Swan and Brady's within the window's percent."""
     s = lm.DPStokes("periodic", "periodic", "single_wall")
     s.setParameters(Lx=32.0, Ly=32.0, zmin=0.0, zmax=6.0)
     s.initialize(viscosity=1.0, hydrodynamicRadius=1.0, tolerance=1e-3, seed=3)
@@ -252,3 +252,33 @@ def test_dpstokes_above_a_wall_is_rotne_prager_blake_s():
     t.setPositions([[0.1, 0.2, 2.5]])
     high, _ = t.Mdot([[0.3, 0.0, -1.0]])
     assert np.allclose(high[0] * [1, 1, -1], low[0], rtol=0, atol=1e-3 * abs(low[0, 0]))
+
+def _dp_mdot(pos, forces, lx, ly):
+    """libMobility's test_dpstokes.py set-up: a wall at zmin = -8, zmax = 8, eta = 1 / (6 pi)."""
+    s = lm.DPStokes(periodicityX="periodic", periodicityY="periodic", periodicityZ="single_wall")
+    s.setParameters(Lx=lx, Ly=ly, zmin=-8.0, zmax=8.0)
+    s.initialize(viscosity=1 / (6 * np.pi), hydrodynamicRadius=1.0)
+    s.setPositions(pos)
+    mf, _ = s.Mdot(forces=forces)
+    return mf
+
+
+def test_dpstokes_periodic_copies_and_isotropy_as_libmobility_tests_them():
+    """libMobility's own DPStokes checks (its tests/test_dpstokes.py, with its tolerances):
+    doubling the box along x or y with the particles copied gives the same velocities, and
+    a force along x in a box long in x moves a particle as the same force along y in the
+    box turned (non-square boxes, any height over the wall)."""
+    rng = np.random.default_rng(11)
+    pos = rng.uniform(-8, 8, (2, 3)).astype(np.float32)
+    forces = rng.uniform(-1, 1, (2, 3)).astype(np.float32)
+    forces -= forces.mean(axis=0)
+    cube = _dp_mdot(pos, forces, 16.0, 16.0)
+    for shift, (lx, ly) in (([16.0, 0.0, 0.0], (32.0, 16.0)), ([0.0, 16.0, 0.0], (16.0, 32.0))):
+        copies = np.vstack((pos, pos + np.array(shift, dtype=np.float32)))
+        doubled = _dp_mdot(copies, np.vstack((forces, forces)), lx, ly)[: len(pos)]
+        assert np.allclose(doubled, cube, rtol=1e-3, atol=1e-2)
+    for _ in range(3):
+        p = rng.uniform(-8, 8, 3).astype(np.float32)
+        along_x = _dp_mdot(p, np.array([1.0, 0.0, 0.0]), 32.0, 16.0).ravel()
+        along_y = _dp_mdot(p, np.array([0.0, 1.0, 0.0]), 16.0, 32.0).ravel()
+        assert np.allclose(along_x[[0, 1, 2]], along_y[[1, 0, 2]], rtol=1e-3, atol=1e-2)

@@ -1149,6 +1149,31 @@ fn a_run_resumed_from_its_checkpoint_goes_on_bit_for_bit() {
         once, resumed,
         "the resumed run differs from the one-shot run"
     );
+    // With frames the checkpoint is rewritten after each (steps 2 and 4 here): the last
+    // one, replacing the first, goes on as well.
+    ok(run(&[
+        "--steps",
+        "4",
+        "--every",
+        "2",
+        "--output",
+        &format!("positions={}", file("frames.npy")),
+        "--checkpoint",
+        &file("ck2.gsd"),
+    ]));
+    ok(run(&[
+        "--steps",
+        "2",
+        "--resume",
+        &file("ck2.gsd"),
+        "--output",
+        &format!("positions={}", file("resumed2.npy")),
+    ]));
+    let (_, resumed2) = read_f32_npy(&dir.join("resumed2.npy"));
+    assert_eq!(
+        once, resumed2,
+        "resumed from the checkpoint written with frames"
+    );
     ok(run(&[
         "--steps",
         "2",
