@@ -540,32 +540,6 @@ impl GpuKernels for Slab {
     }
 }
 
-/// The radius of the ES shape of unit half-width and shape `beta`, a / alpha: its
-/// free-space self-mobility (`fcm::plan::window_radius_cells`, f64), computed once per
-/// beta (about 0.1 s) and kept.
-pub fn es_radius_per_half_width(beta: f64) -> f64 {
-    use crate::nodes::spread::window::{es_integral, es_shape};
-    use std::collections::HashMap;
-    use std::sync::{Mutex, OnceLock};
-    static KNOWN: OnceLock<Mutex<HashMap<u64, f64>>> = OnceLock::new();
-    let known = KNOWN.get_or_init(Default::default);
-    if let Some(r) = known
-        .lock()
-        .map(|m| m.get(&beta.to_bits()).copied())
-        .ok()
-        .flatten()
-    {
-        return r;
-    }
-    let integral = es_integral(beta, 1.0);
-    let r =
-        crate::nodes::fcm::plan::window_radius_cells(|x| es_shape(x, beta, 1.0) / integral, 1.0);
-    if let Ok(mut m) = known.lock() {
-        m.insert(beta.to_bits(), r);
-    }
-    r
-}
-
 /// The half-width of the ES window (shape `beta`) whose rotational self-mobility is
 /// 1 / (8 pi eta a^3): with the torque spread as half the curl of the window, mu_r =
 /// (1 / (6 eta)) int phi^2 d^3x (Parseval), and a unit-integral ES of half-width alpha has
@@ -634,7 +608,7 @@ pub const ES_BETA_PER_CELL: f64 = 1.9;
 ///   so the hydrodynamic radius is exactly a on whatever grid the FFT-friendly rounding
 ///   gives. Forces: w = `fcm::plan::es_support` cells across (FCM's ES rule: 5 at 1e-3)
 ///   at beta = `ES_BETA_PER_CELL` w, the half-width a / (a / alpha of that shape,
-///   `es_radius_per_half_width`); torques: w + 1 cells (rotation has no 1/k^2 to damp
+///   `fcm::plan::es_window_radius`); torques: w + 1 cells (rotation has no 1/k^2 to damp
 ///   aliasing), the half-width from the rotational mobility (`es_torque_half_width`). The
 ///   cell is the width over its cells.
 /// - `gaussian`: FCM's Gaussians, a / sqrt(pi) (forces) and a / (6 sqrt(pi))^(1/3)
@@ -659,8 +633,10 @@ pub fn plan(
     rotation: bool,
     kernel: &str,
 ) -> Result<Vec<f64>, String> {
-    use crate::nodes::fcm::plan::{es_support, gaussian_upsampling, gaussian_width, torque_width};
-    use crate::nodes::spread::window::gaussian_support;
+    use crate::nodes::fcm::plan::{
+        es_support, es_window_radius, gaussian_upsampling, gaussian_width, torque_width,
+    };
+    use crate::nodes::spread::window::{Window, gaussian_support};
     if lengths.len() != 2 {
         return Err(format!(
             "box must be [Lx, Ly], got {} lengths",
@@ -681,7 +657,8 @@ pub fn plan(
                 ES_BETA_PER_CELL * w as f64,
                 ES_BETA_PER_CELL * (w + 1) as f64,
             );
-            let alpha = radius / es_radius_per_half_width(beta);
+            // A window of 2 cells has a half-width of one: its radius in cells is a / alpha.
+            let alpha = radius / es_window_radius(beta, 2);
             let alpha_t = es_torque_half_width(radius, torque_beta);
             (
                 alpha,
@@ -721,8 +698,16 @@ pub fn plan(
     let h_min = hx.min(lengths[1] / cells[1] as f64);
     // Cells visited per axis, and the half support as a length (the z padding).
     let (support, torque_support, half, half_t) = if kernel == "es" {
-        let cells_of = |w: f64| (2.0 * w / h_min - 1e-9).ceil() as u32;
-        (cells_of(width), cells_of(torque), width, torque)
+        // The window library's rule: the cells the half-width spans on the finest axis.
+        let cells_of = |w: f64, b: f64| {
+            Window::from_params("es", w, 0, b, tolerance, h_min).map(|w| w.support())
+        };
+        (
+            cells_of(width, beta)?,
+            cells_of(torque, torque_beta)?,
+            width,
+            torque,
+        )
     } else {
         let (s, st) = (
             gaussian_support(width, tolerance, hx),

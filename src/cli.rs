@@ -414,10 +414,10 @@ fn run(
         .collect();
     // Frames: with --every, or where a GSD file is asked for (one frame at the end).
     let streamed = every.is_some() || files.iter().any(|(_, f)| crate::frames::is_gsd(f));
+    let every = every.unwrap_or(steps).min(steps);
+    let frames = steps.div_ceil(every);
     let (stats, results, streamed_files) = if streamed {
-        let every = every.unwrap_or(steps).min(steps);
-        let sinks = crate::frames::FrameSinks::open(&files, steps.div_ceil(every))
-            .map_err(CliError::Runtime)?;
+        let sinks = crate::frames::FrameSinks::open(&files, frames).map_err(CliError::Runtime)?;
         // Frames go to disk on a thread of their own while the next steps run.
         let writer = crate::frames::FrameWriter::start(sinks, crate::frames::FrameContext::of(&g));
         let mut stats: Option<RunStats> = None;
@@ -526,12 +526,9 @@ fn run(
             .find(|(names, _)| names.contains(name));
         match (files.get(name.as_str()), streamed_to) {
             (Some(f), _) => outln!("{name}: {} -> {}", arr.ty, f.display()),
-            (None, Some((_, f))) => outln!(
-                "{name}: {} -> {} ({} frames)",
-                arr.ty,
-                f.display(),
-                steps.div_ceil(every.unwrap_or(steps).min(steps))
-            ),
+            (None, Some((_, f))) => {
+                outln!("{name}: {} -> {} ({} frames)", arr.ty, f.display(), frames)
+            }
             (None, None) => outln!("{name}: {}", summary(arr)),
         }
     }

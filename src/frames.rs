@@ -23,17 +23,11 @@ pub struct FrameContext {
 
 impl FrameContext {
     pub fn of(g: &Graph) -> FrameContext {
-        let value = |name: &str| {
-            g.params
-                .iter()
-                .find(|p| p.name == name)
-                .map(|p| p.value.clone())
-        };
-        let number = |name: &str| match value(name) {
-            Some(ParamValue::Number(x)) => Some(x),
+        let number = |name: &str| match g.param(name) {
+            Some(ParamValue::Number(x)) => Some(*x),
             _ => None,
         };
-        let box_lengths = match value("box") {
+        let box_lengths = match g.param("box") {
             Some(ParamValue::Numbers(b)) if b.len() == 3 => Some([b[0], b[1], b[2]]),
             Some(ParamValue::Numbers(b)) if b.len() == 2 => {
                 let lz = match (number("zmin"), number("zmax")) {
@@ -60,7 +54,6 @@ enum Sink {
 /// Every file of a streamed run, with the outputs each takes.
 pub struct FrameSinks {
     sinks: Vec<(PathBuf, Vec<String>, Sink)>,
-    frames: u64,
 }
 
 impl FrameSinks {
@@ -79,7 +72,7 @@ impl FrameSinks {
             };
             sinks.push((path.clone(), vec![name.clone()], sink));
         }
-        Ok(FrameSinks { sinks, frames })
+        Ok(FrameSinks { sinks })
     }
 
     /// Appends a frame (after `step` steps) to every file.
@@ -114,7 +107,7 @@ impl FrameSinks {
         for (path, names, sink) in self.sinks {
             let finished = match sink {
                 Sink::Gsd(gsd) => gsd.finish().map(|_| ()),
-                Sink::Npy(npy) => npy.finish(self.frames),
+                Sink::Npy(npy) => npy.finish(),
             };
             finished.map_err(|e| io_error(&names.join(", "), &path, e))?;
             done.push((names, path));
@@ -331,8 +324,8 @@ impl NpyFrames {
 
     fn frame(&mut self, a: &HostArray) -> std::io::Result<()> {
         if self.file.is_none() {
-            let tmp = mesoflow::npy::begin_temporary(&self.path)?;
-            let mut w = BufWriter::new(File::create(&tmp)?);
+            let (tmp, file) = mesoflow::npy::create_temporary(&self.path)?;
+            let mut w = BufWriter::new(file);
             let dtype = match a.data {
                 HostData::F32(_) => "<f4",
                 HostData::U32(_) => "<u4",
@@ -374,15 +367,15 @@ impl NpyFrames {
         Ok(())
     }
 
-    fn finish(mut self, frames: u64) -> std::io::Result<()> {
+    fn finish(mut self) -> std::io::Result<()> {
         let Some((tmp, mut w, _)) = self.file.take() else {
             return Err(std::io::Error::other("no frame was written"));
         };
-        if self.written != frames {
+        if self.written != self.frames {
             mesoflow::npy::abandon_temporary(&tmp);
             return Err(std::io::Error::other(format!(
-                "{} frames written of {frames}",
-                self.written
+                "{} frames written of {}",
+                self.written, self.frames
             )));
         }
         w.flush()?;

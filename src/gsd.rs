@@ -33,11 +33,19 @@ pub enum GsdType {
 
 impl GsdType {
     fn size(self) -> u64 {
-        match self {
-            GsdType::U8 => 1,
-            GsdType::U32 | GsdType::F32 => 4,
-            GsdType::U64 | GsdType::F64 => 8,
-        }
+        element_size(self as u8).expect("a GSD type")
+    }
+}
+
+/// Bytes per element of a type code in gsd.h's numbering (1 to 11: u8, u16, u32, u64,
+/// i8, i16, i32, i64, float, double, character), None for another code.
+fn element_size(code: u8) -> Option<u64> {
+    match code {
+        1 | 5 | 11 => Some(1),
+        2 | 6 => Some(2),
+        3 | 7 | 9 => Some(4),
+        4 | 8 | 10 => Some(8),
+        _ => None,
     }
 }
 
@@ -87,8 +95,7 @@ impl GsdFile {
                 format!("GSD schema name `{schema}`: 1 to 63 bytes"),
             ));
         }
-        let temporary = crate::npy::begin_temporary(path)?;
-        let file = File::create(&temporary)?;
+        let (temporary, file) = crate::npy::create_temporary(path)?;
         let mut out = BufWriter::new(file);
         // The header is written last; its place is kept.
         out.write_all(&[0u8; HEADER_BYTES as usize])?;
@@ -104,11 +111,6 @@ impl GsdFile {
             frame: 0,
             frame_names: Vec::new(),
         })
-    }
-
-    /// Frames ended so far.
-    pub fn frames(&self) -> u64 {
-        self.frame
     }
 
     /// Appends one chunk of the current frame: `n` rows of `m` elements of `ty`, `bytes`
@@ -237,10 +239,9 @@ impl Drop for GsdFile {
 pub struct GsdRead {
     bytes: Vec<u8>,
     pub schema: String,
-    /// (frame, name) -> (type, N, M, location).
-    chunks: std::collections::BTreeMap<(u64, String), (u8, u64, u32, u64)>,
-    /// (frame, name) in the index's order (frame, then name id: the order of first use).
-    order: Vec<(u64, String)>,
+    /// The index in its order (frame, then name id: the order of first use): (frame,
+    /// name, type, N, M, location).
+    chunks: Vec<(u64, String, u8, u64, u32, u64)>,
 }
 
 impl GsdRead {
@@ -284,8 +285,7 @@ impl GsdRead {
             .and_then(|n| n.checked_add(index))
             .filter(|&e| e <= bytes.len())
             .ok_or_else(|| corrupt("index"))?;
-        let mut chunks = std::collections::BTreeMap::new();
-        let mut order = Vec::new();
+        let mut chunks = Vec::new();
         for e in bytes[index..index_end].chunks_exact(32) {
             let location = u64::from_le_bytes(e[16..24].try_into().expect("8 bytes"));
             if location == 0 {
@@ -296,49 +296,32 @@ impl GsdRead {
             let m = u32::from_le_bytes(e[24..28].try_into().expect("4 bytes"));
             let id = u16::from_le_bytes([e[28], e[29]]) as usize;
             let name = names.get(id).ok_or_else(|| corrupt("a chunk's name"))?;
-            chunks.insert((frame, name.clone()), (e[30], n, m, location));
-            order.push((frame, name.clone()));
+            chunks.push((frame, name.clone(), e[30], n, m, location));
         }
         Ok(GsdRead {
             bytes,
             schema,
             chunks,
-            order,
         })
     }
 
     /// A chunk's bytes, with its N and M; None where the frame has no such chunk or it
     /// lies outside the file.
     pub fn chunk(&self, frame: u64, name: &str) -> Option<(u64, u32, &[u8])> {
-        let &(ty, n, m, location) = self.chunks.get(&(frame, name.to_string()))?;
-        let size = match ty {
-            1 | 5 | 11 => 1,
-            2 | 6 => 2,
-            3 | 7 | 9 => 4,
-            4 | 8 | 10 => 8,
-            _ => return None,
-        };
-        let len = n.checked_mul(m as u64)?.checked_mul(size)?;
+        let &(_, _, ty, n, m, location) =
+            self.chunks.iter().find(|c| c.0 == frame && c.1 == name)?;
+        let len = n.checked_mul(m as u64)?.checked_mul(element_size(ty)?)?;
         let end = location.checked_add(len)?;
         let bytes = self.bytes.get(location as usize..end as usize)?;
         Some((n, m, bytes))
     }
 
-    /// The names of a frame's chunks in the order their names were first used.
-    pub fn names_in_order(&self, frame: u64) -> Vec<&str> {
-        self.order
-            .iter()
-            .filter(|(f, _)| *f == frame)
-            .map(|(_, n)| n.as_str())
-            .collect()
-    }
-
-    /// The names of a frame's chunks.
+    /// The names of a frame's chunks, in the order they were first used in the file.
     pub fn names(&self, frame: u64) -> Vec<&str> {
         self.chunks
-            .keys()
-            .filter(|(f, _)| *f == frame)
-            .map(|(_, n)| n.as_str())
+            .iter()
+            .filter(|c| c.0 == frame)
+            .map(|c| c.1.as_str())
             .collect()
     }
 }

@@ -313,19 +313,18 @@ pub fn abandon_writes() {
     }
 }
 
-/// Opens the hidden temporary a file streamed over a run is written to (see
-/// [`write_all`]); registered, so an interrupt removes it.
-pub fn begin_temporary(path: &Path) -> std::io::Result<PathBuf> {
+/// Creates the hidden temporary a file is written to before its rename (beside it:
+/// [`temporary`]), registered under the lock the interrupt handler takes, so that an
+/// interrupt removes it and none is created after one.
+pub fn create_temporary(path: &Path) -> std::io::Result<(PathBuf, File)> {
     let mut files = pending();
     if ABANDONED.load(Ordering::SeqCst) {
         return Err(std::io::Error::other("interrupted"));
     }
-    if path.is_dir() {
-        return Err(std::io::Error::other("it is a folder"));
-    }
     let tmp = temporary(path);
+    let file = File::create(&tmp)?;
     files.push(tmp.clone());
-    Ok(tmp)
+    Ok((tmp, file))
 }
 
 /// Renames a finished temporary into place (it was synced by its writer).
@@ -394,16 +393,7 @@ pub fn write_all(outputs: &[(&Path, &HostArray)]) -> Result<(), WriteAllError> {
                     std::io::Error::other("the same file is written twice"),
                 ));
             }
-            let tmp = temporary(path);
-            let file = {
-                let mut files = pending();
-                if ABANDONED.load(Ordering::SeqCst) {
-                    return Err(fail(i, path, std::io::Error::other("interrupted")));
-                }
-                let file = File::create(&tmp).map_err(|e| fail(i, path, e))?;
-                files.push(tmp.clone());
-                file
-            };
+            let (tmp, file) = create_temporary(path).map_err(|e| fail(i, path, e))?;
             temps.push(tmp);
             write_npy(file, a).map_err(|e| fail(i, path, e))?;
         }

@@ -45,6 +45,7 @@ pub fn es_beta(support: u32) -> f64 {
 /// 3-D integral is one over t of the cube of a 1-D one, so it costs milliseconds in f64.
 /// For the Gaussian of standard deviation s cells it is sqrt(pi) s (checked in the tests).
 pub fn window_radius_cells(phi: impl Fn(f64) -> f64, half_width: f64) -> f64 {
+    use crate::nodes::spread::window::simpson_weight;
     use std::f64::consts::PI;
     // phi^(k) = int phi(x) cos(k x) dx by Simpson over the support (phi is even).
     let nx = 2000;
@@ -52,14 +53,7 @@ pub fn window_radius_cells(phi: impl Fn(f64) -> f64, half_width: f64) -> f64 {
     let samples: Vec<(f64, f64)> = (0..=nx)
         .map(|i| {
             let x = -half_width + i as f64 * dx;
-            let w = if i == 0 || i == nx {
-                1.0
-            } else if i % 2 == 1 {
-                4.0
-            } else {
-                2.0
-            };
-            (x, w * phi(x) * dx / 3.0)
+            (x, simpson_weight(i, nx) * phi(x) * dx / 3.0)
         })
         .collect();
     let norm: f64 = samples.iter().map(|s| s.1).sum();
@@ -102,8 +96,28 @@ pub fn window_radius_cells(phi: impl Fn(f64) -> f64, half_width: f64) -> f64 {
 /// a / h of FCM's ES window at a tolerance (support and beta from the rules above).
 pub fn es_radius_per_cell(tolerance: f64) -> f64 {
     let w = es_support(tolerance);
-    let window = crate::nodes::spread::window::Window::es(es_beta(w), w);
-    window_radius_cells(|x| window.phi(x, 1.0), w as f64 / 2.0)
+    es_window_radius(es_beta(w), w)
+}
+
+/// The hydrodynamic radius, in cells, of the ES window of shape `beta` over `support`
+/// cells (`window_radius_cells`); computed once per (beta, support) in a process (about
+/// 0.1 s) and kept. With support 2 it is a over the half-width, the radius of the shape
+/// whatever its width (the doubly periodic windows').
+pub fn es_window_radius(beta: f64, support: u32) -> f64 {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    static KNOWN: OnceLock<Mutex<HashMap<(u64, u32), f64>>> = OnceLock::new();
+    let key = (beta.to_bits(), support);
+    let known = KNOWN.get_or_init(Default::default);
+    if let Some(r) = known.lock().ok().and_then(|m| m.get(&key).copied()) {
+        return r;
+    }
+    let window = crate::nodes::spread::window::Window::es(beta, support);
+    let r = window_radius_cells(|x| window.phi(x, 1.0), support as f64 / 2.0);
+    if let Ok(mut m) = known.lock() {
+        m.insert(key, r);
+    }
+    r
 }
 
 /// Radius per cell size, a / h, of a window on the actual grid.

@@ -235,21 +235,9 @@ impl Window {
             return (-0.5 * sigma * sigma * k * k).exp();
         }
         let half = self.half_support_cells(h) * h;
-        let n = 4000;
-        let dx = 2.0 * half / n as f64;
-        let mut s = 0.0;
-        for i in 0..=n {
-            let x = -half + i as f64 * dx;
-            let w = if i == 0 || i == n {
-                1.0
-            } else if i % 2 == 1 {
-                4.0
-            } else {
-                2.0
-            };
-            s += w * self.phi(x / h, h) / h * (k * x).cos();
-        }
-        s * dx / 3.0
+        simpson(-half, half, 4000, |x| {
+            self.phi(x / h, h) / h * (k * x).cos()
+        })
     }
 
     /// One line for `mesoflow inspect`.
@@ -299,7 +287,7 @@ pub fn es_support(tolerance: f64) -> u32 {
     ((-tolerance.log10()).ceil() as u32 + 1).max(2)
 }
 
-pub fn es_shape(r: f64, beta: f64, alpha: f64) -> f64 {
+fn es_shape(r: f64, beta: f64, alpha: f64) -> f64 {
     let z = r / alpha;
     if z.abs() >= 1.0 {
         0.0
@@ -310,12 +298,28 @@ pub fn es_shape(r: f64, beta: f64, alpha: f64) -> f64 {
 
 /// Integral of the ES shape over [-alpha, alpha] (Simpson, 20000 intervals, as UAMMD).
 pub fn es_integral(beta: f64, alpha: f64) -> f64 {
-    let n = 20_000;
-    let dx = 2.0 * alpha / n as f64;
-    let f = |i: usize| es_shape(-alpha + i as f64 * dx, beta, alpha);
-    let mut s = f(0) + f(n);
+    simpson(-alpha, alpha, 20_000, |x| es_shape(x, beta, alpha))
+}
+
+/// Simpson's weight of sample i of n intervals (n even), without the step / 3: 1 at the
+/// ends, 4 and 2 between.
+pub fn simpson_weight(i: usize, n: usize) -> f64 {
+    if i == 0 || i == n {
+        1.0
+    } else if i % 2 == 1 {
+        4.0
+    } else {
+        2.0
+    }
+}
+
+/// int_lo^hi f by Simpson's rule on n intervals (n even), the ends added first.
+pub fn simpson(lo: f64, hi: f64, n: usize, f: impl Fn(f64) -> f64) -> f64 {
+    let dx = (hi - lo) / n as f64;
+    let at = |i: usize| f(lo + i as f64 * dx);
+    let mut s = at(0) + at(n);
     for i in 1..n {
-        s += if i % 2 == 1 { 4.0 } else { 2.0 } * f(i);
+        s += simpson_weight(i, n) * at(i);
     }
     s * dx / 3.0
 }

@@ -109,10 +109,7 @@ pub(super) fn load(
 }
 
 pub(super) fn param(g: &Graph, name: &str) -> Option<ParamValue> {
-    g.params
-        .iter()
-        .find(|p| p.name == name)
-        .map(|p| p.value.clone())
+    g.param(name).cloned()
 }
 
 /// Rows of 3-vectors as an f32 particle array (N x 3).

@@ -149,7 +149,7 @@ impl Checkpoint {
         // The buffers in the order they were written (the index keeps name ids in order
         // of first use, which is the writer's order).
         let mut buffers = Vec::new();
-        for name in f.names_in_order(0) {
+        for name in f.names(0) {
             if let Some(buffer) = name.strip_prefix("buffer/") {
                 let (_, _, bytes) = f.chunk(0, name).ok_or_else(|| bad(name))?;
                 buffers.push((buffer.to_string(), bytes.to_vec()));

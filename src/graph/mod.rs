@@ -309,6 +309,14 @@ impl Graph {
         self.outputs.iter().position(|o| o.name == name)
     }
 
+    /// A top-level param's value (its default, --set or expression resolved).
+    pub fn param(&self, name: &str) -> Option<&ParamValue> {
+        self.params
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| &p.value)
+    }
+
     /// The required inputs' types from their declarations, with the declared sizes'
     /// defaults and one row where the count is free: the inputs a plan assumes when no
     /// data is given (`validate`, `inspect`). Optional inputs are absent, as in a run that
