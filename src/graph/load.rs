@@ -60,6 +60,7 @@ pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Grap
         root: RootParts::default(),
         param_roots: HashMap::new(),
         consequences: BTreeMap::new(),
+        graph_params: HashMap::new(),
     };
     let overrides: IndexMap<String, ParamValue> = opts.overrides.clone().into_iter().collect();
     l.load_file(path, "", &overrides, None);
@@ -126,6 +127,9 @@ struct Binding<'a> {
     inputs: &'a IndexMap<String, String>,
     /// Where each param the node sets comes from, in the parent's scope.
     param_origins: &'a BTreeMap<String, Origin>,
+    /// The params a graph param's bindings set (`radius` from `mobility.radius`), with
+    /// where they were written.
+    bound: &'a BTreeMap<String, String>,
 }
 
 /// A kind node's param values as its file gives them, resolved in the node's scope.
@@ -161,6 +165,18 @@ struct Loader<'r> {
     /// What each such problem leaves unresolved (params, nodes, inputs), reported with
     /// it once rather than as a problem each.
     consequences: BTreeMap<usize, Vec<(&'static str, String)>>,
+    /// Graph-valued params by (file scope, name): the file each names and the params
+    /// its parent bound for it (`mobility.radius` given as `radius`).
+    graph_params: HashMap<(String, String), GraphParamValue>,
+}
+
+/// The value of a graph-valued param: the file it names and the params bound for it.
+#[derive(Clone, Debug)]
+struct GraphParamValue {
+    file: PathBuf,
+    bound: IndexMap<String, ParamValue>,
+    /// Where the bindings were written, for messages.
+    bound_at: String,
 }
 
 /// The largest graph file read (a graph of the 20,000 nodes [`MAX_EXPANDED_NODES`]
@@ -205,6 +221,23 @@ impl SubgraphFolders {
             .map(|p| p.display().to_string())
             .collect();
         folders.join(", ")
+    }
+
+    /// An absolute path a graph-valued param carries from its parent: accepted where it
+    /// leads inside the folders subgraphs may come from.
+    fn resolve_canonical(&self, text: &str) -> Result<PathBuf, String> {
+        let found = Path::new(text)
+            .canonicalize()
+            .map_err(|e| format!("cannot read graph file {text}: {e}"))?;
+        if self.allowed.iter().any(|f| found.starts_with(f)) {
+            Ok(found)
+        } else {
+            Err(format!(
+                "{} lies outside the folders subgraphs may come from ({})",
+                found.display(),
+                self.describe()
+            ))
+        }
     }
 
     /// The file a subgraph node's `graph` path names, included from `including`.
@@ -428,7 +461,41 @@ impl<'r> Loader<'r> {
     ) -> Scope<'r> {
         let mut scope = self.builtins.clone();
         let is_root = parent.is_none();
+        // Dotted names bind params of the graph a graph-valued param names.
+        let mut bound: IndexMap<String, IndexMap<String, ParamValue>> = IndexMap::new();
+        for (name, v) in overrides {
+            let Some((head, rest)) = name.split_once('.') else {
+                continue;
+            };
+            if decls.get(head).is_some_and(|d| d.graph) && !rest.is_empty() {
+                bound
+                    .entry(head.to_string())
+                    .or_default()
+                    .insert(rest.to_string(), v.clone());
+                continue;
+            }
+            let graph_params: Vec<&str> = decls
+                .iter()
+                .filter(|(_, d)| d.graph)
+                .map(|(n, _)| n.as_str())
+                .collect();
+            let msg = format!(
+                "`{name}` binds param `{rest}` of graph param `{head}`, but this graph has no graph param `{head}` (its graph params: {})",
+                if graph_params.is_empty() {
+                    "none".to_string()
+                } else {
+                    graph_params.join(", ")
+                }
+            );
+            self.problems.push(match parent {
+                Some(b) => Problem::port(b.file, b.node, name, msg),
+                None => Problem::file(path, msg),
+            });
+        }
         for name in overrides.keys() {
+            if name.contains('.') {
+                continue;
+            }
             if !(decls.contains_key(name) || is_root && BUILTIN_PARAMS.contains(&name.as_str())) {
                 let known: Vec<&str> = decls.keys().map(|s| s.as_str()).collect();
                 let hint = nearest(name, known.iter().copied())
@@ -442,6 +509,10 @@ impl<'r> Loader<'r> {
                         known.join(", ")
                     }
                 );
+                let msg = match parent.as_ref().and_then(|b| b.bound.get(name)) {
+                    Some(at) => format!("{msg}; bound as {at}"),
+                    None => msg,
+                };
                 self.problems.push(match parent {
                     Some(b) => Problem::port(b.file, b.node, name, msg),
                     None => Problem::file(path, msg),
@@ -473,6 +544,36 @@ impl<'r> Loader<'r> {
                 parent,
             ) {
                 Ok((default, value)) => {
+                    let value = if decl.graph {
+                        let given = overrides.contains_key(name);
+                        match self.graph_param(path, name, &value, given, parent) {
+                            Ok(file) => {
+                                let canonical = ParamValue::Text(file.display().to_string());
+                                self.graph_params.insert(
+                                    (file_scope.to_string(), name.clone()),
+                                    GraphParamValue {
+                                        file,
+                                        bound: bound.shift_remove(name).unwrap_or_default(),
+                                        bound_at: match parent {
+                                            Some(b) => {
+                                                format!("node `{}` of {}", b.node, b.file.display())
+                                            }
+                                            None => format!("the settings of {}", path.display()),
+                                        },
+                                    },
+                                );
+                                canonical
+                            }
+                            Err(root) => {
+                                self.param_roots
+                                    .insert((file_scope.to_string(), name.clone()), root);
+                                scope.insert_unresolved(name.clone());
+                                continue;
+                            }
+                        }
+                    } else {
+                        value
+                    };
                     let origin = self.param_origin(name, decl, &scope, &value, overrides, parent);
                     if is_root {
                         self.root.params.push(GraphParam {
@@ -602,6 +703,38 @@ impl<'r> Loader<'r> {
             Some(b) if given => b.param_origins.get(name).cloned().unwrap_or_default(),
             Some(_) => scope.origin_of(&decl.default),
         }
+    }
+
+    /// The file a graph-valued param names: a text found as a subgraph path is, from the
+    /// folder of the file that wrote it (the parent's when the parent sets it) and then
+    /// the library. A value forwarded from a parent's graph param arrives as that param's
+    /// canonical path, accepted where a subgraph may come from.
+    fn graph_param(
+        &mut self,
+        path: &Path,
+        name: &str,
+        value: &ParamValue,
+        given: bool,
+        parent: &Option<Binding>,
+    ) -> Result<PathBuf, usize> {
+        let place = |msg: String| match (parent, given) {
+            (Some(b), true) => Problem::port(b.file, b.node, name, msg),
+            _ => Problem::file(path, msg),
+        };
+        let ParamValue::Text(text) = value else {
+            let msg = format!("graph param `{name}` must name a graph file, got {value}");
+            return Err(self.push(place(msg)));
+        };
+        let written_in = match parent {
+            Some(b) if given => b.file,
+            _ => path,
+        };
+        let found = if Path::new(text).is_absolute() {
+            self.folders.resolve_canonical(text)
+        } else {
+            self.folders.resolve(written_in, text)
+        };
+        found.map_err(|e| self.push(place(format!("graph param `{name}`: {e}"))))
     }
 
     /// Adds a problem; returns its index.
@@ -887,25 +1020,24 @@ impl<'r> Loader<'r> {
                     if let Some(why) = disabled {
                         self.disabled_scopes.push((child_scope.clone(), why));
                     }
-                    let child_path = if bad {
+                    let child = if bad {
                         None
                     } else {
-                        self.folders
-                            .resolve(path, sub)
-                            .map_err(|e| self.problems.push(Problem::node(path, id, e)))
-                            .ok()
+                        self.subgraph_file(path, scope, id, sub, &decl, &raw_params)
                     };
-                    let loaded = match child_path {
+                    let loaded = match child {
                         None => false,
-                        Some(child_path) => {
-                            let overrides: IndexMap<String, ParamValue> =
+                        Some((child_path, bound, bound_at)) => {
+                            let mut overrides: IndexMap<String, ParamValue> =
                                 raw_params.into_iter().collect();
+                            overrides.extend(bound);
                             let binding = Binding {
                                 file: path,
                                 node: id,
                                 scope,
                                 inputs: &decl.inputs,
                                 param_origins: &param_origins,
+                                bound: &bound_at,
                             };
                             self.load_file(&child_path, &child_scope, &overrides, Some(binding))
                         }
@@ -935,6 +1067,81 @@ impl<'r> Loader<'r> {
                 }
             }
         }
+    }
+
+    /// The file a subgraph node uses and the params bound for it by graph params: a
+    /// path, or `$name` for the file graph param `name` names, with the params the
+    /// parent bound for it; and for each of the node's params that forwards a graph
+    /// param (`"mobility": "$mobility"`), that param's bindings under the child's name.
+    fn subgraph_file(
+        &mut self,
+        path: &Path,
+        scope: &str,
+        id: &str,
+        sub: &str,
+        decl: &NodeDecl,
+        own: &BTreeMap<String, ParamValue>,
+    ) -> Option<(
+        PathBuf,
+        IndexMap<String, ParamValue>,
+        BTreeMap<String, String>,
+    )> {
+        let mut bound = IndexMap::new();
+        let mut bound_at = BTreeMap::new();
+        for (pname, raw) in &decl.params {
+            let Some(from) = raw.as_str().and_then(|t| t.strip_prefix('$')) else {
+                continue;
+            };
+            if let Some(g) = self
+                .graph_params
+                .get(&(scope.to_string(), from.to_string()))
+            {
+                for (k, v) in &g.bound {
+                    bound.insert(format!("{pname}.{k}"), v.clone());
+                }
+            }
+        }
+        let Some(name) = sub.strip_prefix('$') else {
+            return self
+                .folders
+                .resolve(path, sub)
+                .map_err(|e| self.problems.push(Problem::node(path, id, e)))
+                .ok()
+                .map(|file| (file, bound, bound_at));
+        };
+        let key = (scope.to_string(), name.to_string());
+        let Some(g) = self.graph_params.get(&key).cloned() else {
+            if self.root_of(scope, name).is_some() {
+                self.follows(scope, name, ("node", format!("{scope}{id}")));
+            } else {
+                self.problems.push(Problem::node(
+                    path,
+                    id,
+                    format!(
+                        "`graph`: `{sub}` is not a graph param of this file (declare it with \"graph\": true)"
+                    ),
+                ));
+            }
+            return None;
+        };
+        let mut clash = false;
+        for (k, v) in g.bound {
+            if own.contains_key(&k) || decl.params.contains_key(&k) {
+                clash = true;
+                self.problems.push(Problem::port(
+                    path,
+                    id,
+                    &k,
+                    format!(
+                        "param `{k}` is set here and bound by the parent as `{name}.{k}`: set it in one place"
+                    ),
+                ));
+            } else {
+                bound_at.insert(k.clone(), format!("`{name}.{k}` in {}", g.bound_at));
+                bound.insert(k, v);
+            }
+        }
+        (!clash).then_some((g.file, bound, bound_at))
     }
 
     fn kind_node(

@@ -45,6 +45,11 @@ pub struct ParamDecl {
     #[serde(default)]
     pub integer: bool,
     pub choices: Option<Vec<String>>,
+    /// A graph-valued param: its value names a graph file (found as a subgraph path is),
+    /// which a node uses with `"graph": "$name"`; a parent binds that graph's params
+    /// with dotted names, `name.param`.
+    #[serde(default)]
+    pub graph: bool,
 }
 
 /// A named size (a particle count, say) shared by inputs; its default is used when no

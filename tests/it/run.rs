@@ -395,3 +395,98 @@ fn non_finite_outputs_from_finite_inputs_are_an_error_of_the_checked_read() {
     assert_eq!(program.non_finite_input(), Some("x"));
     assert!(program.read_finite_outputs().is_ok());
 }
+
+#[test]
+fn graph_params_pick_a_subgraph_and_bind_its_params() {
+    let Some(gpu) = gpu() else { return };
+    let g = load(&root().join("graphs/fixtures/graph_params.json"));
+    let x = Rng::new(6).array(ValueType::Particles { n: 12, k: 3 }, -1.0, 1.0);
+    for steps in [1u64, 3] {
+        let out = run_graph(&gpu, &g, &named(&[("x", x.clone())]), None, steps, true);
+        for (i, x0) in f32s(&x).iter().enumerate() {
+            let (mut plain, mut bound, mut forwarded) = (*x0 as f64, *x0 as f64, *x0 as f64);
+            for _ in 0..steps {
+                plain += 0.1 * (-plain);
+                bound += 0.1 * (-2.0 * bound + 0.5);
+                forwarded += 0.1 * (-0.25 * forwarded);
+            }
+            for (name, want) in [("plain", plain), ("bound", bound), ("forwarded", forwarded)] {
+                let got = f32s(&out[name])[i] as f64;
+                assert!(
+                    (got - want).abs() < 1e-6,
+                    "{steps} steps, {name}[{i}]: {got} against {want}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn graph_param_mistakes_are_named() {
+    let dir = tmpdir("graph_param_mistakes");
+    let lib = root().join("graphs/fixtures/lib");
+    for f in ["relax_with.json", "trap_force.json", "linear_pull.json"] {
+        std::fs::create_dir_all(dir.join("lib")).unwrap();
+        std::fs::copy(lib.join(f), dir.join("lib").join(f)).unwrap();
+    }
+    let cases: [(&str, &str); 5] = [
+        (
+            r#"{"id": "r", "graph": "lib/relax_with.json", "params": {"pull": "lib/linear_pull.json", "pull.stiffness": 1, "pul.shift": 1}, "inputs": {"x0": "inputs.x"}}"#,
+            "`pul.shift` binds param `shift` of graph param `pul`, but this graph has no graph param `pul` (its graph params: pull)",
+        ),
+        (
+            r#"{"id": "r", "graph": "lib/relax_with.json", "params": {"pull": "lib/linear_pull.json", "pull.stifness": 1}, "inputs": {"x0": "inputs.x"}}"#,
+            "unknown param `stifness` (did you mean `stiffness`?) (this graph's params: stiffness, shift); bound as `pull.stifness` in node `r` of",
+        ),
+        (
+            r#"{"id": "r", "graph": "lib/relax_with.json", "params": {"pull": "lib/nowhere.json"}, "inputs": {"x0": "inputs.x"}}"#,
+            "graph param `pull`: cannot read subgraph file",
+        ),
+        (
+            r#"{"id": "r", "graph": "lib/relax_with.json", "params": {"pull": 3}, "inputs": {"x0": "inputs.x"}}"#,
+            "bad value 3 for param `pull`",
+        ),
+        (
+            r#"{"id": "r", "graph": "$k", "inputs": {"x0": "inputs.x"}}"#,
+            "`graph`: `$k` is not a graph param of this file",
+        ),
+    ];
+    for (i, (node, want)) in cases.iter().enumerate() {
+        let text = format!(
+            r#"{{"mesoflow": 1, "params": {{"k": {{"default": 1.0}}}}, "inputs": {{"x": {{"type": "particles", "cols": 3}}}},
+               "nodes": [{node}], "outputs": {{"y": "r.positions"}}}}"#
+        );
+        let path = write_graph(&dir, &format!("case{i}.json"), &text);
+        let err = match mesoflow::graph::load(&path, &crate::util::registry(), &Default::default())
+        {
+            Ok(_) => panic!("case {i} loaded"),
+            Err(e) => e.to_string(),
+        };
+        assert!(err.contains(want), "case {i}: {err}");
+    }
+    // A param both set by the node and bound by the parent.
+    let clash = write_graph(
+        &dir.join("lib"),
+        "clash.json",
+        r#"{"mesoflow": 1, "params": {"pull": {"default": "linear_pull.json", "graph": true}},
+            "inputs": {"x": {"type": "particles", "cols": 3}},
+            "nodes": [{"id": "f", "graph": "$pull", "params": {"stiffness": 2}, "inputs": {"x": "inputs.x"}}],
+            "outputs": {"force": "f.force"}}"#,
+    );
+    let top = write_graph(
+        &dir,
+        "clash_top.json",
+        r#"{"mesoflow": 1, "inputs": {"x": {"type": "particles", "cols": 3}},
+            "nodes": [{"id": "c", "graph": "lib/clash.json", "params": {"pull.stiffness": 3}, "inputs": {"x": "inputs.x"}}],
+            "outputs": {"y": "c.force"}}"#,
+    );
+    let _ = clash;
+    let err = mesoflow::graph::load(&top, &crate::util::registry(), &Default::default())
+        .err()
+        .expect("a clash")
+        .to_string();
+    assert!(
+        err.contains("param `stiffness` is set here and bound by the parent as `pull.stiffness`"),
+        "{err}"
+    );
+}
