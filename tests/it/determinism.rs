@@ -177,6 +177,25 @@ const CASES: &[Case] = &[
         outputs: None,
     },
     Case {
+        // Three FCM evaluations per step, their streams apart.
+        file: "lib/integrators/midpoint.json",
+        sets: &[
+            ("mobility", "\"fcm.json\""),
+            ("mobility.box", "[8, 8, 8]"),
+            ("forces", "\"lib/forces/harmonic_trap.json\""),
+        ],
+        steps: 2,
+        inputs: &[("positions", 32, 3)],
+        outputs: None,
+    },
+    Case {
+        file: "lib/integrators/langevin_gjf.json",
+        sets: &[("forces", "\"lib/forces/harmonic_trap.json\"")],
+        steps: 2,
+        inputs: &[("positions", 32, 3), ("velocities", 32, 3)],
+        outputs: None,
+    },
+    Case {
         file: "examples/relax.json",
         sets: &[],
         steps: 2,

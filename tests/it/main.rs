@@ -15,6 +15,7 @@ mod fcm;
 mod fft;
 mod fuzz;
 mod graph_files;
+mod integrators;
 mod lanczos;
 mod layout;
 mod nbody;

@@ -27,6 +27,13 @@ impl Rng {
         lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
     }
 
+    /// A standard normal draw (Box-Muller).
+    pub fn normal(&mut self) -> f64 {
+        let u = 1.0 - self.uniform(0.0, 1.0);
+        let v = self.uniform(0.0, 1.0);
+        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+    }
+
     /// An array of type `ty` with every word uniform in [lo, hi) (truncated for u32).
     pub fn array(&mut self, ty: ValueType, lo: f64, hi: f64) -> HostArray {
         match ty.elem() {
