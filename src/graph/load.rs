@@ -42,6 +42,26 @@ impl Default for LoadOptions {
 
 /// Loads a graph file and everything it uses, reporting all problems together.
 pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Graph, Problems> {
+    load_from(path, None, registry, opts)
+}
+
+/// Loads a graph given as text (one a scene built), as if it were the file `path`: its
+/// subgraphs are found from `path`'s folder and the library, and problems name `path`.
+pub fn load_text(
+    path: &Path,
+    text: &str,
+    registry: &Registry,
+    opts: &LoadOptions,
+) -> Result<Graph, Problems> {
+    load_from(path, Some(text.to_string()), registry, opts)
+}
+
+fn load_from(
+    path: &Path,
+    text: Option<String>,
+    registry: &Registry,
+    opts: &LoadOptions,
+) -> Result<Graph, Problems> {
     let mut builtins = Scope::new(registry.functions());
     builtins.insert("steps".into(), ParamValue::Number(opts.steps as f64));
     builtins.insert("seed".into(), ParamValue::Number(opts.seed as f64));
@@ -61,6 +81,7 @@ pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Grap
         param_roots: HashMap::new(),
         consequences: BTreeMap::new(),
         graph_params: HashMap::new(),
+        root_text: text,
     };
     let overrides: IndexMap<String, ParamValue> = opts.overrides.clone().into_iter().collect();
     l.load_file(path, "", &overrides, None);
@@ -172,6 +193,8 @@ struct Loader<'r> {
     /// Graph-valued params by (file scope, name): the file each names and the params
     /// its parent bound for it (`mobility.radius` given as `radius`).
     graph_params: HashMap<(String, String), GraphParamValue>,
+    /// The top-level graph's text where it was given rather than read (`load_text`).
+    root_text: Option<String>,
 }
 
 /// The file a subgraph node uses, with what graph params bind for it.
@@ -340,8 +363,10 @@ impl<'r> Loader<'r> {
             )));
             return false;
         }
+        let given = if is_root { self.root_text.take() } else { None };
         // Only regular files of a bounded size: a FIFO or /dev/zero would block or never end.
         match std::fs::metadata(path) {
+            _ if given.is_some() => {}
             Ok(m) if !m.is_file() => {
                 self.problems.push(problem_here(format!(
                     "{} is not a regular file",
@@ -359,7 +384,7 @@ impl<'r> Loader<'r> {
             }
             _ => {}
         }
-        let text = match std::fs::read_to_string(path) {
+        let text = match given.map_or_else(|| std::fs::read_to_string(path), Ok) {
             Ok(t) => t,
             Err(e) => {
                 let what = if is_root {

@@ -27,6 +27,7 @@ mod random;
 mod reduce;
 mod run;
 mod scan;
+mod scene;
 mod shaders;
 mod sort;
 mod spread;
