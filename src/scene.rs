@@ -112,6 +112,21 @@ struct Interactions {
     gravity: Option<[f64; 3]>,
     #[serde(default)]
     electrostatics: Option<Electrostatics>,
+    #[serde(default)]
+    bonds: Option<Bonds>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Bonds {
+    stiffness: f64,
+    /// By default the diameter (the chain generator's step).
+    #[serde(default)]
+    rest_length: Option<f64>,
+    /// Bonded pairs by particle index (in the order of `particles`), beside the bonds of
+    /// sets placed as chains.
+    #[serde(default)]
+    pairs: Vec<[u64; 2]>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -388,6 +403,8 @@ impl Builder<'_> {
         let mut rng = StdRng::seed_from_u64(seed ^ 0x5eed_5ce7e);
         let mut positions: Vec<[f64; 3]> = Vec::new();
         let mut typeid: Vec<u32> = Vec::new();
+        let mut bonds: Vec<(u32, u32)> = Vec::new();
+        let mut placer = Placer::new(s.box_lengths, walls.is_none(), radius.max(smallest));
         for (i, set) in s.particles.iter().enumerate() {
             let place = format!("particles[{i}]");
             let Some(t) = s.species.get_index_of(&set.species) else {
@@ -406,7 +423,11 @@ impl Builder<'_> {
                             "{place}: `place` and `z` are for generated particles, not those read from `positions`"
                         ));
                     }
-                    self.read_positions(&place, &folder.join(file))
+                    let read = self.read_positions(&place, &folder.join(file));
+                    for p in read.iter().flatten() {
+                        placer.add(*p, r);
+                    }
+                    read
                 }
                 (None, Some(count)) => {
                     let region = self.region(&place, set, r, &walls);
@@ -414,23 +435,41 @@ impl Builder<'_> {
                     match (region, kind) {
                         (None, _) => None,
                         (Some(region), "random") => {
-                            let radii_so_far: Vec<f64> = typeid
-                                .iter()
-                                .map(|&t| s.species[t as usize].radius)
-                                .collect();
-                            self.place_random(
+                            self.place_random(&place, count, r, region, &mut placer, &mut rng)
+                        }
+                        (Some(region), "chain") => {
+                            let Some(b) = &s.interactions.bonds else {
+                                self.problem(format!(
+                                    "{place}.place: a chain needs interactions.bonds (its stiffness)"
+                                ));
+                                continue;
+                            };
+                            let step = b.rest_length.unwrap_or(2.0 * r).max(2.0 * r);
+                            let first = positions.len() as u32;
+                            let chain = self.place_chain(
                                 &place,
                                 count,
                                 r,
+                                step,
                                 region,
-                                (&positions, &radii_so_far),
+                                &mut placer,
                                 &mut rng,
-                            )
+                            );
+                            if chain.is_some() {
+                                bonds.extend((1..count as u32).map(|k| (first + k - 1, first + k)));
+                            }
+                            chain
                         }
-                        (Some(region), "lattice") => self.place_lattice(&place, count, region),
+                        (Some(region), "lattice") => {
+                            let sites = self.place_lattice(&place, count, region);
+                            for p in sites.iter().flatten() {
+                                placer.add(*p, r);
+                            }
+                            sites
+                        }
                         (_, other) => {
                             self.problem(format!(
-                                "{place}.place: unknown `{other}` (random or lattice)"
+                                "{place}.place: unknown `{other}` (random, lattice or chain)"
                             ));
                             None
                         }
@@ -494,6 +533,47 @@ impl Builder<'_> {
         } else if charged {
             self.problem(
                 "species carry charges but interactions.electrostatics is not given (give it, or set the charges to 0)",
+            );
+        }
+        if let Some(b) = &s.interactions.bonds {
+            self.positive("interactions.bonds.stiffness", b.stiffness);
+            for (i, &[p, q]) in b.pairs.iter().enumerate() {
+                if p >= n as u64 || q >= n as u64 || p == q {
+                    self.problem(format!(
+                        "interactions.bonds.pairs[{i}]: [{p}, {q}] is not a pair of two of the {n} particles"
+                    ));
+                } else {
+                    bonds.push((p as u32, q as u32));
+                }
+            }
+            if bonds.is_empty() {
+                self.problem(
+                    "interactions.bonds: no bonds (give pairs, or a particle set placed as a chain)",
+                );
+            }
+            let mut lists = vec![Vec::new(); n as usize];
+            for &(p, q) in &bonds {
+                lists[p as usize].push(q);
+                lists[q as usize].push(p);
+            }
+            let mut start = vec![0u32];
+            let mut partner = Vec::new();
+            for l in &lists {
+                partner.extend(l);
+                start.push(partner.len() as u32);
+            }
+            inputs.insert(
+                "bond_start".into(),
+                HostArray::u32(ValueType::Indices { n: n + 1 }, start),
+            );
+            inputs.insert(
+                "bond_partner".into(),
+                HostArray::u32(
+                    ValueType::Indices {
+                        n: partner.len() as u32,
+                    },
+                    partner,
+                ),
             );
         }
         if inertial {
@@ -698,16 +778,15 @@ impl Builder<'_> {
         }
     }
 
-    /// Uniform positions, none closer to another (earlier sets included, periodic in x
-    /// and y and, without walls, z) than the sum of their radii; a grid of cells keeps
-    /// the check local.
+    /// Uniform positions, none closer to another (earlier sets included) than the sum
+    /// of their radii.
     fn place_random(
         &mut self,
         place: &str,
         count: u64,
         r: f64,
         region: Region,
-        (earlier, earlier_radii): (&[[f64; 3]], &[f64]),
+        placer: &mut Placer,
         rng: &mut StdRng,
     ) -> Option<Vec<[f64; 3]>> {
         if count == 0 || count > MAX_GENERATED {
@@ -716,76 +795,72 @@ impl Builder<'_> {
             ));
             return None;
         }
-        let l = self.scene.box_lengths;
-        let periodic_z = self.scene.walls.is_none();
-        let rmax = earlier_radii.iter().cloned().fold(r, f64::max);
-        let cell = 2.0 * rmax;
-        let dims = [0, 1, 2].map(|d| ((l[d] / cell).floor() as usize).clamp(1, 256));
-        let cell_of = |p: &[f64; 3]| -> [usize; 3] {
-            [0, 1, 2].map(|d| {
-                let u = (p[d] / l[d] + 0.5).rem_euclid(1.0);
-                ((u * dims[d] as f64) as usize).min(dims[d] - 1)
-            })
-        };
-        let mut grid: std::collections::HashMap<[usize; 3], Vec<(usize, f64)>> =
-            std::collections::HashMap::new();
-        let mut all: Vec<[f64; 3]> = earlier.to_vec();
-        for (i, (p, rr)) in earlier.iter().zip(earlier_radii).enumerate() {
-            grid.entry(cell_of(p)).or_default().push((i, *rr));
-        }
         let mut out = Vec::with_capacity(count as usize);
         for _ in 0..count {
-            let mut ok = None;
-            for _ in 0..PLACEMENT_TRIES {
-                let p = [0, 1, 2]
-                    .map(|d| region[d][0] + (region[d][1] - region[d][0]) * rng.random::<f64>());
-                let c = cell_of(&p);
-                let mut free = true;
-                'near: for dx in -1i64..=1 {
-                    for dy in -1i64..=1 {
-                        for dz in -1i64..=1 {
-                            let n = [
-                                (c[0] as i64 + dx).rem_euclid(dims[0] as i64) as usize,
-                                (c[1] as i64 + dy).rem_euclid(dims[1] as i64) as usize,
-                                (c[2] as i64 + dz).rem_euclid(dims[2] as i64) as usize,
-                            ];
-                            for &(j, rj) in grid.get(&n).map(|v| v.as_slice()).unwrap_or(&[]) {
-                                let q = all[j];
-                                let mut d2 = 0.0;
-                                for d in 0..3 {
-                                    let mut x = p[d] - q[d];
-                                    if d < 2 || periodic_z {
-                                        x -= l[d] * (x / l[d]).round();
-                                    }
-                                    d2 += x * x;
-                                }
-                                if d2 < (r + rj) * (r + rj) {
-                                    free = false;
-                                    break 'near;
-                                }
-                            }
-                        }
-                    }
-                }
-                if free {
-                    ok = Some(p);
-                    break;
-                }
-            }
-            let Some(p) = ok else {
+            let found = (0..PLACEMENT_TRIES)
+                .map(|_| {
+                    [0, 1, 2]
+                        .map(|d| region[d][0] + (region[d][1] - region[d][0]) * rng.random::<f64>())
+                })
+                .find(|p| placer.fits(p, r));
+            let Some(p) = found else {
                 let volume: f64 = region.iter().map(|[a, b]| b - a).product();
-                let fraction = (all.len() - earlier.len()) as f64 * 4.0 / 3.0
-                    * std::f64::consts::PI
-                    * r.powi(3)
-                    / volume;
+                let fraction =
+                    out.len() as f64 * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3) / volume;
                 self.problem(format!(
                     "{place}: placed {} of {count} particles without overlap before {PLACEMENT_TRIES} tries failed (packing fraction {fraction:.3} reached): use a larger region, fewer particles or place: lattice",
                     out.len()
                 ));
                 return None;
             };
-            grid.entry(cell_of(&p)).or_default().push((all.len(), r));
-            all.push(p);
+            placer.add(p, r);
+            out.push(p);
+        }
+        Some(out)
+    }
+
+    /// A chain: a random walk of steps `bond` from a random start, each bead inside the
+    /// region and overlapping no other particle (its predecessor touches it where the
+    /// step is the sum of radii); bonds between consecutive beads.
+    #[allow(clippy::too_many_arguments)]
+    fn place_chain(
+        &mut self,
+        place: &str,
+        count: u64,
+        r: f64,
+        bond: f64,
+        region: Region,
+        placer: &mut Placer,
+        rng: &mut StdRng,
+    ) -> Option<Vec<[f64; 3]>> {
+        if count == 0 || count > MAX_GENERATED {
+            self.problem(format!(
+                "{place}.count: {count} is not in 1..={MAX_GENERATED}"
+            ));
+            return None;
+        }
+        let inside = |p: &[f64; 3]| (0..3).all(|d| p[d] >= region[d][0] && p[d] <= region[d][1]);
+        let mut out: Vec<[f64; 3]> = Vec::with_capacity(count as usize);
+        for k in 0..count {
+            let found = (0..PLACEMENT_TRIES)
+                .map(|_| match out.last() {
+                    None => [0, 1, 2].map(|d| {
+                        region[d][0] + (region[d][1] - region[d][0]) * rng.random::<f64>()
+                    }),
+                    Some(prev) => {
+                        let u = [normal(rng), normal(rng), normal(rng)];
+                        let norm = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt().max(1e-300);
+                        [0, 1, 2].map(|d| prev[d] + bond * u[d] / norm)
+                    }
+                })
+                .find(|p| inside(p) && placer.fits(p, r));
+            let Some(p) = found else {
+                self.problem(format!(
+                    "{place}: a chain of {count} beads found no room for bead {k} in {PLACEMENT_TRIES} tries (a larger region, or a shorter chain)"
+                ));
+                return None;
+            };
+            placer.add(p, r);
             out.push(p);
         }
         Some(out)
@@ -917,6 +992,14 @@ impl Builder<'_> {
             params.insert("forces.charge_width".into(), json!(width));
             params.insert("forces.tolerance".into(), json!(e.tolerance));
         }
+        if let Some(b) = &it.bonds {
+            params.insert("forces.bonds".into(), json!(true));
+            params.insert("forces.bond_stiffness".into(), json!(b.stiffness));
+            params.insert(
+                "forces.bond_rest_length".into(),
+                json!(b.rest_length.unwrap_or(2.0 * radius)),
+            );
+        }
         // With walls, the periodic box of the pair list spans the domain and a cutoff
         // more each side, so no pair meets across the walls.
         let force_box = match walls {
@@ -943,16 +1026,17 @@ impl Builder<'_> {
         let mut node_inputs = serde_json::Map::new();
         let mut decl = serde_json::Map::new();
         for (name, a) in inputs {
-            let cols = match a.ty {
-                ValueType::Particles { k, .. } => k,
-                _ => unreachable!("scene inputs are particle arrays"),
+            let d = match a.ty {
+                ValueType::Particles { k, .. } => {
+                    json!({"type": "particles", "rows": "n", "cols": k})
+                }
+                _ => json!({"type": "indices"}),
             };
-            decl.insert(
-                name.clone(),
-                json!({"type": "particles", "rows": "n", "cols": cols}),
-            );
+            decl.insert(name.clone(), d);
             let port = match name.as_str() {
-                "charges" | "external" => format!("forces.{name}"),
+                "charges" | "external" | "bond_start" | "bond_partner" => {
+                    format!("forces.{name}")
+                }
                 other => other.to_string(),
             };
             node_inputs.insert(port, json!(format!("inputs.{name}")));
@@ -988,6 +1072,80 @@ impl Builder<'_> {
             "outputs": outputs,
         });
         serde_json::to_string_pretty(&g).expect("a JSON value")
+    }
+}
+
+/// Placed particles in a grid of cells of the largest diameter, so an overlap check looks
+/// at 27 cells: periodic in x and y and, without walls, z (a contact within 1e-9 of the
+/// sum of radii counts as touching, not overlapping).
+struct Placer {
+    lengths: [f64; 3],
+    periodic_z: bool,
+    dims: [usize; 3],
+    largest: f64,
+    cells: std::collections::HashMap<[usize; 3], Vec<usize>>,
+    placed: Vec<([f64; 3], f64)>,
+}
+
+impl Placer {
+    fn new(lengths: [f64; 3], periodic_z: bool, largest_radius: f64) -> Placer {
+        let cell = 2.0 * largest_radius;
+        Placer {
+            lengths,
+            periodic_z,
+            dims: [0, 1, 2].map(|d| ((lengths[d] / cell).floor() as usize).clamp(1, 256)),
+            largest: largest_radius,
+            cells: std::collections::HashMap::new(),
+            placed: Vec::new(),
+        }
+    }
+
+    fn cell_of(&self, p: &[f64; 3]) -> [usize; 3] {
+        [0, 1, 2].map(|d| {
+            let u = (p[d] / self.lengths[d] + 0.5).rem_euclid(1.0);
+            ((u * self.dims[d] as f64) as usize).min(self.dims[d] - 1)
+        })
+    }
+
+    fn fits(&self, p: &[f64; 3], r: f64) -> bool {
+        debug_assert!(r <= self.largest);
+        let c = self.cell_of(p);
+        for dx in -1i64..=1 {
+            for dy in -1i64..=1 {
+                for dz in -1i64..=1 {
+                    let key = [dx, dy, dz]
+                        .iter()
+                        .enumerate()
+                        .map(|(d, o)| (c[d] as i64 + o).rem_euclid(self.dims[d] as i64) as usize)
+                        .collect::<Vec<_>>();
+                    let Some(list) = self.cells.get(&[key[0], key[1], key[2]]) else {
+                        continue;
+                    };
+                    for &j in list {
+                        let (q, rj) = self.placed[j];
+                        let mut d2 = 0.0;
+                        for d in 0..3 {
+                            let mut x = p[d] - q[d];
+                            if d < 2 || self.periodic_z {
+                                x -= self.lengths[d] * (x / self.lengths[d]).round();
+                            }
+                            d2 += x * x;
+                        }
+                        let contact = (r + rj) * (1.0 - 1e-9);
+                        if d2 < contact * contact {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    fn add(&mut self, p: [f64; 3], r: f64) {
+        let c = self.cell_of(&p);
+        self.cells.entry(c).or_default().push(self.placed.len());
+        self.placed.push((p, r));
     }
 }
 

@@ -6,6 +6,7 @@
 //! skipping them.
 
 mod bin_sort;
+mod bonds;
 mod cells;
 mod chebyshev;
 mod cli;
