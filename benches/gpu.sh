@@ -19,6 +19,9 @@
 #               and 10^4, 10^6 (the boundary-value solves' GB/s), torch's copy bandwidth
 #   stream      bd_fcm.json at 10^6 for 1000 steps, with and without a frame every 100
 #               steps streamed to GSD and NPY (`run --every`): the run's wall time
+#   scene       scenes/colloids.json (the main job) against the hand-written bd_fcm.json on
+#               the same particles, 10^4 / 10^5 / 10^6 for 500 steps, two rounds: the
+#               run's wall time; the demo's diffusion check from a streamed trajectory
 #   nbody       the direct pair mobilities, open and above a wall, translation and grand:
 #               pair interactions per second and GFLOP/s
 #   python      a Python loop of libMobility-style Mdot calls against the GPU time of one
@@ -44,7 +47,7 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson dpstokes nbody python mpcd spread atomics fft primitives overhead determinism stream)
+suites=(fcm pse poisson dpstokes nbody python mpcd spread atomics fft primitives overhead determinism stream scene)
 usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
@@ -208,6 +211,36 @@ suite_stream() {
     done
   done
   ls -la "$dir" | tee -a "$log"
+  rm -rf "$dir"
+}
+
+suite_scene() {
+  local dir=/tmp/mesoflow-scene
+  mkdir -p "$dir"
+  for size in 10000:64 100000:128 1000000:256; do
+    local n=${size%:*} side=${size#*:}
+    python3 - "$dir" "$n" "$side" <<'PY'
+import json, sys
+import numpy as np
+d, n, side = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+np.save(f"{d}/x.npy", np.random.default_rng(1).uniform(-side / 2, side / 2, (n, 3)).astype(np.float32))
+scene = json.load(open("scenes/colloids.json"))
+scene["box"] = [side] * 3
+scene["particles"] = [{"species": "colloid", "positions": "x.npy"}]
+scene.pop("output")
+json.dump(scene, open(f"{d}/scene.json", "w"))
+PY
+    for round in 1 2; do
+      echo "== scene n=$n side=$side round $round" | tee -a "$log"
+      $bin run "$dir/scene.json" --steps 500 --output positions="$dir/a.npy" 2>&1 | grep -E "steps in" | tee -a "$log"
+      echo "== bd_fcm.json n=$n side=$side round $round" | tee -a "$log"
+      $bin run graphs/bd_fcm.json --set "box=[$side,$side,$side]" --set dt=0.05 --input positions="$dir/x.npy" \
+        --steps 500 --seed 1 --output positions="$dir/b.npy" 2>&1 | grep -E "steps in" | tee -a "$log"
+    done
+  done
+  echo "== the demo: scenes/colloids.json, every step streamed, diffusion against theory" | tee -a "$log"
+  $bin run scenes/colloids.json --output positions="$dir/t.npy" --every 1 2>&1 | grep -E "steps in|->" | tee -a "$log"
+  python3 scripts/diffusion.py "$dir/t.npy" 0.05 64 2>&1 | tee -a "$log"
   rm -rf "$dir"
 }
 

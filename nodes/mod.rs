@@ -1,6 +1,7 @@
 //! Node implementations, each beside its f64 CPU reference. Kernels live in `shaders/`.
 
 pub mod bin_sort;
+pub mod bonds;
 pub mod cells;
 pub mod chebyshev;
 pub mod chebyshev_bvp;
@@ -37,6 +38,7 @@ pub fn registry() -> Registry {
 pub fn register_all(r: &mut Registry) {
     planners::register(r);
     bin_sort::register(r);
+    bonds::register(r);
     chebyshev::register(r);
     chebyshev_bvp::register(r);
     chebyshev_spread::register(r);

@@ -314,7 +314,69 @@ pub static KINDS: &[PointwiseKind] = &[
         reference: |i, e, p| i[0] + p[e.comp as usize],
         ..BASE
     },
+    PointwiseKind {
+        name: "wall_force",
+        doc: "the WCA repulsion of flat walls on particles (N x 3 positions -> N x 3 forces): F_z = 24 eps (2 (sigma/h)^12 - (sigma/h)^6) / h for h < 2^(1/6) sigma, h the distance to the plane z = bottom (pushing up) and to z = top (pushing down); the x and y columns 0. h is taken at least sigma / 2, so a particle that crossed a wall is pushed back with a bounded force",
+        inputs: &[("x", "positions (N x 3)", false)],
+        params: || {
+            vec![
+                ParamSpec::f32_factor("bottom", Some(-1e18), "z of the bottom wall (-1e18: none)"),
+                ParamSpec::f32_factor("top", Some(1e18), "z of the top wall (1e18: none)"),
+                ParamSpec::f32_nonnegative("epsilon", Some(1.0), "energy scale eps"),
+                ParamSpec::f32_positive(
+                    "sigma",
+                    Some(1.0),
+                    "length scale sigma (the force vanishes from 2^(1/6) sigma)",
+                ),
+            ]
+        },
+        flatten: |p| numbers(p, &["bottom", "top", "epsilon", "sigma"]),
+        check: three_columns,
+        body: "if (comp != 2u) { return 0.0; }
+    let cut = 1.122462048309373 * p3;
+    var f = 0.0;
+    let hb = x - p0;
+    if (hb < cut) {
+        let h = max(hb, 0.5 * p3);
+        let s2 = (p3 / h) * (p3 / h);
+        let s6 = s2 * s2 * s2;
+        f = f + 24.0 * p2 * (2.0 * s6 * s6 - s6) / h;
+    }
+    let ht = p1 - x;
+    if (ht < cut) {
+        let h = max(ht, 0.5 * p3);
+        let s2 = (p3 / h) * (p3 / h);
+        let s6 = s2 * s2 * s2;
+        f = f - 24.0 * p2 * (2.0 * s6 * s6 - s6) / h;
+    }
+    return f;",
+        per_component: false,
+        reference: |i, e, p| {
+            if e.comp != 2 {
+                return 0.0;
+            }
+            let (eps, sigma) = (p[2], p[3]);
+            let wca = |d: f64| {
+                if d >= 2f64.powf(1.0 / 6.0) * sigma {
+                    return 0.0;
+                }
+                let h = d.max(0.5 * sigma);
+                let s6 = (sigma / h).powi(6);
+                24.0 * eps * (2.0 * s6 * s6 - s6) / h
+            };
+            wca(i[0] - p[0]) - wca(p[1] - i[0])
+        },
+        ..BASE
+    },
 ];
+
+/// Positions of 3-D particles (the walls are planes of constant z).
+fn three_columns(t: &ValueType, _: &[f64]) -> Result<(), String> {
+    match t {
+        ValueType::Particles { k: 3, .. } => Ok(()),
+        other => Err(format!("expected positions (N x 3), got {other}")),
+    }
+}
 
 /// The node kind of a table row.
 pub(crate) fn pointwise_kind(row: &'static PointwiseKind) -> NodeKind {

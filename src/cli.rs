@@ -16,6 +16,7 @@ use mesoflow::gpu::{DeviceCaps, GpuContext, GpuError, KernelCache};
 use mesoflow::graph::{self, Graph, LoadOptions};
 use mesoflow::node::{ParamKind, Registry};
 use mesoflow::plan::{self, Plan, PlanOptions};
+use mesoflow::scene::{self, CompiledScene};
 use mesoflow::value::{HostArray, HostData, ValueType};
 
 use crate::bench::{BenchCommand, BenchError};
@@ -33,7 +34,8 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Run a graph file.
+    /// Run a graph file, or a scene (a JSON file with `"scene": 1`: built into the graph
+    /// it needs, its particles placed, its outputs and steps taken from it).
     Run {
         graph: PathBuf,
         /// Set a graph param: NAME=VALUE (a number, a string, or a JSON array such as [64,64,64]).
@@ -49,9 +51,9 @@ pub enum Command {
         /// summarised (the others are named, with why).
         #[arg(long = "output", value_name = "NAME[=FILE]")]
         outputs: Vec<String>,
-        /// Number of time steps.
-        #[arg(long, default_value_t = 1)]
-        steps: u64,
+        /// Number of time steps (default: a scene's `run.steps`, else 1).
+        #[arg(long)]
+        steps: Option<u64>,
         /// Write a frame of each output given a file every K steps (and after the last),
         /// streamed to disk while the run goes on: FILE.npy holds (frames, ...), FILE.gsd
         /// one frame each. The steps and random draws are those of one run.
@@ -90,7 +92,7 @@ pub enum Command {
         #[arg(required = true)]
         graphs: Vec<PathBuf>,
     },
-    /// Print the plan of a graph: order, fused groups, buffers, peak memory.
+    /// Print the plan of a graph or a scene: order, fused groups, buffers, peak memory.
     Inspect {
         graph: PathBuf,
         #[arg(long = "set", value_name = "NAME=VALUE")]
@@ -116,6 +118,9 @@ pub enum Command {
         /// Print Graphviz DOT instead of text.
         #[arg(long)]
         dot: bool,
+        /// For a scene: print the graph file it builds instead of the plan.
+        #[arg(long)]
+        graph_text: bool,
     },
     /// Show the GPU adapter mesoflow would use and what it can do.
     Info,
@@ -201,9 +206,11 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
                 (true, false) => Profile::Launches,
                 (false, false) => Profile::Off,
             };
+            let scene = scene_of(&graph, seed)?;
             run(
                 &registry,
                 &graph,
+                scene,
                 &sets,
                 &inputs,
                 &outputs,
@@ -230,9 +237,12 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             no_fuse,
             deterministic,
             dot,
+            graph_text,
         } => inspect(
             &registry,
             &graph,
+            scene_of(&graph, None)?,
+            graph_text,
             &sets,
             &inputs,
             &with,
@@ -265,6 +275,32 @@ fn parse_sets(sets: &[String]) -> Result<BTreeMap<String, ParamValue>, CliError>
 
 fn load(registry: &Registry, path: &Path, opts: &LoadOptions) -> Result<Graph, CliError> {
     graph::load(&resolve(path), registry, opts).map_err(|p| CliError::Input(p.to_string()))
+}
+
+/// A graph argument's graph: the file's, or the one a scene built.
+fn load_graph(
+    registry: &Registry,
+    path: &Path,
+    scene: Option<&CompiledScene>,
+    opts: &LoadOptions,
+) -> Result<Graph, CliError> {
+    match scene {
+        Some(s) => graph::load_text(&resolve(path), &s.graph, registry, opts)
+            .map_err(|p| CliError::Input(format!("the graph the scene builds: {p}"))),
+        None => load(registry, path, opts),
+    }
+}
+
+/// The scene a graph argument names, built (its generated particles placed with `seed`
+/// where given), or None for a graph file.
+fn scene_of(path: &Path, seed: Option<u64>) -> Result<Option<CompiledScene>, CliError> {
+    let path = resolve(path);
+    if !scene::is_scene(&path) {
+        return Ok(None);
+    }
+    scene::compile(&path, seed)
+        .map(Some)
+        .map_err(|e| CliError::Input(e.to_string()))
 }
 
 /// A graph argument: the file when it exists, else a graph of the library by name
@@ -307,10 +343,11 @@ fn read_inputs(g: &Graph, args: &[String]) -> Result<BTreeMap<String, HostArray>
 fn run(
     registry: &Registry,
     path: &Path,
+    scene: Option<CompiledScene>,
     sets: &[String],
     input_args: &[String],
     output_args: &[String],
-    steps: u64,
+    steps: Option<u64>,
     every: Option<u64>,
     continuation: Continuation,
     seed: Option<u64>,
@@ -318,9 +355,25 @@ fn run(
     fuse: bool,
     deterministic: bool,
 ) -> Result<(), CliError> {
+    let steps = steps.or(scene.as_ref().and_then(|s| s.steps)).unwrap_or(1);
     if steps == 0 {
         return Err(CliError::Input("--steps must be at least 1".into()));
     }
+    // A scene's trajectory and interval stand where the command line gives none.
+    let scene_outputs: Vec<String> = match &scene {
+        Some(s) if output_args.is_empty() => s
+            .outputs
+            .iter()
+            .map(|(name, file)| format!("{name}={}", file.display()))
+            .collect(),
+        _ => Vec::new(),
+    };
+    let output_args = if scene_outputs.is_empty() {
+        output_args
+    } else {
+        &scene_outputs[..]
+    };
+    let every = every.or(scene.as_ref().and_then(|s| s.every));
     if every == Some(0) {
         return Err(CliError::Input("--every must be at least 1".into()));
     }
@@ -343,18 +396,24 @@ fn run(
                 "--set seed={v}: expected a non-negative integer"
             )));
         }
-        (None, None) => 0,
+        (None, None) => scene.as_ref().and_then(|s| s.seed).unwrap_or(0),
     };
-    let g = load(
+    let g = load_graph(
         registry,
         path,
+        scene.as_ref(),
         &LoadOptions {
             overrides,
             steps,
             seed,
         },
     )?;
-    let data = read_inputs(&g, input_args)?;
+    let mut data = read_inputs(&g, input_args)?;
+    if let Some(s) = &scene {
+        for (name, a) in &s.inputs {
+            data.entry(name.clone()).or_insert_with(|| a.clone());
+        }
+    }
     let missing: Vec<String> = g
         .inputs
         .iter()
@@ -419,7 +478,9 @@ fn run(
     let (stats, results, streamed_files) = if streamed {
         let sinks = crate::frames::FrameSinks::open(&files, frames).map_err(CliError::Runtime)?;
         // Frames go to disk on a thread of their own while the next steps run.
-        let writer = crate::frames::FrameWriter::start(sinks, crate::frames::FrameContext::of(&g));
+        let context = crate::frames::FrameContext::of(&g)
+            .with_species(scene.as_ref().map(|s| s.species.clone()));
+        let writer = crate::frames::FrameWriter::start(sinks, context);
         let mut stats: Option<RunStats> = None;
         let mut results = Vec::new();
         let mut done = 0;
@@ -783,9 +844,16 @@ fn print_profile(stats: &RunStats) {
 fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
     let mut failures = Vec::new();
     for path in graphs {
-        match plan::validate_file(registry, &resolve(path)) {
-            Ok(summary) => outln!("{}: ok ({summary})", path.display()),
-            Err(e) => failures.push(e.to_string()),
+        match scene_of(path, None) {
+            Ok(Some(s)) => match validate_scene(registry, path, &s) {
+                Ok(summary) => outln!("{}: ok ({summary})", path.display()),
+                Err(e) => failures.push(format!("{}: {e}\n", path.display())),
+            },
+            Err(e) => failures.push(format!("{e}\n")),
+            Ok(None) => match plan::validate_file(registry, &resolve(path)) {
+                Ok(summary) => outln!("{}: ok ({summary})", path.display()),
+                Err(e) => failures.push(e.to_string()),
+            },
         }
     }
     if failures.is_empty() {
@@ -795,10 +863,36 @@ fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
     }
 }
 
+/// A scene's graph loaded and planned for its particles, on device-independent
+/// capabilities (as `validate` plans graph files).
+fn validate_scene(registry: &Registry, path: &Path, s: &CompiledScene) -> Result<String, CliError> {
+    let g = load_graph(registry, path, Some(s), &LoadOptions::default())?;
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: s.inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
+        fuse: true,
+    };
+    let caps = DeviceCaps {
+        max_binding: u64::MAX,
+        max_buffer: u64::MAX,
+        ..DeviceCaps::baseline()
+    };
+    let p = plan::plan(&g, &opts, &caps).map_err(|e| CliError::Input(e.to_string()))?;
+    Ok(format!(
+        "scene: {} particles of {} species, {} nodes, {} launches per step",
+        s.species.typeid.len(),
+        s.species.names.len(),
+        g.nodes.len(),
+        p.step.len()
+    ))
+}
+
 #[allow(clippy::too_many_arguments)]
 fn inspect(
     registry: &Registry,
     path: &Path,
+    scene: Option<CompiledScene>,
+    graph_text: bool,
     sets: &[String],
     input_args: &[String],
     with: &[String],
@@ -808,20 +902,36 @@ fn inspect(
     deterministic: bool,
     dot: bool,
 ) -> Result<(), CliError> {
+    if graph_text {
+        let Some(s) = &scene else {
+            return Err(CliError::Input(format!(
+                "--graph-text: {} is a graph file, not a scene",
+                path.display()
+            )));
+        };
+        outln!("{}", s.graph);
+        return Ok(());
+    }
     let overrides = parse_sets(sets)?;
-    let g = load(
+    let g = load_graph(
         registry,
         path,
+        scene.as_ref(),
         &LoadOptions {
             overrides,
             steps,
             seed: 0,
         },
     )?;
-    let given: BTreeMap<String, ValueType> = read_inputs(&g, input_args)?
+    let mut given: BTreeMap<String, ValueType> = read_inputs(&g, input_args)?
         .into_iter()
         .map(|(name, arr)| (name, arr.ty))
         .collect();
+    if let Some(s) = &scene {
+        for (name, a) in &s.inputs {
+            given.entry(name.clone()).or_insert(a.ty);
+        }
+    }
     for name in with {
         match g.inputs.iter().find(|i| &i.name == name) {
             Some(i) if i.optional => {}

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use mesoflow::expr::ParamValue;
 use mesoflow::graph::Graph;
 use mesoflow::gsd::{GsdFile, GsdType, f32_bytes};
+use mesoflow::scene::SpeciesTable;
 use mesoflow::value::{HostArray, HostData, ValueType};
 
 /// What a trajectory frame takes from the graph: its box and time step, if it has them.
@@ -19,6 +20,9 @@ pub struct FrameContext {
     /// [Lx, Ly, Lz]; Lz 0 for a 2-D box (zmax - zmin where the graph has those).
     box_lengths: Option<[f64; 3]>,
     dt: Option<f64>,
+    /// A scene's species: written in a GSD file's first frame (particles/types, typeid,
+    /// diameter, mass, charge), which by GSD's rule stands for every later frame.
+    species: Option<SpeciesTable>,
 }
 
 impl FrameContext {
@@ -41,7 +45,12 @@ impl FrameContext {
         FrameContext {
             box_lengths,
             dt: number("dt"),
+            species: None,
         }
+    }
+
+    pub fn with_species(self, species: Option<SpeciesTable>) -> FrameContext {
+        FrameContext { species, ..self }
     }
 }
 
@@ -255,6 +264,38 @@ fn gsd_frame(
             1,
             1,
             &(step as f64 * dt).to_le_bytes(),
+        )?;
+    }
+    if let Some(sp) = cx.species.as_ref().filter(|_| gsd.frames_ended() == 0) {
+        let width = sp.names.iter().map(|n| n.len() + 1).max().unwrap_or(1);
+        let mut types = vec![0u8; width * sp.names.len()];
+        for (i, name) in sp.names.iter().enumerate() {
+            types[i * width..i * width + name.len()].copy_from_slice(name.as_bytes());
+        }
+        let n = sp.typeid.len() as u64;
+        gsd.chunk(
+            "particles/types",
+            GsdType::I8,
+            sp.names.len() as u64,
+            width as u32,
+            &types,
+        )?;
+        let words: Vec<u8> = sp.typeid.iter().flat_map(|t| t.to_le_bytes()).collect();
+        gsd.chunk("particles/typeid", GsdType::U32, n, 1, &words)?;
+        gsd.chunk(
+            "particles/diameter",
+            GsdType::F32,
+            n,
+            1,
+            &f32_bytes(&sp.diameter),
+        )?;
+        gsd.chunk("particles/mass", GsdType::F32, n, 1, &f32_bytes(&sp.mass))?;
+        gsd.chunk(
+            "particles/charge",
+            GsdType::F32,
+            n,
+            1,
+            &f32_bytes(&sp.charge),
         )?;
     }
     let mut n_written = false;

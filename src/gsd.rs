@@ -27,6 +27,8 @@ pub enum GsdType {
     U8 = 1,
     U32 = 3,
     U64 = 4,
+    /// Characters, as HOOMD's `particles/types` (one NUL-padded name per row).
+    I8 = 5,
     F32 = 9,
     F64 = 10,
 }
@@ -165,6 +167,11 @@ impl GsdFile {
         });
         self.at += bytes.len() as u64;
         Ok(())
+    }
+
+    /// How many frames are ended (the current frame's index).
+    pub fn frames_ended(&self) -> u64 {
+        self.frame
     }
 
     /// Ends the current frame (the next chunks belong to the next).

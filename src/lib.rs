@@ -14,6 +14,7 @@ pub mod ids;
 pub mod node;
 pub mod npy;
 pub mod plan;
+pub mod scene;
 pub mod transform;
 pub mod value;
 

@@ -42,6 +42,26 @@ impl Default for LoadOptions {
 
 /// Loads a graph file and everything it uses, reporting all problems together.
 pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Graph, Problems> {
+    load_from(path, None, registry, opts)
+}
+
+/// Loads a graph given as text (one a scene built), as if it were the file `path`: its
+/// subgraphs are found from `path`'s folder and the library, and problems name `path`.
+pub fn load_text(
+    path: &Path,
+    text: &str,
+    registry: &Registry,
+    opts: &LoadOptions,
+) -> Result<Graph, Problems> {
+    load_from(path, Some(text.to_string()), registry, opts)
+}
+
+fn load_from(
+    path: &Path,
+    text: Option<String>,
+    registry: &Registry,
+    opts: &LoadOptions,
+) -> Result<Graph, Problems> {
     let mut builtins = Scope::new(registry.functions());
     builtins.insert("steps".into(), ParamValue::Number(opts.steps as f64));
     builtins.insert("seed".into(), ParamValue::Number(opts.seed as f64));
@@ -61,6 +81,7 @@ pub fn load(path: &Path, registry: &Registry, opts: &LoadOptions) -> Result<Grap
         param_roots: HashMap::new(),
         consequences: BTreeMap::new(),
         graph_params: HashMap::new(),
+        root_text: text,
     };
     let overrides: IndexMap<String, ParamValue> = opts.overrides.clone().into_iter().collect();
     l.load_file(path, "", &overrides, None);
@@ -130,6 +151,10 @@ struct Binding<'a> {
     /// The params a graph param's bindings set (`radius` from `mobility.radius`), with
     /// where they were written.
     bound: &'a BTreeMap<String, String>,
+    /// Inputs bound through graph params, as references in the scope that wrote them:
+    /// those of the graph param the node uses, and dotted ones (`forces.charges`) that
+    /// a forwarded graph param carries.
+    bound_inputs: &'a IndexMap<String, PendingRef>,
 }
 
 /// A kind node's param values as its file gives them, resolved in the node's scope.
@@ -168,6 +193,17 @@ struct Loader<'r> {
     /// Graph-valued params by (file scope, name): the file each names and the params
     /// its parent bound for it (`mobility.radius` given as `radius`).
     graph_params: HashMap<(String, String), GraphParamValue>,
+    /// The top-level graph's text where it was given rather than read (`load_text`).
+    root_text: Option<String>,
+}
+
+/// The file a subgraph node uses, with what graph params bind for it.
+struct SubgraphFile {
+    file: PathBuf,
+    params: IndexMap<String, ParamValue>,
+    /// Where each bound param was bound, for messages.
+    params_at: BTreeMap<String, String>,
+    inputs: IndexMap<String, PendingRef>,
 }
 
 /// The value of a graph-valued param: the file it names and the params bound for it.
@@ -175,6 +211,9 @@ struct Loader<'r> {
 struct GraphParamValue {
     file: PathBuf,
     bound: IndexMap<String, ParamValue>,
+    /// The inputs bound for it (`forces.charges`: input `charges` of every node using
+    /// it), as references in the scope that wrote them.
+    bound_inputs: IndexMap<String, PendingRef>,
     /// Where the bindings were written, for messages.
     bound_at: String,
 }
@@ -324,8 +363,10 @@ impl<'r> Loader<'r> {
             )));
             return false;
         }
+        let given = if is_root { self.root_text.take() } else { None };
         // Only regular files of a bounded size: a FIFO or /dev/zero would block or never end.
         match std::fs::metadata(path) {
+            _ if given.is_some() => {}
             Ok(m) if !m.is_file() => {
                 self.problems.push(problem_here(format!(
                     "{} is not a regular file",
@@ -343,7 +384,7 @@ impl<'r> Loader<'r> {
             }
             _ => {}
         }
-        let text = match std::fs::read_to_string(path) {
+        let text = match given.map_or_else(|| std::fs::read_to_string(path), Ok) {
             Ok(t) => t,
             Err(e) => {
                 let what = if is_root {
@@ -554,6 +595,7 @@ impl<'r> Loader<'r> {
                                     GraphParamValue {
                                         file,
                                         bound: bound.shift_remove(name).unwrap_or_default(),
+                                        bound_inputs: IndexMap::new(),
                                         bound_at: match parent {
                                             Some(b) => {
                                                 format!("node `{}` of {}", b.node, b.file.display())
@@ -794,7 +836,51 @@ impl<'r> Loader<'r> {
         parent: &Option<Binding>,
     ) {
         if let Some(b) = parent {
-            for name in b.inputs.keys() {
+            // Dotted inputs bind inputs of the graph a graph param names.
+            let dotted = b
+                .inputs
+                .iter()
+                .filter(|(n, _)| n.contains('.'))
+                .map(|(n, text)| {
+                    let r = PendingRef {
+                        scope: b.scope.into(),
+                        text: text.clone(),
+                        file: b.file.into(),
+                        node: Some(b.node.into()),
+                        port: Some(n.clone()),
+                        place: String::new(),
+                    };
+                    (n.clone(), r)
+                })
+                .chain(
+                    b.bound_inputs
+                        .iter()
+                        .filter(|(n, _)| n.contains('.'))
+                        .map(|(n, r)| (n.clone(), r.clone())),
+                );
+            for (name, r) in dotted.collect::<Vec<_>>() {
+                let (head, rest) = name.split_once('.').expect("dotted");
+                let unresolved = self.root_of(scope, head).is_some();
+                match self
+                    .graph_params
+                    .get_mut(&(scope.to_string(), head.to_string()))
+                {
+                    Some(g) => {
+                        g.bound_inputs.insert(rest.to_string(), r);
+                    }
+                    None if unresolved => {}
+                    None => self.problems.push(Problem::port(
+                        b.file,
+                        b.node,
+                        &name,
+                        format!(
+                            "`{name}` binds input `{rest}` of graph param `{head}`, but subgraph {} has no graph param `{head}`",
+                            path.display()
+                        ),
+                    )),
+                }
+            }
+            for name in b.inputs.keys().filter(|n| !n.contains('.')) {
                 if !decls.contains_key(name) {
                     let known: Vec<&str> = decls.keys().map(|s| s.as_str()).collect();
                     self.problems.push(Problem::port(
@@ -852,6 +938,14 @@ impl<'r> Loader<'r> {
                 }
                 Some(b) => match b.inputs.get(name) {
                     Some(text) => {
+                        if b.bound_inputs.contains_key(name) {
+                            self.problems.push(Problem::port(
+                                b.file,
+                                b.node,
+                                name,
+                                "input is connected here and bound by the parent through a graph param: connect it in one place",
+                            ));
+                        }
                         let r = PendingRef {
                             scope: b.scope.into(),
                             text: text.clone(),
@@ -860,6 +954,10 @@ impl<'r> Loader<'r> {
                             port: Some(name.clone()),
                             place: String::new(),
                         };
+                        self.input_alias.insert(key, Alias::Parent(r));
+                    }
+                    None if b.bound_inputs.contains_key(name) => {
+                        let r = b.bound_inputs[name].clone();
                         self.input_alias.insert(key, Alias::Parent(r));
                     }
                     None if decl.optional => {
@@ -1027,7 +1125,12 @@ impl<'r> Loader<'r> {
                     };
                     let loaded = match child {
                         None => false,
-                        Some((child_path, bound, bound_at)) => {
+                        Some(SubgraphFile {
+                            file: child_path,
+                            params: bound,
+                            params_at: bound_at,
+                            inputs: bound_inputs,
+                        }) => {
                             let mut overrides: IndexMap<String, ParamValue> =
                                 raw_params.into_iter().collect();
                             overrides.extend(bound);
@@ -1038,6 +1141,7 @@ impl<'r> Loader<'r> {
                                 inputs: &decl.inputs,
                                 param_origins: &param_origins,
                                 bound: &bound_at,
+                                bound_inputs: &bound_inputs,
                             };
                             self.load_file(&child_path, &child_scope, &overrides, Some(binding))
                         }
@@ -1081,13 +1185,10 @@ impl<'r> Loader<'r> {
         sub: &str,
         decl: &NodeDecl,
         own: &BTreeMap<String, ParamValue>,
-    ) -> Option<(
-        PathBuf,
-        IndexMap<String, ParamValue>,
-        BTreeMap<String, String>,
-    )> {
+    ) -> Option<SubgraphFile> {
         let mut bound = IndexMap::new();
         let mut bound_at = BTreeMap::new();
+        let mut bound_inputs = IndexMap::new();
         for (pname, raw) in &decl.params {
             let Some(from) = raw.as_str().and_then(|t| t.strip_prefix('$')) else {
                 continue;
@@ -1099,6 +1200,9 @@ impl<'r> Loader<'r> {
                 for (k, v) in &g.bound {
                     bound.insert(format!("{pname}.{k}"), v.clone());
                 }
+                for (k, r) in &g.bound_inputs {
+                    bound_inputs.insert(format!("{pname}.{k}"), r.clone());
+                }
             }
         }
         let Some(name) = sub.strip_prefix('$') else {
@@ -1107,7 +1211,12 @@ impl<'r> Loader<'r> {
                 .resolve(path, sub)
                 .map_err(|e| self.problems.push(Problem::node(path, id, e)))
                 .ok()
-                .map(|file| (file, bound, bound_at));
+                .map(|file| SubgraphFile {
+                    file,
+                    params: bound,
+                    params_at: bound_at,
+                    inputs: bound_inputs,
+                });
         };
         let key = (scope.to_string(), name.to_string());
         let Some(g) = self.graph_params.get(&key).cloned() else {
@@ -1141,7 +1250,15 @@ impl<'r> Loader<'r> {
                 bound.insert(k, v);
             }
         }
-        (!clash).then_some((g.file, bound, bound_at))
+        for (k, r) in g.bound_inputs {
+            bound_inputs.insert(k, r);
+        }
+        (!clash).then_some(SubgraphFile {
+            file: g.file,
+            params: bound,
+            params_at: bound_at,
+            inputs: bound_inputs,
+        })
     }
 
     fn kind_node(

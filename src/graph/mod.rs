@@ -17,8 +17,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 pub use data::InputDataError;
-pub use load::{LoadOptions, MAX_EXPANDED_NODES, MAX_SUBGRAPH_DEPTH, load};
-pub use schema::SCHEMA_VERSION;
+pub use load::{LoadOptions, MAX_EXPANDED_NODES, MAX_SUBGRAPH_DEPTH, load, load_text};
+pub use schema::{SCHEMA_VERSION, check_unique_keys};
 
 use crate::expr::ParamValue;
 use crate::ids::IdVec;

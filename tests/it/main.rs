@@ -6,6 +6,7 @@
 //! skipping them.
 
 mod bin_sort;
+mod bonds;
 mod cells;
 mod chebyshev;
 mod cli;
@@ -28,6 +29,7 @@ mod random;
 mod reduce;
 mod run;
 mod scan;
+mod scene;
 mod shaders;
 mod sort;
 mod spread;

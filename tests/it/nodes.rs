@@ -107,6 +107,15 @@ fn pointwise_kinds_match_their_references() {
     for (kind, params, inputs) in cases {
         check(kind, params, inputs, ELEMENTWISE_TOL);
     }
+    // Walls at 0.3 and 2.2 with a range of 0.56: particles (in [0.5, 2)) within it of
+    // either wall, some closer than sigma / 2 (clamped), the others force-free. The
+    // twelfth power costs a few more roundings than plain arithmetic.
+    let walls: Case = (
+        "wall_force",
+        r#"{"bottom": 0.3, "top": 2.2, "epsilon": 0.7, "sigma": 0.5}"#,
+        &[("x", P(999, 3))],
+    );
+    check(walls.0, walls.1, walls.2, 64.0 * f32::EPSILON as f64);
 }
 
 /// Columns taken apart and put together, against their references (raw word copies:

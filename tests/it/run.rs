@@ -401,16 +401,26 @@ fn graph_params_pick_a_subgraph_and_bind_its_params() {
     let Some(gpu) = gpu() else { return };
     let g = load(&root().join("graphs/fixtures/graph_params.json"));
     let x = Rng::new(6).array(ValueType::Particles { n: 12, k: 3 }, -1.0, 1.0);
+    let o = Rng::new(7).array(ValueType::Particles { n: 12, k: 3 }, -1.0, 1.0);
     for steps in [1u64, 3] {
-        let out = run_graph(&gpu, &g, &named(&[("x", x.clone())]), None, steps, true);
-        for (i, x0) in f32s(&x).iter().enumerate() {
+        let inputs = named(&[("x", x.clone()), ("o", o.clone())]);
+        let out = run_graph(&gpu, &g, &inputs, None, steps, true);
+        for (i, (x0, o)) in f32s(&x).iter().zip(f32s(&o)).enumerate() {
             let (mut plain, mut bound, mut forwarded) = (*x0 as f64, *x0 as f64, *x0 as f64);
+            let mut offset = *x0 as f64;
             for _ in 0..steps {
                 plain += 0.1 * (-plain);
                 bound += 0.1 * (-2.0 * bound + 0.5);
                 forwarded += 0.1 * (-0.25 * forwarded);
+                offset += 0.1 * (o as f64 - offset);
             }
-            for (name, want) in [("plain", plain), ("bound", bound), ("forwarded", forwarded)] {
+            for (name, want) in [
+                ("plain", plain),
+                ("bound", bound),
+                ("forwarded", forwarded),
+                ("with_input", offset),
+                ("forwarded_input", offset),
+            ] {
                 let got = f32s(&out[name])[i] as f64;
                 assert!(
                     (got - want).abs() < 1e-6,
