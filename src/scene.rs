@@ -961,7 +961,7 @@ impl Builder<'_> {
             };
             bound.push(("viscosity", json!(h.viscosity)));
             bound.push(("radius", json!(radius)));
-            params.insert("mobility".into(), json!(file));
+            params.insert("mobility".into(), json!(library_file(file)));
             for (k, v) in bound {
                 params.insert(format!("mobility.{k}"), v);
             }
@@ -970,7 +970,10 @@ impl Builder<'_> {
             }
         }
         // The interactions, each bound only where the scene has it.
-        params.insert("forces".into(), json!("lib/forces/interactions.json"));
+        params.insert(
+            "forces".into(),
+            json!(library_file("lib/forces/interactions.json")),
+        );
         let it = &s.interactions;
         let mut cutoff: f64 = 0.0;
         if let Some(w) = &it.wca {
@@ -1060,12 +1063,17 @@ impl Builder<'_> {
             "params": {
                 "dt": {"default": s.integrator.dt, "min": 0, "doc": "time step"},
                 "temperature": {"default": s.temperature, "min": 0, "doc": "kT"},
+                "integrator": {
+                    "default": library_file(&format!("lib/integrators/{scheme}.json")),
+                    "graph": true,
+                    "doc": "the integrator's graph",
+                },
             },
             "sizes": {"n": {"default": n, "doc": "particles"}},
             "inputs": decl,
             "nodes": [{
                 "id": "system",
-                "graph": format!("lib/integrators/{scheme}.json"),
+                "graph": "$integrator",
                 "params": params,
                 "inputs": node_inputs,
             }],
@@ -1073,6 +1081,18 @@ impl Builder<'_> {
         });
         serde_json::to_string_pretty(&g).expect("a JSON value")
     }
+}
+
+/// A graph of the library by its path there, as the absolute path of the file found in
+/// the first library folder that holds it: a scene's folder may hold files of the same
+/// name (a scene called fcm.json), which a relative path would find first.
+fn library_file(relative: &str) -> String {
+    crate::graph::library::library_folders()
+        .iter()
+        .map(|folder| folder.join(relative))
+        .find(|p| p.is_file())
+        .and_then(|p| p.canonicalize().ok())
+        .map_or_else(|| relative.to_string(), |p| p.display().to_string())
 }
 
 /// Placed particles in a grid of cells of the largest diameter, so an overlap check looks
