@@ -467,15 +467,14 @@ fn graph_param_mistakes_are_named() {
                "nodes": [{node}], "outputs": {{"y": "r.positions"}}}}"#
         );
         let path = write_graph(&dir, &format!("case{i}.json"), &text);
-        let err = match mesoflow::graph::load(&path, &crate::util::registry(), &Default::default())
-        {
+        let err = match mesoflow::graph::load(&path, crate::util::registry(), &Default::default()) {
             Ok(_) => panic!("case {i} loaded"),
             Err(e) => e.to_string(),
         };
         assert!(err.contains(want), "case {i}: {err}");
     }
     // A param both set by the node and bound by the parent.
-    let clash = write_graph(
+    write_graph(
         &dir.join("lib"),
         "clash.json",
         r#"{"mesoflow": 1, "params": {"pull": {"default": "linear_pull.json", "graph": true}},
@@ -490,8 +489,7 @@ fn graph_param_mistakes_are_named() {
             "nodes": [{"id": "c", "graph": "lib/clash.json", "params": {"pull.stiffness": 3}, "inputs": {"x": "inputs.x"}}],
             "outputs": {"y": "c.force"}}"#,
     );
-    let _ = clash;
-    let err = mesoflow::graph::load(&top, &crate::util::registry(), &Default::default())
+    let err = mesoflow::graph::load(&top, crate::util::registry(), &Default::default())
         .err()
         .expect("a clash")
         .to_string();
