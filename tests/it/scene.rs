@@ -442,3 +442,54 @@ fn a_scene_trajectory_carries_its_species() {
     assert!(read.chunk(1, "particles/typeid").is_none());
     assert!(read.chunk(1, "particles/position").is_some());
 }
+
+/// Every scene of `scenes/`, shrunk (fewer particles in a box of at most 16 across, a
+/// wall domain's height kept in step), builds, plans and runs two steps to finite values.
+#[test]
+fn the_shipped_scenes_build_and_run() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tmpdir("shipped_scenes");
+    let mut names: Vec<PathBuf> = std::fs::read_dir(crate::util::root().join("scenes"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    names.sort();
+    assert!(names.len() >= 5, "{names:?}");
+    for path in names {
+        let mut v: Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let side = 16.0;
+        v["box"][0] = json!(side);
+        v["box"][1] = json!(side);
+        if v.get("walls").is_some() {
+            let lo = v["walls"]["zmin"].as_f64().unwrap();
+            v["walls"]["zmax"] = json!(lo + side);
+            v["box"][2] = json!(side);
+            for set in v["particles"].as_array_mut().unwrap() {
+                if set.get("z").is_some() {
+                    set["z"] = json!([lo + 4.0, lo + 10.0]);
+                }
+            }
+        } else {
+            v["box"][2] = json!(side);
+        }
+        for set in v["particles"].as_array_mut().unwrap() {
+            set["count"] = json!(12);
+        }
+        let name = path.file_name().unwrap().to_str().unwrap().to_string();
+        let (p, c) = compile(&dir, &format!("shrunk_{name}"), &v);
+        let opts = LoadOptions {
+            steps: 2,
+            seed: 1,
+            ..Default::default()
+        };
+        let g = graph::load_text(&p, &c.graph, registry(), &opts)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let out = run_graph(&gpu, &g, &c.inputs, Some(&["positions", "energy"]), 2, true);
+        let x = f32s(&out["positions"]);
+        assert_eq!(x.len(), 3 * c.species.typeid.len(), "{name}");
+        assert!(x.iter().all(|v| v.is_finite()), "{name}: positions {x:?}");
+        assert!(f32s(&out["energy"])[0].is_finite(), "{name}: energy");
+        assert_ne!(x, f32s(&c.inputs["positions"]), "{name}: nothing moved");
+    }
+}
