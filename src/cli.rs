@@ -373,7 +373,12 @@ fn run(
     } else {
         &scene_outputs[..]
     };
-    let every = every.or(scene.as_ref().and_then(|s| s.every));
+    // The scene's interval goes with its outputs: `--output` given, frames only with
+    // `--every`.
+    let every = match &scene {
+        Some(s) if !scene_outputs.is_empty() => every.or(s.every),
+        _ => every,
+    };
     if every == Some(0) {
         return Err(CliError::Input("--every must be at least 1".into()));
     }

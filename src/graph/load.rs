@@ -684,6 +684,19 @@ impl<'r> Loader<'r> {
             // (`support` where `fcm_support` finds none). The value given is checked
             // against the declared range on its own, and stands in for the default.
             Err(e) if e.depends_on_values() && given.is_some() => given.unwrap().clone(),
+            // Inside a subgraph the file leaves out (`enabled` false), a planner refusing
+            // the values is no problem: nothing there runs. What reads the param reads
+            // as absent, as the disabled nodes do (a scene without charges in a box too
+            // small for the electrostatics' planner loads).
+            Err(e)
+                if e.depends_on_values()
+                    && self
+                        .disabled_scopes
+                        .iter()
+                        .any(|(prefix, _)| file_scope.starts_with(prefix.as_str())) =>
+            {
+                return Err(None);
+            }
             Err(e) => {
                 let msg = scope
                     .origin_of(&decl.default)

@@ -498,3 +498,31 @@ fn graph_param_mistakes_are_named() {
         "{err}"
     );
 }
+
+/// A subgraph left out (`enabled` false) whose planner refuses the values it is given
+/// (poisson.json in a box too small for any split) loads, its outputs absent; enabled,
+/// the same refusal is the file's problem.
+#[test]
+fn a_disabled_subgraph_with_a_refused_planner_loads() {
+    let dir = tmpdir("disabled_planner");
+    for on in [false, true] {
+        let text = format!(
+            r#"{{"mesoflow": 1,
+               "inputs": {{"x": {{"type": "particles", "rows": 4, "cols": 3}}, "q": {{"type": "particles", "rows": 4, "cols": 1}}}},
+               "nodes": [
+                 {{"id": "e", "graph": "poisson.json", "enabled": {on}, "params": {{"box": [6, 6, 6], "width": 1.0}},
+                   "inputs": {{"positions": "inputs.x", "charges": "inputs.q"}}}},
+                 {{"id": "f", "kind": "add", "inputs": {{"a": "inputs.x", "b": "e.forces"}}}}
+               ],
+               "outputs": {{"f": "f.out"}}}}"#
+        );
+        let path = write_graph(&dir, &format!("on_{on}.json"), &text);
+        let loaded = mesoflow::graph::load(&path, crate::util::registry(), &Default::default());
+        match (on, loaded) {
+            (false, Ok(_)) => {}
+            (true, Err(e)) => assert!(e.to_string().contains("no split plans Poisson"), "{e}"),
+            (on, Ok(_)) => panic!("enabled {on}: loaded"),
+            (on, Err(e)) => panic!("enabled {on}: {e}"),
+        }
+    }
+}
