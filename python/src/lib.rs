@@ -117,6 +117,8 @@ struct Graph {
     path: std::path::PathBuf,
     seed: u64,
     device: Option<String>,
+    /// A scene's particles and their data (empty for a graph file).
+    scene_inputs: BTreeMap<String, HostArray>,
 }
 
 impl Graph {
@@ -144,11 +146,13 @@ impl Graph {
     /// Loads a graph by path or library name with params as keywords; `seed` (the random
     /// draws), `steps` (the built-in param `steps`, for graphs that size records by it)
     /// and `device` (a substring of an adapter's name, see `adapters()`) are the engine's.
+    /// A scene file (`"scene": 1`) loads as the graph it builds, its particles placed
+    /// (with `seed` where given, else the scene's) and held in `scene_inputs`.
     #[new]
-    #[pyo3(signature = (name_or_path, seed=0, steps=1, device=None, **params))]
+    #[pyo3(signature = (name_or_path, seed=None, steps=1, device=None, **params))]
     fn new(
         name_or_path: &str,
-        seed: u64,
+        seed: Option<u64>,
         steps: u64,
         device: Option<String>,
         params: Option<&Bound<'_, PyDict>>,
@@ -166,12 +170,32 @@ impl Graph {
                 overrides.insert(name.clone(), param_value(&name, &v)?);
             }
         }
+        if mesoflow::scene::is_scene(&path) {
+            let built = mesoflow::scene::compile(&path, seed).map_err(graph_error)?;
+            let seed = seed.or(built.seed).unwrap_or(0);
+            let opts = LoadOptions {
+                overrides,
+                steps,
+                seed,
+            };
+            let graph =
+                graph::load_text(&path, &built.graph, &registry(), &opts).map_err(graph_error)?;
+            return Ok(Graph {
+                graph: Arc::new(graph),
+                path,
+                seed,
+                device,
+                scene_inputs: built.inputs,
+            });
+        }
+        let seed = seed.unwrap_or(0);
         let graph = Self::load(&path, &overrides, seed, steps)?;
         Ok(Graph {
             graph: Arc::new(graph),
             path,
             seed,
             device,
+            scene_inputs: BTreeMap::new(),
         })
     }
 
@@ -179,6 +203,18 @@ impl Graph {
     #[getter]
     fn seed(&self) -> u64 {
         self.seed
+    }
+
+    /// A scene's particles and their data by input name (positions, and where the scene
+    /// has them masses, velocities, charges, external forces, bond lists), to hand to
+    /// `compile` and `run`; empty for a graph file.
+    #[getter]
+    fn scene_inputs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (name, a) in &self.scene_inputs {
+            d.set_item(name, to_numpy(py, a.clone())?)?;
+        }
+        Ok(d)
     }
 
     /// The graph file's path.
