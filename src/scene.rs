@@ -106,6 +106,9 @@ struct ParticleSet {
 struct Interactions {
     #[serde(default)]
     wca: Option<Lj>,
+    /// Lennard-Jones with its attractive tail, truncated at `cutoff` sigma and shifted.
+    #[serde(default)]
+    lj: Option<LjCut>,
     /// Acceleration of gravity: each particle feels mass * gravity (for Brownian
     /// dynamics, give the buoyant mass).
     #[serde(default)]
@@ -136,6 +139,18 @@ struct Lj {
     epsilon: Option<f64>,
     #[serde(default)]
     sigma: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LjCut {
+    #[serde(default)]
+    epsilon: Option<f64>,
+    #[serde(default)]
+    sigma: Option<f64>,
+    /// In units of sigma (default 2.5).
+    #[serde(default)]
+    cutoff: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -976,15 +991,34 @@ impl Builder<'_> {
         );
         let it = &s.interactions;
         let mut cutoff: f64 = 0.0;
-        if let Some(w) = &it.wca {
-            let sigma = w.sigma.unwrap_or(2.0 * radius);
-            let eps = w.epsilon.unwrap_or(s.temperature.max(f64::MIN_POSITIVE));
-            self.positive("interactions.wca.sigma", sigma);
-            self.positive("interactions.wca.epsilon", eps);
-            cutoff = 2f64.powf(1.0 / 6.0) * sigma;
+        // WCA, or Lennard-Jones with its tail: one pair kernel, cut at 2^(1/6) sigma or
+        // at `cutoff` sigma (the energy shifted to 0 there either way).
+        let pair = match (&it.wca, &it.lj) {
+            (Some(_), Some(_)) => {
+                self.problem(
+                    "interactions: give `wca` or `lj`, not both (WCA is LJ cut at 2^(1/6) sigma)",
+                );
+                None
+            }
+            (Some(w), None) => Some(("wca", w.epsilon, w.sigma, 2f64.powf(1.0 / 6.0))),
+            (None, Some(l)) => Some(("lj", l.epsilon, l.sigma, l.cutoff.unwrap_or(2.5))),
+            (None, None) => None,
+        };
+        if let Some((name, epsilon, sigma, reach)) = pair {
+            let sigma = sigma.unwrap_or(2.0 * radius);
+            let eps = epsilon.unwrap_or(s.temperature.max(f64::MIN_POSITIVE));
+            self.positive(&format!("interactions.{name}.sigma"), sigma);
+            self.positive(&format!("interactions.{name}.epsilon"), eps);
+            if !(reach.is_finite() && reach >= 1.0) {
+                self.problem(format!(
+                    "interactions.{name}.cutoff: expected at least 1 (in sigma), got {reach}"
+                ));
+            }
+            cutoff = reach * sigma;
             params.insert("forces.wca".into(), json!(true));
             params.insert("forces.wca_epsilon".into(), json!(eps));
             params.insert("forces.wca_sigma".into(), json!(sigma));
+            params.insert("forces.wca_cutoff".into(), json!(cutoff));
         }
         if let Some(e) = &it.electrostatics {
             let width = e.width.unwrap_or(smallest);

@@ -548,3 +548,60 @@ fn a_scene_resumes_bit_for_bit() {
     // --output given: the scene's own trajectory and interval stand aside.
     assert!(!dir.join("ignored.gsd").exists());
 }
+
+/// `lj` with its tail: the energy the scene's graph reports against the f64
+/// Lennard-Jones sum (truncated at 2.5 sigma and shifted) at the positions it reports.
+#[test]
+fn a_lennard_jones_scene_has_the_truncated_and_shifted_energy() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tmpdir("scene_lj");
+    // A small cluster whose pairs span the well and the tail (1.0 to 2.9 apart).
+    let x: Vec<f32> = vec![
+        0.0, 0.0, 0.0, 1.12, 0.0, 0.0, 0.0, 1.6, 0.0, 0.4, 0.3, 2.2, -1.3, 0.9, -0.8, 3.9, 3.9, 3.9,
+    ];
+    let n = x.len() / 3;
+    mesoflow::npy::write(
+        &dir.join("x.npy"),
+        &mesoflow::value::HostArray::f32(
+            mesoflow::value::ValueType::Particles { n: n as u32, k: 3 },
+            x,
+        ),
+    )
+    .unwrap();
+    let v = json!({
+        "scene": 1,
+        "box": [10, 10, 10],
+        "species": {"atom": {"radius": 0.5}},
+        "particles": [{"species": "atom", "positions": "x.npy"}],
+        "interactions": {"lj": {"epsilon": 1.3, "sigma": 1.0, "cutoff": 2.5}},
+        "temperature": 0.0,
+        "integrator": {"scheme": "velocity_verlet", "dt": 0.0005},
+        "run": {"steps": 1}
+    });
+    let (p, c) = compile(&dir, "lj.json", &v);
+    let g = graph::load_text(&p, &c.graph, registry(), &LoadOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let out = run_graph(&gpu, &g, &c.inputs, Some(&["positions", "energy"]), 1, true);
+    let y: Vec<f64> = f32s(&out["positions"]).iter().map(|&v| v as f64).collect();
+    let lj = |r: f64| 4.0 * 1.3 * ((1.0 / r).powi(12) - (1.0 / r).powi(6));
+    let mut want = 0.0;
+    for i in 0..n {
+        for j in i + 1..n {
+            let mut r2 = 0.0;
+            for d in 0..3 {
+                let mut dx = y[3 * i + d] - y[3 * j + d];
+                dx -= 10.0 * (dx / 10.0).round();
+                r2 += dx * dx;
+            }
+            let r = r2.sqrt();
+            if r < 2.5 {
+                want += lj(r) - lj(2.5);
+            }
+        }
+    }
+    let got = f32s(&out["energy"])[0] as f64;
+    assert!(
+        (got - want).abs() < 1e-5 * want.abs().max(1.0),
+        "energy {got} against {want}"
+    );
+}
