@@ -285,8 +285,11 @@ fn load_graph(
     opts: &LoadOptions,
 ) -> Result<Graph, CliError> {
     match scene {
-        Some(s) => graph::load_text(&resolve(path), &s.graph, registry, opts)
-            .map_err(|p| CliError::Input(format!("the graph the scene builds: {p}"))),
+        Some(s) => graph::load_text(&resolve(path), &s.graph, registry, opts).map_err(|p| {
+            CliError::Input(format!(
+                "the graph the scene builds: {p}\n(--set reaches that graph's params, dt and temperature; the rest is set in the scene file)"
+            ))
+        }),
         None => load(registry, path, opts),
     }
 }
