@@ -445,6 +445,12 @@ impl Builder<'_> {
                     read
                 }
                 (None, Some(count)) => {
+                    if count == 0 || count > MAX_GENERATED {
+                        self.problem(format!(
+                            "{place}.count: {count} is not in 1..={MAX_GENERATED} (give more as a positions file)"
+                        ));
+                        continue;
+                    }
                     let region = self.region(&place, set, r, &walls);
                     let kind = set.place.as_deref().unwrap_or("random");
                     match (region, kind) {
@@ -476,11 +482,11 @@ impl Builder<'_> {
                             chain
                         }
                         (Some(region), "lattice") => {
-                            let sites = self.place_lattice(&place, count, region);
-                            for p in sites.iter().flatten() {
+                            let sites = Self::place_lattice(count, region);
+                            for p in &sites {
                                 placer.add(*p, r);
                             }
-                            sites
+                            Some(sites)
                         }
                         (_, other) => {
                             self.problem(format!(
@@ -804,19 +810,10 @@ impl Builder<'_> {
         placer: &mut Placer,
         rng: &mut StdRng,
     ) -> Option<Vec<[f64; 3]>> {
-        if count == 0 || count > MAX_GENERATED {
-            self.problem(format!(
-                "{place}.count: {count} is not in 1..={MAX_GENERATED} (give more as a positions file)"
-            ));
-            return None;
-        }
         let mut out = Vec::with_capacity(count as usize);
         for _ in 0..count {
             let found = (0..PLACEMENT_TRIES)
-                .map(|_| {
-                    [0, 1, 2]
-                        .map(|d| region[d][0] + (region[d][1] - region[d][0]) * rng.random::<f64>())
-                })
+                .map(|_| uniform_in(&region, rng))
                 .find(|p| placer.fits(p, r));
             let Some(p) = found else {
                 let volume: f64 = region.iter().map(|[a, b]| b - a).product();
@@ -848,20 +845,12 @@ impl Builder<'_> {
         placer: &mut Placer,
         rng: &mut StdRng,
     ) -> Option<Vec<[f64; 3]>> {
-        if count == 0 || count > MAX_GENERATED {
-            self.problem(format!(
-                "{place}.count: {count} is not in 1..={MAX_GENERATED}"
-            ));
-            return None;
-        }
         let inside = |p: &[f64; 3]| (0..3).all(|d| p[d] >= region[d][0] && p[d] <= region[d][1]);
         let mut out: Vec<[f64; 3]> = Vec::with_capacity(count as usize);
         for k in 0..count {
             let found = (0..PLACEMENT_TRIES)
                 .map(|_| match out.last() {
-                    None => [0, 1, 2].map(|d| {
-                        region[d][0] + (region[d][1] - region[d][0]) * rng.random::<f64>()
-                    }),
+                    None => uniform_in(&region, rng),
                     Some(prev) => {
                         let u = [normal(rng), normal(rng), normal(rng)];
                         let norm = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt().max(1e-300);
@@ -883,13 +872,7 @@ impl Builder<'_> {
 
     /// The first `count` sites of a simple cubic lattice of spacing (V / count)^(1/3)
     /// over the region, each site at the centre of its lattice cell.
-    fn place_lattice(&mut self, place: &str, count: u64, region: Region) -> Option<Vec<[f64; 3]>> {
-        if count == 0 || count > MAX_GENERATED {
-            self.problem(format!(
-                "{place}.count: {count} is not in 1..={MAX_GENERATED}"
-            ));
-            return None;
-        }
+    fn place_lattice(count: u64, region: Region) -> Vec<[f64; 3]> {
         let sides = region.map(|[a, b]| b - a);
         let spacing = (sides.iter().product::<f64>() / count as f64).cbrt();
         let mut per = sides.map(|s| ((s / spacing).floor() as u64).max(1));
@@ -916,7 +899,7 @@ impl Builder<'_> {
                 }
             }
         }
-        Some(out)
+        out
     }
 
     /// The graph: one integrator node around the mobility and the interactions.
@@ -1167,12 +1150,11 @@ impl Placer {
         for dx in -1i64..=1 {
             for dy in -1i64..=1 {
                 for dz in -1i64..=1 {
-                    let key = [dx, dy, dz]
-                        .iter()
-                        .enumerate()
-                        .map(|(d, o)| (c[d] as i64 + o).rem_euclid(self.dims[d] as i64) as usize)
-                        .collect::<Vec<_>>();
-                    let Some(list) = self.cells.get(&[key[0], key[1], key[2]]) else {
+                    let offset = [dx, dy, dz];
+                    let key: [usize; 3] = std::array::from_fn(|d| {
+                        (c[d] as i64 + offset[d]).rem_euclid(self.dims[d] as i64) as usize
+                    });
+                    let Some(list) = self.cells.get(&key) else {
                         continue;
                     };
                     for &j in list {
@@ -1201,6 +1183,11 @@ impl Placer {
         self.cells.entry(c).or_default().push(self.placed.len());
         self.placed.push((p, r));
     }
+}
+
+/// A point uniform in the region.
+fn uniform_in(region: &Region, rng: &mut StdRng) -> [f64; 3] {
+    [0, 1, 2].map(|d| region[d][0] + (region[d][1] - region[d][0]) * rng.random::<f64>())
 }
 
 /// A standard normal draw (Box-Muller; the scene's own stream, apart from the graph's).
