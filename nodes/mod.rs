@@ -19,6 +19,7 @@ pub mod pse;
 pub mod random;
 pub mod record;
 pub mod reduce;
+pub mod repeat;
 pub mod scan;
 pub mod sort;
 pub mod spectral;
@@ -51,6 +52,7 @@ pub fn register_all(r: &mut Registry) {
     permute::register(r);
     random::register(r);
     record::register(r);
+    repeat::register(r);
     reduce::register(r);
     spread::register(r);
     stokes_slab::register(r);

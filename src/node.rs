@@ -574,6 +574,13 @@ pub trait GpuIterative {
     /// After `iterations` runs of the body, from the status bytes: go on, finish, or stop
     /// with an error that says why (no convergence, an operator that is not positive).
     fn decide(&self, iterations: usize, status: &[u8]) -> Result<Decision, LoopError>;
+
+    /// A loop whose number of iterations is known before it runs (`repeat`): the program
+    /// records start, that many runs of the body and `iterate`, and finish, one after the
+    /// other, with no status read and no host decision (`decide` is not asked).
+    fn fixed_iterations(&self) -> Option<u32> {
+        None
+    }
 }
 
 /// A node that records its own dispatches.

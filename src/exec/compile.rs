@@ -256,6 +256,23 @@ impl<'a> Program<'a> {
             .iter()
             .map(|l| self.compile_launch(cx, l, parity))
             .collect::<Result<Vec<_>, _>>()?;
+        if let Some(count) = it.fixed_iterations() {
+            // Known in advance: the iterations recorded one after the other, a plain
+            // launch the executor batches like any other.
+            let mut dispatches = kernels.start;
+            for _ in 0..count {
+                for c in &body {
+                    dispatches.extend(c.dispatches.iter().cloned());
+                }
+                dispatches.extend(kernels.iterate.iter().cloned());
+            }
+            dispatches.extend(kernels.finish);
+            return Ok(Compiled::plain(
+                inst.id.clone(),
+                format!("{} (x{count} of {})", inst.kind, body.len()),
+                dispatches,
+            ));
+        }
         let staging = [0, 1].map(|i| {
             self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(&format!("{} status {i}", inst.id)),

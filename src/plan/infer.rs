@@ -178,14 +178,17 @@ impl Inference<'_> {
             // without its loop input first, then the body, then the node again in full.
             let reported = self.problems.len();
             self.signature(n, true);
+            if !self.types.nodes[n].is_present() {
+                // Failing (its params refused, its inputs wrong) or dropping out without its
+                // loop: so it would with it, and these are its problems.
+                return;
+            }
             self.problems.truncate(reported);
-            if self.types.nodes[n].is_present() {
-                for (port, s) in inst.input_ports.iter().zip(&inst.inputs) {
-                    if let Source::Node { node, .. } = s
-                        && port.iterate
-                    {
-                        self.node(*node);
-                    }
+            for (port, s) in inst.input_ports.iter().zip(&inst.inputs) {
+                if let Source::Node { node, .. } = s
+                    && port.iterate
+                {
+                    self.node(*node);
                 }
             }
         }

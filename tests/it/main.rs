@@ -27,6 +27,7 @@ mod poisson;
 mod pse;
 mod random;
 mod reduce;
+mod repeat;
 mod run;
 mod scan;
 mod scene;
