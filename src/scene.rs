@@ -174,11 +174,15 @@ fn default_tolerance() -> f64 {
 struct Hydrodynamics {
     #[serde(default = "no_model")]
     model: String,
-    #[serde(default = "one")]
-    viscosity: f64,
-    #[serde(default = "default_tolerance")]
-    tolerance: f64,
-    /// Further params of the mobility graph, bound as they are (checked by it).
+    /// The solvent's viscosity (default 1; not for `mpcd`, whose viscosity follows from
+    /// its params).
+    #[serde(default)]
+    viscosity: Option<f64>,
+    /// The mobility's accuracy (default 1e-3; not for `mpcd`).
+    #[serde(default)]
+    tolerance: Option<f64>,
+    /// Further params of the mobility graph (of mpcd_md.json for `mpcd`: cell, density,
+    /// angle, thermostat...), bound as they are (checked by it).
     #[serde(default)]
     params: IndexMap<String, Value>,
 }
@@ -191,8 +195,8 @@ impl Default for Hydrodynamics {
     fn default() -> Self {
         Hydrodynamics {
             model: no_model(),
-            viscosity: 1.0,
-            tolerance: default_tolerance(),
+            viscosity: None,
+            tolerance: None,
             params: IndexMap::new(),
         }
     }
@@ -355,7 +359,12 @@ impl Builder<'_> {
             ));
         }
         self.positive("integrator.dt", s.integrator.dt);
-        self.positive("hydrodynamics.viscosity", s.hydrodynamics.viscosity);
+        if let Some(eta) = s.hydrodynamics.viscosity {
+            self.positive("hydrodynamics.viscosity", eta);
+        }
+        if let Some(tol) = s.hydrodynamics.tolerance {
+            self.positive("hydrodynamics.tolerance", tol);
+        }
         let scheme = s.integrator.scheme.as_str();
         let brownian = BROWNIAN.contains(&scheme);
         let inertial = INERTIAL.contains(&scheme);
@@ -376,14 +385,50 @@ impl Builder<'_> {
                 MODELS.join(", ")
             ));
         }
-        if model == "mpcd" {
-            self.problem(
-                "hydrodynamics.model: `mpcd` is not composable in scenes yet (the solvent is a graph of its own: run graphs/mpcd_solute.json for point solutes in an MPCD solvent)",
-            );
-        }
-        if inertial && model != "none" {
+        let mpcd = model == "mpcd";
+        if mpcd {
+            // The solute's MD is mpcd_md.json's own velocity Verlet, one step per collision.
+            if scheme != "velocity_verlet" {
+                self.problem(format!(
+                    "integrator.scheme: hydrodynamics.model `mpcd` moves the particles by velocity Verlet between collisions (the solvent is their thermostat): give `velocity_verlet`, not `{scheme}`"
+                ));
+            }
+            for (field, given) in [
+                ("viscosity", s.hydrodynamics.viscosity.is_some()),
+                ("tolerance", s.hydrodynamics.tolerance.is_some()),
+            ] {
+                if given {
+                    self.problem(format!(
+                        "hydrodynamics.{field}: not a param of `mpcd` (its viscosity follows from cell, density, angle and dt; give those in hydrodynamics.params)"
+                    ));
+                }
+            }
+            for reserved in ["box", "dt", "temperature", "solute_mass", "walls", "forces"] {
+                if s.hydrodynamics.params.contains_key(reserved) {
+                    self.problem(format!(
+                        "hydrodynamics.params.{reserved}: set by the scene (box, integrator.dt, temperature, the species' mass, walls, interactions)"
+                    ));
+                }
+            }
+            let masses: Vec<f64> = s.species.values().map(|sp| sp.mass).collect();
+            if masses.iter().any(|&m| m != masses[0]) {
+                self.problem(format!(
+                    "species: masses {} differ, but the MPCD solute has one mass (mpcd_md.json's solute_mass)",
+                    s.species
+                        .iter()
+                        .map(|(n, sp)| format!("{n} {}", sp.mass))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
+        } else if !brownian && !s.hydrodynamics.params.is_empty() {
             self.problem(format!(
-                "integrator.scheme `{scheme}` is inertial and takes no mobility: hydrodynamics.model must be `none`, not `{model}`"
+                "hydrodynamics.params: `{scheme}` with hydrodynamics.model `{model}` takes no mobility to give them to"
+            ));
+        }
+        if !mpcd && inertial && model != "none" {
+            self.problem(format!(
+                "integrator.scheme `{scheme}` is inertial and takes no mobility: hydrodynamics.model must be `none` (or `mpcd`, an explicit solvent), not `{model}`"
             ));
         }
         if scheme == "langevin_gjf" && s.integrator.friction.is_none() {
@@ -598,10 +643,13 @@ impl Builder<'_> {
             );
         }
         if inertial {
-            inputs.insert(
-                "masses".into(),
-                particles(1, masses.iter().map(|&m| m as f32).collect()),
-            );
+            // mpcd_md.json takes the (one) mass as a param.
+            if !mpcd {
+                inputs.insert(
+                    "masses".into(),
+                    particles(1, masses.iter().map(|&m| m as f32).collect()),
+                );
+            }
             // Maxwell-Boltzmann at the temperature, zero total momentum.
             let mut v: Vec<[f64; 3]> = masses
                 .iter()
@@ -723,6 +771,21 @@ impl Builder<'_> {
             "rpy_open" => self.problem(
                 "walls with hydrodynamics.model `rpy_open`: its mobility knows no wall (use rpy_wall or dpstokes)",
             ),
+            "mpcd" => {
+                if w.kind != "slit" {
+                    self.problem(format!(
+                        "walls.type `{}` with hydrodynamics.model `mpcd`: its solvent is held by two plates (`slit`) or none",
+                        w.kind
+                    ));
+                }
+                let half = s.box_lengths[2] / 2.0;
+                if (w.zmin + half).abs() > 1e-9 * half || (w.zmax - half).abs() > 1e-9 * half {
+                    self.problem(format!(
+                        "walls: with hydrodynamics.model `mpcd` the plates are at z = -box[2]/2 and box[2]/2 = {half}, not {} and {}",
+                        w.zmin, w.zmax
+                    ));
+                }
+            }
             _ => {}
         }
         if s.interactions.electrostatics.is_some() {
@@ -915,9 +978,23 @@ impl Builder<'_> {
         let h = &s.hydrodynamics;
         let l = s.box_lengths;
         let scheme = s.integrator.scheme.as_str();
+        let mpcd = h.model == "mpcd";
         let mut params = serde_json::Map::new();
         params.insert("dt".into(), json!("$dt"));
         params.insert("temperature".into(), json!("$temperature"));
+        if mpcd {
+            // The solvent and the solute's MD are one graph: its params are the scene's.
+            params.insert("box".into(), json!(l));
+            params.insert(
+                "walls".into(),
+                json!(if walls.is_some() { "plates" } else { "none" }),
+            );
+            let mass = s.species.values().next().map_or(1.0, |sp| sp.mass);
+            params.insert("solute_mass".into(), json!(mass));
+            for (k, v) in &h.params {
+                params.insert(k.clone(), v.clone());
+            }
+        }
         if let Some(xi) = s.integrator.friction {
             params.insert("friction".into(), json!(xi));
         }
@@ -925,15 +1002,16 @@ impl Builder<'_> {
             params.insert(k.clone(), v.clone());
         }
         if BROWNIAN.contains(&scheme) {
+            let tolerance = h.tolerance.unwrap_or(default_tolerance());
             let (file, mut bound): (&str, Vec<(&str, Value)>) = match h.model.as_str() {
                 "none" => ("lib/mobility/free.json", vec![]),
                 "fcm" => (
                     "fcm.json",
-                    vec![("box", json!(l)), ("tolerance", json!(h.tolerance))],
+                    vec![("box", json!(l)), ("tolerance", json!(tolerance))],
                 ),
                 "pse" => (
                     "pse.json",
-                    vec![("box", json!(l)), ("tolerance", json!(h.tolerance))],
+                    vec![("box", json!(l)), ("tolerance", json!(tolerance))],
                 ),
                 "rpy_open" => ("rpy_open.json", vec![]),
                 "rpy_wall" => (
@@ -952,12 +1030,12 @@ impl Builder<'_> {
                             ("zmin", json!(zmin)),
                             ("zmax", json!(zmax)),
                             ("walls", json!(kind)),
-                            ("tolerance", json!(h.tolerance)),
+                            ("tolerance", json!(tolerance)),
                         ],
                     )
                 }
             };
-            bound.push(("viscosity", json!(h.viscosity)));
+            bound.push(("viscosity", json!(h.viscosity.unwrap_or(1.0))));
             bound.push(("radius", json!(radius)));
             params.insert("mobility".into(), json!(library_file(file)));
             for (k, v) in bound {
@@ -1068,6 +1146,11 @@ impl Builder<'_> {
         }
         outputs.insert("forces".into(), json!("system.forces"));
         outputs.insert("energy".into(), json!("system.energy"));
+        if mpcd {
+            for name in ["solvent_positions", "solvent_velocities", "temperature"] {
+                outputs.insert(name.into(), json!(format!("system.{name}")));
+            }
+        }
         let mut doc = String::new();
         let _ = write!(
             doc,
@@ -1081,7 +1164,11 @@ impl Builder<'_> {
                 "dt": {"default": s.integrator.dt, "min": 0, "doc": "time step"},
                 "temperature": {"default": s.temperature, "min": 0, "doc": "kT"},
                 "integrator": {
-                    "default": library_file(&format!("lib/integrators/{scheme}.json")),
+                    "default": if mpcd {
+                        library_file("mpcd_md.json")
+                    } else {
+                        library_file(&format!("lib/integrators/{scheme}.json"))
+                    },
                     "graph": true,
                     "doc": "the integrator's graph",
                 },

@@ -1659,34 +1659,9 @@ impl<'r> Loader<'r> {
                     ));
                 }
             }
-            // Every body node must lead to the loop's result.
-            let mut feeds: BTreeSet<NodeId> = BTreeSet::new();
-            let mut stack: Vec<Source> = inst
-                .input_ports
-                .iter()
-                .zip(&inst.inputs)
-                .filter(|(p, _)| p.iterate)
-                .map(|(_, s)| *s)
-                .collect();
-            while let Some(s) = stack.pop() {
-                if let Source::Node { node, .. } = s
-                    && body.contains(&node)
-                    && feeds.insert(node)
-                {
-                    stack.extend(g.nodes[node].inputs.iter().copied());
-                }
-            }
-            for &b in body.difference(&feeds) {
-                let dead = &g.nodes[b];
-                self.problems.push(Problem::node(
-                    &dead.file,
-                    &dead.id,
-                    format!(
-                        "depends on `{}`'s basis (it is inside its loop) but does not lead to the loop's result: compute it outside the loop",
-                        inst.id
-                    ),
-                ));
-            }
+            // A body node that does not lead to the loop's result (a force law's energy
+            // beside its forces) is left alone: nothing outside may read it (below), so no
+            // plan demands it and it never runs.
             for (n, reader) in g.nodes.iter_enumerated() {
                 if body.contains(&n) {
                     if reader

@@ -329,7 +329,7 @@ fn loop_structure_is_checked_at_load_time() {
     {"id": "other", "kind": "add", "inputs": {"a": "a.out", "b": "inputs.z"}}
   ],
   "outputs": {"out": {"from": "root.out"}, "o": {"from": "other.out"}}}"#,
-            "does not lead to the loop's result",
+            "output `o` reads `other.out`, which changes every iteration",
         ),
     ];
     for (i, (json, want)) in cases.iter().enumerate() {

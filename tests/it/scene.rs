@@ -107,6 +107,25 @@ fn a_scene_plans_only_what_it_holds() {
             &["(rfft)", "(stokes)"],
             &["(neighbour_sum)", "(poisson)"],
         ),
+        (
+            "mpcd",
+            with(
+                with(
+                    base(),
+                    "hydrodynamics",
+                    json!({"model": "mpcd", "params": {"density": 2}}),
+                ),
+                "integrator",
+                json!({"scheme": "velocity_verlet", "dt": 0.1}),
+            ),
+            &["(mpcd_stream)", "(mpcd_bin_solute)", "(mpcd_collide)"],
+            &[
+                "(neighbour_sum)",
+                "(rfft)",
+                "(mpcd_measure)",
+                "(random_normal)",
+            ],
+        ),
     ];
     for (name, v, must, must_not) in cases {
         let (p, c) = compile(&dir, &format!("{name}.json"), &v);
@@ -219,7 +238,67 @@ fn scene_mistakes_are_named_with_their_place() {
         ),
         (
             with(base(), "hydrodynamics", json!({"model": "mpcd"})),
-            "`mpcd` is not composable in scenes yet",
+            "hydrodynamics.model `mpcd` moves the particles by velocity Verlet",
+        ),
+        (
+            with(
+                with(
+                    base(),
+                    "hydrodynamics",
+                    json!({"model": "mpcd", "viscosity": 2}),
+                ),
+                "integrator",
+                json!({"scheme": "velocity_verlet", "dt": 0.1}),
+            ),
+            "hydrodynamics.viscosity: not a param of `mpcd`",
+        ),
+        (
+            with(
+                with(
+                    with(base(), "hydrodynamics", json!({"model": "mpcd"})),
+                    "integrator",
+                    json!({"scheme": "velocity_verlet", "dt": 0.1}),
+                ),
+                "walls",
+                json!({"type": "bottom", "zmin": -6, "zmax": 6}),
+            ),
+            "walls.type `bottom` with hydrodynamics.model `mpcd`",
+        ),
+        (
+            with(
+                with(
+                    with(
+                        base(),
+                        "hydrodynamics",
+                        json!({"model": "mpcd", "params": {"dt": 1}}),
+                    ),
+                    "integrator",
+                    json!({"scheme": "velocity_verlet", "dt": 0.1}),
+                ),
+                "species",
+                json!({"a": {"radius": 0.5, "mass": 2}, "b": {"radius": 0.5}}),
+            ),
+            "hydrodynamics.params.dt: set by the scene",
+        ),
+        (
+            with(
+                with(
+                    with(base(), "hydrodynamics", json!({"model": "mpcd"})),
+                    "integrator",
+                    json!({"scheme": "velocity_verlet", "dt": 0.1}),
+                ),
+                "species",
+                json!({"a": {"radius": 0.5, "mass": 2}, "b": {"radius": 0.5}}),
+            ),
+            "species: masses a 2, b 1 differ",
+        ),
+        (
+            with(
+                with(base(), "hydrodynamics", json!({"params": {"cell": 1}})),
+                "integrator",
+                json!({"scheme": "velocity_verlet", "dt": 0.1}),
+            ),
+            "takes no mobility to give them to",
         ),
         (
             with(
@@ -604,4 +683,108 @@ fn a_lennard_jones_scene_has_the_truncated_and_shifted_energy() {
         (got - want).abs() < 1e-5 * want.abs().max(1.0),
         "energy {got} against {want}"
     );
+}
+
+/// A polymer melt in an MPCD solvent: beads that start at rest are brought to the
+/// solvent's temperature by the collisions they join (and nothing else: their forces
+/// conserve energy), and the solvent and beads together conserve momentum.
+#[test]
+fn an_mpcd_scene_thermalises_its_particles_and_conserves_momentum() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tmpdir("scene_mpcd");
+    // 15 chains of 20 beads of mass 5 in 1728 cells of 5 solvent particles: 900 degrees
+    // of freedom, so one frame's kinetic temperature has a relative standard deviation
+    // of sqrt(2/900) = 4.7%; five frames 20 collisions apart (a bead's velocity forgets
+    // itself within a few collisions) average to about 2.1%: 10% is 4.7 of those. The
+    // cell thermostat holds the solvent at kT = 1 (it scales relative velocities, so each
+    // cell keeps its momentum).
+    let chains: Vec<Value> = (0..15)
+        .map(|_| json!({"species": "bead", "count": 20, "place": "chain"}))
+        .collect();
+    let v = json!({
+        "scene": 1,
+        "box": [12, 12, 12],
+        "species": {"bead": {"radius": 0.5, "mass": 5.0}},
+        "particles": chains,
+        "interactions": {"wca": {"sigma": 1.0}, "bonds": {"stiffness": 30.0, "rest_length": 1.0}},
+        "hydrodynamics": {"model": "mpcd", "params": {"density": 5}},
+        "temperature": 1.0,
+        "integrator": {"scheme": "velocity_verlet", "dt": 0.1},
+        "run": {"seed": 8}
+    });
+    let (p, mut c) = compile(&dir, "melt.json", &v);
+    let ns = c.species.typeid.len();
+    assert_eq!(ns, 300);
+    c.inputs.insert(
+        "velocities".into(),
+        mesoflow::value::HostArray::f32(c.inputs["velocities"].ty, vec![0.0; 3 * ns]),
+    );
+    let g = graph::load_text(
+        &p,
+        &c.graph,
+        registry(),
+        &LoadOptions {
+            steps: 1,
+            seed: 8,
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let outputs = ["velocities", "solvent_velocities"];
+    let plan = crate::util::plan_graph(
+        &gpu.caps,
+        &g,
+        crate::util::types_of(&c.inputs),
+        Some(&outputs),
+        true,
+    );
+    let mut program = crate::util::compile_cached(&gpu, &g, &plan);
+    program.upload(&c.inputs).unwrap_or_else(|e| panic!("{e}"));
+    let read = |program: &mut mesoflow::exec::Program, steps: u64| {
+        let (_, out) = program
+            .run_on_and_read(&mesoflow::exec::RunOptions {
+                steps,
+                profile: mesoflow::exec::Profile::Off,
+                progress: false,
+            })
+            .unwrap_or_else(|e| panic!("{e}"));
+        let out: BTreeMap<String, mesoflow::value::HostArray> = out.into_iter().collect();
+        let vs = f32s(&out["velocities"]);
+        let v = f32s(&out["solvent_velocities"]);
+        let kt = 5.0 * vs.iter().map(|&x| (x as f64).powi(2)).sum::<f64>() / (3 * ns) as f64;
+        let momentum: Vec<f64> = (0..3)
+            .map(|d| {
+                v.iter().skip(d).step_by(3).map(|&x| x as f64).sum::<f64>()
+                    + 5.0 * vs.iter().skip(d).step_by(3).map(|&x| x as f64).sum::<f64>()
+            })
+            .collect();
+        (kt, momentum)
+    };
+    let (kt_first, p_first) = read(&mut program, 1);
+    let mut temperatures = Vec::new();
+    let mut p_last = p_first.clone();
+    for _ in 0..10 {
+        let (kt, momentum) = read(&mut program, 20);
+        temperatures.push(kt);
+        p_last = momentum;
+    }
+    eprintln!(
+        "kT after 1 step {kt_first}, then every 20: {temperatures:?}; momentum {p_first:?} -> {p_last:?}"
+    );
+    // The beads started at rest: their temperature is the collisions' doing (their forces
+    // conserve energy, a few kT of bond and WCA energy at most over 300 beads).
+    let late = &temperatures[5..];
+    let mean = late.iter().sum::<f64>() / late.len() as f64;
+    assert!(
+        (mean - 1.0).abs() < 0.1,
+        "the beads' kT {mean} ({temperatures:?})"
+    );
+    // Momentum: f32 rounding of about 1e-7 of each velocity per step, a random walk over
+    // 9000 particles and 200 steps (~1e-4); the thermal scale sqrt(sum m kT) is ~100.
+    for d in 0..3 {
+        assert!(
+            (p_last[d] - p_first[d]).abs() < 2e-3,
+            "momentum {p_first:?} -> {p_last:?}"
+        );
+    }
 }
