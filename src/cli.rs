@@ -487,7 +487,8 @@ fn run(
         let sinks = crate::frames::FrameSinks::open(&files, frames).map_err(CliError::Runtime)?;
         // Frames go to disk on a thread of their own while the next steps run.
         let context = crate::frames::FrameContext::of(&g)
-            .with_species(scene.as_ref().map(|s| s.species.clone()));
+            .with_species(scene.as_ref().map(|s| s.species.clone()))
+            .with_box(scene.as_ref().map(|s| s.box_lengths));
         let writer = crate::frames::FrameWriter::start(sinks, context);
         let mut stats: Option<RunStats> = None;
         let mut results = Vec::new();

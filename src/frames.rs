@@ -52,6 +52,14 @@ impl FrameContext {
     pub fn with_species(self, species: Option<SpeciesTable>) -> FrameContext {
         FrameContext { species, ..self }
     }
+
+    /// A box known outside the graph's params (a scene's, bound inside its graph).
+    pub fn with_box(self, box_lengths: Option<[f64; 3]>) -> FrameContext {
+        FrameContext {
+            box_lengths: box_lengths.or(self.box_lengths),
+            ..self
+        }
+    }
 }
 
 /// A stream of frames of one or more outputs into one file.

@@ -268,6 +268,8 @@ pub struct CompiledScene {
     pub outputs: Vec<(String, PathBuf)>,
     pub every: Option<u64>,
     pub species: SpeciesTable,
+    /// The scene's box, for trajectory frames (its graph binds it inside).
+    pub box_lengths: [f64; 3],
 }
 
 /// Problems of a scene, each with its place.
@@ -731,6 +733,7 @@ impl Builder<'_> {
             outputs,
             every,
             species,
+            box_lengths: s.box_lengths,
         })
     }
 

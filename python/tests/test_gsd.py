@@ -55,7 +55,8 @@ def test_a_streamed_trajectory_reads_back_with_the_gsd_package(tmp_path):
 
 def test_a_scene_trajectory_carries_its_species(tmp_path):
     """`mesoflow run SCENE`: the species (types, typeid, diameter, mass, charge) in the
-    first frame stand for every frame (GSD's rule), read back by the gsd package."""
+    first frame stand for every frame (GSD's rule), read back by the gsd package, and
+    every frame has the scene's box."""
     scene = {
         "scene": 1,
         "box": [12, 12, 12],
@@ -82,5 +83,6 @@ def test_a_scene_trajectory_carries_its_species(tmp_path):
             np.testing.assert_allclose(f.particles.mass, [2.0] * 6 + [0.5] * 9)
             np.testing.assert_allclose(f.particles.diameter, 1.2)
             assert f.particles.position.shape == (15, 3)
+            np.testing.assert_array_equal(f.configuration.box, [12, 12, 12, 0, 0, 0])
         assert [int(f.configuration.step) for f in frames] == [3, 6]
         assert "energy" in frames[1].log

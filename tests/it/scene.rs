@@ -517,6 +517,13 @@ fn a_scene_trajectory_carries_its_species() {
         .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
         .collect();
     assert_eq!(&mass[4..6], &[2.0, 0.5]);
+    // The scene's box (HOOMD's six floats: Lx, Ly, Lz, then no tilt).
+    let (_, _, b) = read.chunk(0, "configuration/box").expect("box");
+    let b: Vec<f32> = b
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    assert_eq!(b, [10.0, 10.0, 10.0, 0.0, 0.0, 0.0]);
     // Species once, positions every frame (steps 2 and 4).
     assert!(read.chunk(1, "particles/typeid").is_none());
     assert!(read.chunk(1, "particles/position").is_some());
