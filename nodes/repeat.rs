@@ -1,13 +1,13 @@
 //! `repeat`: a loop of a fixed number of iterations, x_(k+1) = body(x_k), for values a
 //! step advances several times (a molecular-dynamics step repeated between two MPCD
-//! collisions, a relaxation sweep). The body is any nodes that read the node's `value`
+//! collisions, a relaxation sweep). The body is any nodes that read the node's `current`
 //! output and end in its `next` input, as for `lanczos`; unlike Lanczos, the count is
 //! known when the program is compiled, so the executor records the iterations one after
 //! the other within the step (no host round trip, steps batched as in a loop-free
 //! program). Several values ride together as columns of one array (`concat`, `columns`).
 //!
-//! GPU: copies only (shaders/engine/copy.wgsl): `initial` into `value` before the first
-//! iteration, `next` into `value` after each, `value` into `out` after the last.
+//! GPU: copies only (shaders/engine/copy.wgsl): `initial` into `current` before the first
+//! iteration, `next` into `current` after each, `current` into `out` after the last.
 
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo};
@@ -25,7 +25,7 @@ pub const MAX_REPEAT: f64 = 10_000.0;
 fn repeat_kind() -> NodeKind {
     NodeKind::declare(
         "repeat",
-        "x_(k+1) = body(x_k), `count` times within a step: the loop body reads `value` (x_k) and ends in `next` (x_(k+1)); `out` is x_count. Carry several values as columns of one array. The body sees the same step counter in every iteration (random draws keyed on the step repeat)",
+        "x_(k+1) = body(x_k), `count` times within a step: the loop body reads `current` (x_k) and ends in `next` (x_(k+1)); `out` is x_count. Carry several values as columns of one array. The body sees the same step counter in every iteration (random draws keyed on the step repeat)",
     )
     .input(PortSpec::new(
         "initial",
@@ -47,7 +47,7 @@ fn repeat_kind() -> NodeKind {
     ))
     .output(
         PortSpec::new(
-            "value",
+            "current",
             PortType::Particles(None),
             "x_k, the current value: the loop body computes x_(k+1) from it",
         )

@@ -16,7 +16,7 @@ fn affine_loop(count: &str) -> String {
  "state": {{"s": {{"init": "inputs.x", "next": "loop.out"}}}},
  "nodes": [
    {{"id": "loop", "kind": "repeat", "params": {{"count": "$count"}}, "inputs": {{"initial": "state.s", "next": "body.out"}}}},
-   {{"id": "body", "kind": "axpy", "params": {{"alpha": -0.75}}, "inputs": {{"x": "loop.value", "y": "inputs.b"}}}}
+   {{"id": "body", "kind": "axpy", "params": {{"alpha": -0.75}}, "inputs": {{"x": "loop.current", "y": "inputs.b"}}}}
  ],
  "outputs": {{"s": "state.s"}}}}"#
     )
@@ -72,8 +72,8 @@ fn repeat_carries_several_values_as_columns() {
  "state": {"s": {"init": "inputs.xv", "next": "loop.out"}},
  "nodes": [
    {"id": "loop", "kind": "repeat", "params": {"count": 10}, "inputs": {"initial": "state.s", "next": "pack.out"}},
-   {"id": "x", "kind": "columns", "params": {"first": 0, "count": 1}, "inputs": {"x": "loop.value"}},
-   {"id": "v", "kind": "columns", "params": {"first": 1, "count": 1}, "inputs": {"x": "loop.value"}},
+   {"id": "x", "kind": "columns", "params": {"first": 0, "count": 1}, "inputs": {"x": "loop.current"}},
+   {"id": "v", "kind": "columns", "params": {"first": 1, "count": 1}, "inputs": {"x": "loop.current"}},
    {"id": "half", "kind": "axpy", "params": {"alpha": -0.05}, "inputs": {"x": "x.out", "y": "v.out"}},
    {"id": "drift", "kind": "axpy", "params": {"alpha": 0.1}, "inputs": {"x": "half.out", "y": "x.out"}},
    {"id": "kick", "kind": "axpy", "params": {"alpha": -0.05}, "inputs": {"x": "drift.out", "y": "half.out"}},
@@ -116,8 +116,8 @@ fn repeat_mistakes_are_named() {
         (affine_loop("2.5"), "count"),
         (
             affine_loop("3").replace(
-                r#""inputs": {"x": "loop.value", "y": "inputs.b"}"#,
-                r#""inputs": {"x": "first.out", "y": "first.out"}}, {"id": "first", "kind": "columns", "params": {"first": 0, "count": 1}, "inputs": {"x": "loop.value"}"#,
+                r#""inputs": {"x": "loop.current", "y": "inputs.b"}"#,
+                r#""inputs": {"x": "first.out", "y": "first.out"}}, {"id": "first", "kind": "columns", "params": {"first": 0, "count": 1}, "inputs": {"x": "loop.current"}"#,
             ),
             "port `next`",
         ),
