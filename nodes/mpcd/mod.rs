@@ -40,6 +40,7 @@ mod collide;
 mod init;
 mod measure;
 mod solute;
+mod spheres;
 mod stream;
 mod stream_bin;
 
@@ -47,6 +48,7 @@ use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry, R
 use crate::value::{HostArray, HostData, PortType, ValueType};
 
 pub use collide::srd_rotation;
+pub use spheres::{SPHERE_WORDS, impulse_of};
 
 /// Words per cell of the cell sums' first block: the count and sum v as 64-bit (lo, hi)
 /// pairs, [0, 1] count (hi zero) and [SUM_V + 2a, SUM_V + 2a + 1] sum v_a (v_z zero in 2D):
@@ -644,6 +646,7 @@ pub fn register(r: &mut Registry) {
     r.add(init::mpcd_init_kind());
     r.add(stream::mpcd_stream_kind());
     r.add(stream_bin::mpcd_stream_bin_kind());
+    r.add(spheres::mpcd_stream_spheres_kind());
     r.add(collide::mpcd_bin_kind());
     r.add(collide::mpcd_collide_kind());
     r.add(solute::mpcd_bin_solute_kind());

@@ -19,17 +19,6 @@
 @group(0) @binding(5) var<storage, read_write> cell: array<u32>;
 @group(0) @binding(6) var<storage, read_write> sums64: array<atomic<u32>>;
 
-
-// The 64-bit pair of round(x) for |x| < 2^63 (negatives as two's complement).
-fn fx_of_signed(x: f32) -> vec2<u32> {
-    let p = fx_of_f32(abs(x));
-    if (x >= 0.0) {
-        return p;
-    }
-    let lo = ~p.x + 1u;
-    return vec2<u32>(lo, ~p.y + select(0u, 1u, lo == 0u));
-}
-
 @compute @workgroup_size(256)
 fn copy(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
