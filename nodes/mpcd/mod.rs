@@ -647,6 +647,7 @@ pub fn register(r: &mut Registry) {
     r.add(stream::mpcd_stream_kind());
     r.add(stream_bin::mpcd_stream_bin_kind());
     r.add(spheres::mpcd_stream_spheres_kind());
+    r.add(spheres::mpcd_sphere_exclude_kind());
     r.add(collide::mpcd_bin_kind());
     r.add(collide::mpcd_collide_kind());
     r.add(solute::mpcd_bin_solute_kind());

@@ -1,6 +1,7 @@
 //! Solid spheres in the MPCD solvent (S2 Ch. 5; 3D): `mpcd_stream_spheres` (streaming with
 //! no-slip bounce-back on the spheres, the momentum each bounce gives its sphere summed
-//! exactly) and `mpcd_sphere_exclude` (a drawn solvent moved out of the spheres). The
+//! exactly) and `mpcd_sphere_exclude` (a drawn solvent moved out of the spheres by
+//! rejection: each particle inside one is drawn again, uniform in the box). The
 //! spheres are inputs: `sphere_positions` (S x 3), `sphere_radii` (S x 1) and, for moving
 //! spheres, `sphere_velocities` (S x 3; absent: at rest).
 //!
@@ -17,6 +18,7 @@ use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, PortError, PortSpec, RefCtx, RowError, Signature,
 };
+use crate::nodes::random;
 use crate::value::{HostArray, HostData, PortType, RefArray, ValueType};
 
 /// Words per sphere of a fixed-point impulse: (lo, hi) pairs of x, y, z.
@@ -106,7 +108,7 @@ pub(crate) fn sphere_count(inputs: &[Option<ValueType>], first: usize) -> Result
             ));
         }
     }
-    match inputs[first + 2] {
+    match inputs.get(first + 2).copied().flatten() {
         None => {}
         Some(ValueType::Particles { n, k: 3 }) if n == s => {}
         other => {
@@ -479,5 +481,179 @@ impl GpuKernels for MpcdStreamSpheres {
                 cx.grid_1d(n as u64, WG_1D),
             ),
         ])
+    }
+}
+
+/// Draws a particle inside a sphere takes at most (`EXCLUDE_TRIES` of the kernel): with
+/// spheres filling at most half the box, one left inside has odds below 2^-64.
+const EXCLUDE_TRIES: u64 = 64;
+
+/// The largest fraction of the box the spheres may fill for `mpcd_sphere_exclude`.
+const MAX_SPHERE_FRACTION: f64 = 0.5;
+
+pub(super) fn mpcd_sphere_exclude_kind() -> NodeKind {
+    NodeKind::declare(
+        "mpcd_sphere_exclude",
+        "MPCD solvent outside solid spheres (3D): each particle inside a sphere (nearest periodic image) is drawn again uniformly in the box, from Philox steps 1, 2, ... of (seed, stream), until outside every sphere (at most 64 draws); others are copied. The particle count is kept, so the solvent outside the spheres is denser than `density` by V_box / (V_box - V_spheres)",
+    )
+    .input(PortSpec::new(
+        "positions",
+        PortType::Particles(Some(3)),
+        "solvent positions (N x 3), e.g. mpcd_init's",
+    ))
+    .inputs(sphere_ports("unused").into_iter().take(2))
+    .output(PortSpec::new(
+        "positions",
+        PortType::Particles(Some(3)),
+        "positions, none inside a sphere",
+    ))
+    .params(super::geometry_params())
+    .param(random::seed_param())
+    .param(random::stream_param())
+    .build(|p| {
+        let geo = Geometry::from_params(p)?;
+        if geo.dims() != 3 {
+            return Err("spheres need a 3D box (3 lengths)".into());
+        }
+        let mut u = geo.uniform();
+        super::key_into(&mut u, p);
+        let (seed, stream) = super::key_of(p);
+        Ok(Box::new(MpcdSphereExclude {
+            geo,
+            u,
+            seed,
+            stream,
+        }))
+    })
+}
+
+struct MpcdSphereExclude {
+    geo: Geometry,
+    u: super::Uniform,
+    seed: u64,
+    stream: u32,
+}
+
+fn inside_any(geo: &Geometry, spheres: &[Sphere], x: [f64; 3]) -> bool {
+    spheres.iter().any(|s| {
+        let r = min_image(geo, std::array::from_fn(|a| x[a] - s.c[a]));
+        dot(r, r) < s.r * s.r
+    })
+}
+
+impl Node for MpcdSphereExclude {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+        let n = self.geo.particles("positions", inputs[0])?;
+        sphere_count(inputs, 1)?;
+        Ok(Signature::outputs(vec![ValueType::Particles { n, k: 3 }]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn checks_input(&self) -> bool {
+        true
+    }
+
+    fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
+        if port == 0 {
+            return check_rows(&self.geo, Rows::Positions, data);
+        }
+        check_sphere_rows(&self.geo, port - 1, data, 1.0)?;
+        if let (2, HostData::F32(radii)) = (port, &data.data) {
+            let volume: f64 = self.geo.lengths.iter().product();
+            let filled: f64 = radii
+                .iter()
+                .map(|&r| 4.0 / 3.0 * std::f64::consts::PI * (r as f64).powi(3))
+                .sum();
+            if filled > MAX_SPHERE_FRACTION * volume {
+                return Err(RowError::new(
+                    radii.len() - 1,
+                    format!(
+                        "the spheres fill {} of the box volume {}, more than half: drawing the solvent outside them by rejection would take too many draws",
+                        num(filled),
+                        num(volume)
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let x = &inputs[0].as_ref().expect("required").data;
+        let spheres = spheres_of(
+            inputs[1].as_ref().expect("required"),
+            inputs[2].as_ref().expect("required"),
+            None,
+        );
+        let l = &self.geo.lengths;
+        for p in 0..x.len() / 3 {
+            let mut xp: [f64; 3] = std::array::from_fn(|a| x[3 * p + a]);
+            let mut k = 1;
+            while k <= EXCLUDE_TRIES && inside_any(&self.geo, &spheres, xp) {
+                for a in 0..3 {
+                    let u = random::uniform((3 * p + a) as u64, k, self.seed, self.stream);
+                    xp[a] = ((u - 0.5) * l[a]).min(0.5 * l[a]);
+                }
+                k += 1;
+            }
+            outputs[0].data[3 * p..3 * p + 3].copy_from_slice(&xp);
+        }
+    }
+}
+
+impl GpuKernels for MpcdSphereExclude {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let pos = io.inputs[0].expect("required");
+        let ValueType::Particles { n, .. } = pos.ty else {
+            unreachable!()
+        };
+        let centres = io.inputs[1].expect("required");
+        let ValueType::Particles { n: s, .. } = centres.ty else {
+            unreachable!()
+        };
+        let mut u = self.u;
+        u.n = n;
+        let su = SphereUniform {
+            count: s,
+            ..Default::default()
+        };
+        let kernel = cx.kernel(
+            &KernelSpec::new(
+                "mpcd_sphere_exclude",
+                cx.shader("mpcd/sphere_exclude.wgsl")?,
+                &[
+                    Binding::Uniform,
+                    Binding::Uniform,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                ],
+            )
+            .constant("DIMS", 3.0),
+        )?;
+        let params = cx.uniform("mpcd sphere exclude", bytemuck::bytes_of(&u));
+        let sphere_params = cx.uniform("mpcd spheres", bytemuck::bytes_of(&su));
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &[
+                &params,
+                &sphere_params,
+                pos.buffer,
+                centres.buffer,
+                io.inputs[2].expect("required").buffer,
+                centres.buffer,
+                io.outputs[0].buffer,
+            ],
+            cx.grid_1d(n as u64, WG_1D),
+        )])
     }
 }

@@ -212,3 +212,70 @@ fn sphere_streaming_matches_its_reference_and_balances_momentum() {
         }
     }
 }
+
+/// A solvent drawn uniformly, then moved out of two spheres (one across a periodic face):
+/// none left inside, the others untouched, every particle as the f64 reference draws it,
+/// and about the share of the volume the spheres fill redrawn.
+#[test]
+fn sphere_exclusion_leaves_no_particle_inside_and_keeps_the_others() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(8);
+    let l = [8.0, 8.0, 8.0];
+    let n = 6000;
+    let (x, _) = random_particles(&mut rng, n, &l);
+    let spheres = [([0.5, -0.3, 0.2], 2.0), ([-3.6, 3.2, -1.0], 1.5)];
+    let centres: Vec<[f64; 3]> = spheres.iter().map(|s| s.0).collect();
+    let radii: Vec<[f64; 1]> = spheres.iter().map(|s| [s.1]).collect();
+    let (out, r) = run_node_and_reference(
+        "mpcd_sphere_exclude",
+        r#"{"box": [8, 8, 8], "seed": 3, "stream": 8}"#,
+        &[
+            ("positions", particles(&x)),
+            ("sphere_positions", particles(&centres)),
+            ("sphere_radii", particles(&radii)),
+        ],
+    );
+    let xs = rows(&out["positions"], 3);
+    let inside = |p: &[f64]| {
+        spheres.iter().any(|(c, rad)| {
+            let d2: f64 = (0..3)
+                .map(|a| {
+                    let d = p[a] - c[a];
+                    (d - l[a] * (d / l[a]).round()).powi(2)
+                })
+                .sum();
+            d2 < rad * rad
+        })
+    };
+    let mut moved = 0;
+    for p in 0..n {
+        let x32: Vec<f64> = x[p].iter().map(|&c| c as f32 as f64).collect();
+        assert!(
+            !inside(&xs[p]),
+            "particle {p} at {:?} is inside a sphere",
+            xs[p]
+        );
+        if inside(&x32) {
+            moved += 1;
+        } else {
+            assert_eq!(xs[p], x32, "particle {p} outside the spheres was moved");
+        }
+        for a in 0..3 {
+            assert!(
+                (xs[p][a] - r[0].data[3 * p + a]).abs() < 1e-6,
+                "particle {p}: {:?}, reference {:?}",
+                xs[p],
+                &r[0].data[3 * p..3 * p + 3]
+            );
+        }
+    }
+    // The spheres fill 4/3 pi (8 + 3.375) = 47.6 of 512: about 558 of 6000 drawn inside
+    // (binomial sd 23).
+    let want = n as f64 * 4.0 / 3.0 * std::f64::consts::PI * (8.0 + 3.375) / 512.0;
+    assert!(
+        (moved as f64 - want).abs() < 5.0 * want.sqrt(),
+        "{moved} particles were inside, expected about {want:.0}"
+    );
+}
