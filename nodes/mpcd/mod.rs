@@ -40,6 +40,7 @@ mod collide;
 mod init;
 mod measure;
 mod solute;
+mod sphere_coupling;
 mod spheres;
 mod stream;
 mod stream_bin;
@@ -48,6 +49,7 @@ use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry, R
 use crate::value::{HostArray, HostData, PortType, ValueType};
 
 pub use collide::srd_rotation;
+pub use sphere_coupling::{shell_count, shell_inner};
 pub use spheres::{SPHERE_WORDS, impulse_of};
 
 /// Words per cell of the cell sums' first block: the count and sum v as 64-bit (lo, hi)
@@ -559,7 +561,7 @@ pub(crate) fn thermal_unit(p: &Params) -> Result<f64, String> {
 }
 
 /// The fixed-point scales (fix_v, fix_e) for (kT, m), as f32 (the GPU's values).
-fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
+pub(crate) fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
     let vth = velocity_unit(kt, mass);
     ((16_777_216.0 / vth) as f32, (65_536.0 / (vth * vth)) as f32)
 }
@@ -648,6 +650,9 @@ pub fn register(r: &mut Registry) {
     r.add(stream_bin::mpcd_stream_bin_kind());
     r.add(spheres::mpcd_stream_spheres_kind());
     r.add(spheres::mpcd_sphere_exclude_kind());
+    r.add(sphere_coupling::mpcd_sphere_fill_kind());
+    r.add(sphere_coupling::mpcd_sphere_force_kind());
+    r.add(sphere_coupling::mpcd_sphere_move_kind());
     r.add(collide::mpcd_bin_kind());
     r.add(collide::mpcd_collide_kind());
     r.add(solute::mpcd_bin_solute_kind());

@@ -36,6 +36,9 @@ pub(crate) struct SphereUniform {
     pub per: u32,
     pub moving: u32,
     pub warmup: u32,
+    pub has_velocity: u32,
+    pub has_impulse: u32,
+    pub pad: [u32; 2],
 }
 
 /// One sphere in f64: centre, radius, velocity.

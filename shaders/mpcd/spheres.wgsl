@@ -2,13 +2,7 @@
 // declare the parameter block `m`, the sphere block `sp` and the bindings `centres`
 // (S x 3), `radii` (S) and `sphere_vel` (S x 3, read only when sp.moving = 1).
 #import mpcd/common.wgsl
-
-struct Spheres {
-    count: u32,            // spheres S
-    per: u32,              // virtual particles per sphere
-    moving: u32,           // 1: sphere_vel holds the spheres' velocities (else at rest)
-    warmup: u32,           // steps before the force averages
-}
+#import mpcd/sphere_block.wgsl
 
 fn sphere_centre(j: u32) -> vec3<f32> {
     return vec3<f32>(centres[3u * j], centres[3u * j + 1u], centres[3u * j + 2u]);

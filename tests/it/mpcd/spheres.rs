@@ -279,3 +279,202 @@ fn sphere_exclusion_leaves_no_particle_inside_and_keeps_the_others() {
         "{moved} particles were inside, expected about {want:.0}"
     );
 }
+
+/// Virtual particles of two spheres of radius 4 (one moving, one across a periodic face):
+/// as the f64 reference draws them, inside each shell [R - 2 sqrt(3), R], uniform in its
+/// volume, velocities about the sphere's with variance kT / m.
+#[test]
+fn virtual_particles_fill_each_shell_uniformly() {
+    if gpu().is_none() {
+        return;
+    }
+    let (r, density, kt) = (4.0, 10.0, 2.0);
+    let k = mesoflow::nodes::mpcd::shell_count(density, r, 1.0).round() as usize;
+    let centres = [[0.5, -0.3, 0.2], [-7.0, 6.5, -1.0]];
+    let vs = [[0.5, -0.25, 0.0], [0.0, 0.0, 0.0]];
+    let params = format!(
+        r#"{{"box": [16, 16, 16], "density": {density}, "temperature": {kt}, "per_sphere": {k}, "seed": 4, "stream": 9}}"#
+    );
+    let (out, refs) = run_node_and_reference(
+        "mpcd_sphere_fill",
+        &params,
+        &[
+            ("sphere_positions", particles(&centres)),
+            ("sphere_radii", particles(&[[r], [r]])),
+            ("sphere_velocities", particles(&vs)),
+        ],
+    );
+    let (xs, v) = (rows(&out["positions"], 3), rows(&out["velocities"], 3));
+    assert_eq!(xs.len(), 2 * k);
+    for q in 0..2 * k {
+        for a in 0..3 {
+            assert!(
+                (xs[q][a] - refs[0].data[3 * q + a]).abs() < 1e-4
+                    && (v[q][a] - refs[1].data[3 * q + a]).abs() < 1e-4,
+                "virtual particle {q}: {:?} {:?}, reference {:?} {:?}",
+                xs[q],
+                v[q],
+                &refs[0].data[3 * q..3 * q + 3],
+                &refs[1].data[3 * q..3 * q + 3]
+            );
+        }
+    }
+    let rin = mesoflow::nodes::mpcd::shell_inner(r, 1.0);
+    // Four shells of equal volume between rin and r: about K/4 each (binomial).
+    let edges: Vec<f64> = (0..=4)
+        .map(|i| (rin.powi(3) + i as f64 / 4.0 * (r.powi(3) - rin.powi(3))).cbrt())
+        .collect();
+    for j in 0..2 {
+        let mut shells = [0usize; 4];
+        let mut mean = [0.0; 3];
+        let mut var = 0.0;
+        for q in j * k..(j + 1) * k {
+            let d: Vec<f64> = (0..3)
+                .map(|a| {
+                    let d = xs[q][a] - centres[j][a];
+                    d - 16.0 * (d / 16.0).round()
+                })
+                .collect();
+            let dist = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            assert!(
+                dist > rin - 1e-4 && dist < r + 1e-4,
+                "sphere {j}: virtual particle {q} at distance {dist} outside the shell [{rin}, {r}]"
+            );
+            shells[edges.iter().filter(|&&e| e <= dist).count().clamp(1, 4) - 1] += 1;
+            for a in 0..3 {
+                mean[a] += v[q][a] / k as f64;
+                var += (v[q][a] - vs[j][a]).powi(2) / (3 * k) as f64;
+            }
+        }
+        let expect = k as f64 / 4.0;
+        for (i, &c) in shells.iter().enumerate() {
+            assert!(
+                (c as f64 - expect).abs() < 5.0 * (expect * 0.75).sqrt(),
+                "sphere {j}: shell {i} holds {c}, expected about {expect:.0}"
+            );
+        }
+        for a in 0..3 {
+            // The mean of K normals of variance kT: sd sqrt(kT / K).
+            assert!(
+                (mean[a] - vs[j][a]).abs() < 5.0 * (kt / k as f64).sqrt(),
+                "sphere {j}: mean velocity {mean:?}, sphere's {:?}",
+                vs[j]
+            );
+        }
+        // The variance of 3K samples: relative sd sqrt(2 / 3K).
+        assert!(
+            (var / kt - 1.0).abs() < 5.0 * (2.0 / (3 * k) as f64).sqrt(),
+            "sphere {j}: velocity variance {var}, kT / m = {kt}"
+        );
+    }
+}
+
+/// The force node against its reference for given impulses and virtual velocities, over
+/// two steps with a warm-up of one (the totals persist): exact integer sums.
+#[test]
+fn sphere_force_sums_kinetic_and_collisional_impulses_exactly() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(31);
+    let (s, k) = (3usize, 50usize);
+    // Kinetic impulses of either sign, as u32 words of 64-bit pairs.
+    let kinetic: Vec<u32> = (0..s * 3)
+        .flat_map(|_| {
+            let q = (rng.uniform(-1.0, 1.0) * 1e10) as i64 as u64;
+            [q as u32, (q >> 32) as u32]
+        })
+        .collect();
+    let before: Vec<Vec<f64>> = (0..s * k)
+        .map(|_| (0..3).map(|_| rng.uniform(-2.0, 2.0)).collect())
+        .collect();
+    let after: Vec<Vec<f64>> = before
+        .iter()
+        .map(|v| v.iter().map(|c| c + rng.uniform(-0.5, 0.5)).collect())
+        .collect();
+    let params = r#"{"dt": 0.1, "temperature": 1, "mass": 2, "warmup": 0}"#;
+    let (out, refs) = run_node_and_reference(
+        "mpcd_sphere_force",
+        params,
+        &[
+            ("kinetic", crate::util::indices(&kinetic)),
+            ("before", particles(&before)),
+            ("after", particles(&after)),
+        ],
+    );
+    let got = impulses(&out["impulse"], s);
+    let want: Vec<[i64; 3]> = (0..s).map(|j| impulse_of(&refs[0].data, j)).collect();
+    let forces = rows(&out["forces"], 3);
+    let means = rows(&out["mean_forces"], 3);
+    for j in 0..s {
+        for a in 0..3 {
+            // The kernel rounds the f32 difference of two f32 velocities (within 2^-23 of
+            // 2): at most a few units of 2^-24 per virtual particle.
+            assert!(
+                (got[j][a] - want[j][a]).abs() <= 4 * k as i64,
+                "sphere {j}: impulse {:?}, reference {:?}",
+                got[j],
+                want[j]
+            );
+            // m v_th / 2^24 per unit, v_th = sqrt(kT / m): force = J m v_th 2^-24 / dt.
+            let f = want[j][a] as f64 * UNIT * 0.5f64.sqrt() * 2.0 / 0.1;
+            assert!((forces[j][a] - f).abs() < 1e-5 * f.abs().max(1.0));
+            assert!((means[j][a] - f).abs() < 1e-5 * f.abs().max(1.0));
+        }
+    }
+    assert_eq!(u32s(&out["totals"])[6 * s], 1, "one sample after one step");
+}
+
+/// Fixed spheres stay at rest; moving ones step x += V dt (wrapped) and V += J / M.
+#[test]
+fn sphere_motion_follows_newton_with_the_impulse() {
+    if gpu().is_none() {
+        return;
+    }
+    let x = [[7.9, 0.0, 0.0], [1.0, -2.0, 3.0]];
+    let v = [[1.0, 0.5, 0.0], [0.0, 0.0, -1.0]];
+    let masses = [[10.0], [2.0]];
+    // Impulses 3 and -1 along x (units of 2^-24 at kT = m = 1).
+    let q = [3.0f64, 0.0, 0.0, -1.0, 0.0, 0.0];
+    let words: Vec<u32> = q
+        .iter()
+        .flat_map(|&c| {
+            let w = (c / UNIT) as i64 as u64;
+            [w as u32, (w >> 32) as u32]
+        })
+        .collect();
+    let inputs = [
+        ("positions", particles(&x)),
+        ("velocities", particles(&v)),
+        ("masses", particles(&masses)),
+        ("impulse", crate::util::indices(&words)),
+    ];
+    for mode in ["fixed", "moving"] {
+        let params = format!(r#"{{"box": [16, 16, 16], "dt": 0.5, "mode": "{mode}"}}"#);
+        let (out, refs) = run_node_and_reference("mpcd_sphere_move", &params, &inputs);
+        let (xs, vs) = (rows(&out["positions"], 3), rows(&out["velocities"], 3));
+        let (want_x, want_v) = if mode == "fixed" {
+            (x, [[0.0; 3]; 2])
+        } else {
+            // 7.9 + 0.5 wraps to -7.6; V = 1 + 3 / 10, -1 / 2.
+            (
+                [[-7.6, 0.25, 0.0], [1.0, -2.0, 2.5]],
+                [[1.3, 0.5, 0.0], [-0.5, 0.0, -1.0]],
+            )
+        };
+        for j in 0..2 {
+            for a in 0..3 {
+                assert!(
+                    (xs[j][a] - want_x[j][a]).abs() < 1e-5
+                        && (vs[j][a] - want_v[j][a]).abs() < 1e-6
+                        && (xs[j][a] - refs[0].data[3 * j + a]).abs() < 1e-5,
+                    "{mode}: sphere {j} x {:?} v {:?}, want {:?} {:?}",
+                    xs[j],
+                    vs[j],
+                    want_x[j],
+                    want_v[j]
+                );
+            }
+        }
+    }
+}
