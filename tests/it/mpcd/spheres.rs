@@ -478,3 +478,247 @@ fn sphere_motion_follows_newton_with_the_impulse() {
         }
     }
 }
+
+/// graphs/mpcd_spheres.json loaded with these `--set` values, its inputs, run `count`
+/// times `every` steps on: the named outputs after each run.
+fn sphere_snapshots(
+    sets: &[(&str, &str)],
+    inputs: &std::collections::BTreeMap<String, HostArray>,
+    outputs: &[&str],
+    every: u64,
+    count: usize,
+) -> Vec<std::collections::BTreeMap<String, HostArray>> {
+    use mesoflow::exec::{Profile, RunOptions};
+    let gpu = gpu().expect("GPU");
+    let g = crate::util::load_with("mpcd_spheres.json", sets, every * count as u64, 7);
+    let plan = crate::util::plan_graph(
+        &gpu.caps,
+        &g,
+        crate::util::types_of(inputs),
+        Some(outputs),
+        true,
+    );
+    let mut program = crate::util::compile_cached(&gpu, &g, &plan);
+    program.upload(inputs).unwrap_or_else(|e| panic!("{e}"));
+    let opts = RunOptions {
+        steps: every,
+        profile: Profile::Off,
+        progress: false,
+    };
+    (0..count)
+        .map(|_| {
+            program.run_on(&opts).unwrap_or_else(|e| panic!("{e}"));
+            program
+                .read_outputs()
+                .unwrap_or_else(|e| panic!("{e}"))
+                .into_iter()
+                .collect()
+        })
+        .collect()
+}
+
+/// Squared distance of x from c, nearest periodic image in a cube of side l.
+fn dist2(x: &[f64], c: &[f64], l: f64) -> f64 {
+    (0..3)
+        .map(|a| {
+            let d = x[a] - c[a];
+            (d - l * (d / l).round()).powi(2)
+        })
+        .sum()
+}
+
+/// Momentum is conserved when the spheres' share is counted: fixed spheres (the solvent's
+/// momentum change against the exact impulse sums) and a moving sphere (solvent plus
+/// M V), from a given solvent state with a mean flow, 60 steps.
+#[test]
+fn solvent_and_spheres_conserve_momentum() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(12);
+    let l = 8.0;
+    let n = 4000;
+    let (x, v) = random_particles(&mut rng, n, &[l, l, l]);
+    let centres = [[0.3, -0.2, 0.1], [-3.0, 3.5, -3.2]];
+    let radii = [[2.0], [2.0]];
+    let steps = 60;
+    let p0: Vec<f64> = (0..3)
+        .map(|a| v.iter().map(|r| r[a] as f32 as f64).sum())
+        .collect();
+    for mode in ["fixed", "moving"] {
+        let mut inputs = crate::util::named(&[
+            ("positions", particles(&x)),
+            ("velocities", particles(&v)),
+            ("sphere_positions", particles(&centres)),
+            ("sphere_radii", particles(&radii)),
+        ]);
+        let masses = [[300.0], [500.0]];
+        let v_s = [[0.1, 0.0, -0.05], [0.0, 0.2, 0.0]];
+        if mode == "moving" {
+            inputs.insert("sphere_masses".into(), particles(&masses));
+            inputs.insert("sphere_velocities".into(), particles(&v_s));
+        }
+        let spheres = format!("\"{mode}\"");
+        let out = &sphere_snapshots(
+            &[("box", "[8, 8, 8]"), ("dt", "0.2"), ("spheres", &spheres)],
+            &inputs,
+            &[
+                "velocities",
+                "sphere_impulse",
+                "sphere_velocities",
+                "positions",
+            ],
+            steps,
+            1,
+        )[0];
+        let vs = rows(&out["velocities"], 3);
+        let totals = impulses(&out["sphere_impulse"], 2);
+        assert_eq!(u32s(&out["sphere_impulse"])[12], steps as u32);
+        let sv = rows(&out["sphere_velocities"], 3);
+        for a in 0..3 {
+            let solvent: f64 = vs.iter().map(|r| r[a]).sum();
+            let given: f64 = totals.iter().map(|q| q[a] as f64 * UNIT).sum();
+            // f32 velocities: each collision rounds every new velocity (2^-24 relative,
+            // |v| about 1.3); a random walk over n x steps roundings: about 1e-4.
+            let tol = 2e-3;
+            assert!(
+                (solvent + given - p0[a]).abs() < tol,
+                "{mode}, axis {a}: solvent {solvent} + spheres' impulses {given} = {}, initially {}",
+                solvent + given,
+                p0[a]
+            );
+            if mode == "moving" {
+                let sphere: f64 = (0..2).map(|j| masses[j][0] * (sv[j][a] - v_s[j][a])).sum();
+                assert!(
+                    (sphere - given).abs() < 1e-4 * given.abs().max(1.0),
+                    "axis {a}: M dV = {sphere}, impulses {given}"
+                );
+            }
+        }
+        // Some momentum went to the spheres (the flow pushes them).
+        let moved: f64 = totals.iter().map(|q| (q[0] as f64 * UNIT).abs()).sum();
+        assert!(moved > 1.0, "{mode}: impulses {totals:?}");
+    }
+}
+
+/// Leakage and the radial density around a fixed R = 2 sphere (S2 Fig. 5.4, §5.5.2): the
+/// solvent at density 5 in a 12^3 box (dt 0.2) sampled every 10 steps over 800 (the
+/// solvent diffuses about 10 cells, so the samples decorrelate); no more solvent inside than
+/// the source's rate (7 in 10^6 samples) and the density from the centre (virtual
+/// particles inside, solvent outside) flat within 5% of the solvent's mean density.
+#[test]
+fn a_fixed_sphere_keeps_the_solvent_out_and_the_density_flat() {
+    if gpu().is_none() {
+        return;
+    }
+    let (l, r, density) = (12.0, 2.0, 5.0);
+    let centre = [0.4, -0.3, 0.2];
+    let inputs = crate::util::named(&[
+        ("sphere_positions", particles(&[centre])),
+        ("sphere_radii", particles(&[[r]])),
+    ]);
+    let snaps = sphere_snapshots(
+        &[
+            ("box", "[12, 12, 12]"),
+            ("density", "5"),
+            ("dt", "0.2"),
+            ("sphere_radius", "2"),
+        ],
+        &inputs,
+        &["positions"],
+        10,
+        80,
+    );
+    let edges: Vec<f64> = (0..=8).map(|i| r + 0.25 * i as f64).collect();
+    let mut shells = vec![0usize; 8];
+    let (mut inside, mut samples) = (0usize, 0usize);
+    for s in &snaps {
+        for x in rows(&s["positions"], 3) {
+            samples += 1;
+            let d = dist2(&x, &centre, l).sqrt();
+            if d < r {
+                inside += 1;
+            } else if d < edges[8] {
+                shells[((d - r) / 0.25) as usize] += 1;
+            }
+        }
+    }
+    eprintln!("leakage: {inside} of {samples} samples inside the sphere");
+    assert!(
+        (inside as f64) < 7e-6 * samples as f64,
+        "{inside} of {samples} samples inside the sphere"
+    );
+    // The solvent's mean density outside the sphere (the drawn count keeps
+    // density x box cells, so it is above `density` by V_box / (V_box - V_sphere)).
+    let v_sphere = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+    let bulk = density * l.powi(3) / (l.powi(3) - v_sphere);
+    let g: Vec<f64> = shells
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| {
+            let vol = 4.0 / 3.0 * std::f64::consts::PI * (edges[i + 1].powi(3) - edges[i].powi(3));
+            c as f64 / (snaps.len() as f64 * vol * bulk)
+        })
+        .collect();
+    eprintln!("g by shell of 0.25 from r = 2: {g:.4?}, counts {shells:?}");
+    for (i, (&g, &c)) in g.iter().zip(&shells).enumerate() {
+        assert!(
+            (g - 1.0).abs() < 0.05,
+            "solvent density at r = {:.2} is {g:.3} of the mean ({c} counts)",
+            edges[i]
+        );
+    }
+    // Inside, the virtual particles fill the shell at `density`: against the solvent's
+    // mean density outside.
+    let k = mesoflow::nodes::mpcd::shell_count(density, r, 1.0).round();
+    let g_in = k / v_sphere / bulk;
+    assert!(
+        (g_in - 1.0).abs() < 0.05,
+        "virtual particles' density {g_in} of the solvent's"
+    );
+}
+
+/// Bad sphere data is refused by input, node, port and row before a run.
+#[test]
+fn bad_sphere_data_is_refused_by_input_node_port_and_row() {
+    if gpu().is_none() {
+        return;
+    }
+    let gpu = gpu().expect("GPU");
+    let cases: [(&[[f64; 1]], &[[f64; 3]], &str, &[&str]); 3] = [
+        (
+            &[[2.0], [0.0]],
+            &[[0.0; 3], [3.0, 3.0, 3.0]],
+            "2",
+            &["sphere_radii", "row 1", "radius 0"],
+        ),
+        (
+            &[[2.0], [5.0]],
+            &[[0.0; 3], [3.0, 3.0, 3.0]],
+            "2",
+            &["sphere_radii", "row 1", "diameter"],
+        ),
+        (
+            &[[2.0], [3.0]],
+            &[[0.0; 3], [3.0, 3.0, 3.0]],
+            "2",
+            &["fill", "row 1", "per_sphere"],
+        ),
+    ];
+    for (radii, centres, _, want) in cases {
+        let g = crate::util::load_with("mpcd_spheres.json", &[("box", "[8, 8, 8]")], 1, 0);
+        let inputs = crate::util::named(&[
+            ("sphere_positions", particles(centres)),
+            ("sphere_radii", particles(radii)),
+        ]);
+        let plan =
+            crate::util::plan_graph(&gpu.caps, &g, crate::util::types_of(&inputs), None, true);
+        let mut program = crate::util::compile_cached(&gpu, &g, &plan);
+        let err =
+            crate::util::try_run_program(&mut program, &inputs, 1, mesoflow::exec::Profile::Off)
+                .expect_err("bad sphere data ran");
+        for w in want {
+            assert!(err.contains(w), "`{err}` does not say `{w}`");
+        }
+    }
+}
