@@ -289,12 +289,12 @@ pub(crate) fn stream_with_spheres(
     }
 }
 
-/// A sphere impulse sum's words from f64 components in units of m v_th / 2^24.
+/// Sphere impulses (units m v_th / 2^24) as (lo, hi) words, 6 a sphere.
 pub(crate) fn impulse_words(out: &mut [f64], impulse: &[[i64; 3]]) {
     for (j, q) in impulse.iter().enumerate() {
-        for a in 0..3 {
+        for (a, &c) in q.iter().enumerate() {
             let k = SPHERE_WORDS as usize * j + 2 * a;
-            out[k..k + 2].copy_from_slice(&words_of(q[a]));
+            out[k..k + 2].copy_from_slice(&words_of(c));
         }
     }
 }

@@ -685,31 +685,19 @@ fn bad_sphere_data_is_refused_by_input_node_port_and_row() {
         return;
     }
     let gpu = gpu().expect("GPU");
-    let cases: [(&[[f64; 1]], &[[f64; 3]], &str, &[&str]); 3] = [
-        (
-            &[[2.0], [0.0]],
-            &[[0.0; 3], [3.0, 3.0, 3.0]],
-            "2",
-            &["sphere_radii", "row 1", "radius 0"],
-        ),
-        (
-            &[[2.0], [5.0]],
-            &[[0.0; 3], [3.0, 3.0, 3.0]],
-            "2",
-            &["sphere_radii", "row 1", "diameter"],
-        ),
-        (
-            &[[2.0], [3.0]],
-            &[[0.0; 3], [3.0, 3.0, 3.0]],
-            "2",
-            &["fill", "row 1", "per_sphere"],
-        ),
+    // Radii of two spheres (at the centre and at (3, 3, 3) in a box of 8, the default
+    // virtual_per_sphere for R = 2) and what the error must say.
+    let cases: [([f64; 2], &[&str]); 3] = [
+        ([2.0, 0.0], &["sphere_radii", "row 1", "radius 0"]),
+        ([2.0, 5.0], &["sphere_radii", "row 1", "diameter"]),
+        ([2.0, 3.0], &["fill", "row 1", "per_sphere"]),
     ];
-    for (radii, centres, _, want) in cases {
+    let centres = [[0.0; 3], [3.0, 3.0, 3.0]];
+    for (radii, want) in cases {
         let g = crate::util::load_with("mpcd_spheres.json", &[("box", "[8, 8, 8]")], 1, 0);
         let inputs = crate::util::named(&[
-            ("sphere_positions", particles(centres)),
-            ("sphere_radii", particles(radii)),
+            ("sphere_positions", particles(&centres)),
+            ("sphere_radii", particles(&radii.map(|r| [r]))),
         ]);
         let plan =
             crate::util::plan_graph(&gpu.caps, &g, crate::util::types_of(&inputs), None, true);
