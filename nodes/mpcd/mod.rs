@@ -21,8 +21,11 @@
 //! with the same params on the solute's velocities and cells applies the same rotation of
 //! each cell (V' = u + S R (V - u)). The cell thermostat S counts the relative energy and
 //! degrees of freedom of both species; virtual particles in wall-cut cells add to the
-//! cell's mass. SRD only: with solute sums, `mpcd_collide` refuses MPCD-BC (its acceptance
-//! rule is defined for one species).
+//! cell's mass. With MPCD-BC (`mpcd_bin_solute` given the same `rule`: the grid shift of
+//! width 2a) the cells' masses in units of m stand for the counts n1, n2 of the acceptance
+//! tanh(A du n1 n2) and the pair mean (Ihle's rule is defined for one species: with M = m,
+//! as the solid spheres' virtual particles, it is that rule; other masses generalise it
+//! by mass, conserving momentum and energy).
 //!
 //! Conventions: the box is centred at the origin, particle arrays are (N, d) with d = 2 or 3
 //! (the length of `box`), the body force acts along x, and walls (`plates`) are

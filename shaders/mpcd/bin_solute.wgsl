@@ -6,7 +6,8 @@
 // round(ratio |v|^2 fix_e) to its energy sum (exact 64-bit
 // integer sums, order independent), so the cell means become mass-weighted:
 // u = (m sum v + M sum V) / (m n + M n_s). The grid shift is the solvent's (the same seed,
-// stream and step), SRD width a.
+// stream and step), of width a for SRD and 2a for MPCD-BC (m.rule: give the node mpcd_bin's
+// `rule`).
 #import common/index.wgsl
 #import mpcd/common.wgsl
 #import mpcd/add64.wgsl

@@ -449,7 +449,7 @@ fn sphere_motion_follows_newton_with_the_impulse() {
         ("masses", particles(&masses)),
         ("impulse", crate::util::indices(&words)),
     ];
-    for mode in ["fixed", "moving"] {
+    for (mode, rule) in [("fixed", "srd"), ("moving", "srd"), ("moving", "biased")] {
         let params = format!(r#"{{"box": [16, 16, 16], "dt": 0.5, "mode": "{mode}"}}"#);
         let (out, refs) = run_node_and_reference("mpcd_sphere_move", &params, &inputs);
         let (xs, vs) = (rows(&out["positions"], 3), rows(&out["velocities"], 3));
@@ -529,7 +529,7 @@ fn dist2(x: &[f64], c: &[f64], l: f64) -> f64 {
 
 /// Momentum is conserved when the spheres' share is counted: fixed spheres (the solvent's
 /// momentum change against the exact impulse sums) and a moving sphere (solvent plus
-/// M V), from a given solvent state with a mean flow, 60 steps.
+/// M V; SRD and MPCD-BC), from a given solvent state with a mean flow, 60 steps.
 #[test]
 fn solvent_and_spheres_conserve_momentum() {
     if gpu().is_none() {
@@ -545,7 +545,7 @@ fn solvent_and_spheres_conserve_momentum() {
     let p0: Vec<f64> = (0..3)
         .map(|a| v.iter().map(|r| r[a] as f32 as f64).sum())
         .collect();
-    for mode in ["fixed", "moving"] {
+    for (mode, rule) in [("fixed", "srd"), ("moving", "srd"), ("moving", "biased")] {
         let mut inputs = crate::util::named(&[
             ("positions", particles(&x)),
             ("velocities", particles(&v)),
@@ -558,9 +558,14 @@ fn solvent_and_spheres_conserve_momentum() {
             inputs.insert("sphere_masses".into(), particles(&masses));
             inputs.insert("sphere_velocities".into(), particles(&v_s));
         }
-        let spheres = format!("\"{mode}\"");
+        let (spheres, rule) = (format!("\"{mode}\""), format!("\"{rule}\""));
         let out = &sphere_snapshots(
-            &[("box", "[8, 8, 8]"), ("dt", "0.2"), ("spheres", &spheres)],
+            &[
+                ("box", "[8, 8, 8]"),
+                ("dt", "0.2"),
+                ("spheres", &spheres),
+                ("rule", &rule),
+            ],
             &inputs,
             &[
                 "velocities",
@@ -583,7 +588,7 @@ fn solvent_and_spheres_conserve_momentum() {
             let tol = 2e-3;
             assert!(
                 (solvent + given - p0[a]).abs() < tol,
-                "{mode}, axis {a}: solvent {solvent} + spheres' impulses {given} = {}, initially {}",
+                "{mode} {rule}, axis {a}: solvent {solvent} + spheres' impulses {given} = {}, initially {}",
                 solvent + given,
                 p0[a]
             );
