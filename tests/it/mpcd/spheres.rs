@@ -584,8 +584,14 @@ fn solvent_and_spheres_conserve_momentum() {
             let solvent: f64 = vs.iter().map(|r| r[a]).sum();
             let given: f64 = totals.iter().map(|q| q[a] as f64 * UNIT).sum();
             // f32 velocities: each collision rounds every new velocity (2^-24 relative,
-            // |v| about 1.3); a random walk over n x steps roundings: about 1e-4.
-            let tol = 2e-3;
+            // |v| about 1.3); a random walk over n x steps roundings: about 1e-4 (5e-5
+            // measured, against momenta of 100 to 2400 moved to the spheres).
+            let tol = 3e-4;
+            eprintln!(
+                "{mode} {rule}, axis {a}: momentum off by {:.2e} of the initial {:.1}, spheres got {given:.3}",
+                solvent + given - p0[a],
+                p0[a]
+            );
             assert!(
                 (solvent + given - p0[a]).abs() < tol,
                 "{mode} {rule}, axis {a}: solvent {solvent} + spheres' impulses {given} = {}, initially {}",
