@@ -560,6 +560,8 @@ struct MpcdSphereMove {
     geo: Geometry,
     u: super::Uniform,
     moving: bool,
+    /// The fixed-point unit v_th: sphere velocities stay below 128 of it.
+    unit: f64,
 }
 
 impl MpcdSphereMove {
@@ -568,7 +570,7 @@ impl MpcdSphereMove {
         if geo.dims() != 3 {
             return Err("spheres need a 3D box (3 lengths)".into());
         }
-        thermal_unit(p)?;
+        let unit = thermal_unit(p)?;
         let mut u = geo.thermal_uniform(p);
         u.mass = p.number("mass") as f32;
         u.dt = p.number("dt") as f32;
@@ -576,6 +578,7 @@ impl MpcdSphereMove {
             geo,
             u,
             moving: p.text("mode") == "moving",
+            unit,
         })
     }
 }
@@ -628,7 +631,10 @@ impl Node for MpcdSphereMove {
 
     fn check_input(&self, port: usize, data: &HostArray) -> Result<(), RowError> {
         match (port, &data.data) {
-            (0, _) => check_sphere_rows(&self.geo, 0, data, 1.0),
+            (0, _) => check_sphere_rows(&self.geo, 0, data, self.unit),
+            // Given velocities: finite, in the fixed point's range (the bounces sum
+            // 2 m (v - V)).
+            (1, _) => check_sphere_rows(&self.geo, 2, data, self.unit),
             (2, HostData::F32(masses)) => {
                 for (row, &mass) in masses.iter().enumerate() {
                     if !(mass.is_finite() && mass as f64 >= 1.0 / F32_SCALE) {

@@ -696,19 +696,36 @@ fn bad_sphere_data_is_refused_by_input_node_port_and_row() {
         return;
     }
     let gpu = gpu().expect("GPU");
-    // Radii of two spheres (at the centre and at (3, 3, 3) in a box of 8, the default
-    // virtual_per_sphere for R = 2) and what the error must say.
-    let cases: [([f64; 2], &[&str]); 3] = [
-        ([2.0, 0.0], &["sphere_radii", "row 1", "radius 0"]),
-        ([2.0, 5.0], &["sphere_radii", "row 1", "diameter"]),
-        ([2.0, 3.0], &["fill", "row 1", "per_sphere"]),
+    // Radii of two moving spheres (at the centre and at (3, 3, 3) in a box of 8, the
+    // default virtual_per_sphere for R = 2), the second one's speed, and what the error
+    // must say.
+    let cases: [([f64; 2], f64, &[&str]); 4] = [
+        ([2.0, 0.0], 0.0, &["sphere_radii", "row 1", "radius 0"]),
+        ([2.0, 5.0], 0.0, &["sphere_radii", "row 1", "diameter"]),
+        ([2.0, 3.0], 0.0, &["fill", "row 1", "per_sphere"]),
+        // Radii fine, a sphere velocity beyond the fixed point's range.
+        (
+            [2.0, 2.0],
+            200.0,
+            &["sphere_velocities", "row 1", "128 v_th"],
+        ),
     ];
     let centres = [[0.0; 3], [3.0, 3.0, 3.0]];
-    for (radii, want) in cases {
-        let g = crate::util::load_with("mpcd_spheres.json", &[("box", "[8, 8, 8]")], 1, 0);
+    for (radii, speed, want) in cases {
+        let g = crate::util::load_with(
+            "mpcd_spheres.json",
+            &[("box", "[8, 8, 8]"), ("spheres", "\"moving\"")],
+            1,
+            0,
+        );
         let inputs = crate::util::named(&[
             ("sphere_positions", particles(&centres)),
             ("sphere_radii", particles(&radii.map(|r| [r]))),
+            ("sphere_masses", particles(&[[10.0], [10.0]])),
+            (
+                "sphere_velocities",
+                particles(&[[0.0; 3], [0.0, 200.0, 0.0]]),
+            ),
         ]);
         let plan =
             crate::util::plan_graph(&gpu.caps, &g, crate::util::types_of(&inputs), None, true);
@@ -731,7 +748,8 @@ fn bad_sphere_data_is_refused_by_input_node_port_and_row() {
 /// lags its steady value by about 2% on average, which makes xi 2% high), then 60000
 /// averaged (4.5: the mean velocity's thermal noise sqrt(kT / N m) = 0.007 averages to
 /// about 3% of u = 0.15). The source measured 76 (flow) and 77 (momentum ACF); within
-/// 10%. About 20 minutes on lavapipe: run with --ignored.
+/// 10%. Not yet run to completion: on the shared lavapipe machine a run of about 20
+/// minutes was ended by SIGTERM twice; run it with --ignored on a GPU.
 #[test]
 #[ignore]
 fn a_fixed_sphere_has_the_sources_friction_in_flow() {
