@@ -724,7 +724,7 @@ fn bad_sphere_data_is_refused_by_input_node_port_and_row() {
             ("sphere_masses", particles(&[[10.0], [10.0]])),
             (
                 "sphere_velocities",
-                particles(&[[0.0; 3], [0.0, 200.0, 0.0]]),
+                particles(&[[0.0; 3], [0.0, speed, 0.0]]),
             ),
         ]);
         let plan =
