@@ -439,6 +439,28 @@ static FUNCTIONS: &[HostFunction] = &[
         },
     },
     HostFunction {
+        name: "mpcd_shell_count",
+        doc: "mpcd_shell_count(density, radius, cell): virtual particles filling a solid sphere's shell at the solvent's density (mpcd_sphere_fill's per_sphere): round(density x 4/3 pi (R^3 - R_in^3) / a^3), R_in = max(R - 2 sqrt(3) a, 0)",
+        call: |a| {
+            arity(a, 3)?;
+            let density = number(a, 0, "density")?;
+            let radius = number(a, 1, "radius")?;
+            let cell = number(a, 2, "cell")?;
+            if !(density > 0.0 && radius > 0.0 && cell > 0.0) {
+                return Err(format!(
+                    "density, radius and cell must be positive, got {density}, {radius}, {cell}"
+                ));
+            }
+            let k = crate::nodes::mpcd::shell_count(density, radius, cell).round();
+            if !(1.0..=16_777_216.0).contains(&k) {
+                return Err(format!(
+                    "{k} virtual particles per sphere: outside 1 to 2^24"
+                ));
+            }
+            Ok(ParamValue::Number(k))
+        },
+    },
+    HostFunction {
         name: "fcm_sort_bits",
         doc: "fcm_sort_bits(grid): key bits of that Morton order (3 per level of the largest axis)",
         call: |a| {

@@ -291,7 +291,7 @@ impl GpuKernels for MpcdBin {
 pub(super) fn mpcd_collide_kind() -> NodeKind {
     NodeKind::declare(
         "mpcd_collide",
-        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC). With mpcd_bin_solute's sums (SRD) u_c is the mass-weighted mean of solvent and solute, the thermostat counts both species, and the node run with the same params on the solute's velocities and cells rotates and scales the solute by the same rotation and factor of each cell",
+        "MPCD collision: SRD v <- u_c + S R(angle, random axis per cell) (v - u_c) with a cell thermostat S and virtual particles in wall-cut cells, or biased collisions between cell pairs (MPCD-BC). With mpcd_bin_solute's sums u_c is the mass-weighted mean of solvent and solute, the thermostat counts both species, MPCD-BC takes the cells' masses (units of m) for n1 and n2, and the node run with the same params on the solute's velocities and cells rotates (or reflects) and scales the solute by the same rotation (or pair reflection) and factor of each cell",
     )
     .input(PortSpec::new(
         "velocities",
@@ -481,17 +481,25 @@ impl MpcdCollide {
         )
     }
 
-    fn mean(&self, c: u32, sums: &[f64]) -> ([f64; 3], f64) {
+    /// Cell c's mean velocity and mass in units of m (the count, plus M/m times the
+    /// solute count with a solute: `solute` is (M/m, the solute counts)).
+    fn mean(&self, c: u32, sums: &[f64], solute: Option<(f64, &[f64])>) -> ([f64; 3], f64) {
         let s = SumsLayout::block(sums, c as usize);
+        let mass = match solute {
+            Some((ratio, ns)) => s[0] + ratio * ns[c as usize],
+            None => s[0],
+        };
         let mut u = [0.0; 3];
         for a in 0..self.geo.dims() {
             u[a] = value_of(s[SUM_V + 2 * a], s[SUM_V + 1 + 2 * a]) as f64
-                / (s[0].max(1.0) * self.u.fix_v as f64);
+                / (if mass > 0.0 { mass } else { 1.0 } * self.u.fix_v as f64);
         }
-        (u, s[0])
+        (u, mass)
     }
 
-    /// MPCD-BC update of one particle (f64 twin of `biased` in shaders/mpcd/collide.wgsl).
+    /// MPCD-BC update of one particle (f64 twin of `biased` in shaders/mpcd/collide.wgsl):
+    /// its cell has mean u1 and mass n1 (units of m).
+    #[allow(clippy::too_many_arguments)]
     fn biased(
         &self,
         c: u32,
@@ -500,6 +508,7 @@ impl MpcdCollide {
         n1: f64,
         v: [f64; 3],
         sums: &[f64],
+        solute: Option<(f64, &[f64])>,
     ) -> [f64; 3] {
         let d = self.geo.dims();
         let (nx, ny) = (self.geo.cells[0], self.geo.cells[1]);
@@ -542,7 +551,7 @@ impl MpcdCollide {
         }
         let norm = (s.iter().map(|x| x * x).sum::<f64>()).sqrt();
         s.iter_mut().for_each(|x| *x /= norm);
-        let (u2, n2) = self.mean(cp, sums);
+        let (u2, n2) = self.mean(cp, sums, solute);
         let du: f64 = (0..3).map(|a| s[a] * (u1[a] - u2[a])).sum();
         let p = if du > 0.0 && n2 > 0.0 {
             (self.u.accept_a as f64 * du * n1 * n2).tanh()
@@ -582,15 +591,6 @@ impl Node for MpcdCollide {
             return Err(PortError::new(
                 "sums",
                 "carries no sums of |v|^2, which the thermostat needs: give mpcd_bin the same `thermostat`",
-            ));
-        }
-        if layout.solute && self.u.rule == 1 {
-            return Err(PortError::new(
-                "sums",
-                format!(
-                    "carries a solute (mpcd_bin_solute's {} words), which rule `biased` does not take (its acceptance rule is defined for one species); use srd",
-                    layout.words()
-                ),
             ));
         }
         Ok(Signature::outputs(vec![inputs[0].expect("checked")]))
@@ -689,7 +689,7 @@ impl Node for MpcdCollide {
                 for a in 0..d {
                     vt[a] = u[a] + scale * dv[a];
                 }
-                let out = self.biased(c, cx.step, u, count, vt, sums);
+                let out = self.biased(c, cx.step, u, mass_n, vt, sums, solute);
                 outputs[0].data[p * d..(p + 1) * d].copy_from_slice(&out[..d]);
                 continue;
             }

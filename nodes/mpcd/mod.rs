@@ -21,8 +21,11 @@
 //! with the same params on the solute's velocities and cells applies the same rotation of
 //! each cell (V' = u + S R (V - u)). The cell thermostat S counts the relative energy and
 //! degrees of freedom of both species; virtual particles in wall-cut cells add to the
-//! cell's mass. SRD only: with solute sums, `mpcd_collide` refuses MPCD-BC (its acceptance
-//! rule is defined for one species).
+//! cell's mass. With MPCD-BC (`mpcd_bin_solute` given the same `rule`: the grid shift of
+//! width 2a) the cells' masses in units of m stand for the counts n1, n2 of the acceptance
+//! tanh(A du n1 n2) and the pair mean (Ihle's rule is defined for one species: with M = m,
+//! as the solid spheres' virtual particles, it is that rule; other masses generalise it
+//! by mass, conserving momentum and energy).
 //!
 //! Conventions: the box is centred at the origin, particle arrays are (N, d) with d = 2 or 3
 //! (the length of `box`), the body force acts along x, and walls (`plates`) are
@@ -40,6 +43,8 @@ mod collide;
 mod init;
 mod measure;
 mod solute;
+mod sphere_coupling;
+mod spheres;
 mod stream;
 mod stream_bin;
 
@@ -47,6 +52,8 @@ use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry, R
 use crate::value::{HostArray, HostData, PortType, ValueType};
 
 pub use collide::srd_rotation;
+pub use sphere_coupling::{shell_count, shell_inner};
+pub use spheres::{SPHERE_WORDS, impulse_of};
 
 /// Words per cell of the cell sums' first block: the count and sum v as 64-bit (lo, hi)
 /// pairs, [0, 1] count (hi zero) and [SUM_V + 2a, SUM_V + 2a + 1] sum v_a (v_z zero in 2D):
@@ -557,7 +564,7 @@ pub(crate) fn thermal_unit(p: &Params) -> Result<f64, String> {
 }
 
 /// The fixed-point scales (fix_v, fix_e) for (kT, m), as f32 (the GPU's values).
-fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
+pub(crate) fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
     let vth = velocity_unit(kt, mass);
     ((16_777_216.0 / vth) as f32, (65_536.0 / (vth * vth)) as f32)
 }
@@ -644,6 +651,11 @@ pub fn register(r: &mut Registry) {
     r.add(init::mpcd_init_kind());
     r.add(stream::mpcd_stream_kind());
     r.add(stream_bin::mpcd_stream_bin_kind());
+    r.add(spheres::mpcd_stream_spheres_kind());
+    r.add(spheres::mpcd_sphere_exclude_kind());
+    r.add(sphere_coupling::mpcd_sphere_fill_kind());
+    r.add(sphere_coupling::mpcd_sphere_force_kind());
+    r.add(sphere_coupling::mpcd_sphere_move_kind());
     r.add(collide::mpcd_bin_kind());
     r.add(collide::mpcd_collide_kind());
     r.add(solute::mpcd_bin_solute_kind());

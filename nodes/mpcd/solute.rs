@@ -20,7 +20,7 @@ use crate::value::{HostArray, PortType, RefArray, ValueType};
 pub(super) fn mpcd_bin_solute_kind() -> NodeKind {
     NodeKind::declare(
         "mpcd_bin_solute",
-        "MPCD solute coupling: the cells of a second species of mass M in this step's shifted grid (the solvent's: same seed, stream and box) and the solvent's cell sums with the solute added, weighted by M / m (the mass-weighted cell means of mpcd_collide, its thermostat and virtual particles); SRD only",
+        "MPCD solute coupling: the cells of a second species of mass M in this step's shifted grid (the solvent's: same seed, stream and box) and the solvent's cell sums with the solute added, weighted by M / m (the mass-weighted cell means of mpcd_collide, its thermostat and virtual particles)",
     )
     .input(PortSpec::new(
         "sums",
@@ -61,6 +61,7 @@ pub(super) fn mpcd_bin_solute_kind() -> NodeKind {
         true,
         "random grid shift (as mpcd_bin: give both the same seed and stream)",
     ))
+    .param(super::rule_param())
     .param(random::seed_param())
     .param(random::stream_param())
     .build(|p| {
@@ -73,8 +74,11 @@ pub(super) fn mpcd_bin_solute_kind() -> NodeKind {
                 "solute_mass / mass = {ratio} is outside the f32 range"
             ));
         }
+        let biased = p.text("rule") == "biased";
+        super::check_rule(&geo, biased)?;
         let mut u = geo.thermal_uniform(p);
         u.shift = u32::from(p.flag("shift"));
+        u.rule = u32::from(biased);
         u.solute = 1;
         u.ratio = r32;
         key_into(&mut u, p);
@@ -172,7 +176,12 @@ impl Node for MpcdBinSolute {
         let x = &inputs[1].as_ref().expect("required").data;
         let v = &inputs[2].as_ref().expect("required").data;
         let s = if self.u.shift == 1 {
-            grid_shift(self.geo.cell, cx.step, self.seed, self.stream)
+            grid_shift(
+                self.geo.cell * (1 + self.u.rule) as f64,
+                cx.step,
+                self.seed,
+                self.stream,
+            )
         } else {
             [0.0; 3]
         };

@@ -62,11 +62,11 @@ pub(super) fn mpcd_stream_kind() -> NodeKind {
 }
 
 pub(crate) struct MpcdStream {
-    geo: Geometry,
-    slip: bool,
-    dt: f64,
-    accel: f64,
-    sine: bool,
+    pub(super) geo: Geometry,
+    pub(super) slip: bool,
+    pub(super) dt: f64,
+    pub(super) accel: f64,
+    pub(super) sine: bool,
 }
 
 /// Whether the mean free path dt v_th is one the f32 streaming carries (`dt`'s doc): the
@@ -114,7 +114,7 @@ fn check_streaming(geo: &Geometry, dt: f64, vth: f64) -> Result<(), String> {
     Ok(())
 }
 
-fn advance(x: &mut [f64], v: &mut [f64], g: f64, t: f64) {
+pub(super) fn advance(x: &mut [f64], v: &mut [f64], g: f64, t: f64) {
     for a in 0..x.len() {
         x[a] += v[a] * t;
     }

@@ -6,7 +6,8 @@
 // round(ratio |v|^2 fix_e) to its energy sum (exact 64-bit
 // integer sums, order independent), so the cell means become mass-weighted:
 // u = (m sum v + M sum V) / (m n + M n_s). The grid shift is the solvent's (the same seed,
-// stream and step), SRD width a.
+// stream and step), of width a for SRD and 2a for MPCD-BC (m.rule: give the node mpcd_bin's
+// `rule`).
 #import common/index.wgsl
 #import mpcd/common.wgsl
 #import mpcd/add64.wgsl
@@ -18,17 +19,6 @@
 @group(0) @binding(4) var<storage, read> solvent: array<u32>;
 @group(0) @binding(5) var<storage, read_write> cell: array<u32>;
 @group(0) @binding(6) var<storage, read_write> sums64: array<atomic<u32>>;
-
-
-// The 64-bit pair of round(x) for |x| < 2^63 (negatives as two's complement).
-fn fx_of_signed(x: f32) -> vec2<u32> {
-    let p = fx_of_f32(abs(x));
-    if (x >= 0.0) {
-        return p;
-    }
-    let lo = ~p.x + 1u;
-    return vec2<u32>(lo, ~p.y + select(0u, 1u, lo == 0u));
-}
 
 @compute @workgroup_size(256)
 fn copy(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,

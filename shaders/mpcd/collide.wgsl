@@ -9,10 +9,12 @@
 // particles: u <- (n_m u + (M - n) q) / (n_m + M - n), n_m the cell's mass in units of m,
 // q normal of variance kT / (m (M - n)) per component (the mean of M - n thermal
 // particles); those cells skip the thermostat. MPCD-BC (rule 1): the thermostat, then
-// `biased` below. With a solute (m.solute = 1, sums from mpcd_bin_solute; SRD) u is the
+// `biased` below. With a solute (m.solute = 1, sums from mpcd_bin_solute) u is the
 // mass-weighted mean, the thermostat counts the relative energy and the degrees of freedom
-// of both species, and the same kernel run on the solute's velocities and cells applies
-// the same rotation and scaling of each cell to it.
+// of both species, MPCD-BC takes the cells' masses in units of m for n1 and n2 (the counts
+// without a solute; the pair reflection about the mass-weighted u_P conserves momentum
+// and energy for any masses), and the same kernel run on the solute's velocities and cells
+// applies the same rotation (or pair reflection) and scaling of each cell to it.
 #import common/index.wgsl
 #import mpcd/common.wgsl
 
@@ -35,18 +37,24 @@ fn pair(i: u32) -> vec2<u32> {
     return vec2<u32>(sums[i], sums[i + 1u]);
 }
 
+// Cell c's mean velocity and mass in units of m (with a solute, its M / m-weighted count
+// added: mpcd_bin_solute's layout).
 fn cell_mean(c: u32) -> vec4<f32> {
     let base = c * CELL_WORDS;
-    let n = f32(sums[base]);
+    var n = f32(sums[base]);
+    if (m.solute == 1u) {
+        let sb = solute_base(m);
+        n = n + bitcast<f32>(sums[sb + m.ncells]) * f32(sums[sb + c]);
+    }
     var sv = vec3<f32>(0.0);
     for (var a = 0u; a < DIMS; a = a + 1u) {
         sv[a] = fx_to_f32(pair(base + SUM_V + 2u * a));
     }
-    return vec4<f32>(sv / (max(n, 1.0) * m.fix_v), n);
+    return vec4<f32>(sv / (select(1.0, n, n > 0.0) * m.fix_v), n);
 }
 
 // MPCD-BC (Ihle's biased collisions) for a particle of cell c with velocity v (after the
-// thermostat), its cell holding n1 particles of mean u1. The supercell (2 x 2 (x 2) cells)
+// thermostat), its cell of mass n1 (units of m: the count without a solute) and mean u1. The supercell (2 x 2 (x 2) cells)
 // draws one collision type per step (3D: x, y, z, xy, xz, yz, xyz with weights 1/13 per
 // direction: 1, 1, 1, 2, 2, 2, 4 thirteenths; 2D: x, y, diagonal with 1/4, 1/4, 1/2), which
 // pairs every cell with the one across the type's direction. The pair collides with
@@ -54,7 +62,7 @@ fn cell_mean(c: u32) -> vec4<f32> {
 // to its partner: the cells approach), one uniform per pair (keyed by its lower cell); a
 // collision reverses the velocity components along s relative to the pair's mean velocity
 // u_P: v <- v + 2 s (s.(u_P - v)), conserving the pair's momentum and energy.
-fn biased(c: u32, step: u32, u1: vec3<f32>, count: u32, v: vec3<f32>) -> vec3<f32> {
+fn biased(c: u32, step: u32, u1: vec3<f32>, n1: f32, v: vec3<f32>) -> vec3<f32> {
     let nx = m.cells.x;
     let ny = m.cells.y;
     var i = vec3<u32>(c % nx, (c / nx) % ny, 0u);
@@ -92,7 +100,6 @@ fn biased(c: u32, step: u32, u1: vec3<f32>, count: u32, v: vec3<f32>) -> vec3<f3
     let sgn = (vec3<f32>(1.0) - 2.0 * o) * vec3<f32>(flip);
     let s = sgn / sqrt(dot(sgn, sgn));
     let other = cell_mean(cp);
-    let n1 = f32(count);
     let n2 = other.w;
     let du = dot(s, u1 - other.xyz);
     var p = 0.0;
@@ -170,7 +177,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     let d = v - u;
     if (m.rule == 1u) {
-        let out = biased(c, step, u, count, u + scale * d);
+        let out = biased(c, step, u, mass_n, u + scale * d);
         for (var a = 0u; a < DIMS; a = a + 1u) {
             vel_out[p * DIMS + a] = out[a];
         }

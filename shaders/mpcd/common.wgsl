@@ -81,6 +81,16 @@ fn fx_of_f32(x: f32) -> vec2<u32> {
     return vec2<u32>(u32(y - hi * 4294967296.0), u32(hi));
 }
 
+// The 64-bit pair of round(x) for |x| < 2^63 (negatives as two's complement).
+fn fx_of_signed(x: f32) -> vec2<u32> {
+    let p = fx_of_f32(abs(x));
+    if (x >= 0.0) {
+        return p;
+    }
+    let lo = ~p.x + 1u;
+    return vec2<u32>(lo, ~p.y + select(0u, 1u, lo == 0u));
+}
+
 // (lo, hi) + (lo, hi) without atomics.
 fn fx_sum(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
     let lo = a.x + b.x;

@@ -170,6 +170,24 @@ const CASES: &[Case] = &[
         outputs: None,
     },
     Case {
+        // Sphere radii are given as 1.5 and masses drawn positive (run_twice), not drawn
+        // as the other rows.
+        file: "mpcd_spheres.json",
+        sets: &[
+            ("box", "[8, 8, 8]"),
+            ("density", "5"),
+            ("sphere_radius", "1.5"),
+            ("spheres", "\"moving\""),
+        ],
+        steps: 3,
+        inputs: &[
+            ("sphere_positions", 2, 3),
+            ("sphere_radii", 2, 1),
+            ("sphere_masses", 2, 1),
+        ],
+        outputs: None,
+    },
+    Case {
         file: "examples/colloids.json",
         sets: &[("n", "64"), ("side", "8")],
         steps: 3,
@@ -223,7 +241,16 @@ fn run_twice(gpu: &mut GpuContext, deterministic: bool) -> Vec<(String, usize, f
         let inputs: BTreeMap<String, HostArray> = case
             .inputs
             .iter()
-            .map(|&(name, n, k)| (name.to_string(), rows(&mut rng, n, k)))
+            .map(|&(name, n, k)| {
+                // Positive sizes: mpcd_spheres.json's radii (its per-sphere virtual
+                // particle count is set for 1.5) and masses.
+                let a = match name {
+                    "sphere_radii" => rng.array(ValueType::Particles { n, k }, 1.5, 1.5),
+                    "sphere_masses" => rng.array(ValueType::Particles { n, k }, 50.0, 100.0),
+                    _ => rows(&mut rng, n, k),
+                };
+                (name.to_string(), a)
+            })
             .collect();
         let first = with_caps(
             gpu,

@@ -2,7 +2,7 @@
 //! event schedule, binning with exact cell sums and the collisions' per-cell conservation
 //! laws and f64 references, the whole graph (initial state, measurement, momentum over
 //! many steps, bad input), the thermostats, viscosity against kinetic theory and measured
-//! values, solute coupling, given data checked on the host before it runs, and params
+//! values, solute coupling, solid spheres, given data checked on the host before it runs, and params
 //! beyond what the f32 kernels carry refused. Shared helpers: `crate::util::mpcd`.
 
 mod collide;
@@ -10,6 +10,7 @@ mod graph;
 mod inputs;
 mod params;
 mod solute;
+mod spheres;
 mod streaming;
 mod thermostats;
 mod viscosity;

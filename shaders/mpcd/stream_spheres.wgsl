@@ -1,0 +1,147 @@
+// MPCD streaming with solid spheres, one thread per particle (3D). mpcd_stream's motion
+// (body force along x, plates at +-L_z/2, periodic wrap) with no-slip bounce-back on S
+// spheres moving at constant velocity through the step (fixed: at rest).
+//
+// Each pass takes the rest of the step: the plate crossing as in mpcd/stream_common.wgsl,
+// and the chord from x to where the ballistic motion would end, P1 -> P2, intersected with
+// every sphere in its own frame (S2 Eqs. 5.3-5.6: a f^2 + b f + c = 0 for the relative
+// chord e = P2 - P1 - V t and r = P1 - C(t), the minimum image of the start relative to
+// the centre; a hit at the smaller root f1 in (0, 1), taken as 2c / (-b + sqrt(b^2 - 4ac)),
+// the same root without the cancellation of -b - sqrt(...) near the surface). The earliest
+// event wins: at a sphere the particle moves to P1 + f1 (P2 - P1) on the surface, its
+// velocity there v becomes 2 V - v (bounce-back relative to the surface), and the sphere
+// receives m (v - v') = 2 m (v - V), added exactly to its 64-bit fixed-point impulse
+// (units m v_th / 2^24). A sphere whose box [C - R, C + R] the chord's box cannot reach
+// (|r_a| - |e_a| > R on some axis) costs a few comparisons only.
+#import common/index.wgsl
+#import mpcd/common.wgsl
+
+@group(0) @binding(0) var<uniform> m: Mpcd;
+@group(0) @binding(1) var<uniform> sp: Spheres;
+@group(0) @binding(2) var<storage, read> pos_in: array<f32>;
+@group(0) @binding(3) var<storage, read> vel_in: array<f32>;
+@group(0) @binding(4) var<storage, read> centres: array<f32>;
+@group(0) @binding(5) var<storage, read> radii: array<f32>;
+@group(0) @binding(6) var<storage, read> sphere_vel: array<f32>;
+@group(0) @binding(7) var<storage, read_write> pos_out: array<f32>;
+@group(0) @binding(8) var<storage, read_write> vel_out: array<f32>;
+@group(0) @binding(9) var<storage, read_write> sums64: array<atomic<u32>>;
+
+#import mpcd/spheres.wgsl
+#import mpcd/add64.wgsl
+#import mpcd/stream_common.wgsl
+
+// The earliest sphere hit on the chord dx from x over time `left`, `now` into the step:
+// (f1, sphere) or (1, S) when none.
+fn first_hit(x: vec3<f32>, dx: vec3<f32>, now: f32, left: f32) -> vec2<f32> {
+    var best = 1.0;
+    var hit = sp.count;
+    for (var j = 0u; j < sp.count; j = j + 1u) {
+        let vs = sphere_velocity(j);
+        let r = min_image(x - sphere_centre(j) - vs * now);
+        let e = dx - vs * left;
+        let rad = radii[j];
+        if (any(abs(r) - abs(e) > vec3<f32>(rad))) {
+            continue;
+        }
+        let a = dot(e, e);
+        let b = 2.0 * dot(e, r);
+        let c = dot(r, r) - rad * rad;
+        let disc = b * b - 4.0 * a * c;
+        if (b < 0.0 && c > 0.0 && disc > 0.0) {
+            let f = 2.0 * c / (-b + sqrt(disc));
+            if (f < best) {
+                best = f;
+                hit = j;
+            }
+        }
+    }
+    return vec2<f32>(best, bitcast<f32>(hit));
+}
+
+fn stream_with_spheres(xp: ptr<function, vec3<f32>>, vp: ptr<function, vec3<f32>>) {
+    var x = *xp;
+    var v = *vp;
+    var g = m.accel;
+    if (m.force_shape == 1u) {
+        g = m.accel * sin(6.283185307179586 * x.z / m.box.z);
+    }
+    let h = 0.5 * m.box.z;
+    var left = m.dt;
+    for (var k = 0u; k < 16u && left > 0.0; k = k + 1u) {
+        var hit = left;
+        var wall = 0.0;
+        if (m.walls == 1u) {
+            if (v.z > 0.0) {
+                hit = max((h - x.z) / v.z, 0.0);
+                wall = h;
+            } else if (v.z < 0.0) {
+                hit = max((-h - x.z) / v.z, 0.0);
+                wall = -h;
+            }
+        }
+        var x2 = x;
+        var v2 = v;
+        advance(&x2, &v2, g, left);
+        let dx = x2 - x;
+        let found = first_hit(x, dx, m.dt - left, left);
+        let j = bitcast<u32>(found.y);
+        let ts = found.x * left;
+        if (j < sp.count && ts < hit) {
+            x = x + found.x * dx;
+            v.x = v.x + g * ts;
+            let out = 2.0 * sphere_velocity(j) - v;
+            let q = (v - out) * m.fix_v;
+            add64(6u * j, fx_of_signed(q.x));
+            add64(6u * j + 2u, fx_of_signed(q.y));
+            add64(6u * j + 4u, fx_of_signed(q.z));
+            v = out;
+            left = left - ts;
+        } else if (hit >= left) {
+            x = x2;
+            v = v2;
+            left = 0.0;
+        } else {
+            advance(&x, &v, g, hit);
+            x.z = wall;
+            if (m.wall_slip == 1u) {
+                v.z = -v.z;
+            } else {
+                v = -v;
+            }
+            left = left - hit;
+        }
+    }
+    if (m.walls == 1u) {
+        x.z = clamp(x.z, -h, h);
+    }
+    for (var a = 0u; a < 3u; a = a + 1u) {
+        if (m.walls == 0u || a != 2u) {
+            let l = m.box[a];
+            var y = x[a] - l * floor(x[a] / l + 0.5);
+            if (y >= 0.5 * l) {
+                y = y - l;
+            }
+            x[a] = y;
+        }
+    }
+    *xp = x;
+    *vp = v;
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let p = flat_index(wid, nwg, lid, 256u);
+    if (p >= m.n) {
+        return;
+    }
+    let r = load_row(p);
+    var x = r[0];
+    var v = r[1];
+    stream_with_spheres(&x, &v);
+    for (var a = 0u; a < 3u; a = a + 1u) {
+        pos_out[p * 3u + a] = x[a];
+        vel_out[p * 3u + a] = v[a];
+    }
+}
