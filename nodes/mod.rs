@@ -6,6 +6,7 @@ pub mod cells;
 pub mod chebyshev;
 pub mod chebyshev_bvp;
 pub mod chebyshev_spread;
+pub mod disks;
 pub mod fcm;
 pub mod fft;
 pub mod lanczos;
@@ -45,6 +46,7 @@ pub fn register_all(r: &mut Registry) {
     fft::register(r);
     pointwise::register(r);
     cells::register(r);
+    disks::register(r);
     lanczos::register(r);
     mpcd::register(r);
     pairs::register(r);
