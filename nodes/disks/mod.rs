@@ -10,6 +10,7 @@
 //!   `abp_move_2d` (S1 eq. 10).
 
 pub mod forces;
+pub mod mesh;
 pub mod step;
 
 use crate::expr::ParamValue;
