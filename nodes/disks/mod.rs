@@ -9,6 +9,7 @@
 //! - `step.rs`: `brownian_step_2d` (S1 eq. 1 with its noise convention and clipping) and
 //!   `abp_move_2d` (S1 eq. 10).
 
+pub mod flip;
 pub mod forces;
 pub mod mesh;
 pub mod step;
@@ -45,6 +46,7 @@ pub fn wrap(x: f64, l: f64) -> f64 {
 }
 
 pub fn register(r: &mut Registry) {
+    flip::register(r);
     forces::register(r);
     step::register(r);
 }

@@ -2,5 +2,6 @@
 //! their f64 sums, the moves against their references and the paper's noise statistics.
 //! Shared helpers: `crate::util::disks`.
 
+mod flip;
 mod forces;
 mod step;
