@@ -12,6 +12,7 @@
 pub mod flip;
 pub mod forces;
 pub mod mesh;
+pub mod overlap;
 pub mod step;
 
 use crate::expr::ParamValue;
@@ -48,5 +49,6 @@ pub fn wrap(x: f64, l: f64) -> f64 {
 pub fn register(r: &mut Registry) {
     flip::register(r);
     forces::register(r);
+    overlap::register(r);
     step::register(r);
 }

@@ -4,4 +4,5 @@
 
 mod flip;
 mod forces;
+mod overlap;
 mod step;
