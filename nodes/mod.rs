@@ -20,6 +20,7 @@ pub mod pse;
 pub mod random;
 pub mod record;
 pub mod reduce;
+pub mod repeat;
 pub mod scan;
 pub mod sort;
 pub mod spectral;
@@ -54,6 +55,7 @@ pub fn register_all(r: &mut Registry) {
     random::register(r);
     record::register(r);
     reduce::register(r);
+    repeat::register(r);
     spread::register(r);
     stokes_slab::register(r);
     scan::register(r);

@@ -4,5 +4,6 @@
 
 mod flip;
 mod forces;
+mod loops;
 mod overlap;
 mod step;

@@ -1,0 +1,223 @@
+//! `repeat`: a loop that carries one value through its loop body until the body's u32
+//! count is zero, or for a fixed number of iterations: the general form of the
+//! convergence loops of S1 (edge-flip rounds carrying the mesh until no edge flips,
+//! overlap-correction rounds carrying the positions until no pair overlaps).
+//!
+//! The loop body is every node that depends on the `current` output and leads to the
+//! `next` and `count` inputs (`Lowering::Iterative`, as `lanczos`); it may read values
+//! from outside (the flips read the positions). Per iteration the GPU copies `next` to
+//! `current` and tallies the count (`shaders/repeat/repeat.wgsl`); the host reads four
+//! status words (one round trip per iteration) and stops when the GPU says the loop has
+//! stopped. The GPU decides the stop itself, so the iteration the executor runs ahead
+//! while the host reads (speculation, see `exec/run.rs`) changes nothing once it has.
+
+use crate::gpu::DeviceCaps;
+use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo, WG_1D};
+use crate::node::{
+    Decision, GpuIterative, IterativeKernels, LoopError, Lowering, Node, NodeKind, ParamSpec,
+    PortError, PortSpec, RefCtx, Registry, Signature,
+};
+use crate::value::{PortType, RefArray, ValueType};
+
+fn repeat_kind() -> NodeKind {
+    NodeKind::declare(
+        "repeat",
+        "carries a value through its loop body (current -> nodes -> next) until the body's u32 count is 0, or for `fixed` iterations; out is the last value, iterations the body runs (the last one counting 0), total the sum of the counts",
+    )
+    .input(PortSpec::new(
+        "initial",
+        PortType::RealOrIndices,
+        "the value the loop starts from",
+    ))
+    .input(
+        PortSpec::new(
+            "next",
+            PortType::RealOrIndices,
+            "the loop body's result for `current`",
+        )
+        .iterate(),
+    )
+    .input(
+        PortSpec::new(
+            "count",
+            PortType::Indices,
+            "the loop body's count for `current` (its first word): 0 stops the loop",
+        )
+        .iterate(),
+    )
+    .output(PortSpec::new(
+        "out",
+        PortType::RealOrIndices,
+        "the value after the last iteration",
+    ))
+    .output(
+        PortSpec::new(
+            "current",
+            PortType::RealOrIndices,
+            "the value of this iteration: the loop body starts from it",
+        )
+        .iterate(),
+    )
+    .output(PortSpec::new(
+        "iterations",
+        PortType::Indices,
+        "the iterations run (1 word)",
+    ))
+    .output(PortSpec::new(
+        "total",
+        PortType::Indices,
+        "the sum of the counts over the iterations (1 word)",
+    ))
+    .param(ParamSpec::integer(
+        "fixed",
+        Some(0.0),
+        0.0,
+        1e6,
+        "run exactly this many iterations whatever the count (0: until the count is 0)",
+    ))
+    .param(ParamSpec::integer(
+        "max_iterations",
+        Some(1000.0),
+        1.0,
+        1e6,
+        "until the count is 0: more iterations than this is an error",
+    ))
+    .build(|p| {
+        Ok(Box::new(Repeat {
+            fixed: p.number("fixed") as u32,
+            max_iterations: p.number("max_iterations") as u32,
+        }))
+    })
+}
+
+pub struct Repeat {
+    fixed: u32,
+    max_iterations: u32,
+}
+
+/// Words of the status: iterations, stopped, last count, total.
+const STATUS_WORDS: u64 = 4;
+
+impl Node for Repeat {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+        let initial = inputs[0].expect("required");
+        if let Some(next) = inputs[1]
+            && next != initial
+        {
+            return Err(PortError::new(
+                "next",
+                format!(
+                    "is {next} but initial is {initial}: the body must return the value it was given, reshaped the same"
+                ),
+            ));
+        }
+        if let Some(ValueType::Indices { n: 0 }) = inputs[2] {
+            return Err(PortError::new(
+                "count",
+                "is empty: the loop reads its first word",
+            ));
+        }
+        let one = ValueType::Indices { n: 1 };
+        Ok(Signature::outputs(vec![initial, initial, one, one])
+            .with_scratch(vec![4 * STATUS_WORDS]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Iterative(self)
+    }
+
+    fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
+        vec![if self.fixed > 0 {
+            format!(
+                "{} iterations; one host round trip per iteration",
+                self.fixed
+            )
+        } else {
+            format!(
+                "until the count is 0, at most {} iterations; one host round trip per iteration",
+                self.max_iterations
+            )
+        }]
+    }
+
+    /// There is no reference for the node alone: what it iterates exists only as its
+    /// loop body. The tests compare whole loops with their bodies' references iterated on
+    /// the host; this fills NaN so that nothing can mistake it for a result.
+    fn cpu_reference(&self, _: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        for o in outputs {
+            o.data.fill(f64::NAN);
+        }
+    }
+}
+
+impl GpuIterative for Repeat {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<IterativeKernels, CompileError> {
+        let initial = io.inputs[0].expect("required");
+        let next = io.inputs[1].expect("the planner connects the loop");
+        let count = io.inputs[2].expect("the planner connects the loop");
+        let words = initial.ty.words();
+        let params = cx.uniform(
+            "repeat params",
+            bytemuck::cast_slice(&[words as u32, self.fixed]),
+        );
+        let status = io.scratch[0];
+        let buffers = [
+            initial.buffer,
+            next.buffer,
+            count.buffer,
+            io.outputs[1].buffer,
+            io.outputs[0].buffer,
+            io.outputs[2].buffer,
+            io.outputs[3].buffer,
+            status,
+            &params,
+        ];
+        let mut bindings = vec![Binding::StorageRead; 3];
+        bindings.extend([Binding::StorageReadWrite; 5]);
+        bindings.push(Binding::Uniform);
+        let source = cx.shader("repeat/repeat.wgsl")?;
+        let groups = cx.grid_1d(words.max(STATUS_WORDS), WG_1D);
+        let mut dispatch = |entry: &str, groups: [u32; 3]| -> Result<_, CompileError> {
+            let k = cx.kernel(
+                &KernelSpec::new(format!("repeat {entry}"), source.clone(), &bindings).entry(entry),
+            )?;
+            Ok(cx.dispatch(&k, &buffers, groups))
+        };
+        Ok(IterativeKernels {
+            start: vec![dispatch("start", groups)?],
+            iterate: vec![dispatch("advance", groups)?, dispatch("tally", [1, 1, 1])?],
+            finish: vec![dispatch("finish", groups)?],
+            status: status.clone(),
+            status_bytes: 4 * STATUS_WORDS,
+            answer: status.clone(),
+            answer_offset: 0,
+        })
+    }
+
+    fn decide(&self, iterations: usize, status: &[u8]) -> Result<Decision, LoopError> {
+        let words: &[u32] = bytemuck::cast_slice(status);
+        let (counted, stopped, last) = (words[0] as usize, words[1] != 0, words[2]);
+        if counted != iterations {
+            return Err(LoopError::Internal(format!(
+                "the GPU counted {counted} iterations, the host {iterations}"
+            )));
+        }
+        if stopped {
+            return Ok(Decision::Finish(Vec::new()));
+        }
+        if iterations >= self.max_iterations as usize {
+            return Err(LoopError::NoConvergence(format!(
+                "the loop body's count is still {last} after {iterations} iterations (max_iterations)"
+            )));
+        }
+        Ok(Decision::Continue)
+    }
+}
+
+pub fn register(r: &mut Registry) {
+    r.add(repeat_kind());
+}
