@@ -5,21 +5,16 @@
 
 use std::collections::BTreeMap;
 
-use mesoflow::exec::{Profile, Program};
-use mesoflow::gpu::{GpuContext, KernelCache};
+use mesoflow::gpu::GpuContext;
 use mesoflow::nodes::disks::flip::flip_round;
 use mesoflow::nodes::disks::mesh::{MESH_WORDS, check_torus_mesh, periodic_delaunay};
 use mesoflow::nodes::disks::wrap;
-use mesoflow::plan::{self, PlanOptions};
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::disks::disk_positions;
+use crate::util::disks::{LoopRun, disk_positions, run_with_loops};
 use crate::util::{self, Rng, flat_particles, gpu, input_decl, run_node_and_reference, u32s};
 
 const L: [f64; 2] = [18.0, 16.0];
-
-/// Outputs by name and the iterations of each loop per step, or the run's error.
-type LoopRun = (BTreeMap<String, HostArray>, Vec<(String, Vec<u32>)>);
 
 fn run(
     gpu: &GpuContext,
@@ -28,19 +23,10 @@ fn run(
     steps: u64,
 ) -> Result<LoopRun, String> {
     let dir = util::tmpdir("disk_loops");
-    let path = util::write_graph(&dir, "g.json", json);
-    let g = util::load(&path);
-    let opts = PlanOptions {
-        outputs: None,
-        inputs: util::types_of(inputs),
-        fuse: true,
-    };
-    let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| e.to_string())?;
-    let mut cache = KernelCache::default();
-    let mut program = Program::compile(gpu, &g, &p, &mut cache).map_err(|e| e.to_string())?;
-    let out = util::try_run_program(&mut program, inputs, steps, Profile::Off)?;
+    let g = util::load(&util::write_graph(&dir, "g.json", json));
+    let out = run_with_loops(gpu, &g, inputs, steps);
     let _ = std::fs::remove_dir_all(&dir);
-    Ok((out, program.loop_iterations().to_vec()))
+    out
 }
 
 /// The flip loop: `repeat` carrying the mesh through `edge_flip_round`.

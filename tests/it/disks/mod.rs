@@ -4,6 +4,7 @@
 
 mod flip;
 mod forces;
+mod graph;
 mod loops;
 mod overlap;
 mod step;

@@ -1,6 +1,38 @@
-//! Helpers of the 2-D disk tests (`disks/`): disk packings with a minimum separation.
+//! Helpers of the 2-D disk tests (`disks/`): disk packings with a minimum separation,
+//! graphs with loops run with their iterations per step.
 
-use super::Rng;
+use std::collections::BTreeMap;
+
+use mesoflow::exec::{Profile, Program};
+use mesoflow::gpu::{GpuContext, KernelCache};
+use mesoflow::graph::Graph;
+use mesoflow::plan::{self, PlanOptions};
+use mesoflow::value::HostArray;
+
+use super::{Rng, try_run_program, types_of};
+
+/// Outputs by name and the iterations of each loop per step.
+pub type LoopRun = (BTreeMap<String, HostArray>, Vec<(String, Vec<u32>)>);
+
+/// Plans, compiles and runs a loaded graph for `steps` steps: the outputs and the
+/// iterations of each loop per step, or the first error as text.
+pub fn run_with_loops(
+    gpu: &GpuContext,
+    g: &Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    steps: u64,
+) -> Result<LoopRun, String> {
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: types_of(inputs),
+        fuse: true,
+    };
+    let p = plan::plan(g, &opts, &gpu.caps).map_err(|e| e.to_string())?;
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(gpu, g, &p, &mut cache).map_err(|e| e.to_string())?;
+    let out = try_run_program(&mut program, inputs, steps, Profile::Off)?;
+    Ok((out, program.loop_iterations().to_vec()))
+}
 
 /// `n` points in the periodic box `l` (centred at the origin) no two closer than
 /// `min_dist` by the minimum image, by random sequential addition (panics when the box is
