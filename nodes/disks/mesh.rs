@@ -72,7 +72,7 @@ pub fn periodic_delaunay(x: &[f64], l: [f64; 2]) -> Result<Vec<u32>, MeshError> 
         )));
     }
     let n = x.len() / 2;
-    if n < 3 || x.len() % 2 != 0 {
+    if n < 3 || !x.len().is_multiple_of(2) {
         return Err(MeshError::Input(format!(
             "need at least 3 points (N x 2 values), got {} values",
             x.len()
@@ -219,7 +219,7 @@ fn triangle_vectors(mesh: &[u32], x: &[f64], l: [f64; 2], t: usize) -> ([f64; 2]
 /// for the repair to flip. Errors name the first triangle or vertex that breaks a rule.
 pub fn check_torus_mesh(mesh: &[u32], x: &[f64], l: [f64; 2]) -> Result<MeshStats, String> {
     let n = x.len() / 2;
-    if mesh.len() % MESH_WORDS != 0 {
+    if !mesh.len().is_multiple_of(MESH_WORDS) {
         return Err(format!(
             "{} words: not {MESH_WORDS} per triangle",
             mesh.len()

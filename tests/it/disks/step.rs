@@ -56,11 +56,11 @@ fn clipped_noise_has_the_papers_variance() {
     }
     let n = 1usize << 21;
     let x = flat_particles(&vec![0.0; 2 * n], 2);
-    let (d, dt) = (0.01, 0.01);
+    let (d, dt) = (0.01f64, 0.01f64);
     let params = format!(r#"{{"seed": 9, "dt": {dt}, "diffusion": {d}}}"#);
     let (out, _) = run_node_and_reference("brownian_step_2d", &params, &[("x", x)]);
     let y = out["out"].data.to_f64();
-    let amp = (d * dt as f64).sqrt();
+    let amp = (d * dt).sqrt();
     let max = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     assert!(
         max <= 3.0 * amp * (1.0 + 1e-6),
