@@ -8,12 +8,17 @@
 //! - `forces.rs`: `nonreciprocal_forces`, all pairs (S1 eqs. 2-3).
 //! - `step.rs`: `brownian_step_2d` (S1 eq. 1 with its noise convention and clipping) and
 //!   `abp_move_2d` (S1 eq. 10).
+//! - `mesh.rs`: the triangulation of the torus (layout, host construction, checks).
+//! - `flip.rs`: the edge-flip predicate and `edge_flip_round`; `overlap.rs`:
+//!   `overlap_correction_round`. Their loops are `repeat` nodes (graphs/bd_delaunay.json).
+//! - `svg.rs`: a picture of a small system.
 
 pub mod flip;
 pub mod forces;
 pub mod mesh;
 pub mod overlap;
 pub mod step;
+pub mod svg;
 
 use crate::expr::ParamValue;
 use crate::node::{ParamKind, ParamSpec, Registry};
