@@ -17,6 +17,7 @@ pub mod flip;
 pub mod forces;
 pub mod mesh;
 pub mod overlap;
+pub mod pass_through;
 pub mod step;
 pub mod svg;
 
@@ -55,5 +56,6 @@ pub fn register(r: &mut Registry) {
     flip::register(r);
     forces::register(r);
     overlap::register(r);
+    pass_through::register(r);
     step::register(r);
 }

@@ -206,3 +206,46 @@ fn flip_rounds_restore_the_delaunay_triangulation() {
     );
     eprintln!("{before:?}, {illegal} illegal edges; flips per round {counts:?}");
 }
+
+/// S1's pass-through check: small moves cross no edge; a disk moved through its
+/// neighbour (to the mirror side of it) is counted, the GPU as the f64 count.
+#[test]
+fn pass_through_count_finds_a_disk_moved_through_its_neighbour() {
+    if gpu().is_none() {
+        return;
+    }
+    let l = [18.0, 16.0];
+    let mut rng = Rng::new(47);
+    let x0 = disk_positions(&mut rng, 200, l, 0.8);
+    let mesh = periodic_delaunay(&x0, l).unwrap();
+    let before: Vec<f64> = x0.iter().map(|&v| v as f32 as f64).collect();
+    let small: Vec<f64> = before
+        .iter()
+        .enumerate()
+        .map(|(i, v)| wrap(v + rng.uniform(-0.05, 0.05), l[i % 2]))
+        .collect();
+    // The first edge's end points b, c: b moved to c + (c - b).
+    let (b, c) = (mesh[1] as usize, mesh[2] as usize);
+    let mut through = before.clone();
+    for a in 0..2 {
+        let r = minimum_image(before[2 * c + a] - before[2 * b + a], l[a]);
+        through[2 * b + a] = wrap(before[2 * c + a] + r, l[a]);
+    }
+    let mut counts = Vec::new();
+    for after in [&small, &through] {
+        let (out, refs) = run_node_and_reference(
+            "pass_through_count",
+            r#"{"box": [18, 16]}"#,
+            &[
+                ("before", flat_particles(&before, 2)),
+                ("after", flat_particles(after, 2)),
+                ("mesh", mesh_array(&mesh)),
+            ],
+        );
+        let got = u32s(&out["count"])[0];
+        assert_eq!(got as f64, refs[0].data[0]);
+        counts.push(got);
+    }
+    assert_eq!(counts[0], 0, "moves of at most 0.1 between disks 0.8 apart");
+    assert!(counts[1] >= 1, "the disk moved through its neighbour");
+}

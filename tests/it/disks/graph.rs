@@ -1,6 +1,7 @@
 //! graphs/bd_delaunay.json end to end, step by step: after every step the mesh is a valid
 //! triangulation of the torus with no inverted triangle and no illegal edge (f64, within
-//! the f32 tolerance), and no pair of disks (all pairs) overlaps.
+//! the f32 tolerance), no pair of disks (all pairs) overlaps, and no edge was passed
+//! through.
 
 use std::collections::BTreeMap;
 
@@ -84,6 +85,7 @@ fn bd_delaunay_keeps_a_delaunay_mesh_and_no_overlaps_every_step() {
             program.read_outputs().unwrap().into_iter().collect();
         let x = out["positions"].data.to_f64();
         let mesh = u32s(&out["mesh"]);
+        assert_eq!(u32s(&out["pass_throughs"]), vec![0], "step {step}");
         let stats =
             check_torus_mesh(&mesh, &x, [l, l]).unwrap_or_else(|e| panic!("step {step}: {e}"));
         assert_eq!(stats.inverted, 0, "step {step}");
