@@ -23,8 +23,11 @@ use mesoflow::nodes::disks::svg::disks_svg;
 use mesoflow::plan::{self, PlanOptions};
 use mesoflow::value::{HostArray, ValueType};
 
-/// (name, fraction of species 1, (alpha, mu) of species 1 and 2, packing fraction).
-const CONFIGS: [(&str, f64, [f64; 2], [f64; 2], f64); 5] = [
+/// A configuration: name, fraction of species 1, (alpha, mu) of species 1 and 2,
+/// packing fraction.
+type Config = (&'static str, f64, [f64; 2], [f64; 2], f64);
+
+const CONFIGS: [Config; 5] = [
     ("c0", 0.7, [1.0, 1.0], [-1.0, 1.0], 0.79),
     ("c1", 0.5, [1.0, 1.0], [-1.0, 1.0], 0.52),
     ("c2", 0.5, [1.0, 1.0], [-1.0, -2.0], 0.52),
