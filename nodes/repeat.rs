@@ -1,91 +1,139 @@
-//! `repeat`: a loop of a fixed number of iterations, x_(k+1) = body(x_k), for values a
-//! step advances several times (a molecular-dynamics step repeated between two MPCD
-//! collisions, a relaxation sweep). The body is any nodes that read the node's `current`
-//! output and end in its `next` input, as for `lanczos`; unlike Lanczos, the count is
-//! known when the program is compiled, so the executor records the iterations one after
-//! the other within the step (no host round trip, steps batched as in a loop-free
-//! program). Several values ride together as columns of one array (`concat`, `columns`).
+//! `repeat`: a loop that carries one value through its loop body until the body's u32
+//! count is zero, or for a fixed number of iterations: the general form of the
+//! convergence loops of S1 (edge-flip rounds carrying the mesh until no edge flips,
+//! overlap-correction rounds carrying the positions until no pair overlaps) and of steps
+//! repeated within a step (MD substeps between two MPCD collisions; several values ride
+//! as columns of one array, `concat` and `columns`).
 //!
-//! GPU: copies only (shaders/engine/copy.wgsl): `initial` into `current` before the first
-//! iteration, `next` into `current` after each, `current` into `out` after the last.
+//! The loop body is every node that depends on the `current` output and leads to the
+//! `next` and `count` inputs (`Lowering::Iterative`, as `lanczos`); it may read values
+//! from outside (the flips read the positions). Per iteration the GPU copies `next` to
+//! `current` and tallies the count (`shaders/repeat/repeat.wgsl`); the host reads four
+//! status words (one round trip per iteration) and stops when the GPU says the loop has
+//! stopped. The GPU decides the stop itself, so the iteration the executor runs ahead
+//! while the host reads (speculation, see `exec/run.rs`) changes nothing once it has.
+//! A `fixed` count is known when the program is compiled (`fixed_iterations`): the
+//! iterations are recorded one after the other within the step, no status read, and the
+//! steps batch as in a loop-free program. The body sees the same step counter in every
+//! iteration: random draws keyed on the step repeat across its iterations.
 
 use crate::gpu::DeviceCaps;
-use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo};
+use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
     Decision, GpuIterative, IterativeKernels, LoopError, Lowering, Node, NodeKind, ParamSpec,
     PortError, PortSpec, RefCtx, Registry, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
-const WG: u32 = 256;
-
-/// The most iterations a step may unroll (each is the body's dispatches once more).
-pub const MAX_REPEAT: f64 = 10_000.0;
-
 fn repeat_kind() -> NodeKind {
     NodeKind::declare(
         "repeat",
-        "x_(k+1) = body(x_k), `count` times within a step: the loop body reads `current` (x_k) and ends in `next` (x_(k+1)); `out` is x_count. Carry several values as columns of one array. The body sees the same step counter in every iteration (random draws keyed on the step repeat)",
+        "carries a value through its loop body (current -> nodes -> next) until the body's u32 count is 0, or for `fixed` iterations (recorded one after the other, no host round trip; count optional); out is the last value, iterations the body runs (the last one counting 0), total the sum of the counts. The body sees the same step counter in every iteration (random draws keyed on the step repeat)",
     )
     .input(PortSpec::new(
         "initial",
-        PortType::Particles(None),
-        "x_0",
+        PortType::RealOrIndices,
+        "the value the loop starts from",
     ))
     .input(
         PortSpec::new(
             "next",
-            PortType::Particles(None),
-            "body(x_k): the loop body's result for the current value",
+            PortType::RealOrIndices,
+            "the loop body's result for `current`",
         )
         .iterate(),
     )
+    .input(
+        PortSpec::new(
+            "count",
+            PortType::Indices,
+            "the loop body's count for `current` (its first word): 0 stops the loop (optional with `fixed`)",
+        )
+        .iterate()
+        .optional(),
+    )
     .output(PortSpec::new(
         "out",
-        PortType::Particles(None),
-        "x_count, after the last iteration",
+        PortType::RealOrIndices,
+        "the value after the last iteration",
     ))
     .output(
         PortSpec::new(
             "current",
-            PortType::Particles(None),
-            "x_k, the current value: the loop body computes x_(k+1) from it",
+            PortType::RealOrIndices,
+            "the value of this iteration: the loop body starts from it",
         )
         .iterate(),
     )
+    .output(PortSpec::new(
+        "iterations",
+        PortType::Indices,
+        "the iterations run (1 word)",
+    ))
+    .output(PortSpec::new(
+        "total",
+        PortType::Indices,
+        "the sum of the counts over the iterations (1 word)",
+    ))
     .param(ParamSpec::integer(
-        "count",
-        None,
+        "fixed",
+        Some(0.0),
+        0.0,
+        10_000.0,
+        "run exactly this many iterations whatever the count, recorded one after the other (0: until the count is 0)",
+    ))
+    .param(ParamSpec::integer(
+        "max_iterations",
+        Some(1000.0),
         1.0,
-        MAX_REPEAT,
-        "iterations per step (each records the body's dispatches once more)",
+        1e6,
+        "until the count is 0: more iterations than this is an error",
     ))
     .build(|p| {
         Ok(Box::new(Repeat {
-            count: p.number("count") as u32,
+            fixed: p.number("fixed") as u32,
+            max_iterations: p.number("max_iterations") as u32,
         }))
     })
 }
 
 pub struct Repeat {
-    count: u32,
+    fixed: u32,
+    max_iterations: u32,
 }
+
+/// Words of the status: iterations, stopped, last count, total.
+const STATUS_WORDS: u64 = 4;
 
 impl Node for Repeat {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
-        let x = inputs[0].expect("required");
+        let initial = inputs[0].expect("required");
         if let Some(next) = inputs[1]
-            && next != x
+            && next != initial
         {
             return Err(PortError::new(
                 "next",
                 format!(
-                    "is {next} but initial is {x}: the loop body must give a value of the shape it reads"
+                    "is {next} but initial is {initial}: the body must return the value it was given, reshaped the same"
                 ),
             ));
         }
-        // One word the executor's loop protocol asks for (status and answer); unread.
-        Ok(Signature::outputs(vec![x, x]).with_scratch(vec![4]))
+        // (The planner types the node first without its loop inputs, `next` absent too.)
+        if self.fixed == 0 && inputs[1].is_some() && inputs[2].is_none() {
+            return Err(PortError::new(
+                "count",
+                "is not connected: without `fixed` the loop runs until the body's count is 0",
+            ));
+        }
+        if let Some(ValueType::Indices { n: 0 }) = inputs[2] {
+            return Err(PortError::new(
+                "count",
+                "is empty: the loop reads its first word",
+            ));
+        }
+        let one = ValueType::Indices { n: 1 };
+        Ok(Signature::outputs(vec![initial, initial, one, one])
+            .with_scratch(vec![4 * STATUS_WORDS]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -93,15 +141,22 @@ impl Node for Repeat {
     }
 
     fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
-        vec![format!(
-            "{} iterations per step, recorded one after the other (no host round trip)",
-            self.count
-        )]
+        vec![if self.fixed > 0 {
+            format!(
+                "{} iterations a step, recorded one after the other (no host round trip)",
+                self.fixed
+            )
+        } else {
+            format!(
+                "until the count is 0, at most {} iterations; one host round trip per iteration",
+                self.max_iterations
+            )
+        }]
     }
 
-    /// There is no reference for the node alone: the body is the loop's. The tests run
-    /// graphs against f64 recurrences; this fills NaN so that nothing can mistake it for
-    /// a result.
+    /// There is no reference for the node alone: what it iterates exists only as its
+    /// loop body. The tests compare whole loops with their bodies' references iterated on
+    /// the host; this fills NaN so that nothing can mistake it for a result.
     fn cpu_reference(&self, _: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         for o in outputs {
             o.data.fill(f64::NAN);
@@ -117,48 +172,72 @@ impl GpuIterative for Repeat {
     ) -> Result<IterativeKernels, CompileError> {
         let initial = io.inputs[0].expect("required");
         let next = io.inputs[1].expect("the planner connects the loop");
-        let words = initial.ty.words();
-        let kernel = cx.kernel(&KernelSpec::new(
-            "repeat copy",
-            cx.shader("engine/copy.wgsl")?,
-            &[
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::Uniform,
-            ],
-        ))?;
-        let shape = cx.uniform("repeat shape", bytemuck::bytes_of(&(words as u32)));
-        let groups = cx.grid_1d(words, WG);
-        let (out, value) = (io.outputs[0].buffer, io.outputs[1].buffer);
-        let copy = |cx: &mut CompileCtx<'_>, src: &wgpu::Buffer, dst: &wgpu::Buffer| {
-            cx.dispatch(&kernel, &[src, dst, &shape], groups)
+        // Without a count (a fixed loop) the tally reads none: any read-only buffer
+        // stands in for its binding.
+        let (count, counted) = match io.inputs[2] {
+            Some(c) => (c.buffer, 1u32),
+            None => (initial.buffer, 0),
         };
-        let start = vec![copy(cx, initial.buffer, value)];
-        let iterate = vec![copy(cx, next.buffer, value)];
-        let finish = vec![copy(cx, value, out)];
-        let small = io.scratch[0];
+        let words = initial.ty.words();
+        let params = cx.uniform(
+            "repeat params",
+            bytemuck::cast_slice(&[words as u32, self.fixed, counted, 0]),
+        );
+        let status = io.scratch[0];
+        let buffers = [
+            initial.buffer,
+            next.buffer,
+            count,
+            io.outputs[1].buffer,
+            io.outputs[0].buffer,
+            io.outputs[2].buffer,
+            io.outputs[3].buffer,
+            status,
+            &params,
+        ];
+        let mut bindings = vec![Binding::StorageRead; 3];
+        bindings.extend([Binding::StorageReadWrite; 5]);
+        bindings.push(Binding::Uniform);
+        let source = cx.shader("repeat/repeat.wgsl")?;
+        let groups = cx.grid_1d(words.max(STATUS_WORDS), WG_1D);
+        let mut dispatch = |entry: &str, groups: [u32; 3]| -> Result<_, CompileError> {
+            let k = cx.kernel(
+                &KernelSpec::new(format!("repeat {entry}"), source.clone(), &bindings).entry(entry),
+            )?;
+            Ok(cx.dispatch(&k, &buffers, groups))
+        };
         Ok(IterativeKernels {
-            start,
-            iterate,
-            finish,
-            status: small.clone(),
-            status_bytes: 4,
-            answer: small.clone(),
+            start: vec![dispatch("start", groups)?],
+            iterate: vec![dispatch("advance", groups)?, dispatch("tally", [1, 1, 1])?],
+            finish: vec![dispatch("finish", groups)?],
+            status: status.clone(),
+            status_bytes: 4 * STATUS_WORDS,
+            answer: status.clone(),
             answer_offset: 0,
         })
     }
 
     fn fixed_iterations(&self) -> Option<u32> {
-        Some(self.count)
+        (self.fixed > 0).then_some(self.fixed)
     }
 
-    fn decide(&self, iterations: usize, _: &[u8]) -> Result<Decision, LoopError> {
-        // Only asked where the executor runs loops with host decisions.
-        Ok(if iterations >= self.count as usize {
-            Decision::Finish(Vec::new())
-        } else {
-            Decision::Continue
-        })
+    fn decide(&self, iterations: usize, status: &[u8]) -> Result<Decision, LoopError> {
+        let words: &[u32] = bytemuck::cast_slice(status);
+        let (counted, stopped, last) = (words[0] as usize, words[1] != 0, words[2]);
+        if counted != iterations {
+            return Err(LoopError::Internal(format!(
+                "the GPU counted {counted} iterations, the host {iterations}"
+            )));
+        }
+        if stopped {
+            return Ok(Decision::Finish(Vec::new()));
+        }
+        if iterations >= self.max_iterations as usize {
+            return Err(LoopError::NoConvergence(format!(
+                "the loop body's count is still {last} after {iterations} iterations (max_iterations)"
+            )));
+        }
+        Ok(Decision::Continue)
     }
 }
 

@@ -11,6 +11,7 @@ mod cells;
 mod chebyshev;
 mod cli;
 mod determinism;
+mod disks;
 mod dpstokes;
 mod fcm;
 mod fft;

@@ -1,4 +1,4 @@
-//! The `repeat` node: a loop of a fixed count within a step, against f64 recurrences (the
+//! The `repeat` node with a `fixed` count: a loop within a step, against f64 recurrences (the
 //! body reading the loop's value and values from outside it, state carried across
 //! steps), several values carried as columns, and its mistakes named.
 
@@ -15,7 +15,7 @@ fn affine_loop(count: &str) -> String {
  "inputs": {{"x": {{"type": "particles", "rows": 6, "cols": 2}}, "b": {{"type": "particles", "rows": 6, "cols": 2}}}},
  "state": {{"s": {{"init": "inputs.x", "next": "loop.out"}}}},
  "nodes": [
-   {{"id": "loop", "kind": "repeat", "params": {{"count": "$count"}}, "inputs": {{"initial": "state.s", "next": "body.out"}}}},
+   {{"id": "loop", "kind": "repeat", "params": {{"fixed": "$count"}}, "inputs": {{"initial": "state.s", "next": "body.out"}}}},
    {{"id": "body", "kind": "axpy", "params": {{"alpha": -0.75}}, "inputs": {{"x": "loop.current", "y": "inputs.b"}}}}
  ],
  "outputs": {{"s": "state.s"}}}}"#
@@ -71,7 +71,7 @@ fn repeat_carries_several_values_as_columns() {
  "inputs": {"xv": {"type": "particles", "rows": 4, "cols": 2}},
  "state": {"s": {"init": "inputs.xv", "next": "loop.out"}},
  "nodes": [
-   {"id": "loop", "kind": "repeat", "params": {"count": 10}, "inputs": {"initial": "state.s", "next": "pack.out"}},
+   {"id": "loop", "kind": "repeat", "params": {"fixed": 10}, "inputs": {"initial": "state.s", "next": "pack.out"}},
    {"id": "x", "kind": "columns", "params": {"first": 0, "count": 1}, "inputs": {"x": "loop.current"}},
    {"id": "v", "kind": "columns", "params": {"first": 1, "count": 1}, "inputs": {"x": "loop.current"}},
    {"id": "half", "kind": "axpy", "params": {"alpha": -0.05}, "inputs": {"x": "x.out", "y": "v.out"}},
@@ -112,8 +112,8 @@ fn repeat_carries_several_values_as_columns() {
 fn repeat_mistakes_are_named() {
     let dir = tmpdir("repeat_mistakes");
     let cases = [
-        (affine_loop("0"), "count"),
-        (affine_loop("2.5"), "count"),
+        (affine_loop("0"), "port `count`: is not connected"),
+        (affine_loop("2.5"), "fixed"),
         (
             affine_loop("3").replace(
                 r#""inputs": {"x": "loop.current", "y": "inputs.b"}"#,

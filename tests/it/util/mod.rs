@@ -13,6 +13,7 @@
 
 mod compare;
 mod data;
+pub mod disks;
 pub mod fft;
 mod graphs;
 pub mod mobility;

@@ -1,0 +1,137 @@
+// One parallel round of Lawson edge flips on the torus mesh (nodes/disks/mesh.rs layout:
+// per triangle 3 vertices counter-clockwise and 3 twin slots), conflicts resolved on the
+// GPU by claims (nodes/disks/flip.rs explains why they suffice):
+// - `prepare`: copy the mesh to the output, every claim to 0xFFFFFFFF, the count to 0;
+// - `claim`: every edge (its smaller slot s) whose quad needs a flip
+//   (disks/predicate.wgsl) claims the four triangles its flip writes (its two and the
+//   owners of the two outer edges whose twins move) by atomicMin(claim, s);
+// - `flip`: an edge holding all four of its claims flips, reading the input mesh and
+//   writing the output, and counts itself.
+// The lowest candidate always wins its claims, so a round with a candidate flips at least
+// one edge, and the winners are those of a fixed rule: the same result every run.
+#import common/index.wgsl
+#import disks/predicate.wgsl
+
+struct Params { slots: u32, tolerance: f32, box_len: vec2<f32> }
+
+@group(0) @binding(0) var<storage, read> x: array<vec2<f32>>;
+@group(0) @binding(1) var<storage, read> mesh: array<u32>;
+@group(0) @binding(2) var<storage, read_write> out: array<u32>;
+@group(0) @binding(3) var<storage, read_write> claims: array<atomic<u32>>;
+@group(0) @binding(4) var<storage, read_write> count: array<atomic<u32>>;
+@group(0) @binding(5) var<uniform> params: Params;
+
+fn minimum_image(r: vec2<f32>) -> vec2<f32> {
+    return r - params.box_len * round(r / params.box_len);
+}
+
+fn vert(t: u32, k: u32) -> u32 {
+    return mesh[6u * t + k % 3u];
+}
+
+fn twin(t: u32, k: u32) -> u32 {
+    return mesh[6u * t + 3u + k % 3u];
+}
+
+// The flip of slot s, if its edge is a candidate: the triangles (t, u) and the owners of
+// the outer edges c -> a (of t) and b -> d (of u), whose twins the flip rewrites.
+struct Candidate { ok: bool, t: u32, u: u32, xb: u32, yc: u32 }
+
+fn candidate(s: u32) -> Candidate {
+    var no = Candidate(false, 0u, 0u, 0u, 0u);
+    let t = s / 3u;
+    let k = s % 3u;
+    let us = twin(t, k);
+    // Each edge once, by its smaller slot.
+    if (us <= s || us >= params.slots) {
+        return no;
+    }
+    let u = us / 3u;
+    let m = us % 3u;
+    let a = vert(t, k);
+    let d = vert(u, m);
+    let xb = twin(t, k + 1u) / 3u;
+    let xc = twin(t, k + 2u) / 3u;
+    let yc = twin(u, m + 1u) / 3u;
+    let yb = twin(u, m + 2u) / 3u;
+    // Two triangles sharing more than this edge (a torus of very few points): no flip.
+    if (a == d || xb == u || xc == u || yc == t || yb == t || t == u) {
+        return no;
+    }
+    let xd = x[d];
+    let code = flip_code(minimum_image(x[a] - xd), minimum_image(x[vert(t, k + 1u)] - xd),
+        minimum_image(x[vert(t, k + 2u)] - xd), params.tolerance);
+    return Candidate(code != FLIP_KEEP, t, u, xb, yc);
+}
+
+@compute @workgroup_size(256)
+fn prepare(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+           @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wid, nwg, lid, 256u);
+    if (i < 2u * params.slots) {
+        out[i] = mesh[i];
+    }
+    if (i < params.slots / 3u) {
+        atomicStore(&claims[i], 0xFFFFFFFFu);
+    }
+    if (i == 0u) {
+        atomicStore(&count[0], 0u);
+    }
+}
+
+@compute @workgroup_size(256)
+fn claim(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+         @builtin(local_invocation_index) lid: u32) {
+    let s = flat_index(wid, nwg, lid, 256u);
+    if (s >= params.slots) {
+        return;
+    }
+    let c = candidate(s);
+    if (c.ok) {
+        atomicMin(&claims[c.t], s);
+        atomicMin(&claims[c.u], s);
+        atomicMin(&claims[c.xb], s);
+        atomicMin(&claims[c.yc], s);
+    }
+}
+
+@compute @workgroup_size(256)
+fn flip(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let s = flat_index(wid, nwg, lid, 256u);
+    if (s >= params.slots) {
+        return;
+    }
+    let c = candidate(s);
+    if (!c.ok || atomicLoad(&claims[c.t]) != s || atomicLoad(&claims[c.u]) != s
+        || atomicLoad(&claims[c.xb]) != s || atomicLoad(&claims[c.yc]) != s) {
+        return;
+    }
+    // t = (a, b, c) from slot k, u = (d, c, b) from slot m; after: t = (a, b, d),
+    // u = (d, c, a), the new edge a -> d between them.
+    let t = c.t;
+    let u = c.u;
+    let k = s % 3u;
+    let m = twin(t, k) % 3u;
+    let a = vert(t, k);
+    let d = vert(u, m);
+    let x_b = twin(t, k + 1u);
+    let x_c = twin(t, k + 2u);
+    let y_c = twin(u, m + 1u);
+    let y_b = twin(u, m + 2u);
+    let k1 = (k + 1u) % 3u;
+    let k2 = (k + 2u) % 3u;
+    let m1 = (m + 1u) % 3u;
+    let m2 = (m + 2u) % 3u;
+    out[6u * t + k2] = d;
+    out[6u * t + 3u + k] = y_c;
+    out[6u * t + 3u + k1] = 3u * u + m1;
+    out[6u * t + 3u + k2] = x_c;
+    out[6u * u + m2] = a;
+    out[6u * u + 3u + m] = x_b;
+    out[6u * u + 3u + m1] = 3u * t + k1;
+    out[6u * u + 3u + m2] = y_b;
+    out[6u * (y_c / 3u) + 3u + y_c % 3u] = 3u * t + k;
+    out[6u * (x_b / 3u) + 3u + x_b % 3u] = 3u * u + m;
+    atomicAdd(&count[0], 1u);
+}

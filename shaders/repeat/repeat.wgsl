@@ -1,0 +1,76 @@
+// `repeat`: a value carried through a loop body until the body's count is zero (or for a
+// fixed number of iterations). The words are copied as bits, whatever their type.
+// status: [iterations, stopped, last count, total of the counts]. Entries:
+// - `start`: current = initial, status = 0;
+// - `advance` (after every body run): current = next, unless the loop has stopped;
+// - `tally` (one thread, after `advance`): unless stopped, count the iteration, add the
+//   body's count to the total, and stop when it is 0 (or at the fixed count). An
+//   iteration the executor runs past the stop (speculatively, while the host reads the
+//   status) therefore changes nothing;
+// - `finish`: out = current, the iteration count and the total to their outputs.
+#import common/index.wgsl
+
+// counted: 0 for a fixed loop without a count (binding 2 then stands in, unread).
+struct Params { words: u32, fixed: u32, counted: u32, pad: u32 }
+
+@group(0) @binding(0) var<storage, read> initial: array<u32>;
+@group(0) @binding(1) var<storage, read> next: array<u32>;
+@group(0) @binding(2) var<storage, read> count: array<u32>;
+@group(0) @binding(3) var<storage, read_write> current: array<u32>;
+@group(0) @binding(4) var<storage, read_write> out: array<u32>;
+@group(0) @binding(5) var<storage, read_write> iterations: array<u32>;
+@group(0) @binding(6) var<storage, read_write> total: array<u32>;
+@group(0) @binding(7) var<storage, read_write> status: array<u32>;
+@group(0) @binding(8) var<uniform> params: Params;
+
+@compute @workgroup_size(256)
+fn start(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+         @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wid, nwg, lid, 256u);
+    if (i < params.words) {
+        current[i] = initial[i];
+    }
+    if (i < 4u) {
+        status[i] = 0u;
+    }
+}
+
+@compute @workgroup_size(256)
+fn advance(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+           @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wid, nwg, lid, 256u);
+    if (i < params.words && status[1] == 0u) {
+        current[i] = next[i];
+    }
+}
+
+@compute @workgroup_size(1)
+fn tally() {
+    if (status[1] != 0u) {
+        return;
+    }
+    var c = 0u;
+    if (params.counted == 1u) {
+        c = count[0];
+    }
+    let k = status[0] + 1u;
+    status[0] = k;
+    status[2] = c;
+    status[3] = status[3] + c;
+    if ((params.fixed == 0u && c == 0u) || k == params.fixed) {
+        status[1] = 1u;
+    }
+}
+
+@compute @workgroup_size(256)
+fn finish(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+          @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wid, nwg, lid, 256u);
+    if (i < params.words) {
+        out[i] = current[i];
+    }
+    if (i == 0u) {
+        iterations[0] = status[0];
+        total[0] = status[3];
+    }
+}

@@ -1,0 +1,126 @@
+//! graphs/bd_delaunay.json end to end, step by step: after every step the mesh is a valid
+//! triangulation of the torus with no inverted triangle and no illegal edge (f64, within
+//! the f32 tolerance), no pair of disks (all pairs) overlaps, and no edge was passed
+//! through.
+
+use std::collections::BTreeMap;
+
+use mesoflow::exec::{Profile, Program, RunOptions};
+use mesoflow::gpu::KernelCache;
+use mesoflow::nodes::disks::mesh::{check_torus_mesh, illegal_edges, periodic_delaunay};
+use mesoflow::nodes::disks::minimum_image;
+use mesoflow::plan::{self, PlanOptions};
+use mesoflow::value::{HostArray, ValueType};
+
+use crate::util::disks::disk_positions;
+use crate::util::{Rng, flat_particles, gpu, load_with, types_of, u32s};
+
+/// The smallest distance between two of the disks (minimum image, all pairs).
+fn closest_pair(x: &[f64], l: f64) -> f64 {
+    let n = x.len() / 2;
+    let mut closest = f64::INFINITY;
+    for i in 0..n {
+        for j in i + 1..n {
+            let r = [0, 1].map(|a| minimum_image(x[2 * j + a] - x[2 * i + a], l));
+            closest = closest.min(r[0].hypot(r[1]));
+        }
+    }
+    closest
+}
+
+/// 256 disks of S1's c1 (half alpha = mu = 1, half alpha = -1, mu = 1) at packing 0.4,
+/// long-range forces, S1's dt and D, 6 steps.
+#[test]
+fn bd_delaunay_keeps_a_delaunay_mesh_and_no_overlaps_every_step() {
+    let Some(gpu) = gpu() else { return };
+    let (n, density) = (256usize, 0.4);
+    let l = (n as f64 * std::f64::consts::PI / 4.0 / density).sqrt();
+    let mut rng = Rng::new(43);
+    let x0: Vec<f64> = disk_positions(&mut rng, n, [l, l], 1.0)
+        .iter()
+        .map(|&v| v as f32 as f64)
+        .collect();
+    let charges: Vec<f64> = (0..n)
+        .flat_map(|i| if i % 2 == 0 { [1.0, 1.0] } else { [-1.0, 1.0] })
+        .collect();
+    let mesh = periodic_delaunay(&x0, [l, l]).unwrap();
+    let inputs = BTreeMap::from([
+        ("positions".to_string(), flat_particles(&x0, 2)),
+        ("charges".to_string(), flat_particles(&charges, 2)),
+        (
+            "mesh".to_string(),
+            HostArray::u32(
+                ValueType::Indices {
+                    n: mesh.len() as u32,
+                },
+                mesh.clone(),
+            ),
+        ),
+    ]);
+    let steps = 6;
+    let g = load_with(
+        "bd_delaunay.json",
+        &[("n", "256"), ("density", "0.4")],
+        steps,
+        5,
+    );
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: types_of(&inputs),
+        fuse: true,
+    };
+    let p = plan::plan(&g, &opts, &gpu.caps).unwrap();
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(&gpu, &g, &p, &mut cache).unwrap();
+    program.upload(&inputs).unwrap();
+    let mut previous = x0;
+    for step in 0..steps {
+        let one = RunOptions {
+            steps: 1,
+            profile: Profile::Off,
+            progress: false,
+        };
+        program.run_on(&one).unwrap();
+        let out: BTreeMap<String, HostArray> =
+            program.read_outputs().unwrap().into_iter().collect();
+        let x = out["positions"].data.to_f64();
+        let mesh = u32s(&out["mesh"]);
+        assert_eq!(u32s(&out["pass_throughs"]), vec![0], "step {step}");
+        let stats =
+            check_torus_mesh(&mesh, &x, [l, l]).unwrap_or_else(|e| panic!("step {step}: {e}"));
+        assert_eq!(stats.inverted, 0, "step {step}");
+        // The GPU flips above 1e-5 m^2 in f32: the f64 check allows the f32 band.
+        assert_eq!(
+            illegal_edges(&mesh, &x, [l, l], 2e-5),
+            Vec::<usize>::new(),
+            "step {step}"
+        );
+        let closest = closest_pair(&x, l);
+        assert!(closest >= 1.0 - 1e-5, "step {step}: closest pair {closest}");
+        let moved = (0..n)
+            .map(|i| {
+                let d = [0, 1].map(|a| minimum_image(x[2 * i + a] - previous[2 * i + a], l));
+                d[0].hypot(d[1])
+            })
+            .fold(0.0, f64::max);
+        assert!(
+            moved > 0.0 && moved < 1.0,
+            "step {step}: largest move {moved}"
+        );
+        previous = x;
+    }
+    let loops = program.loop_iterations().to_vec();
+    let flips = &loops
+        .iter()
+        .find(|(name, _)| name == "flips")
+        .expect("flip loop")
+        .1;
+    let overlaps = &loops
+        .iter()
+        .find(|(name, _)| name == "overlaps")
+        .expect("overlap loop")
+        .1;
+    assert_eq!(flips.len(), steps as usize);
+    assert!(flips.iter().all(|&k| k >= 1) && overlaps.iter().all(|&k| k >= 1));
+    eprintln!("flip rounds per step {flips:?}, overlap rounds per step {overlaps:?}");
+}

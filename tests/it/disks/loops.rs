@@ -1,0 +1,196 @@
+//! The `repeat` loop carrying S1's convergence loops: the flip rounds carrying the mesh
+//! (reading the positions from outside) and the overlap rounds carrying the positions
+//! (reading the mesh), against their f64 rounds iterated on the host; a fixed count; the
+//! iteration cap as an error.
+
+use std::collections::BTreeMap;
+
+use mesoflow::gpu::GpuContext;
+use mesoflow::nodes::disks::flip::flip_round;
+use mesoflow::nodes::disks::mesh::{MESH_WORDS, check_torus_mesh, periodic_delaunay};
+use mesoflow::nodes::disks::wrap;
+use mesoflow::value::{HostArray, ValueType};
+
+use crate::util::disks::{LoopRun, disk_positions, run_with_loops};
+use crate::util::{self, Rng, flat_particles, gpu, input_decl, run_node_and_reference, u32s};
+
+const L: [f64; 2] = [18.0, 16.0];
+
+fn run(
+    gpu: &GpuContext,
+    json: &str,
+    inputs: &BTreeMap<String, HostArray>,
+    steps: u64,
+) -> Result<LoopRun, String> {
+    let dir = util::tmpdir("disk_loops");
+    let g = util::load(&util::write_graph(&dir, "g.json", json));
+    let out = run_with_loops(gpu, &g, inputs, steps);
+    let _ = std::fs::remove_dir_all(&dir);
+    out
+}
+
+/// The flip loop: `repeat` carrying the mesh through `edge_flip_round`.
+fn flip_graph(n: usize, repeat_params: &str) -> String {
+    let x = input_decl(&ValueType::Particles { n: n as u32, k: 2 });
+    let mesh = input_decl(&ValueType::Indices {
+        n: (2 * MESH_WORDS * n) as u32,
+    });
+    format!(
+        r#"{{"mesoflow": 1, "inputs": {{"positions": {x}, "mesh": {mesh}}},
+  "nodes": [
+    {{"id": "flips", "kind": "repeat", "params": {repeat_params}, "inputs": {{"initial": "inputs.mesh", "next": "round.mesh", "count": "round.flips"}}}},
+    {{"id": "round", "kind": "edge_flip_round", "params": {{"box": [{}, {}]}}, "inputs": {{"positions": "inputs.positions", "mesh": "flips.current"}}}}
+  ],
+  "outputs": {{"mesh": {{"from": "flips.out"}}, "iterations": {{"from": "flips.iterations"}}, "flips": {{"from": "flips.total"}}}}
+}}"#,
+        L[0], L[1]
+    )
+}
+
+/// 300 disks, their Delaunay mesh, then moved (as in disks::flip): positions and mesh.
+fn moved_disks(seed: u64) -> (Vec<f64>, Vec<u32>) {
+    let mut rng = Rng::new(seed);
+    let x0 = disk_positions(&mut rng, 300, L, 0.7);
+    let mesh = periodic_delaunay(&x0, L).unwrap();
+    let x = x0
+        .iter()
+        .enumerate()
+        .map(|(i, v)| wrap(v + rng.uniform(-0.2, 0.2), L[i % 2]) as f32 as f64)
+        .collect();
+    (x, mesh)
+}
+
+fn inputs(x: &[f64], mesh: &[u32]) -> BTreeMap<String, HostArray> {
+    BTreeMap::from([
+        ("positions".to_string(), flat_particles(x, 2)),
+        (
+            "mesh".to_string(),
+            HostArray::u32(
+                ValueType::Indices {
+                    n: mesh.len() as u32,
+                },
+                mesh.to_vec(),
+            ),
+        ),
+    ])
+}
+
+/// The f64 rounds until one flips nothing (or `fixed` rounds): the mesh, the rounds run
+/// and the flips made.
+fn host_flips(x: &[f64], mesh: &[u32], fixed: usize) -> (Vec<u32>, u32, u32) {
+    let (mut m, mut rounds, mut total) = (mesh.to_vec(), 0, 0);
+    loop {
+        let (next, flips) = flip_round(&m, x, L, 1e-5);
+        m = next;
+        rounds += 1;
+        total += flips;
+        if (fixed == 0 && flips == 0) || rounds as usize == fixed {
+            return (m, rounds, total);
+        }
+    }
+}
+
+/// Until no edge flips: the mesh, the rounds (the last flipping nothing) and the flips
+/// equal the f64 rounds iterated on the host; two steps, each from the given mesh.
+#[test]
+fn repeat_carries_the_mesh_through_the_flip_rounds() {
+    let Some(gpu) = gpu() else { return };
+    let (x, mesh) = moved_disks(31);
+    let (want, rounds, total) = host_flips(&x, &mesh, 0);
+    assert!(rounds >= 3 && total > 10, "{rounds} rounds, {total} flips");
+    let (out, loops) = run(&gpu, &flip_graph(300, "{}"), &inputs(&x, &mesh), 2).unwrap();
+    assert_eq!(u32s(&out["mesh"]), want);
+    assert_eq!(u32s(&out["iterations"]), vec![rounds]);
+    assert_eq!(u32s(&out["flips"]), vec![total]);
+    assert_eq!(loops, vec![("flips".to_string(), vec![rounds, rounds])]);
+    let stats = check_torus_mesh(&want, &x, L).unwrap();
+    assert_eq!(stats.inverted, 0);
+}
+
+/// A fixed count runs exactly that many rounds, although the executor submits one
+/// iteration ahead of the host's decision; and a cap below the rounds needed is an error.
+#[test]
+fn repeat_runs_a_fixed_count_and_refuses_past_its_cap() {
+    let Some(gpu) = gpu() else { return };
+    let (x, mesh) = moved_disks(37);
+    let (want, rounds, total) = host_flips(&x, &mesh, 2);
+    assert_eq!(rounds, 2);
+    let (out, _) = run(
+        &gpu,
+        &flip_graph(300, r#"{"fixed": 2}"#),
+        &inputs(&x, &mesh),
+        1,
+    )
+    .unwrap();
+    assert_eq!(u32s(&out["mesh"]), want);
+    assert_eq!(u32s(&out["iterations"]), vec![2]);
+    assert_eq!(u32s(&out["flips"]), vec![total]);
+    let e = run(
+        &gpu,
+        &flip_graph(300, r#"{"max_iterations": 2}"#),
+        &inputs(&x, &mesh),
+        1,
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("after 2 iterations") && e.contains("flips"),
+        "{e}"
+    );
+}
+
+/// The overlap loop: `repeat` carrying the positions through `overlap_correction_round`
+/// on a fixed mesh until no pair along an edge overlaps, bit for bit the same as the
+/// node's rounds run one by one from the host (each of which `disks::overlap` checks
+/// against the f64 round), with the same count of rounds and overlaps.
+#[test]
+fn repeat_carries_the_positions_through_the_overlap_rounds() {
+    if gpu().is_none() {
+        return;
+    }
+    let l = [24.0, 22.0];
+    let mut rng = Rng::new(41);
+    let n = 300;
+    let x0 = disk_positions(&mut rng, n, l, 0.72);
+    let mesh = periodic_delaunay(&x0, l).unwrap();
+    let x: Vec<f64> = x0.iter().map(|&v| v as f32 as f64).collect();
+    let params = r#"{"sigma": 1, "box": [24, 22]}"#;
+    let (mut want, mut rounds, mut total) = (x.clone(), 0u32, 0u32);
+    loop {
+        let (out, _) = run_node_and_reference(
+            "overlap_correction_round",
+            params,
+            &[
+                ("positions", flat_particles(&want, 2)),
+                ("mesh", inputs(&x, &mesh)["mesh"].clone()),
+            ],
+        );
+        want = out["positions"].data.to_f64();
+        let count = u32s(&out["overlaps"])[0];
+        rounds += 1;
+        total += count;
+        if count == 0 {
+            break;
+        }
+        assert!(rounds < 100, "no convergence");
+    }
+    assert!(rounds >= 4, "{rounds} rounds");
+    let json = format!(
+        r#"{{"mesoflow": 1, "inputs": {{"positions": {}, "mesh": {}}},
+  "nodes": [
+    {{"id": "overlaps", "kind": "repeat", "inputs": {{"initial": "inputs.positions", "next": "round.positions", "count": "round.overlaps"}}}},
+    {{"id": "round", "kind": "overlap_correction_round", "params": {params}, "inputs": {{"positions": "overlaps.current", "mesh": "inputs.mesh"}}}}
+  ],
+  "outputs": {{"positions": {{"from": "overlaps.out"}}, "iterations": {{"from": "overlaps.iterations"}}, "overlaps": {{"from": "overlaps.total"}}}}
+}}"#,
+        input_decl(&ValueType::Particles { n: n as u32, k: 2 }),
+        input_decl(&ValueType::Indices {
+            n: mesh.len() as u32
+        }),
+    );
+    // The rounds above took the shared GPU in turn; the loop takes it now.
+    let gpu = gpu().expect("checked above");
+    let (out, _) = run(&gpu, &json, &inputs(&x, &mesh), 1).unwrap();
+    assert_eq!(u32s(&out["iterations"]), vec![rounds]);
+    assert_eq!(u32s(&out["overlaps"]), vec![total]);
+    assert_eq!(out["positions"].data.to_f64(), want);
+}

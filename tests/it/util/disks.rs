@@ -1,0 +1,64 @@
+//! Helpers of the 2-D disk tests (`disks/`): disk packings with a minimum separation,
+//! graphs with loops run with their iterations per step.
+
+use std::collections::BTreeMap;
+
+use mesoflow::exec::{Profile, Program};
+use mesoflow::gpu::{GpuContext, KernelCache};
+use mesoflow::graph::Graph;
+use mesoflow::plan::{self, PlanOptions};
+use mesoflow::value::HostArray;
+
+use super::{Rng, try_run_program, types_of};
+
+/// Outputs by name and the iterations of each loop per step.
+pub type LoopRun = (BTreeMap<String, HostArray>, Vec<(String, Vec<u32>)>);
+
+/// Plans, compiles and runs a loaded graph for `steps` steps: the outputs and the
+/// iterations of each loop per step, or the first error as text.
+pub fn run_with_loops(
+    gpu: &GpuContext,
+    g: &Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    steps: u64,
+) -> Result<LoopRun, String> {
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: types_of(inputs),
+        fuse: true,
+    };
+    let p = plan::plan(g, &opts, &gpu.caps).map_err(|e| e.to_string())?;
+    let mut cache = KernelCache::default();
+    let mut program = Program::compile(gpu, g, &p, &mut cache).map_err(|e| e.to_string())?;
+    let out = try_run_program(&mut program, inputs, steps, Profile::Off)?;
+    Ok((out, program.loop_iterations().to_vec()))
+}
+
+/// `n` points in the periodic box `l` (centred at the origin) no two closer than
+/// `min_dist` by the minimum image, by random sequential addition (panics when the box is
+/// too full to place them in 1000 tries each).
+pub fn disk_positions(rng: &mut Rng, n: usize, l: [f64; 2], min_dist: f64) -> Vec<f64> {
+    let mut x: Vec<f64> = Vec::with_capacity(2 * n);
+    for _ in 0..n {
+        let mut placed = false;
+        for _ in 0..1000 {
+            let p = [
+                rng.uniform(-0.5 * l[0], 0.5 * l[0]),
+                rng.uniform(-0.5 * l[1], 0.5 * l[1]),
+            ];
+            let clear = x.chunks(2).all(|q| {
+                let d: Vec<f64> = (0..2)
+                    .map(|a| mesoflow::nodes::disks::minimum_image(p[a] - q[a], l[a]))
+                    .collect();
+                d[0] * d[0] + d[1] * d[1] >= min_dist * min_dist
+            });
+            if clear {
+                x.extend(p);
+                placed = true;
+                break;
+            }
+        }
+        assert!(placed, "no room for {n} disks of {min_dist} in {l:?}");
+    }
+    x
+}
