@@ -7,17 +7,25 @@
 #                                                    VARIANT "base" is the embedded shaders)
 # The interp_* variants replace files of the workgroup-table interpolation kernel: since
 # the lane kernels (generated, nodes/spread/interpgen.rs) they show in the rows labelled
-# "tables" only.
+# "tables" only. VARIANT_BENCH=dpstokes times DP Stokes' bottom-wall rows instead (CASES
+# then its sizes, e.g. 100000,1000000; the cheb_* variants), with its dispatches.
 source benches/common.sh
 cases=$1; shift
 dir=${OUT:-/tmp}/variants
 python3 benches/variants.py "$dir" > /dev/null
+bench() {
+  if [ "${VARIANT_BENCH:-spread}" = dpstokes ]; then
+    MESOFLOW_BENCH_DISPATCHES=1 $bin bench dpstokes --walls bottom --sizes "$cases" --reps 10
+  else
+    $bin bench spread --cells 128 --reps 20 --cases "$cases"
+  fi
+}
 for v in "$@"; do
   echo "== variant $v" | tee -a "$log"
   if [ "$v" = base ]; then
-    $bin bench spread --cells 128 --reps 20 --cases "$cases" 2>&1 | tee -a "$log"
+    bench 2>&1 | tee -a "$log"
   else
-    MESOFLOW_SHADER_DIR=$dir/$v $bin bench spread --cells 128 --reps 20 --cases "$cases" 2>&1 | tee -a "$log"
+    MESOFLOW_SHADER_DIR=$dir/$v bench 2>&1 | tee -a "$log"
   fi
 done
 exit 0

@@ -5,7 +5,13 @@ follow them:
   interp_l1       its grid loads folded into 4 KiB (L1 hits)
   interp_setup    no column sums at all (tables, barrier, reduction, store)
   interp_unroll8  the column sums' z loop written out for support 8 in 3D
-(BENCHMARKS.md, issue 5, fifth version: what they showed). Usage:
+(BENCHMARKS.md, issue 5, fifth version: what they showed), and for DP Stokes
+(VARIANT_BENCH=dpstokes in benches/gpu_variants.sh):
+  cheb_interp_pairs  interpolate_chebyshev with the 64 threads over (column, z point)
+                     pairs, columns fastest, instead of one column each (a 6 x 6 support
+                     leaves 28 of 64 threads idle); predicted 1.93 -> ~1.3 ms at 10^6
+                     (bottom, ES); passes tests/it/chebyshev.rs, not yet timed
+Usage:
   python3 benches/variants.py OUT_DIR"""
 import pathlib
 import sys
@@ -52,6 +58,37 @@ fn column_sums(lid: u32, seg: u32, ppw: u32) -> vec4<f32> {{
     return src[:start] + body + src[end:]
 
 
+CHEB_COLUMN_LOOP = """    for (var c = lid; c < side * side; c += 64u) {
+        let wxy = column_weight(c);
+        if (wxy == 0.0) {
+            continue;
+        }
+        var at = (sp.zr.x + zt.x) * plane + column_cell(c, sp);
+        for (var jt = zt.x; jt < zt.y; jt++) {
+            let w = wxy * cached_z(jt, sp.zr, sp.qz, true);
+"""
+
+CHEB_PAIR_LOOP = """    let columns = side * side;
+    for (var t = lid; t < columns * (zt.y - zt.x); t += 64u) {
+        let c = t % columns;
+        let wxy = column_weight(c);
+        if (wxy == 0.0) {
+            continue;
+        }
+        let jt = zt.x + t / columns;
+        let at = (sp.zr.x + jt) * plane + column_cell(c, sp);
+        {
+            let w = wxy * cached_z(jt, sp.zr, sp.qz, true);
+"""
+
+
+def cheb_pairs(src):
+    assert CHEB_COLUMN_LOOP in src, "chebyshev/interpolate.wgsl changed: update benches/variants.py"
+    text = src.replace(CHEB_COLUMN_LOOP, CHEB_PAIR_LOOP)
+    # The column loop's step to the next level has no place in the pair loop.
+    return text.replace("            at += plane;\n", "", 1)
+
+
 def main():
     out = pathlib.Path(sys.argv[1])
     common = pathlib.Path("shaders/spread/interpolate_common.wgsl").read_text()
@@ -64,11 +101,14 @@ def main():
             "    var v = column_sums(lid, seg, ppw);", "    var v = vec4<f32>(stencil_w[lid % 384u]);")),
         "interp_unroll8": ("interpolate_common.wgsl", unroll8(common)),
     }
+    variants = {name: ("spread/" + file, text) for name, (file, text) in variants.items()}
+    cheb = pathlib.Path("shaders/chebyshev/interpolate.wgsl").read_text()
+    variants["cheb_interp_pairs"] = ("chebyshev/interpolate.wgsl", cheb_pairs(cheb))
     for name, (file, text) in variants.items():
-        d = out / name / "spread"
-        d.mkdir(parents=True, exist_ok=True)
-        (d / file).write_text(text)
-        print(d / file)
+        f = out / name / file
+        f.parent.mkdir(parents=True, exist_ok=True)
+        f.write_text(text)
+        print(f)
 
 
 main()
