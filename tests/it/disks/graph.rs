@@ -124,3 +124,89 @@ fn bd_delaunay_keeps_a_delaunay_mesh_and_no_overlaps_every_step() {
     assert!(flips.iter().all(|&k| k >= 1) && overlaps.iter().all(|&k| k >= 1));
     eprintln!("flip rounds per step {flips:?}, overlap rounds per step {overlaps:?}");
 }
+
+/// graphs/abp_delaunay.json, dilute (packing 0.005, mean free path ~80 sigma against
+/// 5 sigma run): 400 active disks' mean squared displacement after K steps against the
+/// exact discrete law V0^2 dt^2 sum_(j,k < K) exp(-D dt |j - k|) (the headings a random
+/// walk of variance 2 D dt a step), the headings' spread 2 D dt K, and after the run a
+/// valid Delaunay torus mesh with no overlapping pair.
+#[test]
+fn abp_delaunay_disks_follow_the_active_msd_and_never_overlap() {
+    let Some(gpu) = gpu() else { return };
+    let (n, density, speed, dt, d) = (400usize, 0.005, 1.0, 0.05, 0.5);
+    let steps = 100u64;
+    let l = (n as f64 * std::f64::consts::PI / 4.0 / density).sqrt();
+    let mut rng = Rng::new(71);
+    let x0: Vec<f64> = disk_positions(&mut rng, n, [l, l], 1.0)
+        .iter()
+        .map(|&v| v as f32 as f64)
+        .collect();
+    let theta0: Vec<f64> = (0..n)
+        .map(|_| rng.uniform(0.0, 2.0 * std::f64::consts::PI) as f32 as f64)
+        .collect();
+    let mesh = periodic_delaunay(&x0, [l, l]).unwrap();
+    let inputs = BTreeMap::from([
+        ("positions".to_string(), flat_particles(&x0, 2)),
+        ("angles".to_string(), flat_particles(&theta0, 1)),
+        (
+            "mesh".to_string(),
+            HostArray::u32(
+                ValueType::Indices {
+                    n: mesh.len() as u32,
+                },
+                mesh,
+            ),
+        ),
+    ]);
+    let g = load_with(
+        "abp_delaunay.json",
+        &[
+            ("n", "400"),
+            ("density", "0.005"),
+            ("speed", "1"),
+            ("dt", "0.05"),
+            ("diffusion", "0.5"),
+        ],
+        steps,
+        9,
+    );
+    let out = crate::util::run_graph(&gpu, &g, &inputs, None, steps, true);
+    let x = out["positions"].data.to_f64();
+    let theta = out["angles"].data.to_f64();
+    let msd = (0..n)
+        .map(|i| {
+            let r = [0, 1].map(|a| minimum_image(x[2 * i + a] - x0[2 * i + a], l));
+            r[0] * r[0] + r[1] * r[1]
+        })
+        .sum::<f64>()
+        / n as f64;
+    let k = steps as i64;
+    let want = speed
+        * speed
+        * dt
+        * dt
+        * (0..k)
+            .flat_map(|a| (0..k).map(move |b| (a - b).abs()))
+            .map(|m| (-d * dt * m as f64).exp())
+            .sum::<f64>();
+    let spread = (0..n).map(|i| (theta[i] - theta0[i]).powi(2)).sum::<f64>() / n as f64;
+    let closest = closest_pair(&x, l);
+    eprintln!(
+        "MSD {msd} vs {want}; heading spread {spread} vs {}; closest pair {closest}",
+        2.0 * d * dt * steps as f64
+    );
+    // One disk's |r|^2 at D t = 2.5 has a relative standard deviation below 0.7, so the
+    // mean over 400 about 3.5%: 15% is 4 of those (rare collisions shorten runs by less).
+    assert!((msd / want - 1.0).abs() < 0.15, "MSD {msd} vs {want}");
+    // The mean of 400 squared normals: relative standard deviation sqrt(2/400) = 7%.
+    let spread_want = 2.0 * d * dt * steps as f64;
+    assert!(
+        (spread / spread_want - 1.0).abs() < 0.3,
+        "{spread} vs {spread_want}"
+    );
+    assert!(closest >= 1.0 - 1e-4, "closest pair {closest}");
+    let final_mesh = u32s(&out["mesh"]);
+    let stats = check_torus_mesh(&final_mesh, &x, [l, l]).unwrap();
+    assert_eq!(stats.inverted, 0);
+    assert_eq!(u32s(&out["pass_throughs"]), vec![0]);
+}
