@@ -265,6 +265,17 @@ pub fn flip_round(mesh: &[u32], x: &[f64], l: [f64; 2], tolerance: f64) -> (Vec<
     (out, flips)
 }
 
+/// A mesh input of a CPU reference (f64 words) as the u32 words the kernels read.
+pub(crate) fn reference_mesh(input: &Option<RefArray>) -> Vec<u32> {
+    input
+        .as_ref()
+        .expect("required")
+        .data
+        .iter()
+        .map(|&v| v as u32)
+        .collect()
+}
+
 /// The twins of a mesh given from the host: in range, pointing back, the same edge
 /// reversed. The first triangle that breaks a rule is refused.
 pub fn check_mesh_twins(mesh: &[u32]) -> Result<(), RowError> {
@@ -342,13 +353,7 @@ impl Node for EdgeFlipRound {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let x = &inputs[0].as_ref().expect("required").data;
-        let mesh: Vec<u32> = inputs[1]
-            .as_ref()
-            .expect("required")
-            .data
-            .iter()
-            .map(|&v| v as u32)
-            .collect();
+        let mesh = reference_mesh(&inputs[1]);
         let (out, flips) = flip_round(&mesh, x, self.box_lengths, self.tolerance);
         outputs[0].data = out.iter().map(|&v| v as f64).collect();
         outputs[1].data = vec![flips as f64];

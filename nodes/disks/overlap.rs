@@ -12,7 +12,7 @@
 //! (along edges) in the positions read: a round that counts 0 moved nothing, which is
 //! when a loop stops. The mesh stays fixed while the rounds repeat (S1 section 4.4).
 
-use super::flip::check_mesh_twins;
+use super::flip::{check_mesh_twins, reference_mesh};
 use super::mesh::MESH_WORDS;
 use super::{minimum_image, wrap};
 use crate::gpu::DeviceCaps;
@@ -178,13 +178,7 @@ impl Node for OverlapCorrectionRound {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let x = &inputs[0].as_ref().expect("required").data;
-        let mesh: Vec<u32> = inputs[1]
-            .as_ref()
-            .expect("required")
-            .data
-            .iter()
-            .map(|&v| v as u32)
-            .collect();
+        let mesh = reference_mesh(&inputs[1]);
         let (out, count) = overlap_round(&mesh, x, self.box_lengths, self.sigma, self.delta);
         outputs[0].data = out;
         outputs[1].data = vec![count as f64];

@@ -5,7 +5,7 @@
 //! caller to act on (graphs/bd_delaunay.json reports it); the flips cannot repair such a
 //! mesh in general.
 
-use super::flip::check_mesh_twins;
+use super::flip::{check_mesh_twins, reference_mesh};
 use super::mesh::MESH_WORDS;
 use super::minimum_image;
 use crate::gpu::DeviceCaps;
@@ -127,13 +127,7 @@ impl Node for PassThroughCount {
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let before = &inputs[0].as_ref().expect("required").data;
         let after = &inputs[1].as_ref().expect("required").data;
-        let mesh: Vec<u32> = inputs[2]
-            .as_ref()
-            .expect("required")
-            .data
-            .iter()
-            .map(|&v| v as u32)
-            .collect();
+        let mesh = reference_mesh(&inputs[2]);
         outputs[0].data = vec![pass_throughs(&mesh, before, after, self.box_lengths) as f64];
     }
 }
