@@ -29,6 +29,9 @@
 #               product (benches/python_mdot.py; the package unpacked in .gpu/py), and
 #               `bench fcm` at the same size beside it
 #   mpcd        MPCD particle-steps per second, per dispatch, torch's copy bandwidth
+#   spheres     the friction of a fixed sphere in flow against S2 Table 5.4 (R = 1 and 2,
+#               L = 16R, M = 5, MPCD-BC A = 0.01, dt 0.02, Monte-Carlo thermostat;
+#               SPHERES_R4=1 adds R = 4, about four minutes)
 #   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
 #   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
 #               request counts
@@ -48,7 +51,7 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson dpstokes nbody python mpcd spread atomics fft primitives overhead determinism stream scene)
+suites=(fcm pse poisson dpstokes nbody python mpcd spheres spread atomics fft primitives overhead determinism stream scene)
 usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
@@ -244,6 +247,27 @@ PY
     $bin run scenes/colloids.json --output positions="$dir/t.npy" --every 1 2>&1 | grep -E "steps in|->" | tee -a "$log"
     python3 scripts/diffusion.py "$dir/t.npy" 0.05 64 2>&1 | tee -a "$log"
   fi
+  rm -rf "$dir"
+}
+
+# One fixed sphere of radius R at the origin of a (16R)^3 box pushed through by a body
+# force on the solvent: xi = F_sphere / ((1 - phi) u) (S2 §5.6.3). Warm-up and averaging
+# in relaxation times N m / xi of the mean flow (2.3 and 4.5 of them).
+suite_spheres() {
+  local dir=/tmp/mesoflow-spheres
+  mkdir -p "$dir"
+  local rows="1:6e-4:30000:60000 2:1.8e-4:95000:185000"
+  [ -n "${SPHERES_R4:-}" ] && rows="$rows 4:5.2e-5:340000:650000"
+  for row in $rows; do
+    IFS=: read -r r force warmup steps <<< "$row"
+    python3 -c "import numpy as np; np.save('$dir/p.npy', np.zeros((1, 3))); np.save('$dir/r.npy', np.full((1, 1), $r))"
+    local l=$((16 * r))
+    run $bin run graphs/mpcd_spheres.json --set "box=[$l,$l,$l]" --set density=5 --set dt=0.02 \
+      --set rule=biased --set acceptance=0.01 --set thermostat=monte_carlo --set sphere_radius=$r \
+      --set force=$force --set warmup=$warmup --steps $((warmup + steps)) --seed 7 \
+      --input sphere_positions="$dir/p.npy" --input sphere_radii="$dir/r.npy" \
+      --output sphere_forces --output momentum --output temperature
+  done
   rm -rf "$dir"
 }
 
