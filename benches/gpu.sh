@@ -29,9 +29,15 @@
 #               product (benches/python_mdot.py; the package unpacked in .gpu/py), and
 #               `bench fcm` at the same size beside it
 #   mpcd        MPCD particle-steps per second, per dispatch, torch's copy bandwidth
-#   spheres     the friction of a fixed sphere in flow against S2 Table 5.4 (R = 1 and 2,
+#   spheres     the friction of a fixed sphere in flow against S2 Table 5.4 (R = 1, 2, 4,
 #               L = 16R, M = 5, MPCD-BC A = 0.01, dt 0.02, Monte-Carlo thermostat;
-#               SPHERES_R4=1 adds R = 4, about four minutes)
+#               SPHERES_ROWS="1 2" for fewer)
+#   spheres_acf the same sphere's friction from the fluid momentum's autocorrelation (R = 1),
+#               the instantaneous friction (R = 2), a moving sphere's velocity
+#               autocorrelation (R = 2) (benches/sphere_friction.py)
+#   spheres_rates  MPCD particle-steps per second with 1, 8, 64 spheres of R = 4 (fixed,
+#               moving) in 128^3 cells, the biased rule with the Monte-Carlo thermostat in
+#               3D and 2D, against sphere-free SRD at the same N
 #   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
 #   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
 #               request counts
@@ -51,7 +57,7 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson dpstokes nbody python mpcd spheres spread atomics fft primitives overhead determinism stream scene)
+suites=(fcm pse poisson dpstokes nbody python mpcd spheres spheres_acf spheres_rates spread atomics fft primitives overhead determinism stream scene)
 usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
@@ -256,10 +262,14 @@ PY
 suite_spheres() {
   local dir=/tmp/mesoflow-spheres
   mkdir -p "$dir"
-  local rows="1:6e-4:30000:60000 2:1.8e-4:95000:185000"
-  [ -n "${SPHERES_R4:-}" ] && rows="$rows 4:5.2e-5:340000:650000"
-  for row in $rows; do
-    IFS=: read -r r force warmup steps <<< "$row"
+  for r in ${SPHERES_ROWS:-1 2 4}; do
+    # R: force (mean flow about 0.15), warm-up and averaged steps (2.3 and 4.5 relaxation times)
+    local force warmup steps
+    case $r in
+      1) force=6e-4 warmup=30000 steps=60000 ;;
+      2) force=1.8e-4 warmup=95000 steps=185000 ;;
+      4) force=5.2e-5 warmup=340000 steps=650000 ;;
+    esac
     python3 -c "import numpy as np; np.save('$dir/p.npy', np.zeros((1, 3))); np.save('$dir/r.npy', np.full((1, 1), $r))"
     local l=$((16 * r))
     run $bin run graphs/mpcd_spheres.json --set "box=[$l,$l,$l]" --set density=5 --set dt=0.02 \
@@ -267,8 +277,49 @@ suite_spheres() {
       --set force=$force --set warmup=$warmup --steps $((warmup + steps)) --seed 7 \
       --input sphere_positions="$dir/p.npy" --input sphere_radii="$dir/r.npy" \
       --output sphere_forces --output momentum --output temperature
+    python3 -c "import math; print(f'R = $r: N = {5 * $l**3}, phi = {4 / 3 * math.pi * $r**3 / $l**3:.6f}: xi = F_sphere / ((1 - phi) momentum_x / N)')" | tee -a "$log"
   done
   rm -rf "$dir"
+}
+
+# S2 §5.6.2's other routes to the friction: the fluid momentum's autocorrelation around a
+# fixed sphere (R = 1; 2e6 steps, about 150 relaxation times), the instantaneous friction
+# from every step's impulse (R = 2), and a moving, neutrally buoyant sphere's velocity
+# autocorrelation (R = 2).
+suite_spheres_acf() {
+  local dir=/tmp/mesoflow-spheres
+  mkdir -p "$dir"
+  local common=(--set density=5 --set dt=0.02 --set rule=biased --set acceptance=0.01
+    --set thermostat=monte_carlo --seed 11)
+  python3 -c "import numpy as np; np.save('$dir/p.npy', np.zeros((1, 3))); [np.save(f'$dir/r{r}.npy', np.full((1, 1), r)) for r in (1, 2)]; np.save('$dir/m2.npy', np.full((1, 1), 5 * 4 / 3 * np.pi * 8))"
+  run $bin run graphs/mpcd_spheres.json "${common[@]}" --set "box=[16,16,16]" --set sphere_radius=1 \
+    --steps 2000000 --every 50 --input sphere_positions="$dir/p.npy" --input sphere_radii="$dir/r1.npy" \
+    --output sphere_impulse="$dir/acf.npy"
+  run python3 benches/sphere_friction.py acf "$dir/acf.npy" --every 50 --dt 0.02 --n 20480 --skip 200
+  run $bin run graphs/mpcd_spheres.json "${common[@]}" --set "box=[32,32,32]" --set sphere_radius=2 \
+    --steps 20000 --every 1 --input sphere_positions="$dir/p.npy" --input sphere_radii="$dir/r2.npy" \
+    --output sphere_impulse="$dir/inst.npy"
+  run python3 benches/sphere_friction.py instant "$dir/inst.npy" --dt 0.02 --skip 1000
+  run $bin run graphs/mpcd_spheres.json "${common[@]}" --set "box=[32,32,32]" --set sphere_radius=2 \
+    --set spheres=moving --steps 400000 --every 5 --input sphere_positions="$dir/p.npy" \
+    --input sphere_radii="$dir/r2.npy" --input sphere_masses="$dir/m2.npy" \
+    --output sphere_velocities="$dir/v.npy"
+  run python3 benches/sphere_friction.py vacf "$dir/v.npy" --every 5 --dt 0.02 --skip 2000
+  rm -rf "$dir"
+}
+
+suite_spheres_rates() {
+  local n=20971520 # 128^3 cells at 10 particles a cell
+  run $bin bench mpcd --sizes $n --reps 20
+  for s in 1 8 64; do
+    run $bin bench mpcd --sizes $n --reps 20 --spheres $s --sphere-radius 4
+    run $bin bench mpcd --sizes $n --reps 20 --spheres $s --sphere-radius 4 --set spheres=moving
+  done
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench mpcd --sizes $n --reps 20 --spheres 8 --sphere-radius 4
+  run $bin bench mpcd --sizes $n --reps 20 --set rule=biased --set thermostat=monte_carlo
+  run $bin bench mpcd --sizes $n --reps 20 --dims 2
+  run $bin bench mpcd --sizes $n --reps 20 --dims 2 --set rule=biased --set thermostat=monte_carlo
+  run python3 benches/torch_reduce.py
 }
 
 suite_overhead() {

@@ -408,11 +408,21 @@ pub enum BenchCommand {
         #[arg(long)]
         deterministic: bool,
     },
-    /// MPCD particle-steps per second (3D SRD) at several particle counts.
+    /// MPCD particle-steps per second (3D SRD; 2D; with spheres) at several particle counts.
     Mpcd {
-        /// The MPCD graph file.
-        #[arg(long, default_value = "graphs/mpcd.json")]
-        graph: PathBuf,
+        /// The MPCD graph file (default: graphs/mpcd.json; mpcd2d.json with --dims 2;
+        /// mpcd_spheres.json with --spheres).
+        #[arg(long)]
+        graph: Option<PathBuf>,
+        /// Dimensions: 3 (a cubic box) or 2 (a square).
+        #[arg(long, default_value_t = 3)]
+        dims: u32,
+        /// Spheres on a cubic lattice (a cube: 1, 8, 64...; 3D).
+        #[arg(long, default_value_t = 0)]
+        spheres: u32,
+        /// The spheres' radius.
+        #[arg(long, default_value_t = 4.0)]
+        sphere_radius: f64,
         /// Particle counts (rounded to whole cubic boxes of cells).
         #[arg(long, value_delimiter = ',', default_values_t = [1_000_000u64, 10_000_000, 50_000_000])]
         sizes: Vec<u64>,
@@ -601,12 +611,18 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
         }
         BenchCommand::Mpcd {
             graph,
+            dims,
+            spheres,
+            sphere_radius,
             sizes,
             density,
             reps,
             sets,
         } => mpcd::run(&mpcd::MpcdBench {
             graph,
+            dims,
+            spheres,
+            sphere_radius,
             sizes,
             density,
             reps,
