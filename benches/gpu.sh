@@ -316,6 +316,7 @@ suite_spheres_rates() {
     run $bin bench mpcd --sizes $n --reps 20 --spheres $s --sphere-radius 4 --set spheres=moving
   done
   MESOFLOW_BENCH_DISPATCHES=1 run $bin bench mpcd --sizes $n --reps 20 --spheres 8 --sphere-radius 4
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench mpcd --sizes $n --reps 20 --spheres 64 --sphere-radius 4 --set sort_every=0
   run $bin bench mpcd --sizes $n --reps 20 --set rule=biased --set thermostat=monte_carlo
   run $bin bench mpcd --sizes $n --reps 20 --dims 2
   run $bin bench mpcd --sizes $n --reps 20 --dims 2 --set rule=biased --set thermostat=monte_carlo

@@ -14,11 +14,15 @@
 use super::stream::{MpcdStream, advance, mpcd_stream_kind};
 use super::{Geometry, Rows, check_rows, fx_round, num, particle_ports, value_of, words_of};
 use crate::gpu::DeviceCaps;
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::gpu::{
+    Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Period, Slot, WG_1D,
+};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, PortError, PortSpec, RefCtx, RowError, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, RowError,
+    Signature,
 };
 use crate::nodes::random;
+use crate::nodes::sort::SortNode;
 use crate::value::{HostArray, HostData, PortType, RefArray, ValueType};
 
 /// Words per sphere of a fixed-point impulse: (lo, hi) pairs of x, y, z.
@@ -322,6 +326,13 @@ pub(super) fn mpcd_stream_spheres_kind() -> NodeKind {
         "momentum the bounced particles gave each sphere in the step: per sphere (lo, hi) u32 pairs of the 64-bit sums of x, y, z in units of m v_th / 2^24 (v_th = sqrt(temperature / mass))",
     ))
     .params(stream.params().iter().cloned())
+    .param(ParamSpec::integer(
+        "sort_every",
+        Some(0.0),
+        0.0,
+        u32::MAX as f64,
+        "reorder the particles by (unshifted) cell on steps 0, K, 2K, ... (stable sort; outputs in cell order), so the binning and collision after it touch the cell sums in order and each workgroup's sphere list is short; 0: never",
+    ))
     .build(|p| {
         let stream = MpcdStream::from_params(p)?;
         if stream.geo.dims() != 3 {
@@ -329,10 +340,13 @@ pub(super) fn mpcd_stream_spheres_kind() -> NodeKind {
         }
         let mut u = stream.geo.thermal_uniform(p);
         stream.uniform_into(&mut u);
+        let bits = (stream.geo.ncells() as f64).log2().ceil().max(1.0) as u32;
         Ok(Box::new(MpcdStreamSpheres {
             vth: super::thermal_unit(p)?,
             stream,
             u,
+            sort_every: p.number("sort_every") as u64,
+            sorter: SortNode::radix(bits),
         }))
     })
 }
@@ -341,6 +355,9 @@ struct MpcdStreamSpheres {
     stream: MpcdStream,
     u: super::Uniform,
     vth: f64,
+    /// 0: never reorder.
+    sort_every: u64,
+    sorter: SortNode,
 }
 
 impl Node for MpcdStreamSpheres {
@@ -351,13 +368,32 @@ impl Node for MpcdStreamSpheres {
     ) -> Result<Signature, PortError> {
         let moved = self.stream.infer(&inputs[..2], caps)?.outputs;
         let s = sphere_count(inputs, 2)?;
-        Ok(Signature::outputs(vec![
+        let mut sig = Signature::outputs(vec![
             moved[0],
             moved[1],
             ValueType::Indices {
                 n: SPHERE_WORDS * s,
             },
-        ]))
+        ]);
+        if self.sort_every > 0 {
+            let ValueType::Particles { n, .. } = moved[0] else {
+                unreachable!("mpcd_stream's positions are particles")
+            };
+            let cells = ValueType::Indices { n };
+            // Streamed positions and velocities, cells, sorted cells, permutation, then
+            // the sort's own scratch.
+            sig.scratch = vec![
+                moved[0].bytes(),
+                moved[1].bytes(),
+                cells.bytes(),
+                cells.bytes(),
+                cells.bytes(),
+            ];
+            let sorter = self.sorter.infer(&[Some(cells)], caps)?;
+            sig.scratch.extend(sorter.scratch);
+            sig.plan = sorter.plan;
+        }
+        Ok(sig)
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -443,47 +479,141 @@ impl GpuKernels for MpcdStreamSpheres {
             moving: u32::from(moving.is_some()),
             ..Default::default()
         };
+        let source = cx.shader("mpcd/stream_spheres.wgsl")?;
+        // main binds 0-9; stream_cell and gather also the cells (10) and permutation (11).
+        let mut bindings = vec![
+            Binding::Uniform,
+            Binding::Uniform,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+            Binding::StorageReadWrite,
+            Binding::StorageReadWrite,
+        ];
         let kernel = cx.kernel(
-            &KernelSpec::new(
-                "mpcd_stream_spheres",
-                cx.shader("mpcd/stream_spheres.wgsl")?,
-                &[
-                    Binding::Uniform,
-                    Binding::Uniform,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                ],
-            )
-            .constant("DIMS", 3.0),
+            &KernelSpec::new("mpcd_stream_spheres", source.clone(), &bindings)
+                .constant("DIMS", 3.0),
         )?;
         let params = cx.uniform("mpcd stream spheres", bytemuck::bytes_of(&u));
         let sphere_params = cx.uniform("mpcd spheres", bytemuck::bytes_of(&su));
         let impulse = io.outputs[2];
-        Ok(vec![
-            cx.fill(impulse.buffer, impulse.ty.words(), 0)?,
+        let (vel, radii) = (
+            io.inputs[1].expect("required").buffer,
+            io.inputs[3].expect("required").buffer,
+        );
+        let sphere_vel = moving.map_or(centres.buffer, |m| m.buffer);
+        let (x, v) = (io.outputs[0].buffer, io.outputs[1].buffer);
+        let grid = cx.grid_1d(n as u64, WG_1D);
+        let main = cx.dispatch(
+            &kernel,
+            &[
+                &params,
+                &sphere_params,
+                pos.buffer,
+                vel,
+                centres.buffer,
+                radii,
+                sphere_vel,
+                x,
+                v,
+                impulse.buffer,
+            ],
+            grid,
+        );
+        let mut out = vec![cx.fill(impulse.buffer, impulse.ty.words(), 0)?];
+        if self.sort_every == 0 {
+            out.push(main);
+            return Ok(out);
+        }
+        let missing = || CompileError::Unsupported("mpcd_stream_spheres: scratch missing".into());
+        let [xt, vt, ct, sorted, perm, sort_scratch @ ..] = io.scratch.as_slice() else {
+            return Err(missing());
+        };
+        bindings.extend([Binding::StorageReadWrite, Binding::StorageRead]);
+        let spec = |entry: &str| {
+            KernelSpec::new(
+                format!("mpcd_stream_spheres {entry}"),
+                source.clone(),
+                &bindings,
+            )
+            .entry(entry)
+            .constant("DIMS", 3.0)
+        };
+        let stream_cell = cx.kernel(&spec("stream_cell"))?;
+        let gather = cx.kernel(&spec("gather"))?;
+        let on = Period {
+            every: self.sort_every,
+            on: true,
+        };
+        out.push(
             cx.dispatch(
-                &kernel,
+                &stream_cell,
                 &[
                     &params,
                     &sphere_params,
                     pos.buffer,
-                    io.inputs[1].expect("required").buffer,
+                    vel,
                     centres.buffer,
-                    io.inputs[3].expect("required").buffer,
-                    moving.map_or(centres.buffer, |m| m.buffer),
-                    io.outputs[0].buffer,
-                    io.outputs[1].buffer,
+                    radii,
+                    sphere_vel,
+                    xt,
+                    vt,
                     impulse.buffer,
+                    ct,
+                    perm,
                 ],
-                cx.grid_1d(n as u64, WG_1D),
-            ),
-        ])
+                grid,
+            )
+            .on_steps(on),
+        );
+        let cells = ValueType::Indices { n };
+        let sort_io = NodeIo {
+            inputs: vec![Some(Slot {
+                buffer: ct,
+                ty: cells,
+            })],
+            outputs: vec![
+                Slot {
+                    buffer: sorted,
+                    ty: cells,
+                },
+                Slot {
+                    buffer: perm,
+                    ty: cells,
+                },
+            ],
+            scratch: sort_scratch.to_vec(),
+            plan: io.plan,
+        };
+        for d in self.sorter.compile(cx, &sort_io)? {
+            out.push(d.on_steps(on));
+        }
+        out.push(
+            cx.dispatch(
+                &gather,
+                &[
+                    &params,
+                    &sphere_params,
+                    xt,
+                    vt,
+                    centres.buffer,
+                    radii,
+                    sphere_vel,
+                    x,
+                    v,
+                    impulse.buffer,
+                    ct,
+                    perm,
+                ],
+                grid,
+            )
+            .on_steps(on),
+        );
+        out.push(main.on_steps(Period { on: false, ..on }));
+        Ok(out)
     }
 }
 

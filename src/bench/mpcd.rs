@@ -74,7 +74,11 @@ pub fn run(bench: &MpcdBench) -> Result<(), BenchError> {
                 ", {} spheres of radius {} on a {lattice}^3 lattice{}",
                 bench.spheres,
                 bench.sphere_radius,
-                if moving { " (moving, neutrally buoyant)" } else { " (fixed)" }
+                if moving {
+                    " (moving, neutrally buoyant)"
+                } else {
+                    " (fixed)"
+                }
             )
         } else {
             String::new()
@@ -228,7 +232,12 @@ fn sphere_inputs(
         }
     }
     let s = centres.len();
-    let column = |v: f64| HostArray::f32(ValueType::Particles { n: s as u32, k: 1 }, vec![v as f32; s]);
+    let column = |v: f64| {
+        HostArray::f32(
+            ValueType::Particles { n: s as u32, k: 1 },
+            vec![v as f32; s],
+        )
+    };
     let mut inputs = BTreeMap::from([
         ("sphere_positions".to_string(), particles(&centres)),
         ("sphere_radii".to_string(), column(r)),

@@ -798,3 +798,142 @@ fn a_fixed_sphere_has_the_sources_friction_in_flow() {
         "xi = {xi:.1}, the source's flow value 76 (momentum ACF 77)"
     );
 }
+
+/// Solvent in cell order (as `sort_every` leaves it), 64 spheres: each workgroup of the
+/// streaming tests only the spheres near its particles, and the result is still the f64
+/// reference's for every particle, fixed and moving spheres, with plates, and with a few
+/// particles fast enough to leave the workgroup's box (they test every sphere).
+#[test]
+fn sphere_culling_per_workgroup_keeps_every_bounce() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(64);
+    let l = 16.0;
+    let side = l as usize;
+    // Three particles per unit cell, the cells in x-fastest order.
+    let mut x = Vec::new();
+    for k in 0..side {
+        for j in 0..side {
+            for i in 0..side {
+                for _ in 0..3 {
+                    let c = [i, j, k].map(|c| c as f64 - l / 2.0);
+                    x.push(
+                        c.iter()
+                            .map(|&c| c + rng.uniform(0.0, 1.0))
+                            .collect::<Vec<f64>>(),
+                    );
+                }
+            }
+        }
+    }
+    let n = x.len();
+    let mut v: Vec<Vec<f64>> = (0..n)
+        .map(|_| (0..3).map(|_| rng.uniform(-2.0, 2.0)).collect())
+        .collect();
+    for p in (0..n).step_by(997) {
+        v[p] = vec![25.0, -18.0, 9.0];
+    }
+    let mut spheres = Vec::new();
+    let mut moving = Vec::new();
+    for i in 0..4 {
+        for j in 0..4 {
+            for k in 0..4 {
+                let c = [i, j, k].map(|c| (c as f64 + 0.5) * 4.0 - l / 2.0);
+                spheres.push((c, 1.3));
+                moving.push([0.2, -0.3, 0.1].map(|s: f64| s * (i + j) as f64));
+            }
+        }
+    }
+    for (walls, with_v) in [("none", false), ("none", true), ("plates", true)] {
+        let params = format!(r#"{{"box": [16, 16, 16], "walls": "{walls}", "dt": 0.3}}"#);
+        let (out, r) = stream_spheres(&params, &x, &v, &spheres, with_v.then_some(&moving[..]));
+        let (xs, vs) = (rows(&out["positions"], 3), rows(&out["velocities"], 3));
+        let mut bounced = 0;
+        for p in 0..n {
+            let vr = &r[1].data[3 * p..3 * p + 3];
+            let xr = &r[0].data[3 * p..3 * p + 3];
+            if (0..3).any(|a| (vr[a] - v[p][a]).abs() > 1e-3) {
+                bounced += 1;
+            }
+            for a in 0..3 {
+                let mut dx = xs[p][a] - xr[a];
+                dx -= l * (dx / l).round();
+                assert!(
+                    dx.abs() < 1e-4 && (vs[p][a] - vr[a]).abs() < 1e-4,
+                    "{walls}, moving {with_v}: particle {p} x {:?} v {:?}, reference {xr:?} {vr:?}",
+                    xs[p],
+                    vs[p]
+                );
+            }
+        }
+        assert!(bounced > 200, "{walls}: only {bounced} particles bounced");
+        let got = impulses(&out["impulse"], spheres.len());
+        let want: Vec<[i64; 3]> = (0..spheres.len())
+            .map(|j| impulse_of(&r[2].data, j))
+            .collect();
+        for j in 0..spheres.len() {
+            for a in 0..3 {
+                assert!(
+                    ((got[j][a] - want[j][a]) as f64).abs() < 2e-4 / UNIT,
+                    "{walls}: sphere {j} impulse {:?}, reference {:?}",
+                    got[j],
+                    want[j]
+                );
+            }
+        }
+    }
+}
+
+/// A reordering step (`sort_every`) streams as the plain node and only reorders: the same
+/// rows bit for bit, in the stable order of their unshifted cells, and the same exact
+/// impulses.
+#[test]
+fn sphere_streaming_with_reordering_changes_only_the_order() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(65);
+    let l = [8.0, 8.0, 8.0];
+    let (x, v) = random_particles(&mut rng, 4000, &l);
+    let spheres = [([0.5, -0.3, 0.2], 1.5), ([-3.6, 3.2, -1.0], 1.0)];
+    let run = |sort: u32| {
+        let params =
+            format!(r#"{{"box": [8, 8, 8], "walls": "plates", "dt": 0.4, "sort_every": {sort}}}"#);
+        stream_spheres(&params, &x, &v, &spheres, None).0
+    };
+    let (plain, sorted) = (run(0), run(1));
+    let rows_bits = |out: &std::collections::BTreeMap<String, HostArray>| -> Vec<Vec<u32>> {
+        let (xs, vs) = (rows(&out["positions"], 3), rows(&out["velocities"], 3));
+        xs.iter()
+            .zip(&vs)
+            .map(|(a, b)| a.iter().chain(b).map(|&f| (f as f32).to_bits()).collect())
+            .collect()
+    };
+    let (mut a, b) = (rows_bits(&plain), rows_bits(&sorted));
+    assert_ne!(a, b, "reordered");
+    // The unshifted cell as the kernel computes it: floor((x + L/2) / a) per axis in f32,
+    // the walled axis (z) with its half-cell offset and L/a + 1 layers.
+    let cell = |r: &Vec<u32>| {
+        let y: Vec<f32> = (0..3).map(|k| f32::from_bits(r[k]) + 4.0).collect();
+        let (i, j) = (
+            (y[0].floor() as i64).rem_euclid(8),
+            (y[1].floor() as i64).rem_euclid(8),
+        );
+        let k = ((y[2] + 0.5).floor() as i64).clamp(0, 8);
+        i + 8 * (j + 8 * k)
+    };
+    assert!(
+        b.windows(2).all(|w| cell(&w[0]) <= cell(&w[1])),
+        "rows in cell order"
+    );
+    let mut b_sorted = b.clone();
+    a.sort();
+    b_sorted.sort();
+    assert_eq!(a, b_sorted, "the same rows");
+    assert_eq!(
+        impulses(&plain["impulse"], 2),
+        impulses(&sorted["impulse"], 2),
+        "the same impulses"
+    );
+}
