@@ -5,12 +5,10 @@ follow them:
   interp_l1       its grid loads folded into 4 KiB (L1 hits)
   interp_setup    no column sums at all (tables, barrier, reduction, store)
   interp_unroll8  the column sums' z loop written out for support 8 in 3D
-(BENCHMARKS.md, issue 5, fifth version: what they showed), and for DP Stokes
-(VARIANT_BENCH=dpstokes in benches/gpu_variants.sh):
-  cheb_interp_pairs  interpolate_chebyshev with the 64 threads over (column, z point)
-                     pairs, columns fastest, instead of one column each (a 6 x 6 support
-                     leaves 28 of 64 threads idle); predicted 1.93 -> ~1.3 ms at 10^6
-                     (bottom, ES); passes tests/it/chebyshev.rs, not yet timed
+(BENCHMARKS.md, issue 5, fifth version: what they showed). DP Stokes variants
+(VARIANT_BENCH=dpstokes in benches/gpu_variants.sh) go under shaders/chebyshev/ the
+same way; none is kept now (cheb_interp_pairs, threads over (column, z point) pairs,
+timed 2026-12-06 on an H100: 0.24 -> 0.47 ms at 10^5, slower; removed).
 Usage:
   python3 benches/variants.py OUT_DIR"""
 import pathlib
@@ -58,37 +56,6 @@ fn column_sums(lid: u32, seg: u32, ppw: u32) -> vec4<f32> {{
     return src[:start] + body + src[end:]
 
 
-CHEB_COLUMN_LOOP = """    for (var c = lid; c < side * side; c += 64u) {
-        let wxy = column_weight(c);
-        if (wxy == 0.0) {
-            continue;
-        }
-        var at = (sp.zr.x + zt.x) * plane + column_cell(c, sp);
-        for (var jt = zt.x; jt < zt.y; jt++) {
-            let w = wxy * cached_z(jt, sp.zr, sp.qz, true);
-"""
-
-CHEB_PAIR_LOOP = """    let columns = side * side;
-    for (var t = lid; t < columns * (zt.y - zt.x); t += 64u) {
-        let c = t % columns;
-        let wxy = column_weight(c);
-        if (wxy == 0.0) {
-            continue;
-        }
-        let jt = zt.x + t / columns;
-        let at = (sp.zr.x + jt) * plane + column_cell(c, sp);
-        {
-            let w = wxy * cached_z(jt, sp.zr, sp.qz, true);
-"""
-
-
-def cheb_pairs(src):
-    assert CHEB_COLUMN_LOOP in src, "chebyshev/interpolate.wgsl changed: update benches/variants.py"
-    text = src.replace(CHEB_COLUMN_LOOP, CHEB_PAIR_LOOP)
-    # The column loop's step to the next level has no place in the pair loop.
-    return text.replace("            at += plane;\n", "", 1)
-
-
 def main():
     out = pathlib.Path(sys.argv[1])
     common = pathlib.Path("shaders/spread/interpolate_common.wgsl").read_text()
@@ -102,8 +69,6 @@ def main():
         "interp_unroll8": ("interpolate_common.wgsl", unroll8(common)),
     }
     variants = {name: ("spread/" + file, text) for name, (file, text) in variants.items()}
-    cheb = pathlib.Path("shaders/chebyshev/interpolate.wgsl").read_text()
-    variants["cheb_interp_pairs"] = ("chebyshev/interpolate.wgsl", cheb_pairs(cheb))
     for name, (file, text) in variants.items():
         f = out / name / file
         f.parent.mkdir(parents=True, exist_ok=True)
