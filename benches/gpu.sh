@@ -317,9 +317,12 @@ suite_spheres_rates() {
   done
   MESOFLOW_BENCH_DISPATCHES=1 run $bin bench mpcd --sizes $n --reps 20 --spheres 8 --sphere-radius 4
   MESOFLOW_BENCH_DISPATCHES=1 run $bin bench mpcd --sizes $n --reps 20 --spheres 64 --sphere-radius 4 --set sort_every=0
-  run $bin bench mpcd --sizes $n --reps 20 --set rule=biased --set thermostat=monte_carlo
-  run $bin bench mpcd --sizes $n --reps 20 --dims 2
-  run $bin bench mpcd --sizes $n --reps 20 --dims 2 --set rule=biased --set thermostat=monte_carlo
+  # SPHERES_ONLY=1: the sphere rows and their reference only.
+  if [ -z "${SPHERES_ONLY:-}" ]; then
+    run $bin bench mpcd --sizes $n --reps 20 --set rule=biased --set thermostat=monte_carlo
+    run $bin bench mpcd --sizes $n --reps 20 --dims 2
+    run $bin bench mpcd --sizes $n --reps 20 --dims 2 --set rule=biased --set thermostat=monte_carlo
+  fi
   run python3 benches/torch_reduce.py
 }
 
