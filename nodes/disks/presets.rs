@@ -160,6 +160,57 @@ pub fn register(r: &mut Registry) {
     });
 }
 
+/// `n` disks of diameter `sigma` at packing `density` in a square periodic box centred
+/// at the origin, as the example and `bench disks` start them: a triangular lattice of
+/// spacing at least sigma filling the box (an even number of rows), `n` of its sites
+/// drawn at random, each jittered by 1e-4 sigma (no four points cocircular, so the
+/// periodic Delaunay triangulation is unique), and the species of each (`true`: species
+/// 1, with probability `fraction`). Returns the positions, the species and the box side;
+/// an error when the lattice has fewer than `n` sites.
+pub fn lattice_disks(
+    n: usize,
+    density: f64,
+    sigma: f64,
+    fraction: f64,
+    seed: u64,
+) -> Result<(Vec<f64>, Vec<bool>, f64), String> {
+    let l = (n as f64 * std::f64::consts::PI * 0.25 * sigma * sigma / density).sqrt();
+    let mut state = seed | 1;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let nx = (l / sigma).floor() as usize;
+    let ny = 2 * (l / (sigma * 3f64.sqrt())).floor() as usize;
+    if nx * ny < n {
+        return Err(format!(
+            "{n} disks do not fit the lattice of {nx} x {ny} sites in a box of {l:.2} (packing {density})"
+        ));
+    }
+    let (ax, ay) = (l / nx as f64, l / ny as f64);
+    let mut sites: Vec<[f64; 2]> = (0..ny)
+        .flat_map(|j| {
+            (0..nx).map(move |i| {
+                let shift = if j % 2 == 1 { 0.5 * ax } else { 0.0 };
+                [i as f64 * ax + shift - 0.5 * l, j as f64 * ay - 0.5 * l]
+            })
+        })
+        .collect();
+    let last = sites.len() - 1;
+    for i in 0..n {
+        let j = i + (uniform() * (sites.len() - i) as f64) as usize;
+        sites.swap(i, j.min(last));
+    }
+    let x = sites[..n]
+        .iter()
+        .flat_map(|p| p.map(|c| super::wrap(c + 1e-4 * sigma * (uniform() - 0.5), l)))
+        .collect();
+    let species = (0..n).map(|_| uniform() < fraction).collect();
+    Ok((x, species, l))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
