@@ -71,18 +71,22 @@ mod tests {
     /// is one cluster, scattered ones are alone.
     #[test]
     fn mesh_clusters_match_all_pairs_clusters() {
-        let l = [20.0, 20.0];
+        let l = [12.0, 12.0];
         let mut x = Vec::new();
-        // A chain of 6 disks 1.01 apart, and 10 disks far from it and each other.
+        // A chain of 6 disks 1.01 apart, and 26 disks 2 apart from each other and far
+        // from it (jittered: no four cocircular).
         for i in 0..6 {
-            x.extend([-8.0 + 1.01 * i as f64, 0.013 * i as f64]);
+            x.extend([-5.0 + 1.01 * i as f64, 0.013 * i as f64]);
         }
-        for i in 0..10 {
-            x.extend([-7.0 + 1.6 * i as f64, 5.0 + 0.37 * (i % 3) as f64]);
+        for (j, y) in [-5.0, -3.0, 3.0, 5.0].into_iter().enumerate() {
+            for i in 0..6 {
+                x.extend([
+                    -5.0 + 2.0 * i as f64 + 0.01 * j as f64,
+                    y + 0.017 * i as f64,
+                ]);
+            }
         }
-        for i in 0..4 {
-            x.extend([3.0 + 2.5 * i as f64, -6.0 - 0.21 * i as f64]);
-        }
+        x.extend([2.5, 0.3, 4.5, -0.2]);
         let mesh = periodic_delaunay(&x, l).unwrap();
         let (roots, sizes) = clusters(&mesh, &x, l, CONTACT);
         // All pairs in f64: contacts join the same cluster, and the mesh's clusters are
@@ -112,6 +116,6 @@ mod tests {
         }
         assert_eq!(sizes[0], 6);
         assert!(sizes[1..].iter().all(|&s| s == 1), "{sizes:?}");
-        assert!((largest_cluster_fraction(&mesh, &x, l, 1.0) - 6.0 / 20.0).abs() < 1e-12);
+        assert!((largest_cluster_fraction(&mesh, &x, l, 1.0) - 6.0 / 32.0).abs() < 1e-12);
     }
 }

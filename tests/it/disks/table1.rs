@@ -253,6 +253,43 @@ fn a_pass_through_stops_the_run_at_its_step() {
         2,
     );
     run_with_loops(&gpu, &g, &inputs, 3).unwrap();
+    drop(gpu);
+    // The command line: the same error, a non-zero exit, no output written.
+    let dir = crate::util::tmpdir("disks-pass-through");
+    let input = |name: &str, a: &HostArray| {
+        let p = dir.join(format!("{name}.npy"));
+        mesoflow::npy::write(&p, a).unwrap();
+        format!("{name}={}", p.display())
+    };
+    let (xs, ms) = (
+        input("positions", &inputs["positions"]),
+        input("mesh", &inputs["mesh"]),
+    );
+    let out = dir.join("out.npy");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+        .args(["run", "bd_delaunay.json", "--input", &xs, "--input", &ms])
+        .args([
+            "--set",
+            "n=256",
+            "--set",
+            "config=c0",
+            "--set",
+            "dt=100",
+            "--steps",
+            "3",
+        ])
+        .args(["--output", &format!("positions={}", out.display())])
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(!o.status.success(), "{text}");
+    assert!(
+        text.contains("step 1") && text.contains("`halt` check is"),
+        "{text}"
+    );
+    assert!(!out.exists(), "an output was written");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Largest cluster fractions at the contact distances 1.02 (CONTACT), 1.01, 1.05, 1.1.
