@@ -373,3 +373,37 @@ fn active_disks_at_packing_0_7_gather_into_one_cluster() {
         "active {last} vs passive {passive:?}"
     );
 }
+
+/// `two_species` against its f64 reference (the same Philox draws, the species' rows
+/// exactly), the drawn share of species 1 near `fraction`, and the same draw every step.
+#[test]
+fn two_species_draws_match_the_reference_and_the_fraction() {
+    if gpu().is_none() {
+        return;
+    }
+    let n = 4000usize;
+    let like = flat_particles(&vec![0.0; 2 * n], 2);
+    let params =
+        r#"{"seed": 7, "stream": 25, "fraction": 0.7, "species1": [1, 1], "species2": [-1, -4]}"#;
+    let (out, refs) = crate::util::run_node_and_reference("two_species", params, &[("like", like)]);
+    let q = out["out"].data.to_f64();
+    assert_eq!(q, refs[0].data);
+    let first = q.chunks(2).filter(|r| r == &[1.0, 1.0]).count();
+    let second = q.chunks(2).filter(|r| r == &[-1.0, -4.0]).count();
+    assert_eq!(first + second, n);
+    // Binomial: standard deviation sqrt(n 0.7 0.3) = 29.
+    assert!(
+        (first as f64 - 0.7 * n as f64).abs() < 5.0 * 29.0,
+        "{first} of {n}"
+    );
+}
+
+/// `either` takes exactly one present input; both or neither is a clear error.
+#[test]
+fn either_refuses_both_or_neither() {
+    let t = ValueType::Particles { n: 4, k: 2 };
+    let e = crate::util::validation_error("either", "{}", &[("a", t), ("b", t)]);
+    assert!(e.contains("exactly one of a, b must be present"), "{e}");
+    let e = crate::util::validation_error("either", "{}", &[]);
+    assert!(e.contains("exactly one of a, b must be present"), "{e}");
+}
