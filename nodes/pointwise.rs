@@ -68,6 +68,9 @@ pub struct PointwiseKind {
     /// The input whose value the output is when the others are absent (`add` without
     /// its optional term): see `Node::forwards`.
     pub(crate) forwards_alone: Option<usize>,
+    /// Exactly one input is present and the output is it (`either`: a graph's choice
+    /// between two paths, the other left out by `enabled`).
+    pub(crate) one_of: bool,
     /// Real-linear in its array inputs (sums, real factors): spectra are accepted too,
     /// since such an operation acts on real and imaginary parts alike.
     pub(crate) linear: bool,
@@ -89,6 +92,7 @@ pub(crate) const BASE: PointwiseKind = PointwiseKind {
     uses_step: false,
     per_component: false,
     forwards_alone: None,
+    one_of: false,
     linear: false,
     reference: |_, _, _| 0.0,
 };
@@ -201,6 +205,16 @@ pub static KINDS: &[PointwiseKind] = &[
         reference: |i, _, _| i[0] + i[1],
         linear: true,
         forwards_alone: Some(0),
+        ..BASE
+    },
+    PointwiseKind {
+        name: "either",
+        doc: "out = whichever of a and b is present (exactly one: a graph choosing between two paths, the other left out by `enabled`); never runs a kernel",
+        inputs: &[("a", "one choice", true), ("b", "the other choice", true)],
+        body: "return a + b;",
+        reference: |i, _, _| i[0] + i[1],
+        linear: true,
+        one_of: true,
         ..BASE
     },
     PointwiseKind {
@@ -445,6 +459,17 @@ struct PointwiseNode {
 
 impl Node for PointwiseNode {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+        if self.kind.one_of && inputs.iter().filter(|t| t.is_some()).count() != 1 {
+            let names: Vec<&str> = self.kind.inputs.iter().map(|p| p.0).collect();
+            return Err(PortError::new(
+                self.kind.inputs[0].0,
+                format!(
+                    "exactly one of {} must be present (the others left out by `enabled`), {} are",
+                    names.join(", "),
+                    inputs.iter().filter(|t| t.is_some()).count()
+                ),
+            ));
+        }
         let mut shape: Option<(usize, ValueType)> = None;
         for (i, t) in inputs.iter().enumerate() {
             let Some(t) = t else { continue };
@@ -491,6 +516,10 @@ impl Node for PointwiseNode {
     }
 
     fn forwards(&self, inputs: &[Option<ValueType>]) -> Option<usize> {
+        if self.kind.one_of {
+            let present: Vec<usize> = (0..inputs.len()).filter(|&i| inputs[i].is_some()).collect();
+            return (present.len() == 1).then(|| present[0]);
+        }
         let i = self.kind.forwards_alone?;
         let others_absent = inputs
             .iter()

@@ -52,6 +52,14 @@ fn repeat_kind() -> NodeKind {
         .iterate()
         .optional(),
     )
+    .input(
+        PortSpec::new(
+            "halt",
+            PortType::Indices,
+            "a check made before the loop (its first word; not part of the body): nonzero stops the run at this step with an error naming the step and the value, before anything the loop computes is kept (bd_delaunay.json: edges passed through in the move); not with `fixed`",
+        )
+        .optional(),
+    )
     .output(PortSpec::new(
         "out",
         PortType::RealOrIndices,
@@ -102,8 +110,8 @@ pub struct Repeat {
     max_iterations: u32,
 }
 
-/// Words of the status: iterations, stopped, last count, total.
-const STATUS_WORDS: u64 = 4;
+/// Words of the status: iterations, stopped, last count, total, halt.
+const STATUS_WORDS: u64 = 5;
 
 impl Node for Repeat {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
@@ -123,6 +131,18 @@ impl Node for Repeat {
             return Err(PortError::new(
                 "count",
                 "is not connected: without `fixed` the loop runs until the body's count is 0",
+            ));
+        }
+        if let Some(ValueType::Indices { n: 0 }) = inputs[3] {
+            return Err(PortError::new(
+                "halt",
+                "is empty: the loop reads its first word",
+            ));
+        }
+        if self.fixed > 0 && inputs[3].is_some() {
+            return Err(PortError::new(
+                "halt",
+                "needs a loop the host decides (a fixed loop reads no status): drop `fixed` or the halt",
             ));
         }
         if let Some(ValueType::Indices { n: 0 }) = inputs[2] {
@@ -178,10 +198,14 @@ impl GpuIterative for Repeat {
             Some(c) => (c.buffer, 1u32),
             None => (initial.buffer, 0),
         };
+        let (halt, halts) = match io.inputs[3] {
+            Some(h) => (h.buffer, 1u32),
+            None => (initial.buffer, 0),
+        };
         let words = initial.ty.words();
         let params = cx.uniform(
             "repeat params",
-            bytemuck::cast_slice(&[words as u32, self.fixed, counted, 0]),
+            bytemuck::cast_slice(&[words as u32, self.fixed, counted, halts]),
         );
         let status = io.scratch[0];
         let buffers = [
@@ -194,10 +218,12 @@ impl GpuIterative for Repeat {
             io.outputs[3].buffer,
             status,
             &params,
+            halt,
         ];
         let mut bindings = vec![Binding::StorageRead; 3];
         bindings.extend([Binding::StorageReadWrite; 5]);
         bindings.push(Binding::Uniform);
+        bindings.push(Binding::StorageRead);
         let source = cx.shader("repeat/repeat.wgsl")?;
         let groups = cx.grid_1d(words.max(STATUS_WORDS), WG_1D);
         let mut dispatch = |entry: &str, groups: [u32; 3]| -> Result<_, CompileError> {
@@ -223,6 +249,12 @@ impl GpuIterative for Repeat {
 
     fn decide(&self, iterations: usize, status: &[u8]) -> Result<Decision, LoopError> {
         let words: &[u32] = bytemuck::cast_slice(status);
+        if words[4] != 0 {
+            return Err(LoopError::Input(format!(
+                "stopped before the loop: its `halt` check is {} (must be 0)",
+                words[4]
+            )));
+        }
         let (counted, stopped, last) = (words[0] as usize, words[1] != 0, words[2]);
         if counted != iterations {
             return Err(LoopError::Internal(format!(

@@ -493,8 +493,10 @@ impl HostFunctions {
 /// unary minus, parentheses, indexing of array params (`box[0]`), array literals
 /// (`[a, b, c]`), strings in single quotes, the constant `pi`, the functions sqrt, cbrt,
 /// exp, log (natural), log10, sin, cos, tan, atan, abs, floor, ceil, round, pow(x, y),
-/// min(...), max(...), sum(...), prod(...) (the last four also take arrays), and the host
-/// functions of the scope.
+/// min(...), max(...), sum(...), prod(...) (the last four also take arrays), eq(a, b)
+/// (true when two numbers, arrays or strings are equal: `"enabled": "= eq(range,
+/// 'short')"` picks a graph's path by a choice param), and the host functions of the
+/// scope.
 pub fn eval(text: &str, scope: &Scope) -> Result<f64, ExprError> {
     match evaluate(text, scope)? {
         ParamValue::Number(x) => Ok(x),
@@ -933,6 +935,18 @@ impl Parser<'_> {
             "floor" => unary(args, f64::floor),
             "ceil" => unary(args, f64::ceil),
             "round" => unary(args, f64::round),
+            "eq" => {
+                let [a, b]: [V; 2] = args
+                    .try_into()
+                    .map_err(|_| misuse("`eq` takes two arguments".into()))?;
+                Ok(V::Bool(match (a, b) {
+                    (V::Text(a), V::Text(b)) => a == b,
+                    (V::Text(_), _) | (_, V::Text(_)) => {
+                        return Err(misuse("`eq` compares a string with a string".into()));
+                    }
+                    (a, b) => flat(vec![a])? == flat(vec![b])?,
+                }))
+            }
             "pow" => {
                 let v = flat(args)?;
                 if v.len() != 2 {
@@ -1030,6 +1044,30 @@ mod tests {
         s.insert("box".into(), ParamValue::Numbers(vec![64.0, 32.0, 16.0]));
         s.insert("kernel".into(), ParamValue::Text("gaussian".into()));
         s
+    }
+
+    #[test]
+    fn eq_compares_strings_numbers_and_arrays() {
+        let s = scope();
+        for (text, want) in [
+            ("eq(kernel, 'gaussian')", true),
+            ("eq(kernel, 'es')", false),
+            ("eq(dt, 0.01)", true),
+            ("eq(box, [64, 32, 16])", true),
+            ("eq(box, [64, 32])", false),
+        ] {
+            assert_eq!(
+                evaluate(text, &s).unwrap(),
+                ParamValue::Bool(want),
+                "{text}"
+            );
+        }
+        for bad in ["eq(kernel, 1)", "eq(kernel)"] {
+            assert!(
+                matches!(evaluate(bad, &s), Err(ExprError::Type { .. })),
+                "{bad}"
+            );
+        }
     }
 
     #[test]

@@ -5,19 +5,25 @@
 //!
 //! Positions are N x 2, in a box centred at the origin, [-L/2, L/2) per periodic axis;
 //! every difference is taken by the minimum image.
-//! - `forces.rs`: `nonreciprocal_forces`, all pairs (S1 eqs. 2-3).
+//! - `forces.rs`: `nonreciprocal_forces`, all pairs (S1 eqs. 2-3); the short-range law
+//!   through a cell list is `neighbour_sum` with the pair kernel `nonreciprocal`
+//!   (nodes/pairs/mod.rs).
+//! - `presets.rs`: S1's Table 1 (c0 to c4, `s1_table1`) and `two_species`.
 //! - `step.rs`: `brownian_step_2d` (S1 eq. 1 with its noise convention and clipping) and
 //!   `abp_move_2d` (S1 eq. 10).
 //! - `mesh.rs`: the triangulation of the torus (layout, host construction, checks).
 //! - `flip.rs`: the edge-flip predicate and `edge_flip_round`; `overlap.rs`:
 //!   `overlap_correction_round`. Their loops are `repeat` nodes (graphs/bd_delaunay.json).
-//! - `svg.rs`: a picture of a small system.
+//! - `svg.rs`: a picture of a small system; `clusters.rs`: clusters of touching disks
+//!   through the mesh edges (the MIPS measure).
 
+pub mod clusters;
 pub mod flip;
 pub mod forces;
 pub mod mesh;
 pub mod overlap;
 pub mod pass_through;
+pub mod presets;
 pub mod step;
 pub mod svg;
 
@@ -57,5 +63,6 @@ pub fn register(r: &mut Registry) {
     forces::register(r);
     overlap::register(r);
     pass_through::register(r);
+    presets::register(r);
     step::register(r);
 }

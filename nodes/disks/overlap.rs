@@ -11,6 +11,11 @@
 //! the sums run in a fixed order. The count output is the number of overlapping pairs
 //! (along edges) in the positions read: a round that counts 0 moved nothing, which is
 //! when a loop stops. The mesh stays fixed while the rounds repeat (S1 section 4.4).
+//!
+//! **Tolerance.** A pair counts as overlapping below sigma - `overlap_tolerance` (8 f32
+//! ulps of the largest coordinate, at least 1e-6 sigma): an overlap smaller than the
+//! coordinates' resolution cannot be removed by moving them (the move rounds away), and
+//! counting it kept loops going to their cap in dense, forced runs.
 
 use super::flip::{check_mesh_twins, reference_mesh};
 use super::mesh::MESH_WORDS;
@@ -85,6 +90,12 @@ pub struct OverlapCorrectionRound {
     box_lengths: [f64; 2],
 }
 
+/// The overlap the correction leaves alone: 8 f32 ulps of the largest coordinate (half
+/// the box), at least 1e-6 sigma.
+pub fn overlap_tolerance(sigma: f64, l: [f64; 2]) -> f64 {
+    (8.0 * f32::EPSILON as f64 * 0.5 * l[0].max(l[1])).max(1e-6 * sigma)
+}
+
 /// One round in f64, the twin of `shaders/disks/overlap.wgsl`: the corrected positions
 /// and the number of overlapping pairs along edges.
 pub fn overlap_round(
@@ -105,6 +116,7 @@ pub fn overlap_round(
     }
     let mut out = vec![0.0; 2 * n];
     let mut count = 0;
+    let limit = (sigma - overlap_tolerance(sigma, l)) as f32 as f64;
     for v in 0..n {
         let mut shift = [0.0f64; 2];
         let mut c = first[v];
@@ -116,7 +128,7 @@ pub fn overlap_round(
             let w = mesh[MESH_WORDS * t + (k + 1) % 3] as usize;
             let r = [0, 1].map(|a| minimum_image(x[2 * w + a] - x[2 * v + a], l[a]));
             let len = r[0].hypot(r[1]);
-            if len < sigma && len > 0.0 {
+            if len < limit && len > 0.0 {
                 for a in 0..2 {
                     shift[a] -= delta * (sigma - len) / len * r[a];
                 }
@@ -214,7 +226,7 @@ impl GpuKernels for OverlapCorrectionRound {
             (self.box_lengths[0] as f32).to_bits(),
             (self.box_lengths[1] as f32).to_bits(),
             ((0.25 * self.sigma) as f32).to_bits(),
-            0,
+            ((self.sigma - overlap_tolerance(self.sigma, self.box_lengths)) as f32).to_bits(),
         ];
         let params = cx.uniform("overlap correction round", bytemuck::cast_slice(&words));
         let buffers = [

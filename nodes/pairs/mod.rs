@@ -37,7 +37,14 @@ use crate::value::{HostArray, HostData, PortType, RefArray, ValueType};
 use rpy::NearTable;
 
 /// The pair kernels, by name in the `kernel` param.
-pub const KERNELS: &[&str] = &["rpy", "rpy_near", "lj", "poisson_near", "rpy_wall"];
+pub const KERNELS: &[&str] = &[
+    "rpy",
+    "rpy_near",
+    "lj",
+    "poisson_near",
+    "rpy_wall",
+    "nonreciprocal",
+];
 
 /// What `poisson_near` and `lj` write: the potential (the energy, for lj), the field (the
 /// force, for lj) or both (potential first: phi, Ex, Ey, Ez).
@@ -96,6 +103,10 @@ pub enum PairKernel {
         cutoff: f64,
         table: std::sync::Arc<Vec<[f64; 2]>>,
     },
+    /// The non-reciprocal 2-D pair force of S1 eq. 2 (nodes/disks/forces.rs): on i from j,
+    /// mu_i alpha_j r / |r|^3 (long range) or r / |r|^7 (`short`), values (alpha, mu) per
+    /// particle, the force out (2 columns); positions N x 2.
+    Nonreciprocal { short: bool },
 }
 
 /// The `outputs` param as an index into [`PAIR_OUTPUTS`].
@@ -211,14 +222,27 @@ impl PairKernel {
                     table: std::sync::Arc::new(table),
                 }
             }
+            "nonreciprocal" => PairKernel::Nonreciprocal {
+                short: p.text("law") == "short",
+            },
             other => unreachable!("choice checked: {other}"),
         })
+    }
+
+    /// Columns of the positions the kernel takes: 2 for the plane's nonreciprocal law,
+    /// 3 for the others.
+    pub fn dims(&self) -> u32 {
+        match self {
+            PairKernel::Nonreciprocal { .. } => 2,
+            _ => 3,
+        }
     }
 
     /// Words of each particle's value row the kernel reads.
     pub fn value_comps(&self) -> u32 {
         match self {
             PairKernel::PoissonNear { .. } => 1,
+            PairKernel::Nonreciprocal { .. } => 2,
             PairKernel::Rpy { rotation: true, .. } | PairKernel::RpyWall { rotation: true, .. } => {
                 6
             }
@@ -242,6 +266,7 @@ impl PairKernel {
             PairKernel::PoissonNear { outputs, .. } | PairKernel::Lj { outputs, .. } => {
                 [1, 3, 4][*outputs]
             }
+            PairKernel::Nonreciprocal { .. } => 2,
             PairKernel::Rpy { rotation: true, .. } | PairKernel::RpyWall { rotation: true, .. } => {
                 6
             }
@@ -256,6 +281,7 @@ impl PairKernel {
             PairKernel::RpyNear { .. } => "rpy_near",
             PairKernel::Lj { .. } => "lj",
             PairKernel::PoissonNear { .. } => "poisson_near",
+            PairKernel::Nonreciprocal { .. } => "nonreciprocal",
         }
     }
 
@@ -320,6 +346,7 @@ impl PairKernel {
                 let last = (table.len() - 1) as f64;
                 vec![(last / cutoff) as f32, last as f32]
             }
+            PairKernel::Nonreciprocal { short } => vec![f32::from(u8::from(*short))],
         }
     }
 
@@ -344,7 +371,6 @@ impl PairKernel {
     /// value vi) at r = x_i - x_j (the minimum image), as the kernel's 8 words (the row is
     /// `out_first ..`).
     pub fn pair(&self, xi: [f64; 3], xj: [f64; 3], r: [f64; 3], vi: Row, vj: Row) -> Row {
-        let _ = vi;
         let cross = |a: [f64; 3], b: [f64; 3]| {
             [
                 a[1] * b[2] - a[2] * b[1],
@@ -443,6 +469,17 @@ impl PairKernel {
                     0.0,
                 ]
             }
+            PairKernel::Nonreciprocal { short } => {
+                let w = if r2 == 0.0 {
+                    0.0
+                } else if *short {
+                    r2.powf(-3.5)
+                } else {
+                    r2.powf(-1.5)
+                };
+                let c = vi[1] * vj4[0] * w;
+                [c * r[0], c * r[1], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+            }
         }
     }
 
@@ -474,7 +511,7 @@ impl PairKernel {
                 [u[0], u[1], u[2], w[0], w[1], w[2], 0.0, 0.0]
             }
             PairKernel::RpyNear { table, .. } => vi.map(|v| table.f[0] * v),
-            PairKernel::Lj { .. } => [0.0; 8],
+            PairKernel::Lj { .. } | PairKernel::Nonreciprocal { .. } => [0.0; 8],
             PairKernel::PoissonNear {
                 width,
                 permittivity,
@@ -548,6 +585,10 @@ impl PairKernel {
                 table.len(),
                 table[0][0]
             ),
+            PairKernel::Nonreciprocal { short } => format!(
+                "non-reciprocal 2-D force mu_i alpha_j r/|r|^{} (S1 eq. 2)",
+                if *short { 7 } else { 3 }
+            ),
         }
     }
 }
@@ -558,7 +599,7 @@ fn kernel_params() -> Vec<ParamSpec> {
             "kernel",
             "rpy",
             KERNELS,
-            "the pair kernel: rpy (free-space RPY mobility times values; with `rotation` forces and torques, N x 6), rpy_wall (RPY above a no-slip wall at `wall_height`, Rotne-Prager-Blake with Swan and Brady's corrections; open boundaries, all_pairs only), rpy_near (PSE near field of RPY), lj (Lennard-Jones force; WCA with cutoff 2^(1/6) sigma), poisson_near (near field of Ewald-split Gaussian charges: charges in (N x 1), potential, field or both out)",
+            "the pair kernel: rpy (free-space RPY mobility times values; with `rotation` forces and torques, N x 6), rpy_wall (RPY above a no-slip wall at `wall_height`, Rotne-Prager-Blake with Swan and Brady's corrections; open boundaries, all_pairs only), rpy_near (PSE near field of RPY), lj (Lennard-Jones force; WCA with cutoff 2^(1/6) sigma), poisson_near (near field of Ewald-split Gaussian charges: charges in (N x 1), potential, field or both out), nonreciprocal (S1's 2-D force mu_i alpha_j r/|r|^3 or r/|r|^7, `law`: positions N x 2, values (alpha, mu) N x 2, forces N x 2 out)",
         ),
         ParamSpec::f32_positive("radius", Some(1.0), "rpy, rpy_near: hydrodynamic radius a"),
         ParamSpec::f32_positive("viscosity", Some(1.0), "rpy, rpy_near: viscosity eta"),
@@ -602,6 +643,12 @@ fn kernel_params() -> Vec<ParamSpec> {
         ),
         ParamSpec::f32_nonnegative("epsilon", Some(1.0), "lj: energy scale"),
         ParamSpec::f32_positive("sigma", Some(1.0), "lj: length scale"),
+        ParamSpec::choice(
+            "law",
+            "short",
+            &["long", "short"],
+            "nonreciprocal: long r/|r|^3 or short r/|r|^7",
+        ),
     ]
 }
 
@@ -609,8 +656,8 @@ fn value_inputs() -> Vec<PortSpec> {
     vec![
         PortSpec::new(
             "positions",
-            PortType::Particles(Some(3)),
-            "positions (N x 3)",
+            PortType::Particles(None),
+            "positions (N x 3; N x 2 for the plane's kernel nonreciprocal)",
         ),
         PortSpec::new(
             "values",
@@ -631,9 +678,20 @@ fn out_port() -> Vec<PortSpec> {
 
 /// Checks positions and values, returning N.
 fn check_rows(kernel: &PairKernel, inputs: &[Option<ValueType>]) -> Result<u32, PortError> {
-    let Some(ValueType::Particles { n, .. }) = inputs[0] else {
+    let Some(ValueType::Particles { n, k: dims }) = inputs[0] else {
         unreachable!("port type checked")
     };
+    if dims != kernel.dims() {
+        return Err(PortError::new(
+            "positions",
+            format!(
+                "has {dims} columns; kernel {} takes positions of {} (N x {})",
+                kernel.name(),
+                kernel.dims(),
+                kernel.dims()
+            ),
+        ));
+    }
     match inputs[1] {
         Some(ValueType::Particles { n: m, .. }) if m != n => Err(PortError::new(
             "values",
@@ -665,8 +723,11 @@ fn check_rows(kernel: &PairKernel, inputs: &[Option<ValueType>]) -> Result<u32, 
     }
 }
 
-fn row(data: &[f64], i: usize) -> [f64; 3] {
-    [data[3 * i], data[3 * i + 1], data[3 * i + 2]]
+/// Row i of `dims` (2 or 3) columns as a 3-vector (z = 0 in the plane).
+fn row(data: &[f64], dims: usize, i: usize) -> [f64; 3] {
+    let mut x = [0.0; 3];
+    x[..dims].copy_from_slice(&data[dims * i..dims * (i + 1)]);
+    x
 }
 
 /// A kernel's value or result row: 8 words (`shaders/pairs/values.wgsl` `Row`).
@@ -699,7 +760,8 @@ fn reference_sum(
     out: &mut [f64],
 ) {
     let pos = &inputs[0].as_ref().expect("required").data;
-    let n = pos.len() / 3;
+    let dims = kernel.dims() as usize;
+    let n = pos.len() / dims;
     let (vc, first, oc) = (
         kernel.value_comps() as usize,
         kernel.out_first() as usize,
@@ -710,14 +772,14 @@ fn reference_sum(
     // The cutoff is compared as the GPU does, squared in f32.
     let cut2 = (cutoff as f32 * cutoff as f32) as f64;
     for i in 0..n {
-        let xi = row(pos, i);
+        let xi = row(pos, dims, i);
         let vi = row8(vals, vc, i);
         let mut acc = kernel.self_term(xi, vi);
         for j in 0..n {
             if j == i {
                 continue;
             }
-            let xj = row(pos, j);
+            let xj = row(pos, dims, j);
             let mut r = [0.0; 3];
             for a in 0..3 {
                 r[a] = xi[a] - xj[a];
@@ -750,7 +812,7 @@ fn box_spec(doc: &'static str, required: bool) -> ParamSpec {
     ParamSpec {
         name: "box",
         kind: ParamKind::Numbers {
-            len: Some(3),
+            len: None,
             min: f64::MIN_POSITIVE,
             max: f64::MAX,
         },
@@ -804,28 +866,28 @@ fn neighbour_sum_kind() -> NodeKind {
     )
     .outputs(out_port())
     .param(box_spec(
-        "box lengths (Lx, Ly, Lz), centred at the origin",
+        "box lengths (Lx, Ly, Lz), centred at the origin; (Lx, Ly) for positions in a plane (N x 2)",
         true,
     ))
     .param(ParamSpec {
         name: "cells",
         kind: ParamKind::Numbers {
-            len: Some(3),
+            len: None,
             min: 1.0,
             max: 1024.0,
         },
         default: None,
-        doc: "cells per axis of the cell list (cell size >= cutoff)",
+        doc: "cells per axis of the cell list (cell size >= cutoff), as many as box lengths",
     })
     .param(ParamSpec {
         name: "periodic",
         kind: ParamKind::Numbers {
-            len: Some(3),
+            len: None,
             min: 0.0,
             max: 1.0,
         },
         default: Some(ParamValue::Numbers(vec![1.0, 1.0, 1.0])),
-        doc: "1 for a periodic axis (minimum image), 0 for an open one",
+        doc: "1 for a periodic axis (minimum image), 0 for an open one, as many as box lengths (the default, 3 periodic axes, suits a 3-D box only)",
     })
     .param(ParamSpec::number(
         "cutoff",
@@ -886,13 +948,21 @@ fn check_geometry(
     periodic: &[bool],
     cutoff: f64,
 ) -> Result<(), String> {
+    let dims = lengths.len();
+    if !(2..=3).contains(&dims) || cells.len() != dims || periodic.len() != dims {
+        return Err(format!(
+            "`box`, `cells` and `periodic` must have one entry per axis, 2 (a plane) or 3, got {dims}, {} and {}",
+            cells.len(),
+            periodic.len()
+        ));
+    }
     if cells.contains(&0) {
         return Err(format!(
             "`cells` must be at least 1 per axis, got {cells:?}"
         ));
     }
     let mut problems = Vec::new();
-    for a in 0..3 {
+    for a in 0..dims {
         let size = lengths[a] / cells[a] as f64;
         if size < cutoff {
             problems.push(format!(
@@ -911,6 +981,17 @@ fn check_geometry(
         Ok(())
     } else {
         Err(problems.join("; "))
+    }
+}
+
+/// The positions have a column per axis of the box.
+fn check_dims(positions: Option<ValueType>, axes: usize) -> Result<(), PortError> {
+    match positions {
+        Some(ValueType::Particles { k, .. }) if k as usize != axes => Err(PortError::new(
+            "positions",
+            format!("has {k} columns but the box has {axes} axes"),
+        )),
+        _ => Ok(()),
     }
 }
 
@@ -985,6 +1066,7 @@ impl Node for NeighbourSum {
         caps: &DeviceCaps,
     ) -> Result<Signature, PortError> {
         let n = check_rows(&self.kernel, inputs)?;
+        check_dims(inputs[0], self.lengths.len())?;
         let Some(ValueType::Indices { n: keys }) = inputs[2] else {
             unreachable!("port type checked")
         };
@@ -1051,7 +1133,7 @@ impl Node for NeighbourSum {
     }
 
     fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {
-        let size: Vec<String> = (0..3)
+        let size: Vec<String> = (0..self.lengths.len())
             .map(|a| format!("{:.4}", self.lengths[a] / self.cells[a] as f64))
             .collect();
         vec![
@@ -1099,7 +1181,8 @@ impl NeighbourGeometry {
             cutoff2: (cutoff as f32) * (cutoff as f32),
             pad: [0; 2],
         };
-        for a in 0..3 {
+        // A plane's z axis: one open cell of length 1 (the walk visits offset 0 only).
+        for a in 0..lengths.len() {
             g.lengths[a] = lengths[a] as f32;
             g.cells[a] = cells[a];
             g.periodic[a] = u32::from(periodic[a]);
@@ -1153,7 +1236,8 @@ impl GpuKernels for NeighbourSum {
             &b,
         )
         .constant("HAS_VALUES", f64::from(u8::from(values.is_some())))
-        .constant("LIST_WIDTH", width as f64);
+        .constant("LIST_WIDTH", width as f64)
+        .constant("DIM", self.lengths.len() as f64);
         if let Some(s) = seg {
             spec = spec.constant("SEG", s as f64);
         }
@@ -1251,6 +1335,7 @@ impl Node for NeighbourList {
         let Some(ValueType::Particles { n, .. }) = inputs[0] else {
             unreachable!("port type checked")
         };
+        check_dims(inputs[0], self.lengths.len())?;
         let cells: u32 = self.cells.iter().product();
         for (port, i, want) in [
             ("cells", 1, n),
@@ -1307,8 +1392,9 @@ impl Node for NeighbourList {
         let keys = &inputs[1].as_ref().expect("required").data;
         let start = &inputs[2].as_ref().expect("required").data;
         let count = &inputs[3].as_ref().expect("required").data;
-        let n = pos.len() / 3;
-        let [nx, ny, nz] = [0, 1, 2].map(|a| self.cells[a] as i64);
+        let dims = self.lengths.len();
+        let n = pos.len() / dims;
+        let [nx, ny, nz] = [0, 1, 2].map(|a| self.cells.get(a).copied().unwrap_or(1) as i64);
         let cut2 = (self.cutoff as f32 * self.cutoff as f32) as f64;
         let width = self.width as usize;
         outputs[0].data.fill(u32::MAX as f64);
@@ -1317,7 +1403,7 @@ impl Node for NeighbourList {
             let c = [key % nx, (key / nx) % ny, key / (nx * ny)];
             let n3 = [nx, ny, nz];
             let range = |a: usize| -> (i64, i64) {
-                if self.periodic[a] {
+                if a < dims && self.periodic[a] {
                     if n3[a] >= 3 { (-1, 1) } else { (0, n3[a] - 1) }
                 } else {
                     ((-1i64).max(-c[a]), 1i64.min(n3[a] - 1 - c[a]))
@@ -1340,8 +1426,8 @@ impl Node for NeighbourList {
                                 continue;
                             }
                             let mut r2 = 0.0;
-                            for a in 0..3 {
-                                let mut d = pos[3 * i + a] - pos[3 * j + a];
+                            for a in 0..dims {
+                                let mut d = pos[dims * i + a] - pos[dims * j + a];
                                 if self.periodic[a] {
                                     d -= self.lengths[a] * (d / self.lengths[a]).round();
                                 }
@@ -1384,7 +1470,8 @@ impl GpuKernels for NeighbourList {
                 cx.shader("pairs/neighbour_list.wgsl")?,
                 &b,
             )
-            .constant("LIST_WIDTH", self.width as f64),
+            .constant("LIST_WIDTH", self.width as f64)
+            .constant("DIM", self.lengths.len() as f64),
         )?;
         let g = NeighbourGeometry::new(&self.lengths, &self.cells, &self.periodic, n, self.cutoff);
         let geo = cx.uniform("neighbour geometry", bytemuck::bytes_of(&g));
@@ -1459,6 +1546,9 @@ fn all_pairs_kind() -> NodeKind {
     .params(kernel_params())
     .build(|p| {
         let cutoff = p.number("cutoff");
+        if p.text("kernel") == "nonreciprocal" {
+            return Err("kernel nonreciprocal is the plane's law: use nonreciprocal_forces for all pairs, neighbour_sum for a cutoff".into());
+        }
         if matches!(p.text("kernel"), "rpy_near" | "poisson_near") {
             return Err(format!("kernel {} is the near field of a periodic split: use it in neighbour_sum", p.text("kernel")));
         }

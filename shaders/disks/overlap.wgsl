@@ -16,7 +16,8 @@
 // corrected by its first MAX_FAN only.
 const MAX_FAN: u32 = 128u;
 
-struct Params { n: u32, slots: u32, sigma: f32, delta: f32, box_len: vec2<f32>, max_step: f32, pad: u32 }
+// limit: sigma less the tolerance (nodes/disks/overlap.rs `overlap_tolerance`): closer pairs overlap.
+struct Params { n: u32, slots: u32, sigma: f32, delta: f32, box_len: vec2<f32>, max_step: f32, limit: f32 }
 
 @group(0) @binding(0) var<storage, read> x: array<vec2<f32>>;
 @group(0) @binding(1) var<storage, read> mesh: array<u32>;
@@ -77,7 +78,7 @@ fn correct(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         let w = mesh[6u * t + (k + 1u) % 3u];
         let r = minimum_image(x[w] - xv);
         let len = length(r);
-        if (len < params.sigma && len > 0.0) {
+        if (len < params.limit && len > 0.0) {
             shift = shift - (params.delta * (params.sigma - len) / len) * r;
             overlaps = overlaps + select(0u, 1u, w > v);
         }

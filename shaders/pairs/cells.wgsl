@@ -1,5 +1,9 @@
 // template: shared by the cell-list traversals (neighbour_sum.wgsl, neighbour_list.wgsl), which
-// bind `pos` and `geo`: the geometry, positions, and the cell offsets to visit.
+// bind `pos` and `geo`: the geometry, positions, and the cell offsets to visit. DIM is
+// the positions' columns: 3, or 2 for a plane (z read as 0; the host gives the padded z
+// axis one open cell, so every walk visits z offset 0 only).
+
+override DIM: u32 = 3u;
 
 struct Geometry {
     lengths: vec4<f32>,
@@ -10,6 +14,9 @@ struct Geometry {
 }
 
 fn load3(a: u32) -> vec3<f32> {
+    if (DIM == 2u) {
+        return vec3<f32>(pos[2u * a], pos[2u * a + 1u], 0.0);
+    }
     return vec3<f32>(pos[3u * a], pos[3u * a + 1u], pos[3u * a + 2u]);
 }
 

@@ -29,7 +29,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                 let j = min(list[k * geo.n + i], geo.n - 1u);
                 let xj = load3(j);
                 let r = minimum_image(xi - xj);
-                acc = row_add(acc, pair_term(xi, xj, r, dot(r, r), vi, value_row(j)));
+                let r2 = dot(r, r);
+                // A list built with a skin (a larger cutoff) holds pairs beyond this one.
+                if (r2 <= geo.cutoff2) {
+                    acc = row_add(acc, pair_term(xi, xj, r, r2, vi, value_row(j)));
+                }
             }
             store_out(i, acc);
             return;

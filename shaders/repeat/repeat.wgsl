@@ -1,7 +1,8 @@
 // `repeat`: a value carried through a loop body until the body's count is zero (or for a
 // fixed number of iterations). The words are copied as bits, whatever their type.
-// status: [iterations, stopped, last count, total of the counts]. Entries:
-// - `start`: current = initial, status = 0;
+// status: [iterations, stopped, last count, total of the counts, halt]. Entries:
+// - `start`: current = initial, status = 0, status[4] = the `halt` check's first word
+//   (when one is bound: a nonzero halt stops the loop at once and the host reports it);
 // - `advance` (after every body run): current = next, unless the loop has stopped;
 // - `tally` (one thread, after `advance`): unless stopped, count the iteration, add the
 //   body's count to the total, and stop when it is 0 (or at the fixed count). An
@@ -10,8 +11,9 @@
 // - `finish`: out = current, the iteration count and the total to their outputs.
 #import common/index.wgsl
 
-// counted: 0 for a fixed loop without a count (binding 2 then stands in, unread).
-struct Params { words: u32, fixed: u32, counted: u32, pad: u32 }
+// counted: 0 for a fixed loop without a count (binding 2 then stands in, unread);
+// halts: 1 where a halt check is bound (binding 9; else a stand-in, unread).
+struct Params { words: u32, fixed: u32, counted: u32, halts: u32 }
 
 @group(0) @binding(0) var<storage, read> initial: array<u32>;
 @group(0) @binding(1) var<storage, read> next: array<u32>;
@@ -22,6 +24,7 @@ struct Params { words: u32, fixed: u32, counted: u32, pad: u32 }
 @group(0) @binding(6) var<storage, read_write> total: array<u32>;
 @group(0) @binding(7) var<storage, read_write> status: array<u32>;
 @group(0) @binding(8) var<uniform> params: Params;
+@group(0) @binding(9) var<storage, read> halt: array<u32>;
 
 @compute @workgroup_size(256)
 fn start(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -32,6 +35,13 @@ fn start(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     }
     if (i < 4u) {
         status[i] = 0u;
+    }
+    if (i == 4u) {
+        var h = 0u;
+        if (params.halts == 1u) {
+            h = halt[0];
+        }
+        status[4] = h;
     }
 }
 
@@ -47,6 +57,10 @@ fn advance(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
 @compute @workgroup_size(1)
 fn tally() {
     if (status[1] != 0u) {
+        return;
+    }
+    if (status[4] != 0u) {
+        status[1] = 1u;
         return;
     }
     var c = 0u;

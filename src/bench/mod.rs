@@ -13,6 +13,7 @@
 //! Nothing here depends on the command line: `cli` parses the arguments into a
 //! [`BenchCommand`] and wraps [`BenchError`].
 
+mod disks;
 mod dpstokes;
 mod fcm;
 mod fft;
@@ -135,6 +136,8 @@ fn mean_duration(samples: &[Duration]) -> Duration {
 /// A timed graph: per-launch and end-to-end GPU times, and the outputs of the last step.
 pub struct TimedRun {
     pub timings: Vec<Timing>,
+    /// Each loop's iterations per step over the timed runs (`Program::loop_iterations`).
+    pub loops: Vec<(String, Vec<u32>)>,
     /// Each timed step end to end: first to last timestamp of the step's one compute
     /// pass, or the host's time from submission to the end of the wait for a graph with
     /// loops or on a device without timestamp queries.
@@ -291,6 +294,7 @@ pub fn time_loaded(
         .collect();
     Ok(TimedRun {
         timings,
+        loops: program.loop_iterations().to_vec(),
         steps: per_step.step_samples,
         outputs,
         memory: p.memory.total(),
@@ -455,6 +459,27 @@ pub enum BenchCommand {
         /// dpstokes.json's windows: es or gaussian.
         #[arg(long, default_value = "es")]
         kernel: String,
+        #[arg(long, default_value_t = 10)]
+        reps: u64,
+    },
+    /// Brownian disks with a Delaunay mesh (bd_delaunay.json, S1): time per step split
+    /// into forces, flips and overlap correction, the loops' iterations, and the
+    /// long-range force's pair interactions per second.
+    Disks {
+        /// The graph file.
+        #[arg(long, default_value = "graphs/bd_delaunay.json")]
+        graph: PathBuf,
+        /// S1 Table 1 configurations (c0 to c4).
+        #[arg(long, value_delimiter = ',', default_values_t = ["c0".to_string()])]
+        configs: Vec<String>,
+        /// Force ranges: long (all pairs), short (cell list), verlet (short through a
+        /// neighbour list).
+        #[arg(long, value_delimiter = ',', default_values_t = ["long".to_string(), "short".to_string()])]
+        ranges: Vec<String>,
+        /// Disk counts (2^10 to 2^20 on a GPU; the mesh is built on the host).
+        #[arg(long, value_delimiter = ',', default_values_t = [1024u32, 16384, 262144, 1048576])]
+        sizes: Vec<u32>,
+        /// Timed steps per size (after a warm-up).
         #[arg(long, default_value_t = 10)]
         reps: u64,
     },
@@ -643,6 +668,19 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             sizes,
             tolerance,
             kernel,
+            reps,
+        }),
+        BenchCommand::Disks {
+            graph,
+            configs,
+            ranges,
+            sizes,
+            reps,
+        } => disks::run(&disks::DisksBench {
+            graph,
+            configs,
+            ranges,
+            sizes,
             reps,
         }),
         BenchCommand::Nbody {

@@ -60,7 +60,7 @@ fn bd_delaunay_keeps_a_delaunay_mesh_and_no_overlaps_every_step() {
     let steps = 6;
     let g = load_with(
         "bd_delaunay.json",
-        &[("n", "256"), ("density", "0.4")],
+        &[("n", "256"), ("density", "0.4"), ("config", "\"custom\"")],
         steps,
         5,
     );

@@ -7,4 +7,6 @@ mod forces;
 mod graph;
 mod loops;
 mod overlap;
+mod short_range;
 mod step;
+mod table1;

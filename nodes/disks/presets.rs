@@ -1,0 +1,229 @@
+//! S1's Table 1 (Carter et al. 2017): the five two-species configurations c0 to c4 as
+//! graph-level presets, and `two_species`, the node that draws each disk's species.
+//!
+//! The table comes from the digest's reconstruction (`bd-delaunay-and-mpcd-digest.md`
+//! part D): the fractions and packing fractions are read directly; the multiset of
+//! (alpha, mu) values is certain, their order inside c2 to c4 is the digest's best reading
+//! of the behaviours (like repel / unlike attract for c2 and c4, like attract / unlike
+//! repel for c3). A graph reads a row through the host function `s1_table1(config)`
+//! (graphs/bd_delaunay.json's `config` param); each value stays a param of its own, so a
+//! user may override any of them (`--set species2=[-2,-1]`).
+
+use super::super::pointwise::{BASE, ElemCtx, Param, PointwiseKind, pointwise_kind};
+use super::super::random::{seed_param, stream_param, uniform};
+use crate::expr::{HostFunction, ParamValue};
+use crate::node::{ParamKind, ParamSpec, Params, Registry};
+use crate::value::ValueType;
+
+/// One row of Table 1: name, fraction of species 1, (alpha, mu) of species 1 and of
+/// species 2, packing fraction.
+pub type Configuration = (&'static str, f64, [f64; 2], [f64; 2], f64);
+
+/// S1 Table 1 as the digest reconstructs it.
+pub const TABLE1: [Configuration; 5] = [
+    // Asymmetric 1 -> 2 attraction: a homogeneous fluid-like mixture.
+    ("c0", 0.7, [1.0, 1.0], [-1.0, 1.0], 0.79),
+    // Species 2 self-attracts (a dense cluster), species 1 self-repels (a gas).
+    ("c1", 0.5, [1.0, 1.0], [-1.0, 1.0], 0.52),
+    // Like repel, unlike attract: alternating chains.
+    ("c2", 0.5, [1.0, 1.0], [-1.0, -2.0], 0.52),
+    // Like attract, unlike repel: dense segregated clusters.
+    ("c3", 0.5, [1.0, -1.0], [-2.0, 1.0], 0.79),
+    // As c2, dilute: small clusters.
+    ("c4", 0.5, [1.0, 1.0], [-1.0, -4.0], 0.0873),
+];
+
+/// The names a `config` param takes: `custom` (the charges given as an input) and c0..c4.
+pub const CONFIGS: [&str; 6] = ["custom", "c0", "c1", "c2", "c3", "c4"];
+
+/// A configuration by name.
+pub fn configuration(name: &str) -> Option<Configuration> {
+    TABLE1.iter().find(|c| c.0 == name).copied()
+}
+
+/// `s1_table1(config)`: [fraction of species 1, alpha1, mu1, alpha2, mu2, packing
+/// fraction]; `custom`: one species, alpha = mu = 1, packing 0.79 (the defaults a user
+/// overrides).
+fn s1_table1(args: &[ParamValue]) -> Result<ParamValue, String> {
+    let [ParamValue::Text(name)] = args else {
+        return Err(
+            "takes one argument, the configuration's name ('c0' to 'c4' or 'custom')".into(),
+        );
+    };
+    let (fraction, a, b, density) = match configuration(name) {
+        Some((_, f, a, b, d)) => (f, a, b, d),
+        None if name == "custom" => (1.0, [1.0, 1.0], [1.0, 1.0], 0.79),
+        None => {
+            return Err(format!(
+                "no configuration `{name}`: S1's Table 1 has c0 to c4 (or custom)"
+            ));
+        }
+    };
+    Ok(ParamValue::Numbers(vec![
+        fraction, a[0], a[1], b[0], b[1], density,
+    ]))
+}
+
+fn pair_param(name: &'static str, doc: &'static str) -> ParamSpec {
+    ParamSpec {
+        name,
+        kind: ParamKind::Numbers {
+            len: Some(2),
+            min: -1e6,
+            max: 1e6,
+        },
+        default: None,
+        doc,
+    }
+}
+
+fn two_columns(t: &ValueType, _: &[f64]) -> Result<(), String> {
+    match t {
+        ValueType::Particles { k: 2, .. } => Ok(()),
+        other => Err(format!(
+            "expected one (alpha, mu) row per disk (N x 2), got {other}"
+        )),
+    }
+}
+
+/// The species of disk i: 1 (`true`) when its uniform draw (seed, stream, step 0, i) is
+/// below `fraction`.
+pub fn first_species(i: u64, seed: u64, stream: u32, fraction: f64) -> bool {
+    uniform(i, 0, seed, stream) < fraction
+}
+
+pub static KINDS: &[PointwiseKind] = &[PointwiseKind {
+    name: "two_species",
+    doc: "(alpha, mu) per disk for two species (S1 Table 1): disk i is of species 1 when its uniform draw (seed, stream, step 0, element i) is below `fraction`, else of species 2; the same every step",
+    inputs: &[(
+        "like",
+        "N x 2 template (the positions; values not read): one row per disk",
+        false,
+    )],
+    params: || {
+        vec![
+            seed_param(),
+            stream_param(),
+            ParamSpec::number(
+                "fraction",
+                None,
+                0.0,
+                1.0,
+                "fraction of species 1 (the expected share; each disk draws)",
+            ),
+            pair_param("species1", "(alpha, mu) of species 1"),
+            pair_param("species2", "(alpha, mu) of species 2"),
+        ]
+    },
+    flatten: |p: &Params| {
+        let seed = p.number("seed") as u64;
+        let (a, b) = (p.numbers("species1"), p.numbers("species2"));
+        vec![
+            Param::Bits(seed as u32),
+            Param::Bits((seed >> 32) as u32),
+            Param::Bits(p.number("stream") as u32),
+            Param::Number(p.number("fraction")),
+            Param::Number(a[0]),
+            Param::Number(a[1]),
+            Param::Number(b[0]),
+            Param::Number(b[1]),
+        ]
+    },
+    check: two_columns,
+    body:
+        "let u = philox_uniform(idx / 2u, 0u, bitcast<u32>(p0), bitcast<u32>(p1), bitcast<u32>(p2));
+    let first = select(p5, p4, comp == 0u);
+    let second = select(p7, p6, comp == 0u);
+    return select(second, first, u < p3);",
+    imports: &["common/philox.wgsl"],
+    reference: |_, e: ElemCtx, p| {
+        let seed = (p[1] as u64) << 32 | p[0] as u64;
+        let first = first_species(e.idx / 2, seed, p[2] as u32, p[3]);
+        match (first, e.comp) {
+            (true, 0) => p[4],
+            (true, _) => p[5],
+            (false, 0) => p[6],
+            (false, _) => p[7],
+        }
+    },
+    ..BASE
+}];
+
+pub fn register(r: &mut Registry) {
+    for row in KINDS {
+        r.add(pointwise_kind(row));
+    }
+    r.add_function(HostFunction {
+        name: "s1_table1",
+        doc: "s1_table1(config): S1's Table 1 row ('c0' to 'c4'; 'custom': one species alpha = mu = 1 at packing 0.79) as [fraction of species 1, alpha1, mu1, alpha2, mu2, packing fraction] (nodes/disks/presets.rs)",
+        call: s1_table1,
+    });
+}
+
+/// `n` disks of diameter `sigma` at packing `density` in a square periodic box centred
+/// at the origin, as the example and `bench disks` start them: a triangular lattice of
+/// spacing at least sigma filling the box (an even number of rows), `n` of its sites
+/// drawn at random, each jittered by 1e-4 sigma (no four points cocircular, so the
+/// periodic Delaunay triangulation is unique), and the species of each (`true`: species
+/// 1, with probability `fraction`). Returns the positions, the species and the box side;
+/// an error when the lattice has fewer than `n` sites.
+pub fn lattice_disks(
+    n: usize,
+    density: f64,
+    sigma: f64,
+    fraction: f64,
+    seed: u64,
+) -> Result<(Vec<f64>, Vec<bool>, f64), String> {
+    let l = (n as f64 * std::f64::consts::PI * 0.25 * sigma * sigma / density).sqrt();
+    let mut state = seed | 1;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let nx = (l / sigma).floor() as usize;
+    let ny = 2 * (l / (sigma * 3f64.sqrt())).floor() as usize;
+    if nx * ny < n {
+        return Err(format!(
+            "{n} disks do not fit the lattice of {nx} x {ny} sites in a box of {l:.2} (packing {density})"
+        ));
+    }
+    let (ax, ay) = (l / nx as f64, l / ny as f64);
+    let mut sites: Vec<[f64; 2]> = (0..ny)
+        .flat_map(|j| {
+            (0..nx).map(move |i| {
+                let shift = if j % 2 == 1 { 0.5 * ax } else { 0.0 };
+                [i as f64 * ax + shift - 0.5 * l, j as f64 * ay - 0.5 * l]
+            })
+        })
+        .collect();
+    let last = sites.len() - 1;
+    for i in 0..n {
+        let j = i + (uniform() * (sites.len() - i) as f64) as usize;
+        sites.swap(i, j.min(last));
+    }
+    let x = sites[..n]
+        .iter()
+        .flat_map(|p| p.map(|c| super::wrap(c + 1e-4 * sigma * (uniform() - 0.5), l)))
+        .collect();
+    let species = (0..n).map(|_| uniform() < fraction).collect();
+    Ok((x, species, l))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table1_rows_and_refusals() {
+        let row = s1_table1(&[ParamValue::Text("c4".into())]).unwrap();
+        assert_eq!(
+            row,
+            ParamValue::Numbers(vec![0.5, 1.0, 1.0, -1.0, -4.0, 0.0873])
+        );
+        let err = s1_table1(&[ParamValue::Text("c5".into())]).unwrap_err();
+        assert!(err.contains("no configuration `c5`"), "{err}");
+        assert!(s1_table1(&[ParamValue::Number(1.0)]).is_err());
+    }
+}

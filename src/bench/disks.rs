@@ -1,0 +1,184 @@
+//! `mesoflow bench disks`: graphs/bd_delaunay.json (S1's Brownian disks with a Delaunay
+//! mesh) per configuration, force range and size: the time of a step end to end (host
+//! clock: the loops decide on the host), split by launch into forces (the all-pairs
+//! node, or the cell list, the neighbour sum and its scatter), the move, flips (the two
+//! flip loops, round trips included) and the overlap correction (its loop), with the
+//! loops' iterations per step and, for the long-range force, pair interactions per
+//! second (N^2 / the force launch's time) and GFLOP/s at `LONG_FLOPS` per pair.
+//!
+//! The disks start on a jittered triangular lattice (`presets::lattice_disks`) and the
+//! mesh is built on the host (`periodic_delaunay`, seconds at 2^20 disks).
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use mesoflow::expr::ParamValue;
+use mesoflow::nodes::disks::mesh::periodic_delaunay;
+use mesoflow::nodes::disks::presets::{configuration, lattice_disks};
+use mesoflow::value::{HostArray, ValueType};
+
+use super::fcm::load;
+use super::{BenchError, ms, open_gpu, time_loaded};
+
+pub struct DisksBench {
+    pub graph: PathBuf,
+    pub configs: Vec<String>,
+    pub ranges: Vec<String>,
+    pub sizes: Vec<u32>,
+    pub reps: u64,
+}
+
+/// Flops per pair of the long-range kernel (shaders/disks/forces.wgsl, counted by hand:
+/// minimum image 6, r^2 3, the reciprocal, its square root and the weight 4, the select
+/// and accumulate 5).
+const LONG_FLOPS: f64 = 18.0;
+
+/// Which part of a step a launch is, by its node's id in bd_delaunay.json.
+fn part(label: &str) -> &'static str {
+    let id = label.split([' ', '/', ':', '(']).next().unwrap_or(label);
+    match id {
+        "force" | "cl" | "sorted_charges" | "verlet" | "short_sorted" | "short" | "species"
+        | "charges" | "forces" => "forces",
+        "flips" | "flip" | "settle" | "reflip" => "flips",
+        "overlaps" | "correct" => "overlap",
+        _ => "move",
+    }
+}
+
+pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
+    let gpu = open_gpu(bench.reps)?;
+    let registry = mesoflow::nodes::registry();
+    outln!(
+        "bd_delaunay.json, dt 0.01, D 0.01, sigma 1; step: median over {} steps end to end (host \
+         clock: loops read their status each iteration); parts: medians of each launch timed \
+         alone (a loop with its body and round trips); iterations per step of the loops \
+         (each counting its last, empty round); long range: pairs/s = N^2 / force time, \
+         GFLOP/s at {LONG_FLOPS} flops per pair",
+        bench.reps
+    );
+    outln!(
+        "{:>6} {:>7} {:>8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>7} {:>7} {:>7} {:>11} {:>8}",
+        "config",
+        "range",
+        "N",
+        "step ms",
+        "forces ms",
+        "move ms",
+        "flips ms",
+        "overlap ms",
+        "flips",
+        "overlap",
+        "settle",
+        "pairs/s",
+        "GFLOP/s"
+    );
+    for config in &bench.configs {
+        let Some((_, fraction, _, _, density)) = configuration(config) else {
+            return Err(BenchError::Args(format!(
+                "no configuration `{config}`: c0 to c4"
+            )));
+        };
+        for range in &bench.ranges {
+            let (law, neighbours) = match range.as_str() {
+                "long" => ("long", "cells"),
+                "short" => ("short", "cells"),
+                "verlet" => ("short", "verlet"),
+                other => {
+                    return Err(BenchError::Args(format!(
+                        "range `{other}`: long, short or verlet"
+                    )));
+                }
+            };
+            for &n in &bench.sizes {
+                let (x, _, l) =
+                    lattice_disks(n as usize, density, 1.0, fraction, 0x5EED ^ n as u64)
+                        .map_err(BenchError::Args)?;
+                let mesh = periodic_delaunay(&x, [l, l])
+                    .map_err(|e| BenchError::Args(format!("the mesh of {n} disks: {e}")))?;
+                let g = load(
+                    &bench.graph,
+                    &[
+                        ("n", ParamValue::Number(n as f64)),
+                        ("config", ParamValue::Text(config.clone())),
+                        ("range", ParamValue::Text(law.into())),
+                        ("neighbours", ParamValue::Text(neighbours.into())),
+                    ],
+                    &registry,
+                )?;
+                let inputs = BTreeMap::from([
+                    (
+                        "positions".to_string(),
+                        HostArray::f32(
+                            ValueType::Particles { n, k: 2 },
+                            x.iter().map(|&v| v as f32).collect(),
+                        ),
+                    ),
+                    (
+                        "mesh".to_string(),
+                        HostArray::u32(
+                            ValueType::Indices {
+                                n: mesh.len() as u32,
+                            },
+                            mesh,
+                        ),
+                    ),
+                ]);
+                // A size that fails (a pass-through at this dt, the device's memory) is
+                // reported on its row and the table goes on.
+                let run = match time_loaded(&gpu, &g, &inputs, None, bench.reps, true) {
+                    Ok(run) => run,
+                    Err(e) => {
+                        outln!("{config:>6} {range:>7} {n:>8} failed: {e}");
+                        continue;
+                    }
+                };
+                let mut parts: BTreeMap<&str, Duration> = BTreeMap::new();
+                for t in &run.timings {
+                    *parts.entry(part(&t.label)).or_default() += t.median;
+                }
+                let mean = |name: &str| {
+                    run.loops
+                        .iter()
+                        .find(|(l, _)| l == name)
+                        .map(|(_, c)| {
+                            c.iter().map(|&k| k as f64).sum::<f64>() / c.len().max(1) as f64
+                        })
+                        .unwrap_or(0.0)
+                };
+                let forces = parts.get("forces").copied().unwrap_or_default();
+                let (pairs, gflops) = if law == "long" {
+                    let p = n as f64 * n as f64 / forces.as_secs_f64().max(1e-12);
+                    (format!("{p:.3e}"), format!("{:.0}", p * LONG_FLOPS / 1e9))
+                } else {
+                    ("-".into(), "-".into())
+                };
+                outln!(
+                    "{:>6} {:>7} {:>8} {:>10.3} {:>10.3} {:>10.3} {:>10.3} {:>10.3} {:>7.2} {:>7.2} {:>7.2} {:>11} {:>8}",
+                    config,
+                    range,
+                    n,
+                    ms(run.end_to_end()),
+                    ms(forces),
+                    ms(parts.get("move").copied().unwrap_or_default()),
+                    ms(parts.get("flips").copied().unwrap_or_default()),
+                    ms(parts.get("overlap").copied().unwrap_or_default()),
+                    mean("flips"),
+                    mean("overlaps"),
+                    mean("settle"),
+                    pairs,
+                    gflops
+                );
+                for t in &run.timings {
+                    outln!(
+                        "        {:<8} {:<48} {:>10.3} ms",
+                        part(&t.label),
+                        t.label,
+                        ms(t.median)
+                    );
+                }
+            }
+        }
+    }
+    Ok(())
+}
