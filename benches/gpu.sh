@@ -38,6 +38,9 @@
 #   spheres_rates  MPCD particle-steps per second with 1, 8, 64 spheres of R = 4 (fixed,
 #               moving) in 128^3 cells, the biased rule with the Monte-Carlo thermostat in
 #               3D and 2D, against sphere-free SRD at the same N
+#   disks       Brownian disks with a Delaunay mesh (bd_delaunay.json, c0): the step split
+#               into forces, flips, overlap correction, long and short range, 2^16 and 2^20
+#               (DISKS_SIZES to change), the long-range pair interactions per second
 #   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
 #   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
 #               request counts
@@ -57,7 +60,7 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson dpstokes nbody python mpcd spheres spheres_acf spheres_rates spread atomics fft primitives overhead determinism stream scene)
+suites=(fcm pse poisson dpstokes nbody python mpcd spheres spheres_acf spheres_rates disks spread atomics fft primitives overhead determinism stream scene)
 usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
@@ -324,6 +327,10 @@ suite_spheres_rates() {
     run $bin bench mpcd --sizes $n --reps 20 --dims 2 --set rule=biased --set thermostat=monte_carlo
   fi
   run python3 benches/torch_reduce.py
+}
+
+suite_disks() {
+  run $bin bench disks --configs c0 --ranges long,short --sizes ${DISKS_SIZES:-65536,1048576} --reps 5
 }
 
 suite_overhead() {
