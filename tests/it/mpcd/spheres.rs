@@ -739,6 +739,115 @@ fn bad_sphere_data_is_refused_by_input_node_port_and_row() {
     }
 }
 
+/// Spheres that overlap each other (by the nearest periodic image) or reach through a
+/// plate are refused before a run, naming both spheres (or the plate) and the distance,
+/// through `upload` and through `update_inputs` that gives the centres alone (the radii
+/// of the last upload kept); spheres that only come close run.
+#[test]
+fn overlapping_spheres_and_spheres_through_a_plate_are_refused() {
+    if gpu().is_none() {
+        return;
+    }
+    let gpu = gpu().expect("GPU");
+    // (walls, centres of two spheres of radius 1.5 in a box of 8, what the error must say;
+    // empty: it runs).
+    let cases: [(&str, [[f64; 3]; 2], &[&str]); 6] = [
+        (
+            "none",
+            [[0.0; 3], [2.9, 0.0, 0.0]],
+            &[
+                "sphere_positions",
+                "exclude",
+                "row 1",
+                "spheres 0 and 1 overlap",
+                "2.9 apart",
+                "1.5 + 1.5 = 3",
+            ],
+        ),
+        // Apart in the box, 2 apart through the periodic boundary.
+        (
+            "none",
+            [[-3.5, 0.0, 0.0], [3.5, 0.0, 1.0]],
+            &["spheres 0 and 1 overlap", "nearest periodic image"],
+        ),
+        ("none", [[-3.5, 0.0, 0.0], [1.0, 0.0, 0.0]], &[]),
+        (
+            "plates",
+            [[0.0; 3], [0.0, 3.0, 2.9]],
+            &[
+                "sphere_positions",
+                "row 1",
+                "sphere 1",
+                "plate at z = 4",
+                "1.1 from the plate",
+            ],
+        ),
+        (
+            "plates",
+            [[0.0, 0.0, -3.0], [0.0, 3.0, 2.0]],
+            &["sphere 0", "plate at z = -4"],
+        ),
+        // Periodic along z without plates: the same centres run.
+        ("none", [[0.0, 0.0, -3.0], [0.0, 3.0, 2.0]], &[]),
+    ];
+    for (walls, centres, want) in cases {
+        let w = format!("\"{walls}\"");
+        let g = crate::util::load_with(
+            "mpcd_spheres.json",
+            &[
+                ("box", "[8, 8, 8]"),
+                ("walls", &w),
+                ("sphere_radius", "1.5"),
+            ],
+            1,
+            0,
+        );
+        let inputs = crate::util::named(&[
+            ("sphere_positions", particles(&centres)),
+            ("sphere_radii", particles(&[[1.5], [1.5]])),
+        ]);
+        let plan =
+            crate::util::plan_graph(&gpu.caps, &g, crate::util::types_of(&inputs), None, true);
+        let mut program = crate::util::compile_cached(&gpu, &g, &plan);
+        let result =
+            crate::util::try_run_program(&mut program, &inputs, 1, mesoflow::exec::Profile::Off);
+        if want.is_empty() {
+            result.unwrap_or_else(|e| panic!("{walls} {centres:?} was refused: {e}"));
+            continue;
+        }
+        let err = result.expect_err("overlapping spheres ran");
+        for w in want {
+            assert!(err.contains(w), "`{err}` does not say `{w}`");
+        }
+    }
+    // An update of the centres alone is checked against the radii of the last upload.
+    let g = crate::util::load_with(
+        "mpcd_spheres.json",
+        &[("box", "[8, 8, 8]"), ("sphere_radius", "1.5")],
+        1,
+        0,
+    );
+    let inputs = crate::util::named(&[
+        ("sphere_positions", particles(&[[0.0; 3], [3.5, 0.0, 0.0]])),
+        ("sphere_radii", particles(&[[1.5], [1.5]])),
+    ]);
+    let plan = crate::util::plan_graph(&gpu.caps, &g, crate::util::types_of(&inputs), None, true);
+    let mut program = crate::util::compile_cached(&gpu, &g, &plan);
+    program.upload(&inputs).expect("spheres apart");
+    let moved =
+        crate::util::named(&[("sphere_positions", particles(&[[0.0; 3], [0.0, 2.0, 0.0]]))]);
+    let err = program
+        .update_inputs(&moved)
+        .expect_err("overlapping centres were taken")
+        .to_string();
+    assert!(
+        err.contains("sphere_positions")
+            && err.contains("spheres 0 and 1 overlap")
+            && err.contains("2 apart"),
+        "{err}"
+    );
+}
+
 /// The friction of a fixed sphere from a flow run (S2 §5.6.3, Tables 5.3 and 5.4): R = 1
 /// in a box of 16R = 16, M = 5, MPCD-BC with A = 0.01, dt = 0.02, the Monte-Carlo
 /// thermostat, a body force F on every solvent particle. In the steady state the sphere
