@@ -192,8 +192,8 @@ pub(crate) fn check_sphere_layout(
     };
     if geo.walls {
         let h = 0.5 * geo.lengths[2];
-        for j in 0..s {
-            let (z, rj) = (centre(j)[2], r[j] as f64);
+        for (j, &rj) in r.iter().enumerate().take(s) {
+            let (z, rj) = (centre(j)[2], rj as f64);
             let gap = h - z.abs();
             if gap < rj {
                 return Err(refuse(

@@ -751,7 +751,8 @@ fn overlapping_spheres_and_spheres_through_a_plate_are_refused() {
     let gpu = gpu().expect("GPU");
     // (walls, centres of two spheres of radius 1.5 in a box of 8, what the error must say;
     // empty: it runs).
-    let cases: [(&str, [[f64; 3]; 2], &[&str]); 6] = [
+    type Case<'a> = (&'a str, [[f64; 3]; 2], &'a [&'a str]);
+    let cases: [Case; 6] = [
         (
             "none",
             [[0.0; 3], [2.9, 0.0, 0.0]],
