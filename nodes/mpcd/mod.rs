@@ -44,6 +44,7 @@ mod init;
 mod measure;
 mod solute;
 mod sphere_coupling;
+mod sphere_profile;
 mod spheres;
 mod stream;
 mod stream_bin;
@@ -656,6 +657,7 @@ pub fn register(r: &mut Registry) {
     r.add(sphere_coupling::mpcd_sphere_fill_kind());
     r.add(sphere_coupling::mpcd_sphere_force_kind());
     r.add(sphere_coupling::mpcd_sphere_move_kind());
+    r.add(sphere_profile::mpcd_sphere_profile_kind());
     r.add(collide::mpcd_bin_kind());
     r.add(collide::mpcd_collide_kind());
     r.add(solute::mpcd_bin_solute_kind());
