@@ -977,7 +977,7 @@ fn sphere_tangential_profile_matches_its_reference() {
         let got: Vec<f64> = sums.iter().map(|&w| w as f64).collect();
         let profile = rows(&out["profile"], 3);
         let mut inside = 0;
-        for b in 0..bins {
+        for (b, row) in profile.iter().enumerate() {
             let (n, want_n) = (pair(&got, 3 + 4 * b), pair(want, 3 + 4 * b));
             assert_eq!(n, want_n, "bin {b}: count");
             inside += n;
@@ -988,22 +988,17 @@ fn sphere_tangential_profile_matches_its_reference() {
             );
             let r = &refs[1].data[3 * b..3 * b + 3];
             assert!(
-                (profile[b][0] - r[0]).abs() < 1e-5,
+                (row[0] - r[0]).abs() < 1e-5,
                 "bin {b}: centre {:?} {r:?}",
-                profile[b]
+                row
             );
             for c in 1..3 {
-                assert_eq!(
-                    profile[b][c].is_nan(),
-                    r[c].is_nan(),
-                    "bin {b}: {:?} {r:?}",
-                    profile[b]
-                );
+                assert_eq!(row[c].is_nan(), r[c].is_nan(), "bin {b}: {:?} {r:?}", row);
                 if !r[c].is_nan() {
                     assert!(
-                        (profile[b][c] - r[c]).abs() < 1e-5 * r[c].abs().max(1.0),
+                        (row[c] - r[c]).abs() < 1e-5 * r[c].abs().max(1.0),
                         "bin {b}: {:?} {r:?}",
-                        profile[b]
+                        row
                     );
                 }
             }
