@@ -110,7 +110,7 @@ pub(super) fn mpcd_sphere_profile_kind() -> NodeKind {
     .param(ParamSpec::integer("sphere", Some(0.0), 0.0, u32::MAX as f64, "the sphere (row of sphere_positions) the cylinder goes through"))
     .param(vector_param("axis", [0.0, 1.0, 0.0], "direction e of the cylinder's axis (normalised)"))
     .param(vector_param("tangent", [1.0, 0.0, 0.0], "direction of the velocity component measured (normalised; perpendicular to axis)"))
-    .param(ParamSpec::number("length", None, 1e-18, 1e18, "cylinder length L_C, centred on the sphere's centre; with the radius within half the shortest box length of the centre (sqrt((L_C/2)^2 + R_C^2) < L/2: one periodic image)"))
+    .param(ParamSpec::number("length", None, 1e-18, 1e18, "cylinder length L_C, centred on the sphere's centre; the cylinder within half a box length of the centre along each periodic axis (particles are taken at their nearest image of the centre)"))
     .param(ParamSpec::number("radius", None, 1e-18, 1e18, "cylinder radius R_C (the source: 0.1 R)"))
     .param(ParamSpec::number("bins_per_cell", Some(10.0), 1e-6, 1e6, "bins per cell length a (the source's alpha: 10)"))
     .param(ParamSpec::integer("warmup", Some(0.0), 0.0, u32::MAX as f64, "steps before the first sample"))
@@ -130,16 +130,23 @@ pub(super) fn mpcd_sphere_profile_kind() -> NodeKind {
             ));
         }
         let (length, radius) = (p.number("length"), p.number("radius"));
-        let reach = ((0.5 * length).powi(2) + radius * radius).sqrt();
-        let shortest = geo.lengths.iter().cloned().fold(f64::MAX, f64::min);
-        if reach >= 0.5 * shortest {
-            return Err(format!(
-                "the cylinder (`length` {}, `radius` {}) reaches {} from the sphere's centre, not below half the shortest box length {}: a particle would be in it by two periodic images",
-                num(length),
-                num(radius),
-                num(reach),
-                num(shortest)
-            ));
+        // The particles are taken at their nearest image of the sphere's centre: the
+        // cylinder must lie within half a box length of it along every periodic axis.
+        for a in 0..3 {
+            if geo.walls && a == 2 {
+                continue;
+            }
+            let extent = 0.5 * length * axis[a].abs() + radius * (1.0 - axis[a] * axis[a]).max(0.0).sqrt();
+            if extent > 0.5 * geo.lengths[a] * (1.0 + 1e-9) {
+                return Err(format!(
+                    "the cylinder (`length` {}, `radius` {}, `axis` {:?}) reaches {} from the sphere's centre along axis {a}, more than half the box length {}: particles seen by the nearest periodic image of the centre would leave part of it empty",
+                    num(length),
+                    num(radius),
+                    p.numbers("axis"),
+                    num(extent),
+                    num(geo.lengths[a])
+                ));
+            }
         }
         let per_length = p.number("bins_per_cell") / geo.cell;
         let bins = (length * per_length).ceil();
