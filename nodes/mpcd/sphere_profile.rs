@@ -132,11 +132,11 @@ pub(super) fn mpcd_sphere_profile_kind() -> NodeKind {
         let (length, radius) = (p.number("length"), p.number("radius"));
         // The particles are taken at their nearest image of the sphere's centre: the
         // cylinder must lie within half a box length of it along every periodic axis.
-        for a in 0..3 {
+        for (a, &e) in axis.iter().enumerate() {
             if geo.walls && a == 2 {
                 continue;
             }
-            let extent = 0.5 * length * axis[a].abs() + radius * (1.0 - axis[a] * axis[a]).max(0.0).sqrt();
+            let extent = 0.5 * length * e.abs() + radius * (1.0 - e * e).max(0.0).sqrt();
             if extent > 0.5 * geo.lengths[a] * (1.0 + 1e-9) {
                 return Err(format!(
                     "the cylinder (`length` {}, `radius` {}, `axis` {:?}) reaches {} from the sphere's centre along axis {a}, more than half the box length {}: particles seen by the nearest periodic image of the centre would leave part of it empty",
