@@ -48,6 +48,7 @@ mod sphere_profile;
 mod spheres;
 mod stream;
 mod stream_bin;
+mod virial;
 
 use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry, RowError};
 use crate::value::{HostArray, HostData, PortType, ValueType};
@@ -678,6 +679,7 @@ pub fn register(r: &mut Registry) {
     r.add(sphere_coupling::mpcd_sphere_force_kind());
     r.add(sphere_coupling::mpcd_sphere_move_kind());
     r.add(sphere_profile::mpcd_sphere_profile_kind());
+    r.add(virial::mpcd_virial_kind());
     r.add(collide::mpcd_bin_kind());
     r.add(collide::mpcd_collide_kind());
     r.add(solute::mpcd_bin_solute_kind());
