@@ -620,6 +620,15 @@ impl RowError {
     }
 }
 
+/// Rows of host data a node refuses together ([`Node::check_inputs_together`]): the port
+/// and row it blames, and what is wrong (naming the other rows involved).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PortRowError {
+    pub port: usize,
+    pub row: usize,
+    pub message: String,
+}
+
 /// A node instance with checked params.
 pub trait Node: Send + Sync {
     /// Output types for the given input types (`None`: an absent optional input) on an
@@ -673,6 +682,23 @@ pub trait Node: Send + Sync {
     /// Whether `check_input` looks at any data: false lets uploads skip holding the data
     /// on the host for it (nodes that check return true).
     fn checks_input(&self) -> bool {
+        false
+    }
+
+    /// Checks the data given from the host for several input ports together, where one
+    /// port's rows are only wrong beside another's (sphere centres with their radii: two
+    /// spheres that overlap): `data[port]` is the data given for the port (as for
+    /// `check_input`, this upload's or the last one's), `None` where the port reads no
+    /// graph input. Runs after every `check_input` passed. The refusal names the port
+    /// and row it blames. Default: any data.
+    fn check_inputs_together(&self, data: &[Option<&HostArray>]) -> Result<(), PortRowError> {
+        let _ = data;
+        Ok(())
+    }
+
+    /// Whether `check_inputs_together` looks at any data (then the program keeps a host
+    /// copy of the inputs it reads, for uploads that give only some of them).
+    fn checks_inputs_together(&self) -> bool {
         false
     }
 

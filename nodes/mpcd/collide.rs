@@ -321,6 +321,13 @@ pub(super) fn mpcd_collide_kind() -> NodeKind {
         "whether mpcd_bin shifts the grid (with walls, the first and last layers are then cut cells)",
     ))
     .param(rule_param())
+    .param(ParamSpec::integer(
+        "shift_stream",
+        Some(-1.0),
+        -1.0,
+        u32::MAX as f64,
+        "rule biased with plates: the `stream` of the mpcd_bin whose sums this node reads (its grid shift says which layers the plates cut); -1: not given (refused there)",
+    ))
     .param(ParamSpec::number(
         "acceptance",
         Some(0.01),
@@ -384,6 +391,11 @@ pub(super) fn mpcd_collide_kind() -> NodeKind {
         u.ghosts = u32::from(p.flag("ghosts"));
         u.thermostat = thermostat;
         u.mc_c = p.number("mc_scale") as f32;
+        let shift_stream = p.number("shift_stream");
+        if biased && geo.walls && u.shift == 1 && shift_stream < 0.0 {
+            return Err("rule `biased` with plates needs `shift_stream`: the `stream` of the mpcd_bin whose sums this node reads (its grid shift says which cell layers the plates cut)".into());
+        }
+        u.shift_stream = shift_stream.max(0.0) as u32;
         key_into(&mut u, p);
         let (seed, stream) = key_of(p);
         Ok(Box::new(MpcdCollide {
@@ -481,6 +493,46 @@ impl MpcdCollide {
         )
     }
 
+    /// Whether the plates cut cell c at `step` (f64 twin of the kernel's `wall_cut`).
+    fn wall_cut(&self, c: u32, step: u64) -> bool {
+        if !self.geo.walls || self.u.shift == 0 {
+            return false;
+        }
+        let d = self.geo.dims();
+        let layer = self.geo.layer(c);
+        let last = self.geo.cells[d - 1] - 1;
+        if self.u.rule == 0 {
+            return layer == 0 || layer == last;
+        }
+        let s = grid_shift(2.0 * self.geo.cell, step, self.seed, self.u.shift_stream)[d - 1]
+            / self.geo.cell;
+        let lo = layer as f64 - 1.0 - s;
+        lo < 0.0 || lo + 1.0 > (last - 1) as f64
+    }
+
+    /// Cell c's mean `u` and mass `mass` (units of m) with the virtual particles of a
+    /// wall-cut cell holding fewer than `density` solvent particles (f64 twin of the
+    /// kernel's `filled`).
+    fn filled(&self, c: u32, step: u64, sums: &[f64], u: [f64; 3], mass: f64) -> ([f64; 3], f64) {
+        let count = SumsLayout::block(sums, c as usize)[0];
+        if self.u.ghosts == 0 || count >= self.density || !self.wall_cut(c, step) {
+            return (u, mass);
+        }
+        let g = self.block(c, step, 2);
+        let r0 = (-2.0 * open01(g[0]).ln()).sqrt();
+        let r1 = (-2.0 * open01(g[2]).ln()).sqrt();
+        let t0 = 2.0 * std::f64::consts::PI * open01(g[1]);
+        let t1 = 2.0 * std::f64::consts::PI * open01(g[3]);
+        let sd = (self.kt / (self.mass * (self.density - count))).sqrt();
+        let q = [r0 * t0.cos() * sd, r0 * t0.sin() * sd, r1 * t1.cos() * sd];
+        let extra = self.density - count;
+        let mut out = [0.0; 3];
+        for a in 0..self.geo.dims() {
+            out[a] = (mass * u[a] + extra * q[a]) / (mass + extra);
+        }
+        (out, mass + extra)
+    }
+
     /// Cell c's mean velocity and mass in units of m (the count, plus M/m times the
     /// solute count with a solute: `solute` is (M/m, the solute counts)).
     fn mean(&self, c: u32, sums: &[f64], solute: Option<(f64, &[f64])>) -> ([f64; 3], f64) {
@@ -552,6 +604,7 @@ impl MpcdCollide {
         let norm = (s.iter().map(|x| x * x).sum::<f64>()).sqrt();
         s.iter_mut().for_each(|x| *x /= norm);
         let (u2, n2) = self.mean(cp, sums, solute);
+        let (u2, n2) = self.filled(cp, step, sums, u2, n2);
         let du: f64 = (0..3).map(|a| s[a] * (u1[a] - u2[a])).sum();
         let p = if du > 0.0 && n2 > 0.0 {
             (self.u.accept_a as f64 * du * n1 * n2).tanh()
@@ -618,7 +671,6 @@ impl Node for MpcdCollide {
         let cells = &inputs[1].as_ref().expect("required").data;
         let sums = &inputs[2].as_ref().expect("required").data;
         let (fix_v, fix_e) = (self.u.fix_v as f64, self.u.fix_e as f64);
-        let w_layers = self.geo.cells[d - 1];
         let layout =
             SumsLayout::of_words(self.geo.ncells(), sums.len() as u64).expect("checked in infer");
         // With a solute: M / m and the solute count per cell (mpcd_bin_solute's layout).
@@ -648,23 +700,9 @@ impl Node for MpcdCollide {
                 0.0
             };
             let mut scale = 1.0;
-            let layer = self.geo.layer(c);
-            let cut = self.u.rule == 0
-                && self.geo.walls
-                && self.u.shift == 1
-                && (layer == 0 || layer == w_layers - 1);
-            if self.u.ghosts == 1 && cut && count < self.density {
-                let g = self.block(c, cx.step, 2);
-                let r0 = (-2.0 * open01(g[0]).ln()).sqrt();
-                let r1 = (-2.0 * open01(g[2]).ln()).sqrt();
-                let t0 = 2.0 * std::f64::consts::PI * open01(g[1]);
-                let t1 = 2.0 * std::f64::consts::PI * open01(g[3]);
-                let sd = (self.kt / (self.mass * (self.density - count))).sqrt();
-                let q = [r0 * t0.cos() * sd, r0 * t0.sin() * sd, r1 * t1.cos() * sd];
-                for a in 0..d {
-                    u[a] = (mass_n * u[a] + (self.density - count) * q[a])
-                        / (mass_n + self.density - count);
-                }
+            let mut mass_eff = mass_n;
+            if self.u.ghosts == 1 && count < self.density && self.wall_cut(c, cx.step) {
+                (u, mass_eff) = self.filled(c, cx.step, sums, u, mass_n);
             } else if self.u.thermostat != 0 && count_all >= 2.0 && rel > 0.0 {
                 let dof = d as f64 * (count_all - 1.0);
                 if self.u.thermostat == 1 {
@@ -689,7 +727,7 @@ impl Node for MpcdCollide {
                 for a in 0..d {
                     vt[a] = u[a] + scale * dv[a];
                 }
-                let out = self.biased(c, cx.step, u, mass_n, vt, sums, solute);
+                let out = self.biased(c, cx.step, u, mass_eff, vt, sums, solute);
                 outputs[0].data[p * d..(p + 1) * d].copy_from_slice(&out[..d]);
                 continue;
             }

@@ -69,6 +69,7 @@ pub(super) fn mpcd_measure_kind() -> NodeKind {
     .params(geometry_params())
     .params(thermal_params())
     .param(bins_param())
+    .param(super::rule_param())
     .param(ParamSpec::integer(
         "warmup",
         Some(0.0),

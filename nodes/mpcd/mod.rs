@@ -44,9 +44,11 @@ mod init;
 mod measure;
 mod solute;
 mod sphere_coupling;
+mod sphere_profile;
 mod spheres;
 mod stream;
 mod stream_bin;
+mod virial;
 
 use crate::node::{ParamKind, ParamSpec, Params, PortError, PortSpec, Registry, RowError};
 use crate::value::{HostArray, HostData, PortType, ValueType};
@@ -220,6 +222,10 @@ pub(crate) struct Uniform {
     pub ratio: f32,
     /// 1: the cell sums carry sum |v|^2 per cell (a thermostat needs them).
     pub energy: u32,
+    /// The stream of mpcd_bin's grid shift (mpcd_collide, MPCD-BC with plates: which
+    /// layers the plates cut).
+    pub shift_stream: u32,
+    pub pad: [u32; 3],
 }
 
 /// Box, cells and walls, shared by the MPCD kinds.
@@ -228,8 +234,10 @@ pub(crate) struct Geometry {
     pub lengths: Vec<f64>,
     pub cell: f64,
     pub walls: bool,
-    /// Cells per axis (the walled axis: L/a + 1 layers).
+    /// Cells per axis (the walled axis: L/a + 1 layers, L/a + 2 for MPCD-BC).
     pub cells: Vec<u32>,
+    /// MPCD-BC's grid (a kind whose `rule` is biased): the shift spans 2a.
+    pub biased: bool,
 }
 
 impl Geometry {
@@ -237,6 +245,11 @@ impl Geometry {
         let lengths = p.numbers("box").to_vec();
         let cell = p.number("cell");
         let walls = p.text("walls") == "plates";
+        // MPCD-BC's grid shift spans 2a: one layer more on the walled axis (kinds with a
+        // `rule`).
+        let biased = u32::from(
+            matches!(p.get("rule"), Some(crate::expr::ParamValue::Text(t)) if t == "biased"),
+        );
         if !(2..=3).contains(&lengths.len()) {
             return Err(format!("`box` needs 2 or 3 lengths, got {}", lengths.len()));
         }
@@ -254,7 +267,8 @@ impl Geometry {
                     r.round()
                 ));
             }
-            cells.push(r.round() as u32 + u32::from(walls && a == lengths.len() - 1));
+            cells
+                .push(r.round() as u32 + (1 + biased) * u32::from(walls && a == lengths.len() - 1));
         }
         let total: f64 = cells.iter().map(|&c| c as f64).product();
         if total * (CELL_WORDS as f64 + 3.0) + 1.0 > u32::MAX as f64 {
@@ -268,6 +282,7 @@ impl Geometry {
             cell,
             walls,
             cells,
+            biased: biased == 1,
         })
     }
 
@@ -329,7 +344,16 @@ impl Geometry {
             let nc = self.cells[a] as i64;
             let l = self.lengths[a];
             let i = if self.walls && a == d - 1 {
-                (((x[a] + 0.5 * l + s[a] + 0.5 * self.cell) / self.cell).floor() as i64)
+                (((x[a]
+                    + 0.5 * l
+                    + s[a]
+                    + if self.biased {
+                        self.cell
+                    } else {
+                        0.5 * self.cell
+                    })
+                    / self.cell)
+                    .floor() as i64)
                     .clamp(0, nc - 1)
             } else {
                 (((x[a] + 0.5 * l + s[a]) / self.cell).floor() as i64).rem_euclid(nc)
@@ -598,13 +622,11 @@ pub(crate) fn check_rule(geo: &Geometry, biased: bool) -> Result<(), String> {
     if !biased {
         return Ok(());
     }
-    if geo.walls {
-        return Err("rule `biased` supports periodic boxes only (walls none)".into());
-    }
+    // With plates the walled axis has L/a + 2 layers: even with L/a.
     if geo.cells.iter().any(|c| c % 2 != 0) {
+        let cells: Vec<f64> = geo.lengths.iter().map(|l| (l / geo.cell).round()).collect();
         return Err(format!(
-            "rule `biased` needs an even number of cells per axis (supercells of 2), got {:?}",
-            geo.cells
+            "rule `biased` needs an even number of cells per axis (supercells of 2), got {cells:?}"
         ));
     }
     Ok(())
@@ -615,7 +637,7 @@ pub(crate) fn rule_param() -> ParamSpec {
         "rule",
         "srd",
         &["srd", "biased"],
-        "srd: rotations within cells; biased: Ihle's biased collisions between cell pairs of 2 x 2 (x 2) supercells (MPCD-BC; grid shift in [-a, a); periodic boxes of even cell counts only)",
+        "srd: rotations within cells; biased: Ihle's biased collisions between cell pairs of 2 x 2 (x 2) supercells (MPCD-BC; grid shift in [-a, a); even cell counts per axis; with plates one more layer of cells on the walled axis, the layers the plates cut filled up to `density` with virtual particles (mpcd_collide's `ghosts`) for the pairs' means and acceptance)",
     )
 }
 
@@ -656,6 +678,8 @@ pub fn register(r: &mut Registry) {
     r.add(sphere_coupling::mpcd_sphere_fill_kind());
     r.add(sphere_coupling::mpcd_sphere_force_kind());
     r.add(sphere_coupling::mpcd_sphere_move_kind());
+    r.add(sphere_profile::mpcd_sphere_profile_kind());
+    r.add(virial::mpcd_virial_kind());
     r.add(collide::mpcd_bin_kind());
     r.add(collide::mpcd_collide_kind());
     r.add(solute::mpcd_bin_solute_kind());

@@ -7,8 +7,8 @@
 //! sphere's mass; no rotation: the source treats translation only).
 
 use super::spheres::{
-    SPHERE_WORDS, SphereUniform, check_sphere_rows, fx_round_wide, impulse_of, impulse_words,
-    sphere_count, sphere_ports, spheres_of,
+    SPHERE_WORDS, SphereUniform, check_sphere_layout, check_sphere_rows, fx_round_wide, impulse_of,
+    impulse_words, sphere_count, sphere_ports, spheres_of,
 };
 use super::{
     F32_SCALE, Geometry, geometry_params, key_into, key_of, num, thermal_params, thermal_unit,
@@ -16,8 +16,8 @@ use super::{
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, RowError,
-    Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortRowError, PortSpec,
+    RefCtx, RowError, Signature,
 };
 use crate::nodes::random;
 use crate::value::{HostArray, HostData, PortType, RefArray, ValueType};
@@ -167,6 +167,14 @@ impl Node for MpcdSphereFill {
             }
         }
         Ok(())
+    }
+
+    fn checks_inputs_together(&self) -> bool {
+        true
+    }
+
+    fn check_inputs_together(&self, data: &[Option<&HostArray>]) -> Result<(), PortRowError> {
+        check_sphere_layout(&self.geo, data, 0)
     }
 
     fn notes(&self, _: &[Option<ValueType>]) -> Vec<String> {

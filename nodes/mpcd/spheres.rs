@@ -18,8 +18,8 @@ use crate::gpu::{
     Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Period, Slot, WG_1D,
 };
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, RowError,
-    Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortRowError, PortSpec, RefCtx,
+    RowError, Signature,
 };
 use crate::nodes::random;
 use crate::nodes::sort::SortNode;
@@ -166,6 +166,72 @@ pub(crate) fn check_sphere_rows(
             Ok(())
         }
     }
+}
+
+/// Checks given spheres together (`Node::check_inputs_together` of every sphere node):
+/// `data[first]` the centres (S x 3), `data[first + 1]` the radii (S x 1), where both
+/// are given. Refuses two spheres that overlap (centres, by the nearest periodic image,
+/// closer than the sum of their radii: the solvent between them, the bounces and the
+/// virtual particles of both would be wrong) and, with plates, a sphere that reaches
+/// through a plate (centre closer to it than its radius). The error names the spheres
+/// (rows) and the distance; it blames the centres' port, the later sphere's row.
+pub(crate) fn check_sphere_layout(
+    geo: &Geometry,
+    data: &[Option<&HostArray>],
+    first: usize,
+) -> Result<(), PortRowError> {
+    let (Some(Some(centres)), Some(Some(radii))) = (data.get(first), data.get(first + 1)) else {
+        return Ok(());
+    };
+    let (HostData::F32(c), HostData::F32(r)) = (&centres.data, &radii.data) else {
+        return Ok(());
+    };
+    let s = r.len().min(c.len() / 3);
+    let centre = |j: usize| -> [f64; 3] { std::array::from_fn(|a| c[3 * j + a] as f64) };
+    let refuse = |row: usize, message: String| PortRowError {
+        port: first,
+        row,
+        message,
+    };
+    if geo.walls {
+        let h = 0.5 * geo.lengths[2];
+        for (j, &rj) in r.iter().enumerate().take(s) {
+            let (z, rj) = (centre(j)[2], rj as f64);
+            let gap = h - z.abs();
+            if gap < rj {
+                return Err(refuse(
+                    j,
+                    format!(
+                        "sphere {j} (centre z = {}, radius {}) reaches through the plate at z = {}: its centre is {} from the plate, less than its radius",
+                        num(z),
+                        num(rj),
+                        num(if z < 0.0 { -h } else { h }),
+                        num(gap)
+                    ),
+                ));
+            }
+        }
+    }
+    for j in 1..s {
+        for i in 0..j {
+            let d = min_image(geo, std::array::from_fn(|a| centre(j)[a] - centre(i)[a]));
+            let dist = dot(d, d).sqrt();
+            let reach = r[i] as f64 + r[j] as f64;
+            if dist < reach {
+                return Err(refuse(
+                    j,
+                    format!(
+                        "spheres {i} and {j} overlap: their centres are {} apart (nearest periodic image), less than the sum of their radii {} + {} = {}",
+                        num(dist),
+                        num(r[i] as f64),
+                        num(r[j] as f64),
+                        num(reach)
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The minimum image of a displacement on the periodic axes (f64 twin of `min_image`).
@@ -411,6 +477,14 @@ impl Node for MpcdStreamSpheres {
             1 => check_rows(&self.stream.geo, Rows::Velocities(Some(self.vth)), data),
             _ => check_sphere_rows(&self.stream.geo, port - 2, data, self.vth),
         }
+    }
+
+    fn checks_inputs_together(&self) -> bool {
+        true
+    }
+
+    fn check_inputs_together(&self, data: &[Option<&HostArray>]) -> Result<(), PortRowError> {
+        check_sphere_layout(&self.stream.geo, data, 2)
     }
 
     fn notes(&self, inputs: &[Option<ValueType>]) -> Vec<String> {
@@ -712,6 +786,14 @@ impl Node for MpcdSphereExclude {
             }
         }
         Ok(())
+    }
+
+    fn checks_inputs_together(&self) -> bool {
+        true
+    }
+
+    fn check_inputs_together(&self, data: &[Option<&HostArray>]) -> Result<(), PortRowError> {
+        check_sphere_layout(&self.geo, data, 1)
     }
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {

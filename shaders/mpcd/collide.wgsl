@@ -4,12 +4,14 @@
 // factor (1, plain rescaling of the relative velocities to kT, or the Monte-Carlo cell
 // scaling). Each cell's draws come from one Philox block keyed by (seed, stream + j, step,
 // cell), so every particle of a cell recomputes the same rotation without a pass over the
-// cells. Wall-cut cells (first and last layer along the walled axis, with the grid shift)
+// cells. Wall-cut cells (`wall_cut`: the first and last layer along the walled axis with
+// the grid shift; with MPCD-BC those of the first and last two that the plates cut)
 // holding fewer than `density` solvent particles are filled up to it with virtual
 // particles: u <- (n_m u + (M - n) q) / (n_m + M - n), n_m the cell's mass in units of m,
 // q normal of variance kT / (m (M - n)) per component (the mean of M - n thermal
 // particles); those cells skip the thermostat. MPCD-BC (rule 1): the thermostat, then
-// `biased` below. With a solute (m.solute = 1, sums from mpcd_bin_solute) u is the
+// `biased` below, where a wall-cut cell (this one or the partner) enters with its virtual
+// particles' mean and mass (`filled`): the wall's cells are partners too. With a solute (m.solute = 1, sums from mpcd_bin_solute) u is the
 // mass-weighted mean, the thermostat counts the relative energy and the degrees of freedom
 // of both species, MPCD-BC takes the cells' masses in units of m for n1 and n2 (the counts
 // without a solute; the pair reflection about the mass-weighted u_P conserves momentum
@@ -51,6 +53,47 @@ fn cell_mean(c: u32) -> vec4<f32> {
         sv[a] = fx_to_f32(pair(base + SUM_V + 2u * a));
     }
     return vec4<f32>(sv / (select(1.0, n, n > 0.0) * m.fix_v), n);
+}
+
+// Whether the plates cut cell c in this step's grid: with SRD the first and last layer
+// along the walled axis (the shift is within a/2); with MPCD-BC (L/a + 2 layers, shift s in
+// [-a, a) drawn from mpcd_bin's stream) the layers whose extent [l - 1, l) a - s along the
+// walled axis reaches past a plate: the first two and last two may be cut, or lie wholly
+// in a wall (then they hold no particle and are all virtual).
+fn wall_cut(c: u32, step: u32) -> bool {
+    if (m.walls == 0u || m.shift == 0u) {
+        return false;
+    }
+    let layer = cell_layer(m, c);
+    let last = m.cells[DIMS - 1u] - 1u;
+    if (m.rule == 0u) {
+        return layer == 0u || layer == last;
+    }
+    let s = grid_shift_of(m, step, m.shift_stream)[DIMS - 1u] / m.cell;
+    let lo = f32(layer) - 1.0 - s;
+    return lo < 0.0 || lo + 1.0 > f32(last - 1u);
+}
+
+// Cell c's mean velocity and mass `um` (units of m) with the virtual particles of a
+// wall-cut cell holding fewer than `density` solvent particles (Lamura et al.; S2 Eq. 4.9):
+// u <- (n_m u + (M - n) q) / (n_m + M - n), q normal of variance kT / (m (M - n)) per
+// component (the mean of M - n thermal particles), mass n_m + M - n; other cells as given.
+fn filled(c: u32, step: u32, um: vec4<f32>) -> vec4<f32> {
+    let n = f32(sums[c * CELL_WORDS]);
+    if (m.ghosts == 0u || n >= m.density || !wall_cut(c, step)) {
+        return um;
+    }
+    let g = cell_block(c, step, 2u);
+    let r0 = sqrt(-2.0 * log(philox_open01(g.x)));
+    let r1 = sqrt(-2.0 * log(philox_open01(g.z)));
+    let t0 = 6.283185307179586 * philox_open01(g.y);
+    let t1 = 6.283185307179586 * philox_open01(g.w);
+    let q = vec3<f32>(r0 * cos(t0), r0 * sin(t0), r1 * cos(t1)) * sqrt(m.kt / (m.mass * (m.density - n)));
+    var u = (um.w * um.xyz + (m.density - n) * q) / (um.w + m.density - n);
+    if (DIMS == 2u) {
+        u.z = 0.0;
+    }
+    return vec4<f32>(u, um.w + m.density - n);
 }
 
 // MPCD-BC (Ihle's biased collisions) for a particle of cell c with velocity v (after the
@@ -99,7 +142,7 @@ fn biased(c: u32, step: u32, u1: vec3<f32>, n1: f32, v: vec3<f32>) -> vec3<f32> 
     let o = vec3<f32>(i & vec3<u32>(1u));
     let sgn = (vec3<f32>(1.0) - 2.0 * o) * vec3<f32>(flip);
     let s = sgn / sqrt(dot(sgn, sgn));
-    let other = cell_mean(cp);
+    let other = filled(cp, step, cell_mean(cp));
     let n2 = other.w;
     let du = dot(s, u1 - other.xyz);
     var p = 0.0;
@@ -148,19 +191,12 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         rel = max(fx_to_f32(pair(energy_word(m, c))) / m.fix_e - mass_n * dot(u, u), 0.0);
     }
     var scale = 1.0;
-    let layer = cell_layer(m, c);
-    let cut = m.rule == 0u && m.walls == 1u && m.shift == 1u && (layer == 0u || layer == m.cells[DIMS - 1u] - 1u);
-    if (m.ghosts == 1u && cut && n < m.density) {
-        let g = cell_block(c, step, 2u);
-        let r0 = sqrt(-2.0 * log(philox_open01(g.x)));
-        let r1 = sqrt(-2.0 * log(philox_open01(g.z)));
-        let t0 = 6.283185307179586 * philox_open01(g.y);
-        let t1 = 6.283185307179586 * philox_open01(g.w);
-        let q = vec3<f32>(r0 * cos(t0), r0 * sin(t0), r1 * cos(t1)) * sqrt(m.kt / (m.mass * (m.density - n)));
-        u = (mass_n * u + (m.density - n) * q) / (mass_n + m.density - n);
-        if (DIMS == 2u) {
-            u.z = 0.0;
-        }
+    // A wall-cut cell with virtual particles: their mean and mass, no thermostat.
+    var mass_eff = mass_n;
+    if (m.ghosts == 1u && n < m.density && wall_cut(c, step)) {
+        let f = filled(c, step, vec4<f32>(u, mass_n));
+        u = f.xyz;
+        mass_eff = f.w;
     } else if (m.thermostat != 0u && count_all >= 2u && rel > 0.0) {
         let dof = f32(DIMS * (count_all - 1u));
         if (m.thermostat == 1u) {
@@ -177,7 +213,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     let d = v - u;
     if (m.rule == 1u) {
-        let out = biased(c, step, u, mass_n, u + scale * d);
+        let out = biased(c, step, u, mass_eff, u + scale * d);
         for (var a = 0u; a < DIMS; a = a + 1u) {
             vel_out[p * DIMS + a] = out[a];
         }

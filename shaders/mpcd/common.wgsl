@@ -45,6 +45,10 @@ struct Mpcd {
     solute: u32,           // 1: the cell sums carry a solute (mpcd_bin_solute's layout)
     ratio: f32,            // solute mass over solvent mass M / m
     energy: u32,           // 1: the cell sums carry sum |v|^2 per cell (for a thermostat)
+    shift_stream: u32,     // mpcd_collide: the stream of mpcd_bin's grid shift (MPCD-BC with plates)
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // The cell sums (nodes/mpcd/mod.rs, SumsLayout): per cell CELL_WORDS words, the count and
@@ -117,10 +121,15 @@ fn fx_to_f32(p: vec2<u32>) -> f32 {
 // for MPCD-BC (collisions within supercells of 2 x 2 (x 2) cells), one Philox block
 // (block 0 of (seed, stream) at this step); zero when the shift is off.
 fn grid_shift(m: Mpcd, step: u32) -> vec3<f32> {
+    return grid_shift_of(m, step, m.stream);
+}
+
+// The grid shift drawn from `stream` (mpcd_collide: mpcd_bin's).
+fn grid_shift_of(m: Mpcd, step: u32, stream: u32) -> vec3<f32> {
     if (m.shift == 0u) {
         return vec3<f32>(0.0);
     }
-    let w = philox_block(0u, step, m.seed_lo, m.seed_hi, m.stream);
+    let w = philox_block(0u, step, m.seed_lo, m.seed_hi, stream);
     let u = vec3<f32>(vec3<u32>(w.x, w.y, w.z) >> vec3<u32>(8u)) * (1.0 / 16777216.0);
     return (u - vec3<f32>(0.5)) * (m.cell * f32(1u + m.rule));
 }
@@ -128,7 +137,8 @@ fn grid_shift(m: Mpcd, step: u32) -> vec3<f32> {
 // Linear cell index ix + nx (iy + ny iz) of a position x for grid shift s: per axis
 // floor((x + L/2 + s) / a) wrapped on periodic axes; on the walled axis (the last)
 // floor((x + L/2 + s + a/2) / a) in [0, L/a] (L/a + 1 layers, the first and last cut by
-// the walls when shifted). In 2D the unused z axis has one cell (iz = 0).
+// the walls when shifted); with MPCD-BC (shift in [-a, a)) floor((x + L/2 + s + a) / a)
+// in [0, L/a + 1] (L/a + 2 layers, an even count: whole supercells). In 2D the unused z axis has one cell (iz = 0).
 //
 // All axes at once in vector arithmetic, without indexing `m` by axis: the form before, a
 // loop over the axes reading m.cells[a] and m.box[a] of the struct passed by value with
@@ -142,7 +152,7 @@ fn cell_of(m: Mpcd, x: vec3<f32>, s: vec3<f32>) -> u32 {
     let periodic = vec3<i32>(floor(y / m.cell));
     var i = vec3<u32>(((periodic % nc) + nc) % nc);
     if (m.walls == 1u) {
-        let layer = clamp(vec3<i32>(floor((y + 0.5 * m.cell) / m.cell)), vec3<i32>(0), nc - 1);
+        let layer = clamp(vec3<i32>(floor((y + 0.5 * m.cell * f32(1u + m.rule)) / m.cell)), vec3<i32>(0), nc - 1);
         i = select(i, vec3<u32>(layer), vec3<u32>(0u, 1u, 2u) == vec3<u32>(DIMS - 1u));
     }
     return i.x + m.cells.x * (i.y + m.cells.y * i.z);

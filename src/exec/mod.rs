@@ -216,6 +216,9 @@ pub struct Program<'a> {
     /// The inputs whose last upload held NaN or infinite values: then NaN or infinite
     /// outputs may come from them, and [`Program::check_finite`] does not judge.
     non_finite_inputs: std::collections::BTreeSet<String>,
+    /// Host copies of the last data of the inputs that nodes check together
+    /// (`Node::check_inputs_together`), for uploads that give only some of them.
+    joint_inputs: BTreeMap<usize, HostArray>,
     /// One host-visible buffer per output, kept between reads (the plan's order).
     readback: Vec<wgpu::Buffer>,
     /// Host time of the batched runs so far.
@@ -314,6 +317,7 @@ impl<'a> Program<'a> {
             steps_done: 0,
             iterations: Vec::new(),
             non_finite_inputs: Default::default(),
+            joint_inputs: BTreeMap::new(),
             readback: Vec::new(),
             host_times: HostTimes::default(),
         };
@@ -519,6 +523,23 @@ impl<'a> Program<'a> {
             }
             given.push((i, name, words));
         }
+        let joint = self.graph.jointly_checked_inputs(&self.plan.pruned);
+        let arrays: BTreeMap<usize, HostArray> = given
+            .iter()
+            .filter(|(i, _, _)| joint.contains(i))
+            .map(|&(i, _, words)| {
+                let t = self
+                    .plan
+                    .inputs
+                    .iter()
+                    .find(|(j, _)| *j == i)
+                    .expect("found")
+                    .1;
+                (i, words.to_array(t))
+            })
+            .collect();
+        self.check_joint(&arrays)?;
+        self.joint_inputs.extend(arrays);
         for (i, name, words) in given {
             if words.all_finite() {
                 self.non_finite_inputs.remove(name);
@@ -565,6 +586,17 @@ impl<'a> Program<'a> {
                 })?;
             given.push((i, a));
         }
+        let joint = self.graph.jointly_checked_inputs(&self.plan.pruned);
+        let arrays: BTreeMap<usize, HostArray> = given
+            .iter()
+            .filter(|(i, _)| joint.contains(i))
+            .map(|&(&i, a)| (i, a.clone()))
+            .collect();
+        self.check_joint(&arrays)?;
+        if all {
+            self.joint_inputs.clear();
+        }
+        self.joint_inputs.extend(arrays);
         if all {
             self.non_finite_inputs.clear();
         }
@@ -582,6 +614,23 @@ impl<'a> Program<'a> {
             }
         }
         Ok(())
+    }
+
+    /// The checks of data by several inputs together (`Node::check_inputs_together`) on
+    /// `given` (input index to data) beside the kept copies of the other inputs.
+    fn check_joint(&self, given: &BTreeMap<usize, HostArray>) -> Result<(), ExecError> {
+        if given.is_empty() {
+            return Ok(());
+        }
+        self.graph
+            .check_joint_input_data(
+                |i| given.get(&i).or_else(|| self.joint_inputs.get(&i)),
+                &self.plan.pruned,
+            )
+            .map_err(|(name, e)| ExecError::Input {
+                name,
+                message: e.to_string(),
+            })
     }
 
     /// The first input of the last upload that holds NaN or infinite values, if any.

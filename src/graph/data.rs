@@ -2,6 +2,7 @@
 //! (`Node::check_input`): a particle outside a node's walls is refused before upload,
 //! named by input, node, port and row, rather than run.
 
+use crate::ids::Id;
 use crate::value::HostArray;
 
 use super::{Graph, NodeId, Source};
@@ -100,6 +101,66 @@ impl Graph {
                     row: e.row,
                     message: e.message,
                 })?;
+        }
+        Ok(())
+    }
+
+    /// The graph inputs read by the nodes that check data together
+    /// (`Node::checks_inputs_together`), outside `skip`: the program keeps host copies of
+    /// them.
+    pub fn jointly_checked_inputs(&self, skip: &[NodeId]) -> Vec<usize> {
+        (0..self.inputs.len())
+            .filter(|&i| {
+                self.readers_of_input(i).into_iter().any(|(n, _)| {
+                    !skip.contains(&n)
+                        && matches!(&self.nodes[n].built,
+                            Ok(built) if built.node.checks_inputs_together())
+                })
+            })
+            .collect()
+    }
+
+    /// Runs every `Node::check_inputs_together` (nodes outside `skip`) on the data
+    /// `data(input)` gives for the graph inputs their ports read: the first refusal, with
+    /// the name of the input feeding the port it blames.
+    pub fn check_joint_input_data<'d>(
+        &self,
+        data: impl Fn(usize) -> Option<&'d HostArray>,
+        skip: &[NodeId],
+    ) -> Result<(), (String, InputDataError)> {
+        let mut feeding: Vec<Vec<Option<usize>>> = self
+            .nodes
+            .iter()
+            .map(|inst| vec![None; inst.inputs.len()])
+            .collect();
+        for i in 0..self.inputs.len() {
+            for (n, port) in self.readers_of_input(i) {
+                feeding[n.index()][port].get_or_insert(i);
+            }
+        }
+        for (n, inst) in self.nodes.iter_enumerated() {
+            let Ok(built) = &inst.built else { continue };
+            if skip.contains(&n) || !built.node.checks_inputs_together() {
+                continue;
+            }
+            let ports: Vec<Option<&HostArray>> = feeding[n.index()]
+                .iter()
+                .map(|i| i.and_then(&data))
+                .collect();
+            built.node.check_inputs_together(&ports).map_err(|e| {
+                let input = feeding[n.index()][e.port]
+                    .map_or_else(String::new, |i| self.inputs[i].name.clone());
+                (
+                    input,
+                    InputDataError {
+                        node: inst.id.clone(),
+                        kind: inst.kind,
+                        port: inst.input_ports[e.port].name.to_string(),
+                        row: e.row,
+                        message: e.message,
+                    },
+                )
+            })?;
         }
         Ok(())
     }

@@ -243,10 +243,15 @@ fn run_twice(gpu: &mut GpuContext, deterministic: bool) -> Vec<(String, usize, f
             .iter()
             .map(|&(name, n, k)| {
                 // Positive sizes: mpcd_spheres.json's radii (its per-sphere virtual
-                // particle count is set for 1.5) and masses.
+                // particle count is set for 1.5) and masses; its two spheres apart.
                 let a = match name {
                     "sphere_radii" => rng.array(ValueType::Particles { n, k }, 1.5, 1.5),
                     "sphere_masses" => rng.array(ValueType::Particles { n, k }, 50.0, 100.0),
+                    // Spheres apart (overlapping ones are refused).
+                    "sphere_positions" => HostArray::f32(
+                        ValueType::Particles { n, k },
+                        (0..n * k).map(|i| if i < k { -2.0 } else { 1.5 }).collect(),
+                    ),
                     _ => rows(&mut rng, n, k),
                 };
                 (name.to_string(), a)

@@ -373,3 +373,116 @@ fn biased_collisions_conserve_supercell_momentum_and_energy_and_match_the_f64_re
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// MPCD-BC between plates (S2 §4.2.3 with the biased rule): the walled axis has L/a + 2
+/// layers (the shift spans 2a), binning and collisions match their f64 references for
+/// several shifts (seeds), supercells clear of the plates conserve momentum and energy,
+/// and the cells the plates cut take part with their virtual particles: the supercells
+/// at the plates exchange momentum with the wall.
+#[test]
+fn biased_collisions_between_plates_match_the_f64_reference() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("mpcd-biased-plates");
+    let mut rng = Rng::new(17);
+    for l in [vec![6.0, 4.0, 4.0], vec![8.0, 6.0]] {
+        let d = l.len();
+        let n = 2000;
+        let mut wall_exchange = 0.0;
+        for seed in [7, 8, 9] {
+            let (x, v) = random_particles(&mut rng, n, &l);
+            let geometry = format!(
+                r#""box": {l:?}, "cell": 1, "walls": "plates", "rule": "biased", "temperature": 1"#
+            );
+            let json = format!(
+                r#"{{"mesoflow": 1,
+  "inputs": {{"x": {{"type": "particles", "rows": {n}, "cols": {d}}}, "v": {{"type": "particles", "rows": {n}, "cols": {d}}}}},
+  "nodes": [
+    {{"id": "bin", "kind": "mpcd_bin", "params": {{{geometry}, "seed": {seed}, "stream": 2}}, "inputs": {{"positions": "inputs.x", "velocities": "inputs.v"}}}},
+    {{"id": "collide", "kind": "mpcd_collide", "params": {{{geometry}, "acceptance": 0.05, "density": 5, "shift_stream": 2, "seed": {seed}, "stream": 3}}, "inputs": {{"velocities": "inputs.v", "cell": "bin.cell", "sums": "bin.sums"}}}}
+  ],
+  "outputs": {{"cell": "bin.cell", "sums": "bin.sums", "v": "collide.velocities"}}}}"#
+            );
+            let g = crate::util::load(&write_graph(&dir, "collide.json", &json));
+            let inputs: BTreeMap<String, HostArray> = [
+                ("x".to_string(), particles(&x)),
+                ("v".to_string(), particles(&v)),
+            ]
+            .into();
+            let out = run_loaded(&g, &inputs, &["cell", "sums", "v"], 1);
+            let mut dims: Vec<u32> = l.iter().map(|&x| x as u32).collect();
+            dims[d - 1] += 2;
+            let ncells: u32 = dims.iter().product();
+            assert_eq!(
+                u32s(&out["sums"]).len() as u32,
+                ncells * CELL_WORDS,
+                "{d}D: L/a + 2 layers"
+            );
+            let bin_params = format!("{{{geometry}, \"seed\": {seed}, \"stream\": 2}}");
+            let rb = reference(
+                "mpcd_bin",
+                &bin_params,
+                &[Some(&particles(&x)), Some(&particles(&v))],
+            );
+            let cells = u32s(&out["cell"]);
+            for (p, &c) in cells.iter().enumerate() {
+                assert_eq!(
+                    c as f64, rb[0].data[p],
+                    "{d}D seed {seed}: particle {p}'s cell"
+                );
+            }
+            let params = format!(
+                "{{{geometry}, \"acceptance\": 0.05, \"density\": 5, \"shift_stream\": 2, \"seed\": {seed}, \"stream\": 3}}"
+            );
+            let r = reference(
+                "mpcd_collide",
+                &params,
+                &[Some(&particles(&v)), Some(&out["cell"]), Some(&out["sums"])],
+            );
+            let worst = out["v"]
+                .data
+                .to_f64()
+                .iter()
+                .zip(&r[0].data)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                worst < 1e-5,
+                "{d}D seed {seed}: largest |gpu - f64| {worst}"
+            );
+            let vin = rows(&particles(&v), d);
+            let vout = rows(&out["v"], d);
+            let below = dims[..d - 1].iter().product::<u32>();
+            let supercell = |c: u32| {
+                let (ix, iy) = (c % dims[0], (c / dims[0]) % dims[1]);
+                let iz = if d == 3 { c / (dims[0] * dims[1]) } else { 0 };
+                ix / 2 + dims[0] / 2 * (iy / 2 + dims[1] / 2 * (iz / 2))
+            };
+            let super_cells: Vec<u32> = cells.iter().map(|&c| supercell(c)).collect();
+            let ns = dims.iter().map(|&c| c as usize / 2).product::<usize>();
+            let before = cell_moments(&super_cells, &vin, ns);
+            let after = cell_moments(&super_cells, &vout, ns);
+            let top = dims[d - 1] / 2 - 1;
+            for s in 0..ns {
+                // The supercell's layer pair: the first and last touch the plates.
+                let layer_pair = s as u32 / (below / 2u32.pow(d as u32 - 1));
+                let dp: f64 = (0..d).map(|a| (after[s].1[a] - before[s].1[a]).abs()).sum();
+                if layer_pair == 0 || layer_pair == top {
+                    wall_exchange += dp;
+                    continue;
+                }
+                assert!(dp < 1e-6 * d as f64 * before[s].0, "supercell {s} momentum");
+                assert!(
+                    (after[s].2 - before[s].2).abs() < 2e-6 * before[s].2.max(1.0),
+                    "supercell {s} energy"
+                );
+            }
+        }
+        assert!(
+            wall_exchange > 1.0,
+            "{d}D: momentum exchanged with the plates {wall_exchange}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -308,12 +308,19 @@ fn bad_mpcd_input_gets_messages_naming_file_node_and_port() {
             && e.contains("not a whole number of cells"),
         "{e}"
     );
+    // Plates take the biased rule (one more layer of cells), with L/a even too.
     let e = load(&[
         ("rule", ParamValue::Text("biased".into())),
         ("walls", ParamValue::Text("plates".into())),
     ]);
+    assert!(e.is_empty(), "{e}");
+    let e = load(&[
+        ("rule", ParamValue::Text("biased".into())),
+        ("walls", ParamValue::Text("plates".into())),
+        ("box", ParamValue::Numbers(vec![16.0, 16.0, 15.0])),
+    ]);
     assert!(
-        e.contains("node `collide`") && e.contains("periodic boxes only"),
+        e.contains("node `collide`") && e.contains("even number of cells") && e.contains("15"),
         "{e}"
     );
     let e = load(&[

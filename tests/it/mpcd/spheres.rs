@@ -739,6 +739,116 @@ fn bad_sphere_data_is_refused_by_input_node_port_and_row() {
     }
 }
 
+/// Spheres that overlap each other (by the nearest periodic image) or reach through a
+/// plate are refused before a run, naming both spheres (or the plate) and the distance,
+/// through `upload` and through `update_inputs` that gives the centres alone (the radii
+/// of the last upload kept); spheres that only come close run.
+#[test]
+fn overlapping_spheres_and_spheres_through_a_plate_are_refused() {
+    if gpu().is_none() {
+        return;
+    }
+    let gpu = gpu().expect("GPU");
+    // (walls, centres of two spheres of radius 1.5 in a box of 8, what the error must say;
+    // empty: it runs).
+    type Case<'a> = (&'a str, [[f64; 3]; 2], &'a [&'a str]);
+    let cases: [Case; 6] = [
+        (
+            "none",
+            [[0.0; 3], [2.9, 0.0, 0.0]],
+            &[
+                "sphere_positions",
+                "exclude",
+                "row 1",
+                "spheres 0 and 1 overlap",
+                "2.9 apart",
+                "1.5 + 1.5 = 3",
+            ],
+        ),
+        // Apart in the box, 2 apart through the periodic boundary.
+        (
+            "none",
+            [[-3.5, 0.0, 0.0], [3.5, 0.0, 1.0]],
+            &["spheres 0 and 1 overlap", "nearest periodic image"],
+        ),
+        ("none", [[-3.5, 0.0, 0.0], [1.0, 0.0, 0.0]], &[]),
+        (
+            "plates",
+            [[0.0; 3], [0.0, 3.0, 2.9]],
+            &[
+                "sphere_positions",
+                "row 1",
+                "sphere 1",
+                "plate at z = 4",
+                "1.1 from the plate",
+            ],
+        ),
+        (
+            "plates",
+            [[0.0, 0.0, -3.0], [0.0, 3.0, 2.0]],
+            &["sphere 0", "plate at z = -4"],
+        ),
+        // Periodic along z without plates: the same centres run.
+        ("none", [[0.0, 0.0, -3.0], [0.0, 3.0, 2.0]], &[]),
+    ];
+    for (walls, centres, want) in cases {
+        let w = format!("\"{walls}\"");
+        let g = crate::util::load_with(
+            "mpcd_spheres.json",
+            &[
+                ("box", "[8, 8, 8]"),
+                ("walls", &w),
+                ("sphere_radius", "1.5"),
+            ],
+            1,
+            0,
+        );
+        let inputs = crate::util::named(&[
+            ("sphere_positions", particles(&centres)),
+            ("sphere_radii", particles(&[[1.5], [1.5]])),
+        ]);
+        let plan =
+            crate::util::plan_graph(&gpu.caps, &g, crate::util::types_of(&inputs), None, true);
+        let mut program = crate::util::compile_cached(&gpu, &g, &plan);
+        let result =
+            crate::util::try_run_program(&mut program, &inputs, 1, mesoflow::exec::Profile::Off);
+        if want.is_empty() {
+            result.unwrap_or_else(|e| panic!("{walls} {centres:?} was refused: {e}"));
+            continue;
+        }
+        let err = result.expect_err("overlapping spheres ran");
+        for w in want {
+            assert!(err.contains(w), "`{err}` does not say `{w}`");
+        }
+    }
+    // An update of the centres alone is checked against the radii of the last upload.
+    let g = crate::util::load_with(
+        "mpcd_spheres.json",
+        &[("box", "[8, 8, 8]"), ("sphere_radius", "1.5")],
+        1,
+        0,
+    );
+    let inputs = crate::util::named(&[
+        ("sphere_positions", particles(&[[0.0; 3], [3.5, 0.0, 0.0]])),
+        ("sphere_radii", particles(&[[1.5], [1.5]])),
+    ]);
+    let plan = crate::util::plan_graph(&gpu.caps, &g, crate::util::types_of(&inputs), None, true);
+    let mut program = crate::util::compile_cached(&gpu, &g, &plan);
+    program.upload(&inputs).expect("spheres apart");
+    let moved =
+        crate::util::named(&[("sphere_positions", particles(&[[0.0; 3], [0.0, 2.0, 0.0]]))]);
+    let err = program
+        .update_inputs(&moved)
+        .expect_err("overlapping centres were taken")
+        .to_string();
+    assert!(
+        err.contains("sphere_positions")
+            && err.contains("spheres 0 and 1 overlap")
+            && err.contains("2 apart"),
+        "{err}"
+    );
+}
+
 /// The friction of a fixed sphere from a flow run (S2 §5.6.3, Tables 5.3 and 5.4): R = 1
 /// in a box of 16R = 16, M = 5, MPCD-BC with A = 0.01, dt = 0.02, the Monte-Carlo
 /// thermostat, a body force F on every solvent particle. In the steady state the sphere
@@ -797,6 +907,154 @@ fn a_fixed_sphere_has_the_sources_friction_in_flow() {
         (xi / 76.0 - 1.0).abs() < 0.1,
         "xi = {xi:.1}, the source's flow value 76 (momentum ACF 77)"
     );
+}
+
+/// The tangential profile of `mpcd_sphere_profile` (S2 Eqs. 5.14-5.16) against its f64
+/// reference: a diagonal cylinder through a moving sphere near the box's corner (so the
+/// cylinder wraps through the periodic boundary), particles in it and around it; the
+/// bins' counts equal, their velocity sums within the f32 rounding of each particle's
+/// (v - V) . t, the means and densities alike; with a warm-up, no sample yet.
+#[test]
+fn sphere_tangential_profile_matches_its_reference() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(41);
+    let l = 8.0;
+    let centre = [3.5, -3.0, 1.0];
+    let s2 = 0.5f64.sqrt();
+    let (axis, tangent) = ([s2, s2, 0.0], [s2, -s2, 0.0]);
+    let (length, radius, per_cell) = (6.0, 0.6, 2.0);
+    let wrap = |x: f64| x - l * (x / l + 0.5).floor();
+    let mut x = Vec::new();
+    let mut v = Vec::new();
+    while x.len() < 3000 {
+        let p: [f64; 3] = if x.len() % 2 == 0 {
+            // In or near the cylinder: along the axis, off it by up to 1.5 R_C.
+            let k = rng.uniform(-0.5 * length - 0.3, 0.5 * length + 0.3);
+            let (a, b) = (rng.uniform(-0.9, 0.9), rng.uniform(-0.9, 0.9));
+            std::array::from_fn(|i| {
+                wrap(centre[i] + k * axis[i] + a * tangent[i] + b * [0.0, 0.0, 1.0][i])
+            })
+        } else {
+            std::array::from_fn(|_| rng.uniform(-0.5 * l, 0.5 * l))
+        };
+        // Keep particles clear of the bins' and the cylinder's edges (f32 positions).
+        let r: [f64; 3] = std::array::from_fn(|i| wrap(p[i] - centre[i]));
+        let k = (0..3).map(|i| r[i] * axis[i]).sum::<f64>() + 0.5 * length;
+        let m2 = (0..3)
+            .map(|i| (r[i] + 0.5 * length * axis[i] - k * axis[i]).powi(2))
+            .sum::<f64>();
+        let edge = (k * per_cell - (k * per_cell).round()).abs() < 1e-3
+            || (m2.sqrt() - radius).abs() < 1e-3;
+        if edge {
+            continue;
+        }
+        x.push(p.to_vec());
+        v.push((0..3).map(|_| rng.normal()).collect::<Vec<f64>>());
+    }
+    let vs = [0.3, -0.2, 0.1];
+    for warmup in [0, 1] {
+        let params = format!(
+            r#"{{"box": [8, 8, 8], "temperature": 1, "mass": 1, "sphere": 1, "axis": [1, 1, 0], "tangent": [1, -1, 0], "length": {length}, "radius": {radius}, "bins_per_cell": {per_cell}, "warmup": {warmup}}}"#
+        );
+        let (out, refs) = run_node_and_reference(
+            "mpcd_sphere_profile",
+            &params,
+            &[
+                ("positions", particles(&x)),
+                ("velocities", particles(&v)),
+                ("sphere_positions", particles(&[[0.0; 3], centre])),
+                ("sphere_velocities", particles(&[[0.0; 3], vs])),
+            ],
+        );
+        let sums = u32s(&out["sums"]);
+        let want = &refs[0].data;
+        let bins = (length * per_cell) as usize;
+        assert_eq!(sums.len(), 1 + 4 * bins);
+        assert_eq!(sums[0] as f64, want[0], "samples");
+        let pair = |w: &[f64], i: usize| (w[i] as u64 | ((w[i + 1] as u64) << 32)) as i64;
+        let got: Vec<f64> = sums.iter().map(|&w| w as f64).collect();
+        let profile = rows(&out["profile"], 3);
+        let mut inside = 0;
+        for (b, row) in profile.iter().enumerate() {
+            let (n, want_n) = (pair(&got, 3 + 4 * b), pair(want, 3 + 4 * b));
+            assert_eq!(n, want_n, "bin {b}: count");
+            inside += n;
+            let (sv, want_sv) = (pair(&got, 1 + 4 * b), pair(want, 1 + 4 * b));
+            assert!(
+                (sv - want_sv).abs() <= 8 * n.max(1),
+                "bin {b}: sum {sv}, reference {want_sv}"
+            );
+            let r = &refs[1].data[3 * b..3 * b + 3];
+            assert!(
+                (row[0] - r[0]).abs() < 1e-5,
+                "bin {b}: centre {:?} {r:?}",
+                row
+            );
+            for c in 1..3 {
+                assert_eq!(row[c].is_nan(), r[c].is_nan(), "bin {b}: {:?} {r:?}", row);
+                if !r[c].is_nan() {
+                    assert!(
+                        (row[c] - r[c]).abs() < 1e-5 * r[c].abs().max(1.0),
+                        "bin {b}: {:?} {r:?}",
+                        row
+                    );
+                }
+            }
+        }
+        if warmup == 0 {
+            assert!(inside > 300, "{inside} particles in the cylinder");
+        } else {
+            assert_eq!(inside, 0, "sampled before the warm-up");
+        }
+    }
+}
+
+/// mpcd_spheres.json's `sphere_profile` on a fixed sphere: no solvent inside the sphere
+/// (bins with |s| < R - R_C), the solvent's density outside it, and a mean tangential
+/// velocity within the thermal noise of zero without a force.
+#[test]
+fn the_sphere_profile_of_a_fixed_sphere_is_empty_inside_and_at_density_outside() {
+    if gpu().is_none() {
+        return;
+    }
+    let inputs = crate::util::named(&[
+        ("sphere_positions", particles(&[[0.5, -0.5, 0.25]])),
+        ("sphere_radii", particles(&[[2.0]])),
+    ]);
+    let steps = 40;
+    let out = &sphere_snapshots(
+        &[
+            ("box", "[8, 8, 8]"),
+            ("density", "5"),
+            ("cylinder_length", "7"),
+            ("cylinder_radius", "0.8"),
+            ("profile_per_cell", "2"),
+        ],
+        &inputs,
+        &["sphere_profile"],
+        steps,
+        1,
+    )[0];
+    let profile = rows(&out["sphere_profile"], 3);
+    assert_eq!(profile.len(), 14);
+    // The solvent outside the sphere: 5 x 512 particles in 512 - 4/3 pi 8.
+    let outside = 5.0 * 512.0 / (512.0 - 4.0 / 3.0 * std::f64::consts::PI * 8.0);
+    for row in &profile {
+        let (s, u, n) = (row[0], row[1], row[2]);
+        if s.abs() + 0.25 < 2.0 - 0.8 {
+            assert_eq!(n, 0.0, "solvent inside the sphere at s = {s}: {row:?}");
+        } else if s.abs() - 0.25 > 2.0 {
+            // 40 samples of about 5 particles a bin: within 4 standard deviations.
+            assert!(
+                (n / outside - 1.0).abs()
+                    < 4.0 / (40.0 * outside * 0.5 * 0.64 * std::f64::consts::PI).sqrt(),
+                "{row:?} against {outside}"
+            );
+            assert!(u.abs() < 0.5, "{row:?}");
+        }
+    }
 }
 
 /// Solvent in cell order (as `sort_every` leaves it), 64 spheres: each workgroup of the
