@@ -7,10 +7,11 @@
 //!
 //! The configurations are the graph's presets (`config`, nodes/disks/presets.rs: the
 //! digest's reconstruction of S1's Table 1; the order of alpha and mu within c2 to c4 is
-//! uncertain); the graph draws each disk's species. The disks start on a triangular
-//! lattice of spacing at least sigma with N of its sites taken at random and a 1e-4 sigma
-//! jitter (`presets::lattice_disks`: no four points on a circle, so the periodic Delaunay
-//! triangulation is unique); writes disks_<config>_start.svg and _end.svg (by species)
+//! uncertain); the graph draws each disk's species. The disks start on the widest
+//! triangular lattice of at least N sites in the box (spacing about 1.07 sigma at
+//! packing 0.79) with N of its sites taken at random and a jitter of a quarter of the gap
+//! (`presets::lattice_disks`: no four points near a circle, so the periodic Delaunay
+//! triangulation is unique, also in f32); writes disks_<config>_start.svg and _end.svg (by species)
 //! and prints the largest cluster's fraction (contact 1.02 sigma) before and after.
 
 use std::collections::BTreeMap;

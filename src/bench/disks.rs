@@ -6,7 +6,8 @@
 //! loops' iterations per step and, for the long-range force, pair interactions per
 //! second (N^2 / the force launch's time) and GFLOP/s at `LONG_FLOPS` per pair.
 //!
-//! The disks start on a jittered triangular lattice (`presets::lattice_disks`) and the
+//! The disks start on the widest jittered triangular lattice in the box
+//! (`presets::lattice_disks`: spacing about 1.07 sigma at packing 0.79) and the
 //! mesh is built on the host (`periodic_delaunay`, seconds at 2^20 disks).
 
 use std::collections::BTreeMap;

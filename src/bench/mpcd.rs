@@ -196,7 +196,7 @@ fn sphere_lattice_side(bench: &MpcdBench) -> Result<u32, BenchError> {
             bench.spheres
         )));
     }
-    if !(bench.sphere_radius > 0.0) {
+    if bench.sphere_radius.is_nan() || bench.sphere_radius <= 0.0 {
         return Err(BenchError::Args(format!(
             "--sphere-radius {}: must be positive",
             bench.sphere_radius

@@ -8,5 +8,6 @@ mod graph;
 mod loops;
 mod overlap;
 mod short_range;
+mod start;
 mod step;
 mod table1;

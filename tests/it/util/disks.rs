@@ -63,34 +63,27 @@ pub fn disk_positions(rng: &mut Rng, n: usize, l: [f64; 2], min_dist: f64) -> Ve
     x
 }
 
-/// `n` disks of diameter `sigma` at packing `density` in a square periodic box: a
-/// triangular lattice of spacing at least sigma filling the box (an even number of rows),
-/// `n` of its sites drawn at random, each jittered by 1e-4 sigma (so that no four points
-/// are cocircular and the periodic Delaunay triangulation is unique); f32 values. Returns
-/// the positions and the box side. Reaches the packings random addition cannot (0.79).
+/// `n` disks of diameter `sigma` at packing `density` in a square periodic box, as
+/// `presets::lattice_disks` places them with this rng: the widest triangular lattice of
+/// at least `n` sites in the box (`presets::triangular_lattice`, spacing d), `n` of its
+/// sites drawn at random, each jittered by up to `JITTER` (d - sigma) / 2 per coordinate
+/// (no four points near a circle; no two closer than sigma); f32 values. Returns the
+/// positions and the box side. Reaches the packings random addition cannot (0.79).
 pub fn lattice_disks(rng: &mut Rng, n: usize, density: f64, sigma: f64) -> (Vec<f64>, f64) {
+    use mesoflow::nodes::disks::presets::{JITTER, triangular_lattice};
     let l = (n as f64 * std::f64::consts::PI * 0.25 * sigma * sigma / density).sqrt();
-    let nx = (l / sigma).floor() as usize;
-    let ny = 2 * (l / (sigma * 3f64.sqrt())).floor() as usize;
-    assert!(nx * ny >= n, "{n} disks do not fit a lattice in {l}");
-    let (ax, ay) = (l / nx as f64, l / ny as f64);
-    let mut sites: Vec<[f64; 2]> = (0..ny)
-        .flat_map(|j| {
-            (0..nx).map(move |i| {
-                let shift = if j % 2 == 1 { 0.5 * ax } else { 0.0 };
-                [i as f64 * ax + shift - 0.5 * l, j as f64 * ay - 0.5 * l]
-            })
-        })
-        .collect();
+    let (mut sites, d) = triangular_lattice(n, l);
+    assert!(d >= sigma, "{n} disks do not fit a lattice in {l}");
     for i in 0..n {
         let j = i + (rng.uniform(0.0, (sites.len() - i) as f64) as usize).min(sites.len() - i - 1);
         sites.swap(i, j);
     }
+    let jitter = JITTER * (d - sigma);
     let x = sites[..n]
         .iter()
         .flat_map(|p| {
             p.map(|c| {
-                let c = mesoflow::nodes::disks::wrap(c + 1e-4 * sigma * rng.uniform(-0.5, 0.5), l);
+                let c = mesoflow::nodes::disks::wrap(c + jitter * rng.uniform(-0.5, 0.5), l);
                 c as f32 as f64
             })
         })
