@@ -12,11 +12,10 @@
 //! rounding of each bounce's 2 m (v - V) to that unit.
 
 use super::stream::{MpcdStream, advance, mpcd_stream_kind};
+use super::stream_bin::{reorder_scratch, sort_cells};
 use super::{Geometry, Rows, check_rows, fx_round, num, particle_ports, value_of, words_of};
 use crate::gpu::DeviceCaps;
-use crate::gpu::{
-    Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Period, Slot, WG_1D,
-};
+use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Period, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortRowError, PortSpec, RefCtx,
     RowError, Signature,
@@ -446,18 +445,7 @@ impl Node for MpcdStreamSpheres {
                 unreachable!("mpcd_stream's positions are particles")
             };
             let cells = ValueType::Indices { n };
-            // Streamed positions and velocities, cells, sorted cells, permutation, then
-            // the sort's own scratch.
-            sig.scratch = vec![
-                moved[0].bytes(),
-                moved[1].bytes(),
-                cells.bytes(),
-                cells.bytes(),
-                cells.bytes(),
-            ];
-            let sorter = self.sorter.infer(&[Some(cells)], caps)?;
-            sig.scratch.extend(sorter.scratch);
-            sig.plan = sorter.plan;
+            reorder_scratch(&mut sig, &self.sorter, moved[0], moved[1], cells, caps)?;
         }
         Ok(sig)
     }
@@ -644,27 +632,16 @@ impl GpuKernels for MpcdStreamSpheres {
             .on_steps(on),
         );
         let cells = ValueType::Indices { n };
-        let sort_io = NodeIo {
-            inputs: vec![Some(Slot {
-                buffer: ct,
-                ty: cells,
-            })],
-            outputs: vec![
-                Slot {
-                    buffer: sorted,
-                    ty: cells,
-                },
-                Slot {
-                    buffer: perm,
-                    ty: cells,
-                },
-            ],
-            scratch: sort_scratch.to_vec(),
-            plan: io.plan,
-        };
-        for d in self.sorter.compile(cx, &sort_io)? {
-            out.push(d.on_steps(on));
-        }
+        let sort = [*ct, *sorted, *perm];
+        out.extend(sort_cells(
+            cx,
+            &self.sorter,
+            io,
+            cells,
+            sort,
+            sort_scratch,
+            on,
+        )?);
         out.push(
             cx.dispatch(
                 &gather,

@@ -82,20 +82,7 @@ impl Node for MpcdStreamBin {
             .outputs;
         let mut sig = Signature::outputs(vec![moved[0], moved[1], binned[0], binned[1]]);
         if self.sort_every > 0 {
-            // Streamed positions and velocities, cells, sorted cells, permutation, then
-            // the sort's own scratch.
-            let cells = binned[0];
-            sig.scratch = vec![
-                moved[0].bytes(),
-                moved[1].bytes(),
-                cells.bytes(),
-                cells.bytes(),
-                cells.bytes(),
-            ];
-            // The sorter's decision, if it takes one, is this node's: its compile gets it.
-            let sorter = self.sorter.infer(&[Some(cells)], caps)?;
-            sig.scratch.extend(sorter.scratch);
-            sig.plan = sorter.plan;
+            reorder_scratch(&mut sig, &self.sorter, moved[0], moved[1], binned[0], caps)?;
         }
         Ok(sig)
     }
@@ -207,27 +194,16 @@ impl GpuKernels for MpcdStreamBin {
             .on_steps(on),
         );
         let cells = io.outputs[2].ty;
-        let sort_io = NodeIo {
-            inputs: vec![Some(Slot {
-                buffer: ct,
-                ty: cells,
-            })],
-            outputs: vec![
-                Slot {
-                    buffer: sorted,
-                    ty: cells,
-                },
-                Slot {
-                    buffer: perm,
-                    ty: cells,
-                },
-            ],
-            scratch: sort_scratch.to_vec(),
-            plan: io.plan,
-        };
-        for d in self.sorter.compile(cx, &sort_io)? {
-            out.push(d.on_steps(on));
-        }
+        let sort = [*ct, *sorted, *perm];
+        out.extend(sort_cells(
+            cx,
+            &self.sorter,
+            io,
+            cells,
+            sort,
+            sort_scratch,
+            on,
+        )?);
         out.push(
             cx.dispatch(
                 &gather_bin,
@@ -239,4 +215,54 @@ impl GpuKernels for MpcdStreamBin {
         out.push(main.on_steps(Period { on: false, ..on }));
         Ok(out)
     }
+}
+
+/// The scratch of a node that reorders particles by cell every few steps (mpcd_stream_bin,
+/// mpcd_stream_spheres), after its outputs in `sig`: streamed positions and velocities,
+/// cells, sorted cells, permutation, then the sort's own scratch. The sorter's decision, if
+/// it takes one, is the node's: its compile gets it.
+pub(super) fn reorder_scratch(
+    sig: &mut Signature,
+    sorter: &SortNode,
+    positions: ValueType,
+    velocities: ValueType,
+    cells: ValueType,
+    caps: &DeviceCaps,
+) -> Result<(), PortError> {
+    sig.scratch = vec![
+        positions.bytes(),
+        velocities.bytes(),
+        cells.bytes(),
+        cells.bytes(),
+        cells.bytes(),
+    ];
+    let sorted = sorter.infer(&[Some(cells)], caps)?;
+    sig.scratch.extend(sorted.scratch);
+    sig.plan = sorted.plan;
+    Ok(())
+}
+
+/// The stable sort of the cells `[cells, sorted, permutation]` (scratch of
+/// [`reorder_scratch`]) on the steps `on`.
+pub(super) fn sort_cells(
+    cx: &mut CompileCtx<'_>,
+    sorter: &SortNode,
+    io: &NodeIo<'_>,
+    ty: ValueType,
+    [cells, sorted, perm]: [&wgpu::Buffer; 3],
+    sort_scratch: &[&wgpu::Buffer],
+    on: Period,
+) -> Result<Vec<Dispatch>, CompileError> {
+    let slot = |buffer| Slot { buffer, ty };
+    let sort_io = NodeIo {
+        inputs: vec![Some(slot(cells))],
+        outputs: vec![slot(sorted), slot(perm)],
+        scratch: sort_scratch.to_vec(),
+        plan: io.plan,
+    };
+    Ok(sorter
+        .compile(cx, &sort_io)?
+        .into_iter()
+        .map(|d| d.on_steps(on))
+        .collect())
 }

@@ -225,10 +225,10 @@ fn stream_with_spheres(xp: ptr<function, vec3<f32>>, vp: ptr<function, vec3<f32>
     *vp = v;
 }
 
-@compute @workgroup_size(256)
-fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
-        @builtin(local_invocation_index) lid: u32) {
-    let p = flat_index(wid, nwg, lid, 256u);
+// Streams particle p and stores it (pos_out, vel_out): its new position and 1, or 0 past
+// the last particle. Every thread of the workgroup calls it (the sphere list is built
+// together, with barriers).
+fn stream_and_store(p: u32, lid: u32) -> vec4<f32> {
     let valid = p < m.n;
     var r = array<vec3<f32>, 2>(vec3<f32>(0.0), vec3<f32>(0.0));
     if (valid) {
@@ -236,7 +236,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     cull_spheres(lid, valid, r[0], r[1]);
     if (!valid) {
-        return;
+        return vec4<f32>(0.0);
     }
     var x = r[0];
     var v = r[1];
@@ -245,6 +245,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         pos_out[p * 3u + a] = x[a];
         vel_out[p * 3u + a] = v[a];
     }
+    return vec4<f32>(x, 1.0);
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    _ = stream_and_store(flat_index(wid, nwg, lid, 256u), lid);
 }
 
 // Streaming (pos_out, vel_out to scratch) and each particle's unshifted cell.
@@ -252,23 +259,10 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
 fn stream_cell(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                @builtin(local_invocation_index) lid: u32) {
     let p = flat_index(wid, nwg, lid, 256u);
-    let valid = p < m.n;
-    var r = array<vec3<f32>, 2>(vec3<f32>(0.0), vec3<f32>(0.0));
-    if (valid) {
-        r = load_row(p);
+    let x = stream_and_store(p, lid);
+    if (x.w > 0.0) {
+        cell[p] = cell_of(m, x.xyz, vec3<f32>(0.0));
     }
-    cull_spheres(lid, valid, r[0], r[1]);
-    if (!valid) {
-        return;
-    }
-    var x = r[0];
-    var v = r[1];
-    stream_with_spheres(&x, &v);
-    for (var a = 0u; a < 3u; a = a + 1u) {
-        pos_out[p * 3u + a] = x[a];
-        vel_out[p * 3u + a] = v[a];
-    }
-    cell[p] = cell_of(m, x, vec3<f32>(0.0));
 }
 
 // Output row p is streamed particle perm[p] (pos_in and vel_in are stream_cell's scratch).
