@@ -8,13 +8,13 @@
 
 use super::spheres::{
     SPHERE_WORDS, SphereUniform, check_sphere_layout, check_sphere_rows, fx_round_wide, impulse_of,
-    impulse_words, sphere_count, sphere_ports, spheres_of,
+    impulse_words, sphere_bindings, sphere_count, sphere_kernels, sphere_ports, spheres_of,
 };
 use super::{
     F32_SCALE, Geometry, geometry_params, key_into, key_of, num, thermal_params, thermal_unit,
 };
 use crate::gpu::DeviceCaps;
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::gpu::{CompileCtx, CompileError, Dispatch, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortRowError, PortSpec,
     RefCtx, RowError, Signature,
@@ -236,22 +236,12 @@ impl GpuKernels for MpcdSphereFill {
             moving: u32::from(moving.is_some()),
             ..Default::default()
         };
-        let kernel = cx.kernel(
-            &KernelSpec::new(
-                "mpcd_sphere_fill",
-                cx.shader("mpcd/sphere_fill.wgsl")?,
-                &[
-                    Binding::Uniform,
-                    Binding::Uniform,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                ],
-            )
-            .constant("DIMS", 3.0),
+        let [kernel] = sphere_kernels(
+            cx,
+            "mpcd_sphere_fill",
+            "mpcd/sphere_fill.wgsl",
+            &sphere_bindings(4, 2),
+            ["main"],
         )?;
         let params = cx.uniform("mpcd sphere fill", bytemuck::bytes_of(&self.u));
         let sphere_params = cx.uniform("mpcd spheres", bytemuck::bytes_of(&su));
@@ -452,34 +442,13 @@ impl GpuKernels for MpcdSphereForce {
             warmup: self.warmup,
             ..Default::default()
         };
-        let source = cx.shader("mpcd/sphere_force.wgsl")?;
-        let bindings = [
-            Binding::Uniform,
-            Binding::Uniform,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageReadWrite,
-            Binding::StorageReadWrite,
-            Binding::StorageReadWrite,
-            Binding::StorageReadWrite,
-        ];
-        let spec = |entry: &str| {
-            KernelSpec::new(
-                format!("mpcd_sphere_force {entry}"),
-                source.clone(),
-                &bindings,
-            )
-            .entry(entry)
-            .constant("DIMS", 3.0)
-        };
-        let (start, gather, finish, count) = (
-            cx.kernel(&spec("start"))?,
-            cx.kernel(&spec("gather"))?,
-            cx.kernel(&spec("finish"))?,
-            cx.kernel(&spec("count"))?,
-        );
+        let [start, gather, finish, count] = sphere_kernels(
+            cx,
+            "mpcd_sphere_force",
+            "mpcd/sphere_force.wgsl",
+            &sphere_bindings(4, 4),
+            ["start", "gather", "finish", "count"],
+        )?;
         let params = cx.uniform("mpcd sphere force", bytemuck::bytes_of(&self.u));
         let sphere_params = cx.uniform("mpcd spheres", bytemuck::bytes_of(&su));
         let input = |i: usize| io.inputs[i].expect("required").buffer;
@@ -708,22 +677,12 @@ impl GpuKernels for MpcdSphereMove {
             has_impulse: u32::from(io.inputs[3].is_some()),
             ..Default::default()
         };
-        let kernel = cx.kernel(
-            &KernelSpec::new(
-                "mpcd_sphere_move",
-                cx.shader("mpcd/sphere_move.wgsl")?,
-                &[
-                    Binding::Uniform,
-                    Binding::Uniform,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::StorageReadWrite,
-                ],
-            )
-            .constant("DIMS", 3.0),
+        let [kernel] = sphere_kernels(
+            cx,
+            "mpcd_sphere_move",
+            "mpcd/sphere_move.wgsl",
+            &sphere_bindings(4, 2),
+            ["main"],
         )?;
         let params = cx.uniform("mpcd sphere move", bytemuck::bytes_of(&self.u));
         let sphere_params = cx.uniform("mpcd spheres", bytemuck::bytes_of(&su));

@@ -13,13 +13,13 @@
 //! the sphere's velocity (moving spheres; zero for fixed ones). The flow of the graphs is
 //! along x, so a cylinder along y or z with tangent x reads the flow past the sphere.
 
-use super::spheres::{min_image, sphere_ports};
+use super::spheres::{min_image, sphere_bindings, sphere_kernels, sphere_ports};
 use super::{
     Geometry, Rows, check_rows, fx_round, geometry_params, num, thermal_params, value_of, words_of,
 };
 use crate::expr::ParamValue;
 use crate::gpu::DeviceCaps;
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
+use crate::gpu::{CompileCtx, CompileError, Dispatch, NodeIo, WG_1D};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, PortError, PortSpec, RefCtx,
     RowError, Signature,
@@ -339,32 +339,13 @@ impl GpuKernels for MpcdSphereProfile {
             spheres: s,
             ..self.c
         };
-        let source = cx.shader("mpcd/sphere_profile.wgsl")?;
-        let bindings = [
-            Binding::Uniform,
-            Binding::Uniform,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageReadWrite,
-            Binding::StorageReadWrite,
-        ];
-        let spec = |entry: &str| {
-            KernelSpec::new(
-                format!("mpcd_sphere_profile {entry}"),
-                source.clone(),
-                &bindings,
-            )
-            .entry(entry)
-            .constant("DIMS", 3.0)
-        };
-        let (particles, finish, count) = (
-            cx.kernel(&spec("particles"))?,
-            cx.kernel(&spec("finish"))?,
-            cx.kernel(&spec("count"))?,
-        );
+        let [particles, finish, count] = sphere_kernels(
+            cx,
+            "mpcd_sphere_profile",
+            "mpcd/sphere_profile.wgsl",
+            &sphere_bindings(5, 2),
+            ["particles", "finish", "count"],
+        )?;
         let params = cx.uniform("mpcd sphere profile", bytemuck::bytes_of(&u));
         let cylinder = cx.uniform("mpcd sphere profile cylinder", bytemuck::bytes_of(&c));
         let buffers = [

@@ -11,11 +11,15 @@
 //! atomics, so the solvent's momentum change and the spheres' impulses balance to the
 //! rounding of each bounce's 2 m (v - V) to that unit.
 
+use std::sync::Arc;
+
 use super::stream::{MpcdStream, advance, mpcd_stream_kind};
 use super::stream_bin::{reorder_scratch, sort_cells};
 use super::{Geometry, Rows, check_rows, fx_round, num, particle_ports, value_of, words_of};
 use crate::gpu::DeviceCaps;
-use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, Period, WG_1D};
+use crate::gpu::{
+    Binding, CompileCtx, CompileError, Dispatch, Kernel, KernelSpec, NodeIo, Period, WG_1D,
+};
 use crate::node::{
     GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortRowError, PortSpec, RefCtx,
     RowError, Signature,
@@ -368,6 +372,41 @@ pub(crate) fn impulse_words(out: &mut [f64], impulse: &[[i64; 3]]) {
     }
 }
 
+/// The bindings of an MPCD sphere kernel: its parameter block and the sphere block
+/// (uniforms), then `reads` read-only and `writes` read-write storage buffers.
+pub(super) fn sphere_bindings(reads: usize, writes: usize) -> Vec<Binding> {
+    let mut b = vec![Binding::Uniform; 2];
+    b.extend(std::iter::repeat_n(Binding::StorageRead, reads));
+    b.extend(std::iter::repeat_n(Binding::StorageReadWrite, writes));
+    b
+}
+
+/// The 3D kernels of one sphere shader (`shaders/` path) with these bindings, one per entry
+/// point: `main` labelled `label`, others `label entry`.
+pub(super) fn sphere_kernels<const N: usize>(
+    cx: &mut CompileCtx<'_>,
+    label: &str,
+    shader: &str,
+    bindings: &[Binding],
+    entries: [&str; N],
+) -> Result<[Arc<Kernel>; N], CompileError> {
+    let source = cx.shader(shader)?;
+    let kernels = entries
+        .iter()
+        .map(|&entry| {
+            let spec = if entry == "main" {
+                KernelSpec::new(label, source.clone(), bindings)
+            } else {
+                KernelSpec::new(format!("{label} {entry}"), source.clone(), bindings).entry(entry)
+            };
+            cx.kernel(&spec.constant("DIMS", 3.0))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(kernels
+        .try_into()
+        .unwrap_or_else(|_| unreachable!("one kernel per entry")))
+}
+
 /// Sphere j's impulse components from impulse words (units m v_th / 2^24).
 pub fn impulse_of(words: &[f64], j: usize) -> [i64; 3] {
     let k = SPHERE_WORDS as usize * j;
@@ -541,24 +580,11 @@ impl GpuKernels for MpcdStreamSpheres {
             moving: u32::from(moving.is_some()),
             ..Default::default()
         };
-        let source = cx.shader("mpcd/stream_spheres.wgsl")?;
         // main binds 0-9; stream_cell and gather also the cells (10) and permutation (11).
-        let mut bindings = vec![
-            Binding::Uniform,
-            Binding::Uniform,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageRead,
-            Binding::StorageReadWrite,
-            Binding::StorageReadWrite,
-            Binding::StorageReadWrite,
-        ];
-        let kernel = cx.kernel(
-            &KernelSpec::new("mpcd_stream_spheres", source.clone(), &bindings)
-                .constant("DIMS", 3.0),
-        )?;
+        let mut bindings = sphere_bindings(5, 3);
+        let label = "mpcd_stream_spheres";
+        let shader = "mpcd/stream_spheres.wgsl";
+        let [kernel] = sphere_kernels(cx, label, shader, &bindings, ["main"])?;
         let params = cx.uniform("mpcd stream spheres", bytemuck::bytes_of(&u));
         let sphere_params = cx.uniform("mpcd spheres", bytemuck::bytes_of(&su));
         let impulse = io.outputs[2];
@@ -595,17 +621,8 @@ impl GpuKernels for MpcdStreamSpheres {
             return Err(missing());
         };
         bindings.extend([Binding::StorageReadWrite, Binding::StorageRead]);
-        let spec = |entry: &str| {
-            KernelSpec::new(
-                format!("mpcd_stream_spheres {entry}"),
-                source.clone(),
-                &bindings,
-            )
-            .entry(entry)
-            .constant("DIMS", 3.0)
-        };
-        let stream_cell = cx.kernel(&spec("stream_cell"))?;
-        let gather = cx.kernel(&spec("gather"))?;
+        let [stream_cell, gather] =
+            sphere_kernels(cx, label, shader, &bindings, ["stream_cell", "gather"])?;
         let on = Period {
             every: self.sort_every,
             on: true,
@@ -816,21 +833,12 @@ impl GpuKernels for MpcdSphereExclude {
             count: s,
             ..Default::default()
         };
-        let kernel = cx.kernel(
-            &KernelSpec::new(
-                "mpcd_sphere_exclude",
-                cx.shader("mpcd/sphere_exclude.wgsl")?,
-                &[
-                    Binding::Uniform,
-                    Binding::Uniform,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                ],
-            )
-            .constant("DIMS", 3.0),
+        let [kernel] = sphere_kernels(
+            cx,
+            "mpcd_sphere_exclude",
+            "mpcd/sphere_exclude.wgsl",
+            &sphere_bindings(4, 1),
+            ["main"],
         )?;
         let params = cx.uniform("mpcd sphere exclude", bytemuck::bytes_of(&u));
         let sphere_params = cx.uniform("mpcd spheres", bytemuck::bytes_of(&su));
