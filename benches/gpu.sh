@@ -38,9 +38,14 @@
 #   spheres_rates  MPCD particle-steps per second with 1, 8, 64 spheres of R = 4 (fixed,
 #               moving) in 128^3 cells, the biased rule with the Monte-Carlo thermostat in
 #               3D and 2D, against sphere-free SRD at the same N
-#   disks       Brownian disks with a Delaunay mesh (bd_delaunay.json, c0): the step split
-#               into forces, flips, overlap correction, long and short range, 2^16 and 2^20
-#               (DISKS_SIZES to change), the long-range pair interactions per second
+#   poiseuille  MPCD-BC Poiseuille flow between plates against S2 4.4 (40 x 20 x 80, M = 5,
+#               A = 0.01, Monte-Carlo thermostat; (a) dt 0.01, F 1.5e-4; (b) dt 0.005,
+#               F 2.5e-4; 200000 steps of warm-up, 300000 averaged): the mean velocity
+#               against 0.0436 and 0.0406 (benches/poiseuille.py)
+#   disks       Brownian disks with a Delaunay mesh (bd_delaunay.json): the step split into
+#               forces, flips, overlap correction for c0 to c4, long range, short range
+#               (cell list) and the Verlet variant, 2^10 to 2^20 (DISKS_SIZES,
+#               DISKS_CONFIGS to change), the long-range pair interactions per second
 #   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
 #   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
 #               request counts
@@ -60,8 +65,8 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson dpstokes nbody python mpcd spheres spheres_acf spheres_rates disks spread atomics fft primitives overhead determinism stream scene)
-usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
+suites=(fcm pse poisson dpstokes nbody python mpcd spheres spheres_acf spheres_rates poiseuille disks spread atomics fft primitives overhead determinism stream scene)
+usage() { sed -n '2,/^set -uo/{/^#/p}' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
   case " ${suites[*]} all compare " in
@@ -329,8 +334,24 @@ suite_spheres_rates() {
   run python3 benches/torch_reduce.py
 }
 
+suite_poiseuille() {
+  local dir=$out/poiseuille run_set
+  mkdir -p "$dir"
+  for run_set in "0.01 1.5e-4 0.0436" "0.005 2.5e-4 0.0406"; do
+    set -- $run_set
+    run $bin run graphs/mpcd.json --set "box=[40,20,80]" --set walls=plates --set density=5 \
+      --set dt=$1 --set rule=biased --set acceptance=0.01 --set thermostat=monte_carlo \
+      --set force=$2 --set profile_bins=80 --set warmup=200000 --steps 500000 \
+      --output momentum="$dir/momentum.npy" --output velocity_profile="$dir/profile.npy" \
+      --output temperature="$dir/temperature.npy"
+    run python3 benches/poiseuille.py "$dir" $3 $2 320000
+  done
+  rm -rf "$dir"
+}
+
 suite_disks() {
-  run $bin bench disks --configs c0 --ranges long,short --sizes ${DISKS_SIZES:-65536,1048576} --reps 5
+  run $bin bench disks --configs ${DISKS_CONFIGS:-c0,c1,c2,c3,c4} --ranges long,short,verlet \
+    --sizes ${DISKS_SIZES:-1024,16384,65536,262144,1048576} --reps 5
 }
 
 suite_overhead() {
