@@ -45,7 +45,8 @@
 #   disks       Brownian disks with a Delaunay mesh (bd_delaunay.json): the step split into
 #               forces, flips, overlap correction for c0 to c4, long range, short range
 #               (cell list) and the Verlet variant, 2^10 to 2^20 (DISKS_SIZES,
-#               DISKS_CONFIGS to change), the long-range pair interactions per second
+#               DISKS_CONFIGS to change), the long-range pair interactions per second;
+#               the long-range forces against an f64 sum (benches/disk_forces_check.py)
 #   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
 #   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
 #               request counts
@@ -350,6 +351,7 @@ suite_poiseuille() {
 }
 
 suite_disks() {
+  run python3 benches/disk_forces_check.py $bin 65536
   run $bin bench disks --configs ${DISKS_CONFIGS:-c0,c1,c2,c3,c4} --ranges long,short,verlet \
     --sizes ${DISKS_SIZES:-1024,16384,65536,262144,1048576} --reps 5
 }

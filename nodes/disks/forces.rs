@@ -5,10 +5,13 @@
 //! paper does none). mu_i alpha_k > 0 repels. With alpha = mu for every particle the law is
 //! reciprocal and the forces sum to zero.
 //!
-//! Both laws run all pairs, tiled through workgroup memory (shaders/disks/forces.wgsl).
-//! The short-range law does not use the cell list yet: the engine's cell traversals
-//! (`neighbour_sum`) walk 3-D cells of 3-vectors; a 2-D walk is future work, and the cutoff
-//! is applied inside the all-pairs loop (O(N^2), exact).
+//! Both laws run all pairs, tiled through workgroup memory (shaders/disks/forces.wgsl);
+//! the long-range law without cutoff takes one periodic image per (particle, tile) where
+//! the tile's bounding box allows it (a first launch writes the boxes to scratch), so
+//! particles in a spatial order run the pair loop without a minimum image. This node
+//! applies the short-range law's cutoff inside the all-pairs loop (O(N^2), exact); the
+//! graphs' short range goes through the 2-D cell list instead (`neighbour_sum`'s
+//! `nonreciprocal` kernel).
 
 use super::{box_param, minimum_image};
 use crate::gpu::DeviceCaps;
@@ -126,7 +129,12 @@ impl Node for NonreciprocalForces {
                 format!("is {q} but positions are {x}: one (alpha, mu) row per particle"),
             ));
         }
-        Ok(Signature::outputs(vec![x]))
+        let tiles = match x {
+            ValueType::Particles { n, .. } => n.div_ceil(WG) as u64,
+            _ => 1,
+        };
+        // Each tile's bounding box (shaders/disks/forces.wgsl `bounds`).
+        Ok(Signature::outputs(vec![x]).with_scratch(vec![16 * tiles.max(1)]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -167,32 +175,41 @@ impl GpuKernels for NonreciprocalForces {
         let ValueType::Particles { n, .. } = x.ty else {
             unreachable!()
         };
-        let kernel = cx.kernel(&KernelSpec::new(
-            "nonreciprocal_forces",
-            cx.shader("disks/forces.wgsl")?,
-            &[
-                Binding::StorageRead,
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::Uniform,
-            ],
-        ))?;
+        let bindings = [
+            Binding::StorageRead,
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+            Binding::Uniform,
+            Binding::StorageReadWrite,
+        ];
+        let source = cx.shader("disks/forces.wgsl")?;
+        let bounds = cx.kernel(
+            &KernelSpec::new("nonreciprocal_forces bounds", source.clone(), &bindings)
+                .entry("bounds"),
+        )?;
+        let kernel = cx.kernel(&KernelSpec::new("nonreciprocal_forces", source, &bindings))?;
         let words: [u32; 8] = [
             n,
             self.short as u32,
             ((self.cutoff * self.cutoff) as f32).to_bits(),
-            0,
+            0, // zero: the shader reads its 0 from here (minimum_image)
             (self.box_lengths[0] as f32).to_bits(),
             (self.box_lengths[1] as f32).to_bits(),
             0,
             0,
         ];
         let params = cx.uniform("nonreciprocal forces", bytemuck::cast_slice(&words));
-        Ok(vec![cx.dispatch(
-            &kernel,
-            &[x.buffer, q.buffer, io.outputs[0].buffer, &params],
-            cx.grid_1d(n as u64, WG),
-        )])
+        let buffers = [
+            x.buffer,
+            q.buffer,
+            io.outputs[0].buffer,
+            &params,
+            io.scratch[0],
+        ];
+        Ok(vec![
+            cx.dispatch(&bounds, &buffers, cx.grid_1d(n.div_ceil(WG) as u64, WG)),
+            cx.dispatch(&kernel, &buffers, cx.grid_1d(n as u64, WG)),
+        ])
     }
 }
 

@@ -6,23 +6,107 @@
 // particles come in tiles of WG through workgroup memory (Nyland, Harris, Prins), each
 // thread summing the tile in the same order: no atomics, the same result every run. A
 // pair at distance 0 (the particle itself, or a coincident one) adds nothing.
+//
+// The pair loop is what the long-range law's speed is (issue 24: half the f32 peak).
+// - `bounds` (one thread per tile of WG particles) writes each tile's bounding box.
+// - `main`: per tile, a thread whose particle sees the whole box of the tile through one
+//   periodic image (every |x_i - shift - x_k| below half the box on each axis) shifts x_i
+//   once and runs the pair loop without any minimum image: a difference, r^2, one
+//   inverseSqrt, the weight and the sum. Particles in a spatial order (a lattice, the cell
+//   list's order) make compact tiles, so nearly every (particle, tile) takes this path.
+// - Otherwise (a tile straddling the half-box distance, or particles in no order) each
+//   pair takes its own minimum image: rounding by the magic number 1.5 x 2^23
+//   (fma(d, 1/L, MAGIC) - MAGIC is d/L rounded to the nearest integer for |d/L| < 2^22;
+//   no division, and no round(), which NVIDIA runs on the quarter-rate special-function
+//   unit beside the inverse square root).
+// Both paths give the minimum image, so the result does not depend on the order; the law
+// and the cutoff are decided once per thread, outside the loops.
 #import common/index.wgsl
 
 const WG: u32 = 128u;
 
-struct Params { n: u32, law: u32, cutoff2: f32, pad: u32, box_len: vec2<f32> }
+// zero: 0, read from the uniform so that no compiler can see it (see minimum_image).
+struct Params { n: u32, law: u32, cutoff2: f32, zero: u32, box_len: vec2<f32> }
 
 @group(0) @binding(0) var<storage, read> x: array<vec2<f32>>;
 @group(0) @binding(1) var<storage, read> charges: array<vec2<f32>>;
 @group(0) @binding(2) var<storage, read_write> forces: array<vec2<f32>>;
 @group(0) @binding(3) var<uniform> params: Params;
+// Per tile: (lower x, lower y, upper x, upper y).
+@group(0) @binding(4) var<storage, read_write> tile_box: array<vec4<f32>>;
 
 var<workgroup> tile: array<vec4<f32>, WG>;
 
-fn minimum_image(r: vec2<f32>) -> vec2<f32> {
-    let l = params.box_len;
-    let wrapped = r - l * round(r / max(l, vec2<f32>(1e-30)));
-    return select(r, wrapped, l > vec2<f32>(0.0));
+const MAGIC: f32 = 12582912.0;
+
+// r by the minimum image: d less the nearest multiple of the box (an open axis, L = 0 and
+// inv_l = 0, keeps d). The rounded sum passes through an integer XOR with the uniform's
+// zero: without it a compiler that reassociates floats (lavapipe's LLVM does) folds
+// (t + MAGIC) - MAGIC to t and the rounding is lost. The XOR runs on the integer pipe.
+fn minimum_image(d: vec2<f32>, l: vec2<f32>, inv_l: vec2<f32>) -> vec2<f32> {
+    let t = fma(d, inv_l, vec2<f32>(MAGIC));
+    let k = bitcast<vec2<f32>>(bitcast<vec2<u32>>(t) ^ vec2<u32>(params.zero)) - vec2<f32>(MAGIC);
+    return fma(-l, k, d);
+}
+
+// The long-range law without cutoff over one tile, each pair by its minimum image.
+fn tile_long(xi: vec2<f32>, l: vec2<f32>, inv_l: vec2<f32>) -> vec2<f32> {
+    var f = vec2<f32>(0.0);
+    for (var k = 0u; k < WG; k = k + 1u) {
+        let p = tile[k];
+        let r = minimum_image(xi - p.xy, l, inv_l);
+        let r2 = dot(r, r);
+        let inv = select(0.0, inverseSqrt(r2), r2 > 0.0);
+        f = f + (p.z * inv * inv * inv) * r;
+    }
+    return f;
+}
+
+// The same when the whole tile is seen through one image: xs is x_i shifted to it.
+fn tile_long_one_image(xs: vec2<f32>) -> vec2<f32> {
+    var f = vec2<f32>(0.0);
+    for (var k = 0u; k < WG; k = k + 1u) {
+        let p = tile[k];
+        let r = xs - p.xy;
+        let r2 = dot(r, r);
+        let inv = select(0.0, inverseSqrt(r2), r2 > 0.0);
+        f = f + (p.z * inv * inv * inv) * r;
+    }
+    return f;
+}
+
+// Either law, with the cutoff: S1's short-range law when it runs all pairs.
+fn tile_general(xi: vec2<f32>, l: vec2<f32>, inv_l: vec2<f32>) -> vec2<f32> {
+    var f = vec2<f32>(0.0);
+    let cut2 = select(3.4e38, params.cutoff2, params.cutoff2 > 0.0);
+    let short = params.law == 1u;
+    for (var k = 0u; k < WG; k = k + 1u) {
+        let p = tile[k];
+        let r = minimum_image(xi - p.xy, l, inv_l);
+        let r2 = dot(r, r);
+        let ok = r2 > 0.0 && r2 < cut2;
+        let inv = select(0.0, inverseSqrt(r2), ok);
+        let inv3 = inv * inv * inv;
+        let w = select(inv3, inv3 * inv3 * inv, short);
+        f = f + (p.z * w) * r;
+    }
+    return f;
+}
+
+@compute @workgroup_size(128)
+fn bounds(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+          @builtin(local_invocation_index) lid: u32) {
+    let t = flat_index(wid, nwg, lid, WG);
+    if (t * WG >= params.n) {
+        return;
+    }
+    var lo = x[t * WG];
+    var hi = lo;
+    for (var j = t * WG + 1u; j < min(params.n, (t + 1u) * WG); j = j + 1u) {
+        lo = min(lo, x[j]);
+        hi = max(hi, x[j]);
+    }
+    tile_box[t] = vec4<f32>(lo, hi);
 }
 
 @compute @workgroup_size(128)
@@ -31,6 +115,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let i = flat_index(wid, nwg, lid, WG);
     let inside = i < params.n;
     let xi = x[min(i, params.n - 1u)];
+    let l = max(params.box_len, vec2<f32>(0.0));
+    let periodic = l > vec2<f32>(0.0);
+    let inv_l = select(vec2<f32>(0.0), 1.0 / l, periodic);
+    let half = select(vec2<f32>(3.4e38), 0.5 * l, periodic);
+    let fast = params.law == 0u && params.cutoff2 <= 0.0;
     var f = vec2<f32>(0.0);
     let tiles = (params.n + WG - 1u) / WG;
     for (var t = 0u; t < tiles; t = t + 1u) {
@@ -42,20 +131,18 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             tile[lid] = vec4<f32>(xi, 0.0, 0.0);
         }
         workgroupBarrier();
-        for (var k = 0u; k < WG; k = k + 1u) {
-            let p = tile[k];
-            let r = minimum_image(xi - p.xy);
-            let r2 = dot(r, r);
-            var ok = r2 > 0.0;
-            if (params.cutoff2 > 0.0) {
-                ok = ok && r2 < params.cutoff2;
+        if (fast) {
+            // The image of the tile's centre; one image serves the tile when every
+            // difference stays strictly within half the box (ties take the exact path).
+            let b = tile_box[t];
+            let xs = xi - l * round((xi - 0.5 * (b.xy + b.zw)) * inv_l);
+            if (all(xs - b.xy < half) && all(b.zw - xs < half)) {
+                f = f + tile_long_one_image(xs);
+            } else {
+                f = f + tile_long(xi, l, inv_l);
             }
-            let inv2 = 1.0 / select(1.0, r2, ok);
-            var w = inv2 * sqrt(inv2);
-            if (params.law == 1u) {
-                w = inv2 * inv2 * inv2 * sqrt(inv2);
-            }
-            f = f + select(0.0, p.z * w, ok) * r;
+        } else {
+            f = f + tile_general(xi, l, inv_l);
         }
         workgroupBarrier();
     }

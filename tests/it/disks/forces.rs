@@ -50,6 +50,44 @@ fn nonreciprocal_forces_match_the_f64_sum() {
     }
 }
 
+/// Particles in a spatial order (sorted by 8 x 8 blocks of a 64 x 48 box, 3072 of them:
+/// 24 tiles of two blocks each) make compact tiles, so most (particle, tile) pairs take
+/// the long-range law's one-image path and the tiles at half the box the per-pair minimum
+/// image: both against the f64 sum (a shift that broke the one-image path failed this).
+#[test]
+fn long_range_forces_of_ordered_particles_match_the_f64_sum() {
+    if gpu().is_none() {
+        return;
+    }
+    let l = [64.0, 48.0];
+    let mut rng = Rng::new(11);
+    let mut x: Vec<[f64; 2]> = disk_positions(&mut rng, 3072, l, 0.5)
+        .chunks(2)
+        .map(|p| [p[0], p[1]])
+        .collect();
+    let block = |p: &[f64; 2]| {
+        (
+            ((p[1] + 24.0) / 8.0) as usize,
+            ((p[0] + 32.0) / 8.0) as usize,
+        )
+    };
+    x.sort_by(|a, b| block(a).cmp(&block(b)));
+    let x: Vec<f64> = x.concat();
+    let q: Vec<f64> = (0..3072)
+        .flat_map(|_| [rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)])
+        .collect();
+    let (out, refs) = run_node_and_reference(
+        "nonreciprocal_forces",
+        r#"{"law": "long", "box": [64, 48]}"#,
+        &[
+            ("positions", flat_particles(&x, 2)),
+            ("charges", flat_particles(&q, 2)),
+        ],
+    );
+    let (err, at) = rel_max_err(&out["forces"], &refs[0]);
+    assert!(err < 5e-5, "relative error {err:e} at {at}");
+}
+
 /// The cutoff removes exactly the pairs beyond it: one pair at 2.4 and one at 2.6 apart.
 #[test]
 fn short_range_forces_stop_at_the_cutoff() {
