@@ -71,7 +71,7 @@ fn long_range_forces_of_ordered_particles_match_the_f64_sum() {
             ((p[0] + 32.0) / 8.0) as usize,
         )
     };
-    x.sort_by(|a, b| block(a).cmp(&block(b)));
+    x.sort_by_key(block);
     let x: Vec<f64> = x.concat();
     let q: Vec<f64> = (0..3072)
         .flat_map(|_| [rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)])
