@@ -240,6 +240,8 @@ impl GpuIterative for Repeat {
             status_bytes: 4 * STATUS_WORDS,
             answer: status.clone(),
             answer_offset: 0,
+            // `tally` sets `stopped` (status[1]); `advance` and `tally` do nothing after.
+            stopped_word: Some(1),
         })
     }
 

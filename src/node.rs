@@ -531,6 +531,13 @@ pub struct IterativeKernels {
     /// Where the host writes [`Decision::Finish`]'s bytes (from `answer_offset`).
     pub answer: wgpu::Buffer,
     pub answer_offset: u64,
+    /// For a loop whose GPU side knows when it has stopped (`repeat`): the index of a u32
+    /// word in `status` that `start` sets to 0 and `iterate` sets nonzero at the stop,
+    /// after which `iterate` changes nothing and the body's results are read by no one.
+    /// The executor then gates the iterations it runs past the stop: the body's and
+    /// `iterate`'s dispatches go out as indirect dispatches with zero workgroups (see
+    /// `exec/run.rs`). `None` where only the host's `decide` knows (`lanczos`).
+    pub stopped_word: Option<u32>,
 }
 
 /// The host's verdict after reading an iterative node's status.

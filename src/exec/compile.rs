@@ -2,7 +2,7 @@
 //! own dispatches (or a spectral node alone), a transform with what it folds in, a fused
 //! group, a state copy, a loop with its body.
 
-use super::{Compiled, CompiledLoop, ExecError, Program, engine_err};
+use super::{Compiled, CompiledLoop, ExecError, GATED_AHEAD, LoopGate, Program, engine_err};
 use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo, NodePlan, Slot, WG_1D};
 use crate::graph::NodeId;
 use crate::node::Lowering;
@@ -273,24 +273,79 @@ impl<'a> Program<'a> {
                 dispatches,
             ));
         }
-        let staging = [0, 1].map(|i| {
-            self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(&format!("{} status {i}", inst.id)),
-                size: kernels.status_bytes.max(4).next_multiple_of(4),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
+        // A gated loop's speculative iterations cost only their launches once it has
+        // stopped, so more of them go out ahead of the host's decisions.
+        let in_flight = if kernels.stopped_word.is_some() {
+            1 + GATED_AHEAD
+        } else {
+            2
+        };
+        let staging = (0..in_flight)
+            .map(|i| {
+                self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(&format!("{} status {i}", inst.id)),
+                    size: kernels.status_bytes.max(4).next_multiple_of(4),
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
             })
-        });
+            .collect();
+        let mut lp = CompiledLoop {
+            node,
+            kernels,
+            body,
+            staging,
+            gate: None,
+        };
+        if let Some(word) = lp.kernels.stopped_word {
+            lp.gate = Some(self.compile_gate(cx, &lp, word)?);
+        }
         Ok(Compiled {
             label: inst.id.clone(),
-            kinds: format!("{} (loop of {})", inst.kind, body.len()),
+            kinds: format!("{} (loop of {})", inst.kind, lp.body.len()),
             dispatches: Vec::new(),
-            looped: Some(std::sync::Arc::new(CompiledLoop {
-                node,
-                kernels,
-                body,
-                staging,
-            })),
+            looped: Some(std::sync::Arc::new(lp)),
         })
+    }
+
+    /// The gate of a loop whose node sets status word `stopped_word` at the stop: the
+    /// static workgroup counts of its iteration's dispatches, the indirect arguments and
+    /// the kernel that writes them from the counts and the word.
+    fn compile_gate(
+        &self,
+        cx: &mut CompileCtx,
+        lp: &CompiledLoop,
+        stopped_word: u32,
+    ) -> Result<LoopGate, ExecError> {
+        let counts: Vec<u32> = lp.iteration().flat_map(|d| d.workgroups).collect();
+        let static_counts = cx.table("loop gate counts", bytemuck::cast_slice(&counts));
+        let args = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("loop gate args"),
+            size: (4 * counts.len() as u64).max(16).next_multiple_of(16),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::INDIRECT,
+            mapped_at_creation: false,
+        });
+        let kernel = cx
+            .kernel(&KernelSpec::new(
+                "loop gate",
+                cx.shader("engine/gate.wgsl").map_err(engine_err)?,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                ],
+            ))
+            .map_err(engine_err)?;
+        let params = cx.uniform(
+            "loop gate params",
+            bytemuck::cast_slice(&[counts.len() as u32, stopped_word]),
+        );
+        let dispatch = cx.dispatch(
+            &kernel,
+            &[&static_counts, &lp.kernels.status, &args, &params],
+            cx.grid_1d(counts.len() as u64, WG_1D),
+        );
+        Ok(LoopGate { args, dispatch })
     }
 }

@@ -178,8 +178,35 @@ struct CompiledLoop {
     node: NodeId,
     kernels: IterativeKernels,
     body: Vec<Compiled>,
-    /// Two readback buffers for the status: iteration k copies into `staging[k % 2]`.
-    staging: [wgpu::Buffer; 2],
+    /// Readback buffers for the status, one per iteration in flight: iteration k copies
+    /// into `staging[k % staging.len()]`.
+    staging: Vec<wgpu::Buffer>,
+    /// Where the GPU knows when the loop stopped (`IterativeKernels::stopped_word`).
+    gate: Option<LoopGate>,
+}
+
+/// Iterations a gated loop runs ahead of the one the host is judging (an ungated loop
+/// runs one): enough that the GPU does not idle through a host round trip when an
+/// iteration is short, while each one run past the stop costs only its launches.
+const GATED_AHEAD: usize = 2;
+
+/// The indirect arguments of a gated loop's iteration: one (x, y, z) per dispatch of
+/// [`CompiledLoop::iteration`], in its order, that `dispatch` (shaders/engine/gate.wgsl)
+/// writes after `start` and after each iteration: the static counts while the loop runs,
+/// zeros once its node has set its `stopped` word.
+struct LoopGate {
+    args: wgpu::Buffer,
+    dispatch: Dispatch,
+}
+
+impl CompiledLoop {
+    /// One iteration's dispatches: the body's, then the node's `iterate`.
+    fn iteration(&self) -> impl Iterator<Item = &Dispatch> {
+        self.body
+            .iter()
+            .flat_map(|c| &c.dispatches)
+            .chain(&self.kernels.iterate)
+    }
 }
 
 impl Compiled {
@@ -781,6 +808,15 @@ impl Compiled {
             }
             all.extend(&lp.kernels.iterate);
             all.extend(&lp.kernels.finish);
+            if let Some(gate) = &lp.gate {
+                all.push(&gate.dispatch);
+                // The gated iteration as the executor records it.
+                for (i, d) in lp.iteration().enumerate() {
+                    if !d.workgroups.contains(&0) {
+                        Program::record_gated(pass, d, &gate.args, i);
+                    }
+                }
+            }
         }
         for d in all {
             if d.workgroups.contains(&0) {

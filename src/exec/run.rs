@@ -60,6 +60,19 @@ impl Program<'_> {
         self.gpu.queue.submit([enc.finish()])
     }
 
+    /// Records one dispatch of a gated loop's iteration, its workgroup counts read from
+    /// the loop gate's arguments (slot `index` of `CompiledLoop::iteration`).
+    pub(super) fn record_gated(
+        pass: &mut wgpu::ComputePass,
+        d: &Dispatch,
+        args: &wgpu::Buffer,
+        index: usize,
+    ) {
+        pass.set_pipeline(&d.kernel.pipeline);
+        pass.set_bind_group(0, &d.bind_group, &[]);
+        pass.dispatch_workgroups_indirect(args, 12 * index as u64);
+    }
+
     /// Runs an iterative node: `pending` (work recorded before it) goes out with the
     /// first iteration; each iteration ends with a host round trip that reads the node's
     /// status and asks it whether to go on. Leaves the node's finishing dispatches in
@@ -75,32 +88,54 @@ impl Program<'_> {
             unreachable!("compiled as a loop")
         };
         // Iteration k goes out with a copy of the status after it. While the host reads
-        // and judges iteration k, iteration k + 1 already runs (speculatively: when k
-        // finishes, its work is discarded; it only wrote basis rows past the answer), so
-        // the GPU does not idle through the round trip.
+        // and judges iteration k, the next iterations already run (speculatively: when k
+        // finishes, their work is discarded; they only wrote basis rows past the answer,
+        // or values the loop no longer reads), so the GPU does not idle through the round
+        // trip: one ahead, or `GATED_AHEAD` where the node tells the GPU it has stopped.
+        // There the gate kernel, after each iteration, zeroes the indirect workgroup
+        // counts of the next iterations' dispatches once the loop has stopped, so those
+        // run past the stop cost only their launches.
+        let in_flight = lp.staging.len();
         let bytes = lp.kernels.status_bytes.max(4).next_multiple_of(4);
         let submit_iteration = |pending: &mut Vec<&'p Dispatch>, k: usize| {
-            for c in &lp.body {
-                pending.extend(&c.dispatches);
-            }
-            pending.extend(&lp.kernels.iterate);
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
             {
                 let mut pass = enc.begin_compute_pass(&Default::default());
                 for d in pending.iter() {
                     Self::record(&mut pass, std::slice::from_ref(*d), step);
                 }
+                match &lp.gate {
+                    None => {
+                        for d in lp.iteration() {
+                            Self::record(&mut pass, std::slice::from_ref(d), step);
+                        }
+                    }
+                    Some(gate) => {
+                        for (i, d) in lp.iteration().enumerate() {
+                            if !d.workgroups.contains(&0) && d.runs_at(step) {
+                                Self::record_gated(&mut pass, d, &gate.args, i);
+                            }
+                        }
+                        Self::record(&mut pass, std::slice::from_ref(&gate.dispatch), step);
+                    }
+                }
             }
-            enc.copy_buffer_to_buffer(&lp.kernels.status, 0, &lp.staging[k % 2], 0, bytes);
+            enc.copy_buffer_to_buffer(&lp.kernels.status, 0, &lp.staging[k % in_flight], 0, bytes);
             pending.clear();
             self.gpu.queue.submit([enc.finish()])
         };
         pending.extend(&lp.kernels.start);
+        if let Some(gate) = &lp.gate {
+            // The first iteration's counts, the stopped word just cleared by `start`.
+            pending.push(&gate.dispatch);
+        }
+        let mut submitted: std::collections::VecDeque<_> = (1..=in_flight)
+            .map(|k| submit_iteration(pending, k))
+            .collect();
         let mut iterations = 1usize;
-        let mut current = submit_iteration(pending, iterations);
         loop {
-            let next = submit_iteration(pending, iterations + 1);
-            let staging = &lp.staging[iterations % 2];
+            let current = submitted.pop_front().expect("an iteration in flight");
+            let staging = &lp.staging[iterations % in_flight];
             let (tx, rx) = std::sync::mpsc::channel();
             staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
                 let _ = tx.send(r);
@@ -117,8 +152,9 @@ impl Program<'_> {
             staging.unmap();
             match it.decide(iterations, &status) {
                 Ok(Decision::Continue) => {
+                    // Its copy goes to the staging buffer just read.
+                    submitted.push_back(submit_iteration(pending, iterations + in_flight));
                     iterations += 1;
-                    current = next;
                 }
                 Ok(Decision::Finish(answer)) => {
                     self.gpu.queue.write_buffer(

@@ -5,13 +5,14 @@
 
 use std::collections::BTreeMap;
 
+use mesoflow::exec::Profile;
 use mesoflow::gpu::GpuContext;
 use mesoflow::nodes::disks::flip::flip_round;
 use mesoflow::nodes::disks::mesh::{MESH_WORDS, check_torus_mesh, periodic_delaunay};
 use mesoflow::nodes::disks::wrap;
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::disks::{LoopRun, disk_positions, run_with_loops};
+use crate::util::disks::{LoopRun, disk_positions, run_with_loops, run_with_loops_profiled};
 use crate::util::{self, Rng, flat_particles, gpu, input_decl, run_node_and_reference, u32s};
 
 const L: [f64; 2] = [18.0, 16.0];
@@ -91,24 +92,36 @@ fn host_flips(x: &[f64], mesh: &[u32], fixed: usize) -> (Vec<u32>, u32, u32) {
 }
 
 /// Until no edge flips: the mesh, the rounds (the last flipping nothing) and the flips
-/// equal the f64 rounds iterated on the host; two steps, each from the given mesh.
+/// equal the f64 rounds iterated on the host; two steps, each from the given mesh; the
+/// same whether the loop runs in a step or is timed alone (profiles), whatever the
+/// executor ran ahead of its decisions.
 #[test]
 fn repeat_carries_the_mesh_through_the_flip_rounds() {
     let Some(gpu) = gpu() else { return };
     let (x, mesh) = moved_disks(31);
     let (want, rounds, total) = host_flips(&x, &mesh, 0);
     assert!(rounds >= 3 && total > 10, "{rounds} rounds, {total} flips");
-    let (out, loops) = run(&gpu, &flip_graph(300, "{}"), &inputs(&x, &mesh), 2).unwrap();
-    assert_eq!(u32s(&out["mesh"]), want);
-    assert_eq!(u32s(&out["iterations"]), vec![rounds]);
-    assert_eq!(u32s(&out["flips"]), vec![total]);
-    assert_eq!(loops, vec![("flips".to_string(), vec![rounds, rounds])]);
+    let dir = util::tmpdir("disk_loops_profiled");
+    let g = util::load(&util::write_graph(&dir, "g.json", &flip_graph(300, "{}")));
+    for profile in [Profile::Off, Profile::Launches] {
+        let (out, loops) =
+            run_with_loops_profiled(&gpu, &g, &inputs(&x, &mesh), 2, profile).unwrap();
+        assert_eq!(u32s(&out["mesh"]), want, "{profile:?}");
+        assert_eq!(u32s(&out["iterations"]), vec![rounds], "{profile:?}");
+        assert_eq!(u32s(&out["flips"]), vec![total], "{profile:?}");
+        assert_eq!(
+            loops,
+            vec![("flips".to_string(), vec![rounds, rounds])],
+            "{profile:?}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
     let stats = check_torus_mesh(&want, &x, L).unwrap();
     assert_eq!(stats.inverted, 0);
 }
 
-/// A fixed count runs exactly that many rounds, although the executor submits one
-/// iteration ahead of the host's decision; and a cap below the rounds needed is an error.
+/// A fixed count runs exactly that many rounds; and a cap below the rounds needed is an
+/// error, although the executor submits iterations ahead of the host's decision.
 #[test]
 fn repeat_runs_a_fixed_count_and_refuses_past_its_cap() {
     let Some(gpu) = gpu() else { return };

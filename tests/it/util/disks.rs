@@ -22,6 +22,17 @@ pub fn run_with_loops(
     inputs: &BTreeMap<String, HostArray>,
     steps: u64,
 ) -> Result<LoopRun, String> {
+    run_with_loops_profiled(gpu, g, inputs, steps, Profile::Off)
+}
+
+/// [`run_with_loops`] under a profile (loops then timed through `time_loop`).
+pub fn run_with_loops_profiled(
+    gpu: &GpuContext,
+    g: &Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    steps: u64,
+    profile: Profile,
+) -> Result<LoopRun, String> {
     let opts = PlanOptions {
         outputs: None,
         inputs: types_of(inputs),
@@ -30,7 +41,7 @@ pub fn run_with_loops(
     let p = plan::plan(g, &opts, &gpu.caps).map_err(|e| e.to_string())?;
     let mut cache = KernelCache::default();
     let mut program = Program::compile(gpu, g, &p, &mut cache).map_err(|e| e.to_string())?;
-    let out = try_run_program(&mut program, inputs, steps, Profile::Off)?;
+    let out = try_run_program(&mut program, inputs, steps, profile)?;
     Ok((out, program.loop_iterations().to_vec()))
 }
 
