@@ -60,7 +60,7 @@
 #               release binary, e.g. .gpu/mesoflow-before) and with .gpu/mesoflow,
 #               alternating ROUNDS times (2): that a change left the speed as it was
 #               (not in `all`); COMPARE_SET=dpstokes times the DP Stokes bottom-wall
-#               rows instead
+#               rows instead, COMPARE_SET=disks the disks' short-range c0 and c4 rows
 #
 # Each suite is sized for one device call (ten minutes at most). The log, headed once by
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
@@ -158,11 +158,16 @@ suite_primitives() {
 }
 
 # Rows that every binary since the session-6 one understands (per-launch medians);
-# COMPARE_SET=dpstokes: the DP Stokes bottom-wall rows instead (binaries since 2026-12-05).
+# COMPARE_SET=dpstokes: the DP Stokes bottom-wall rows instead (binaries since 2026-12-05);
+# COMPARE_SET=disks: the disks' short-range rows (binaries since 2026-12-06).
 compare_rows() {
   local b=$1
   if [ "${COMPARE_SET:-}" = dpstokes ]; then
     run $b bench dpstokes --walls bottom --sizes 10000,100000,1000000 --reps 10
+    return
+  fi
+  if [ "${COMPARE_SET:-}" = disks ]; then
+    run $b bench disks --configs c0,c4 --ranges short --sizes 16384,1048576 --reps 5
     return
   fi
   run $b bench fcm --tolerances 1e-2,1e-3,1e-4 --sizes 128:100000 --reps 20
