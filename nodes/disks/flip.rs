@@ -17,7 +17,11 @@
 //! flip claims, by `atomicMin` of its slot, the four triangles whose words its flip
 //! writes: its own two (all six words each) and the owners of its outer edges c -> a and
 //! b -> d (one twin word each, pointing to the slot the edge moved to). An edge that holds
-//! all four claims flips, reading only the input mesh and writing only the output. Two
+//! all four claims flips, reading only the input mesh and writing only the output. The
+//! flip pass runs one thread per triangle, not per slot: a winner holds the claim of its
+//! own triangle, so the slot a triangle's claim names, when it lies in that triangle, is
+//! the only edge there that may have won, and it is a candidate (only candidates claim):
+//! the pass checks its other three claims without evaluating the predicate again. Two
 //! winners therefore write disjoint triangles, and an outer edge that neither moves keeps
 //! its slot, so the twins it points to stay right. The lowest candidate always wins: a
 //! round with candidates flips at least one edge, and the winners follow a fixed rule (the
@@ -397,7 +401,7 @@ impl GpuKernels for EdgeFlipRound {
         for (entry, items) in [
             ("prepare", 2 * slots as u64),
             ("claim", slots as u64),
-            ("flip", slots as u64),
+            ("flip", slots as u64 / 3),
         ] {
             let kernel = cx.kernel(
                 &KernelSpec::new(format!("edge_flip_{entry}"), source.clone(), &bindings)

@@ -5,8 +5,9 @@
 // - `claim`: every edge (its smaller slot s) whose quad needs a flip
 //   (disks/predicate.wgsl) claims the four triangles its flip writes (its two and the
 //   owners of the two outer edges whose twins move) by atomicMin(claim, s);
-// - `flip`: an edge holding all four of its claims flips, reading the input mesh and
-//   writing the output, and counts itself.
+// - `flip` (one thread per triangle): the edge holding the claim of its own triangle
+//   flips if it holds its other three claims too, reading the input mesh and writing the
+//   output, and counts itself.
 // The lowest candidate always wins its claims, so a round with a candidate flips at least
 // one edge, and the winners are those of a fixed rule: the same result every run.
 #import common/index.wgsl
@@ -98,19 +99,28 @@ fn claim(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
 @compute @workgroup_size(256)
 fn flip(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let s = flat_index(wid, nwg, lid, 256u);
-    if (s >= params.slots) {
+    // One thread per triangle t: a winner s holds the claim of its own triangle s / 3, so
+    // the edge whose slot holds claims[t] and lies in t is the one candidate of t that
+    // may have won; only a candidate claims, so no predicate is evaluated again.
+    let tri = flat_index(wid, nwg, lid, 256u);
+    if (tri >= params.slots / 3u) {
         return;
     }
-    let c = candidate(s);
-    if (!c.ok || atomicLoad(&claims[c.t]) != s || atomicLoad(&claims[c.u]) != s
-        || atomicLoad(&claims[c.xb]) != s || atomicLoad(&claims[c.yc]) != s) {
+    let s = atomicLoad(&claims[tri]);
+    if (s / 3u != tri) {
+        return;
+    }
+    let us = twin(tri, s);
+    let xb = twin(tri, s + 1u) / 3u;
+    let yc = twin(us / 3u, us + 1u) / 3u;
+    if (atomicLoad(&claims[us / 3u]) != s || atomicLoad(&claims[xb]) != s
+        || atomicLoad(&claims[yc]) != s) {
         return;
     }
     // t = (a, b, c) from slot k, u = (d, c, b) from slot m; after: t = (a, b, d),
     // u = (d, c, a), the new edge a -> d between them.
-    let t = c.t;
-    let u = c.u;
+    let t = tri;
+    let u = us / 3u;
     let k = s % 3u;
     let m = twin(t, k) % 3u;
     let a = vert(t, k);
