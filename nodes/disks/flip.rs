@@ -21,7 +21,9 @@
 //! flip pass runs one thread per triangle, not per slot: a winner holds the claim of its
 //! own triangle, so the slot a triangle's claim names, when it lies in that triangle, is
 //! the only edge there that may have won, and it is a candidate (only candidates claim):
-//! the pass checks its other three claims without evaluating the predicate again. Two
+//! the pass checks its other three claims without evaluating the predicate again. The
+//! claim pass runs one thread per triangle too, for its three edges: the triangle's words
+//! and its vertices' positions are read once. Two
 //! winners therefore write disjoint triangles, and an outer edge that neither moves keeps
 //! its slot, so the twins it points to stay right. The lowest candidate always wins: a
 //! round with candidates flips at least one edge, and the winners follow a fixed rule (the
@@ -400,7 +402,7 @@ impl GpuKernels for EdgeFlipRound {
         let mut out = Vec::new();
         for (entry, items) in [
             ("prepare", 2 * slots as u64),
-            ("claim", slots as u64),
+            ("claim", slots as u64 / 3),
             ("flip", slots as u64 / 3),
         ] {
             let kernel = cx.kernel(

@@ -2,9 +2,10 @@
 // per triangle 3 vertices counter-clockwise and 3 twin slots), conflicts resolved on the
 // GPU by claims (nodes/disks/flip.rs explains why they suffice):
 // - `prepare`: copy the mesh to the output, every claim to 0xFFFFFFFF, the count to 0;
-// - `claim`: every edge (its smaller slot s) whose quad needs a flip
-//   (disks/predicate.wgsl) claims the four triangles its flip writes (its two and the
-//   owners of the two outer edges whose twins move) by atomicMin(claim, s);
+// - `claim` (one thread per triangle, for its three slots): every edge (its smaller slot
+//   s) whose quad needs a flip (disks/predicate.wgsl) claims the four triangles its flip
+//   writes (its two and the owners of the two outer edges whose twins move) by
+//   atomicMin(claim, s);
 // - `flip` (one thread per triangle): the edge holding the claim of its own triangle
 //   flips if it holds its other three claims too, reading the input mesh and writing the
 //   output, and counts itself.
@@ -34,35 +35,34 @@ fn twin(t: u32, k: u32) -> u32 {
     return mesh[6u * t + 3u + k % 3u];
 }
 
-// The flip of slot s, if its edge is a candidate: the triangles (t, u) and the owners of
-// the outer edges c -> a (of t) and b -> d (of u), whose twins the flip rewrites.
-struct Candidate { ok: bool, t: u32, u: u32, xb: u32, yc: u32 }
-
-fn candidate(s: u32) -> Candidate {
-    var no = Candidate(false, 0u, 0u, 0u, 0u);
-    let t = s / 3u;
-    let k = s % 3u;
-    let us = twin(t, k);
+// Slot s = 3 t + k of triangle t = (a, b, c) from k (positions pa, pb, pc), its twin us
+// and the owners xb, xc of the twins of its outer edges c -> a and a -> b: if the edge is
+// a candidate, it claims the triangles (t, u) and the owners of the outer edges c -> a
+// (of t) and b -> d (of u), whose twins its flip rewrites.
+fn claim_edge(t: u32, s: u32, us: u32, a: u32, pa: vec2<f32>, pb: vec2<f32>, pc: vec2<f32>,
+              xb: u32, xc: u32) {
     // Each edge once, by its smaller slot.
     if (us <= s || us >= params.slots) {
-        return no;
+        return;
     }
     let u = us / 3u;
     let m = us % 3u;
-    let a = vert(t, k);
     let d = vert(u, m);
-    let xb = twin(t, k + 1u) / 3u;
-    let xc = twin(t, k + 2u) / 3u;
     let yc = twin(u, m + 1u) / 3u;
     let yb = twin(u, m + 2u) / 3u;
     // Two triangles sharing more than this edge (a torus of very few points): no flip.
     if (a == d || xb == u || xc == u || yc == t || yb == t || t == u) {
-        return no;
+        return;
     }
     let xd = x[d];
-    let code = flip_code(minimum_image(x[a] - xd), minimum_image(x[vert(t, k + 1u)] - xd),
-        minimum_image(x[vert(t, k + 2u)] - xd), params.tolerance);
-    return Candidate(code != FLIP_KEEP, t, u, xb, yc);
+    let code = flip_code(minimum_image(pa - xd), minimum_image(pb - xd),
+        minimum_image(pc - xd), params.tolerance);
+    if (code != FLIP_KEEP) {
+        atomicMin(&claims[t], s);
+        atomicMin(&claims[u], s);
+        atomicMin(&claims[xb], s);
+        atomicMin(&claims[yc], s);
+    }
 }
 
 @compute @workgroup_size(256)
@@ -83,17 +83,20 @@ fn prepare(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
 @compute @workgroup_size(256)
 fn claim(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
          @builtin(local_invocation_index) lid: u32) {
-    let s = flat_index(wid, nwg, lid, 256u);
-    if (s >= params.slots) {
+    // One thread per triangle: its words and vertices' positions read once for its three
+    // edges.
+    let t = flat_index(wid, nwg, lid, 256u);
+    if (t >= params.slots / 3u) {
         return;
     }
-    let c = candidate(s);
-    if (c.ok) {
-        atomicMin(&claims[c.t], s);
-        atomicMin(&claims[c.u], s);
-        atomicMin(&claims[c.xb], s);
-        atomicMin(&claims[c.yc], s);
-    }
+    let v = vec3<u32>(mesh[6u * t], mesh[6u * t + 1u], mesh[6u * t + 2u]);
+    let w = vec3<u32>(mesh[6u * t + 3u], mesh[6u * t + 4u], mesh[6u * t + 5u]);
+    let p0 = x[v.x];
+    let p1 = x[v.y];
+    let p2 = x[v.z];
+    claim_edge(t, 3u * t, w.x, v.x, p0, p1, p2, w.y / 3u, w.z / 3u);
+    claim_edge(t, 3u * t + 1u, w.y, v.y, p1, p2, p0, w.z / 3u, w.x / 3u);
+    claim_edge(t, 3u * t + 2u, w.z, v.z, p2, p0, p1, w.x / 3u, w.y / 3u);
 }
 
 @compute @workgroup_size(256)
