@@ -92,7 +92,7 @@ pub fn vertex_fans(mesh: &[u32], n: usize, width: usize) -> Vec<u32> {
 
 /// The vertices of a mesh input of `words` words (2N triangles), or the port's problem.
 fn mesh_vertices(words: u32, port: &str) -> Result<u32, PortError> {
-    if words == 0 || words as usize % (2 * MESH_WORDS) != 0 {
+    if words == 0 || !(words as usize).is_multiple_of(2 * MESH_WORDS) {
         return Err(PortError::new(
             port,
             format!(
