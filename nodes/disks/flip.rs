@@ -399,12 +399,36 @@ impl GpuKernels for EdgeFlipRound {
             io.outputs[1].buffer,
             &params,
         ];
-        let mut out = Vec::new();
-        for (entry, items) in [
-            ("prepare", 2 * slots as u64),
-            ("claim", slots as u64 / 3),
-            ("flip", slots as u64 / 3),
-        ] {
+        let triangles = slots / 3;
+        let prepare = cx.kernel(&KernelSpec::new(
+            "edge_flip_prepare",
+            cx.shader("disks/flip_prepare.wgsl")?,
+            &[
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
+        ))?;
+        // The mesh's 12N words as 3N 16-byte quads.
+        let quads = mesh.ty.words() as u32 / 4;
+        let prepare_params = cx.uniform(
+            "edge flip prepare",
+            bytemuck::cast_slice(&[quads, triangles, 0, 0]),
+        );
+        let mut out = vec![cx.dispatch(
+            &prepare,
+            &[
+                mesh.buffer,
+                io.outputs[0].buffer,
+                io.scratch[0],
+                io.outputs[1].buffer,
+                &prepare_params,
+            ],
+            cx.grid_1d(quads.max(triangles) as u64, WG_1D),
+        )];
+        for (entry, items) in [("claim", triangles as u64), ("flip", triangles as u64)] {
             let kernel = cx.kernel(
                 &KernelSpec::new(format!("edge_flip_{entry}"), source.clone(), &bindings)
                     .entry(entry),

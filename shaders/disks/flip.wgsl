@@ -1,7 +1,8 @@
 // One parallel round of Lawson edge flips on the torus mesh (nodes/disks/mesh.rs layout:
 // per triangle 3 vertices counter-clockwise and 3 twin slots), conflicts resolved on the
 // GPU by claims (nodes/disks/flip.rs explains why they suffice):
-// - `prepare`: copy the mesh to the output, every claim to 0xFFFFFFFF, the count to 0;
+// - before them, disks/flip_prepare.wgsl copies the mesh to the output, every claim to
+//   0xFFFFFFFF, the count to 0;
 // - `claim` (one thread per triangle, for its three slots): every edge (its smaller slot
 //   s) whose quad needs a flip (disks/predicate.wgsl) claims the four triangles its flip
 //   writes (its two and the owners of the two outer edges whose twins move) by
@@ -62,21 +63,6 @@ fn claim_edge(t: u32, s: u32, us: u32, a: u32, pa: vec2<f32>, pb: vec2<f32>, pc:
         atomicMin(&claims[u], s);
         atomicMin(&claims[xb], s);
         atomicMin(&claims[yc], s);
-    }
-}
-
-@compute @workgroup_size(256)
-fn prepare(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
-           @builtin(local_invocation_index) lid: u32) {
-    let i = flat_index(wid, nwg, lid, 256u);
-    if (i < 2u * params.slots) {
-        out[i] = mesh[i];
-    }
-    if (i < params.slots / 3u) {
-        atomicStore(&claims[i], 0xFFFFFFFFu);
-    }
-    if (i == 0u) {
-        atomicStore(&count[0], 0u);
     }
 }
 

@@ -177,7 +177,7 @@ fn repeat_carries_the_positions_through_the_overlap_rounds() {
     let mesh = periodic_delaunay(&x0, l).unwrap();
     let x: Vec<f64> = x0.iter().map(|&v| v as f32 as f64).collect();
     let params = r#"{"sigma": 1, "box": [24, 22]}"#;
-    let table = vertex_fans(&mesh, n, 16);
+    let table = vertex_fans(&mesh, n, 10);
     let fans = HostArray::u32(
         ValueType::Indices {
             n: table.len() as u32,

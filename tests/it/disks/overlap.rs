@@ -69,7 +69,7 @@ fn overlap_rounds_remove_every_overlap() {
     let mut rng = Rng::new(29);
     let x0 = disk_positions(&mut rng, 300, L, 0.72);
     let mesh = mesh_array(&periodic_delaunay(&x0, L).unwrap());
-    let fans = fan_tables(&mesh, &[16, 3]);
+    let fans = fan_tables(&mesh, &[10, 3]);
     let mut x: Vec<f64> = x0.iter().map(|&v| v as f32 as f64).collect();
     let (initial, _) = all_pair_overlaps(&x, 1.0);
     assert!(initial > 30, "{initial} overlapping pairs");
