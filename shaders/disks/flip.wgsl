@@ -1,15 +1,21 @@
-// One parallel round of Lawson edge flips on the torus mesh (nodes/disks/mesh.rs layout:
-// per triangle 3 vertices counter-clockwise and 3 twin slots), conflicts resolved on the
-// GPU by claims (nodes/disks/flip.rs explains why they suffice):
+// Rounds of parallel Lawson edge flips on the torus mesh (nodes/disks/mesh.rs layout: per
+// triangle 3 vertices counter-clockwise and 3 twin slots), in place on the output,
+// conflicts resolved on the GPU by claims (nodes/disks/flip.rs explains why they suffice
+// and why the later rounds need only the marked triangles):
 // - before them, disks/flip_prepare.wgsl copies the mesh to the output, every claim to
-//   0xFFFFFFFF, the count to 0;
-// - `claim` (one thread per triangle, for its three slots): every edge (its smaller slot
-//   s) whose quad needs a flip (disks/predicate.wgsl) claims the four triangles its flip
-//   writes (its two and the owners of the two outer edges whose twins move) by
-//   atomicMin(claim, s);
+//   0xFFFFFFFF, the count to 0; before each later round, fills reset the claims and the
+//   marks the round writes;
+// - `claim` (first round; one thread per triangle, for its three slots): every edge (its
+//   smaller slot s) whose quad needs a flip (disks/predicate.wgsl) claims the four
+//   triangles its flip writes (its two and the owners of the two outer edges whose twins
+//   move) by atomicMin(claim, s), and marks its two triangles for the next round (an edge
+//   left out as degenerate marks them too);
+// - `claim_marked` (later rounds): the same for the three edges of each triangle the
+//   round before marked, each by its smaller slot;
 // - `flip` (one thread per triangle): the edge holding the claim of its own triangle
-//   flips if it holds its other three claims too, reading the input mesh and writing the
-//   output, and counts itself.
+//   flips if it holds its other three claims too, and counts itself. A thread reads the
+//   words of a triangle only once it holds that triangle's claim, and a winner writes
+//   only triangles it holds: the flips of a round touch disjoint words, in place.
 // The lowest candidate always wins its claims, so a round with a candidate flips at least
 // one edge, and the winners are those of a fixed rule: the same result every run.
 #import common/index.wgsl
@@ -18,22 +24,25 @@
 struct Params { slots: u32, tolerance: f32, box_len: vec2<f32> }
 
 @group(0) @binding(0) var<storage, read> x: array<vec2<f32>>;
-@group(0) @binding(1) var<storage, read> mesh: array<u32>;
-@group(0) @binding(2) var<storage, read_write> out: array<u32>;
-@group(0) @binding(3) var<storage, read_write> claims: array<atomic<u32>>;
-@group(0) @binding(4) var<storage, read_write> count: array<atomic<u32>>;
-@group(0) @binding(5) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read_write> out: array<u32>;
+@group(0) @binding(2) var<storage, read_write> claims: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> count: array<atomic<u32>>;
+@group(0) @binding(4) var<uniform> params: Params;
+// The triangles the round before marked (read by `claim_marked`) and those this round
+// marks.
+@group(0) @binding(5) var<storage, read> marked: array<u32>;
+@group(0) @binding(6) var<storage, read_write> marks: array<atomic<u32>>;
 
 fn minimum_image(r: vec2<f32>) -> vec2<f32> {
     return r - params.box_len * round(r / params.box_len);
 }
 
 fn vert(t: u32, k: u32) -> u32 {
-    return mesh[6u * t + k % 3u];
+    return out[6u * t + k % 3u];
 }
 
 fn twin(t: u32, k: u32) -> u32 {
-    return mesh[6u * t + 3u + k % 3u];
+    return out[6u * t + 3u + k % 3u];
 }
 
 // Slot s = 3 t + k of triangle t = (a, b, c) from k (positions pa, pb, pc), its twin us
@@ -51,8 +60,11 @@ fn claim_edge(t: u32, s: u32, us: u32, a: u32, pa: vec2<f32>, pb: vec2<f32>, pc:
     let d = vert(u, m);
     let yc = twin(u, m + 1u) / 3u;
     let yb = twin(u, m + 2u) / 3u;
-    // Two triangles sharing more than this edge (a torus of very few points): no flip.
+    // Two triangles sharing more than this edge (a torus of very few points): no flip,
+    // but the next round looks again (a flip nearby may change that).
     if (a == d || xb == u || xc == u || yc == t || yb == t || t == u) {
+        atomicStore(&marks[t], 1u);
+        atomicStore(&marks[u], 1u);
         return;
     }
     let xd = x[d];
@@ -63,7 +75,17 @@ fn claim_edge(t: u32, s: u32, us: u32, a: u32, pa: vec2<f32>, pb: vec2<f32>, pc:
         atomicMin(&claims[u], s);
         atomicMin(&claims[xb], s);
         atomicMin(&claims[yc], s);
+        atomicStore(&marks[t], 1u);
+        atomicStore(&marks[u], 1u);
     }
+}
+
+// The edge of slot s, from its triangle's side.
+fn claim_slot(s: u32, us: u32) {
+    let t = s / 3u;
+    let k = s % 3u;
+    claim_edge(t, s, us, vert(t, k), x[vert(t, k)], x[vert(t, k + 1u)], x[vert(t, k + 2u)],
+        twin(t, k + 1u) / 3u, twin(t, k + 2u) / 3u);
 }
 
 @compute @workgroup_size(256)
@@ -75,8 +97,8 @@ fn claim(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     if (t >= params.slots / 3u) {
         return;
     }
-    let v = vec3<u32>(mesh[6u * t], mesh[6u * t + 1u], mesh[6u * t + 2u]);
-    let w = vec3<u32>(mesh[6u * t + 3u], mesh[6u * t + 4u], mesh[6u * t + 5u]);
+    let v = vec3<u32>(out[6u * t], out[6u * t + 1u], out[6u * t + 2u]);
+    let w = vec3<u32>(out[6u * t + 3u], out[6u * t + 4u], out[6u * t + 5u]);
     let p0 = x[v.x];
     let p1 = x[v.y];
     let p2 = x[v.z];
@@ -86,11 +108,32 @@ fn claim(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
 }
 
 @compute @workgroup_size(256)
+fn claim_marked(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+                @builtin(local_invocation_index) lid: u32) {
+    let t = flat_index(wid, nwg, lid, 256u);
+    if (t >= params.slots / 3u || marked[t] == 0u) {
+        return;
+    }
+    // Each edge by its smaller slot, whichever triangle holds it (both may be marked:
+    // the claims and marks are the same again).
+    for (var k = 0u; k < 3u; k = k + 1u) {
+        let s = 3u * t + k;
+        let us = twin(t, k);
+        if (us > s) {
+            claim_slot(s, us);
+        } else if (us < s) {
+            claim_slot(us, twin(us / 3u, us));
+        }
+    }
+}
+
+@compute @workgroup_size(256)
 fn flip(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     // One thread per triangle t: a winner s holds the claim of its own triangle s / 3, so
     // the edge whose slot holds claims[t] and lies in t is the one candidate of t that
-    // may have won; only a candidate claims, so no predicate is evaluated again.
+    // may have won; only a candidate claims, so no predicate is evaluated again. Each
+    // triangle's words are read only after its claim is seen held (no winner writes it).
     let tri = flat_index(wid, nwg, lid, 256u);
     if (tri >= params.slots / 3u) {
         return;
@@ -100,18 +143,21 @@ fn flip(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         return;
     }
     let us = twin(tri, s);
+    if (us >= params.slots || atomicLoad(&claims[us / 3u]) != s) {
+        return;
+    }
     let xb = twin(tri, s + 1u) / 3u;
     let yc = twin(us / 3u, us + 1u) / 3u;
-    if (atomicLoad(&claims[us / 3u]) != s || atomicLoad(&claims[xb]) != s
-        || atomicLoad(&claims[yc]) != s) {
+    if (atomicLoad(&claims[xb]) != s || atomicLoad(&claims[yc]) != s) {
         return;
     }
     // t = (a, b, c) from slot k, u = (d, c, b) from slot m; after: t = (a, b, d),
-    // u = (d, c, a), the new edge a -> d between them.
+    // u = (d, c, a), the new edge a -> d between them. Every word is read before any is
+    // written.
     let t = tri;
     let u = us / 3u;
     let k = s % 3u;
-    let m = twin(t, k) % 3u;
+    let m = us % 3u;
     let a = vert(t, k);
     let d = vert(u, m);
     let x_b = twin(t, k + 1u);

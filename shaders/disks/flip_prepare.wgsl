@@ -1,4 +1,4 @@
-// The start of a round of shaders/disks/flip.wgsl: the mesh copied to the output in
+// The start of an evaluation of shaders/disks/flip.wgsl (its rounds then flip in place): the mesh copied to the output in
 // 16-byte words (a quarter of the threads and loads of a word-wise copy; the mesh's 12N
 // words are 3N of them), every claim to 0xFFFFFFFF, the count to 0.
 #import common/index.wgsl

@@ -41,7 +41,7 @@ fn flip_graph(n: usize, repeat_params: &str) -> String {
         r#"{{"mesoflow": 1, "inputs": {{"positions": {x}, "mesh": {mesh}}},
   "nodes": [
     {{"id": "flips", "kind": "repeat", "params": {repeat_params}, "inputs": {{"initial": "inputs.mesh", "next": "round.mesh", "count": "round.flips"}}}},
-    {{"id": "round", "kind": "edge_flip_round", "params": {{"box": [{}, {}]}}, "inputs": {{"positions": "inputs.positions", "mesh": "flips.current"}}}}
+    {{"id": "round", "kind": "edge_flip_round", "params": {{"box": [{}, {}], "rounds": 1}}, "inputs": {{"positions": "inputs.positions", "mesh": "flips.current"}}}}
   ],
   "outputs": {{"mesh": {{"from": "flips.out"}}, "iterations": {{"from": "flips.iterations"}}, "flips": {{"from": "flips.total"}}}}
 }}"#,
