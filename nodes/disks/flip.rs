@@ -29,8 +29,10 @@
 //! once and the rounds flip in place on it. In place is safe: a winner reads and writes
 //! only triangles whose claims it holds, and the flip pass reads a triangle's words only
 //! after seeing its claim held by the edge it checks, so no thread reads a word another
-//! writes in the same pass. Only the first round looks at every edge (one thread per
-//! triangle); every candidate (and every edge left out as degenerate) marks its two
+//! writes in the same pass. Nothing is reset between rounds: a claim is its slot below
+//! its round's tag (later rounds win over earlier claims, which the flip pass ignores), a
+//! mark its round's number, in two arrays taken in turn. Only the first round looks at
+//! every edge (one thread per triangle); every candidate (and every edge left out as degenerate) marks its two
 //! triangles, and the next round evaluates just the edges of the marked triangles, each
 //! by its smaller slot as before. That set holds every candidate of a full round: an
 //! edge's candidacy depends on its two triangles' words and the positions; the words a
@@ -384,6 +386,16 @@ impl Node for EdgeFlipRound {
             ));
         }
         let tris = words as u64 / MESH_WORDS as u64;
+        // A claim holds its slot in 27 bits below its round's tag.
+        if 3 * tris >= 1 << 27 {
+            return Err(PortError::new(
+                "mesh",
+                format!(
+                    "has {} slots; edge_flip_round's claims hold slots below 2^27 (N below 22369621)",
+                    3 * tris
+                ),
+            ));
+        }
         // The claims and the marks of two rounds, a word per triangle each.
         Ok(Signature::outputs(vec![mesh, ValueType::Indices { n: 1 }])
             .with_scratch(vec![4 * tris; 3]))
@@ -423,13 +435,6 @@ impl GpuKernels for EdgeFlipRound {
         let mesh = io.inputs[1].expect("required");
         let slots = (mesh.ty.words() / 2) as u32;
         let source = cx.shader("disks/flip.wgsl")?;
-        let words: [u32; 4] = [
-            slots,
-            (self.tolerance as f32).to_bits(),
-            (self.box_lengths[0] as f32).to_bits(),
-            (self.box_lengths[1] as f32).to_bits(),
-        ];
-        let params = cx.uniform("edge flip round", bytemuck::cast_slice(&words));
         let triangles = slots / 3;
         let prepare = cx.kernel(&KernelSpec::new(
             "edge_flip_prepare",
@@ -440,6 +445,8 @@ impl GpuKernels for EdgeFlipRound {
                 Binding::StorageReadWrite,
                 Binding::StorageReadWrite,
                 Binding::Uniform,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
             ],
         ))?;
         // The mesh's 12N words as 3N 16-byte quads.
@@ -457,6 +464,8 @@ impl GpuKernels for EdgeFlipRound {
                 claims,
                 io.outputs[1].buffer,
                 &prepare_params,
+                marks_a,
+                marks_b,
             ],
             cx.grid_1d(quads.max(triangles) as u64, WG_1D),
         )];
@@ -488,10 +497,17 @@ impl GpuKernels for EdgeFlipRound {
             } else {
                 (marks_b, marks_a)
             };
-            if round > 0 {
-                out.push(cx.fill(claims, triangles as u64, u32::MAX)?);
-            }
-            out.push(cx.fill(marks, triangles as u64, 0)?);
+            let words: [u32; 8] = [
+                slots,
+                (self.tolerance as f32).to_bits(),
+                (self.box_lengths[0] as f32).to_bits(),
+                (self.box_lengths[1] as f32).to_bits(),
+                round,
+                self.rounds - 1 - round,
+                0,
+                0,
+            ];
+            let params = cx.uniform("edge flip round", bytemuck::cast_slice(&words));
             let buffers = [
                 x.buffer,
                 io.outputs[0].buffer,

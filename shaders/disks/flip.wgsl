@@ -3,12 +3,14 @@
 // conflicts resolved on the GPU by claims (nodes/disks/flip.rs explains why they suffice
 // and why the later rounds need only the marked triangles):
 // - before them, disks/flip_prepare.wgsl copies the mesh to the output, every claim to
-//   0xFFFFFFFF, the count to 0; before each later round, fills reset the claims and the
-//   marks the round writes;
+//   0xFFFFFFFF, every mark and the count to 0. Nothing is reset between rounds: a claim
+//   carries its round's tag in its top bits (later rounds smaller tags, so they win
+//   over earlier rounds' claims, which the flip pass ignores), and a mark is the number
+//   of its round plus 1, in two arrays taken in turn (read: the round before's number);
 // - `claim` (first round; one thread per triangle, for its three slots): every edge (its
 //   smaller slot s) whose quad needs a flip (disks/predicate.wgsl) claims the four
 //   triangles its flip writes (its two and the owners of the two outer edges whose twins
-//   move) by atomicMin(claim, s), and marks its two triangles for the next round (an edge
+//   move) by atomicMin(claim, tag | s), and marks its two triangles for the next round (an edge
 //   left out as degenerate marks them too);
 // - `claim_marked` (later rounds): the same for the three edges of each triangle the
 //   round before marked, each by its smaller slot;
@@ -21,7 +23,12 @@
 #import common/index.wgsl
 #import disks/predicate.wgsl
 
-struct Params { slots: u32, tolerance: f32, box_len: vec2<f32> }
+// round: this round's number (from 0); tag: the rounds left after it.
+struct Params { slots: u32, tolerance: f32, box_len: vec2<f32>, round: u32, tag: u32 }
+
+// The low bits of a claim: the slot (the node refuses meshes of 2^27 slots or more).
+const SLOT_BITS: u32 = 27u;
+const SLOT_MASK: u32 = 0x7FFFFFFu;
 
 @group(0) @binding(0) var<storage, read> x: array<vec2<f32>>;
 @group(0) @binding(1) var<storage, read_write> out: array<u32>;
@@ -31,6 +38,7 @@ struct Params { slots: u32, tolerance: f32, box_len: vec2<f32> }
 // The triangles the round before marked (read by `claim_marked`) and those this round
 // marks.
 @group(0) @binding(5) var<storage, read> marked: array<u32>;
+// (marks hold round + 1 where this round marks.)
 @group(0) @binding(6) var<storage, read_write> marks: array<atomic<u32>>;
 
 fn minimum_image(r: vec2<f32>) -> vec2<f32> {
@@ -43,6 +51,11 @@ fn vert(t: u32, k: u32) -> u32 {
 
 fn twin(t: u32, k: u32) -> u32 {
     return out[6u * t + 3u + k % 3u];
+}
+
+fn mark(t: u32, u: u32) {
+    atomicStore(&marks[t], params.round + 1u);
+    atomicStore(&marks[u], params.round + 1u);
 }
 
 // Slot s = 3 t + k of triangle t = (a, b, c) from k (positions pa, pb, pc), its twin us
@@ -63,20 +76,19 @@ fn claim_edge(t: u32, s: u32, us: u32, a: u32, pa: vec2<f32>, pb: vec2<f32>, pc:
     // Two triangles sharing more than this edge (a torus of very few points): no flip,
     // but the next round looks again (a flip nearby may change that).
     if (a == d || xb == u || xc == u || yc == t || yb == t || t == u) {
-        atomicStore(&marks[t], 1u);
-        atomicStore(&marks[u], 1u);
+        mark(t, u);
         return;
     }
     let xd = x[d];
     let code = flip_code(minimum_image(pa - xd), minimum_image(pb - xd),
         minimum_image(pc - xd), params.tolerance);
     if (code != FLIP_KEEP) {
-        atomicMin(&claims[t], s);
-        atomicMin(&claims[u], s);
-        atomicMin(&claims[xb], s);
-        atomicMin(&claims[yc], s);
-        atomicStore(&marks[t], 1u);
-        atomicStore(&marks[u], 1u);
+        let c = (params.tag << SLOT_BITS) | s;
+        atomicMin(&claims[t], c);
+        atomicMin(&claims[u], c);
+        atomicMin(&claims[xb], c);
+        atomicMin(&claims[yc], c);
+        mark(t, u);
     }
 }
 
@@ -111,7 +123,7 @@ fn claim(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
 fn claim_marked(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                 @builtin(local_invocation_index) lid: u32) {
     let t = flat_index(wid, nwg, lid, 256u);
-    if (t >= params.slots / 3u || marked[t] == 0u) {
+    if (t >= params.slots / 3u || marked[t] != params.round) {
         return;
     }
     // Each edge by its smaller slot, whichever triangle holds it (both may be marked:
@@ -138,17 +150,18 @@ fn flip(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     if (tri >= params.slots / 3u) {
         return;
     }
-    let s = atomicLoad(&claims[tri]);
-    if (s / 3u != tri) {
+    let c = atomicLoad(&claims[tri]);
+    let s = c & SLOT_MASK;
+    if (c >> SLOT_BITS != params.tag || s / 3u != tri) {
         return;
     }
     let us = twin(tri, s);
-    if (us >= params.slots || atomicLoad(&claims[us / 3u]) != s) {
+    if (us >= params.slots || atomicLoad(&claims[us / 3u]) != c) {
         return;
     }
     let xb = twin(tri, s + 1u) / 3u;
     let yc = twin(us / 3u, us + 1u) / 3u;
-    if (atomicLoad(&claims[xb]) != s || atomicLoad(&claims[yc]) != s) {
+    if (atomicLoad(&claims[xb]) != c || atomicLoad(&claims[yc]) != c) {
         return;
     }
     // t = (a, b, c) from slot k, u = (d, c, b) from slot m; after: t = (a, b, d),
