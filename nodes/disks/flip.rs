@@ -17,7 +17,32 @@
 //! flip claims, by `atomicMin` of its slot, the four triangles whose words its flip
 //! writes: its own two (all six words each) and the owners of its outer edges c -> a and
 //! b -> d (one twin word each, pointing to the slot the edge moved to). An edge that holds
-//! all four claims flips, reading only the input mesh and writing only the output. Two
+//! all four claims flips, reading only the input mesh and writing only the output. The
+//! flip pass runs one thread per triangle, not per slot: a winner holds the claim of its
+//! own triangle, so the slot a triangle's claim names, when it lies in that triangle, is
+//! the only edge there that may have won, and it is a candidate (only candidates claim):
+//! the pass checks its other three claims without evaluating the predicate again. The
+//! claim pass runs one thread per triangle too, for its three edges: the triangle's words
+//! and its vertices' positions are read once.
+//!
+//! **Rounds per evaluation** (`rounds`, default 4): the output is copied from the input
+//! once and the rounds flip in place on it. In place is safe: a winner reads and writes
+//! only triangles whose claims it holds, and the flip pass reads a triangle's words only
+//! after seeing its claim held by the edge it checks, so no thread reads a word another
+//! writes in the same pass. Nothing is reset between rounds: a claim is its slot below
+//! its round's tag (later rounds win over earlier claims, which the flip pass ignores), a
+//! mark its round's number, in two arrays taken in turn. Only the first round looks at
+//! every edge (one thread per triangle); every candidate (and every edge left out as degenerate) marks its two
+//! triangles, and the next round evaluates just the edges of the marked triangles, each
+//! by its smaller slot as before. That set holds every candidate of a full round: an
+//! edge's candidacy depends on its two triangles' words and the positions; the words a
+//! round changes are its winners' two triangles (marked) and one twin word in each of
+//! two outer triangles, which changes an unmarked edge's outer owners only: an edge the
+//! predicate kept still keeps (its quad is the same), and a degenerate one was marked.
+//! So `rounds` rounds here give the mesh and the count of as many single rounds
+//! ([`flip_rounds`], the f64 twin), while the later rounds cost a pass over a word per
+//! triangle: the Lawson cascade after a move (most flips in round 1, then a few next to
+//! them) takes one or two evaluations, so fewer iterations of the loop that repeats it. Two
 //! winners therefore write disjoint triangles, and an outer edge that neither moves keeps
 //! its slot, so the twins it points to stay right. The lowest candidate always wins: a
 //! round with candidates flips at least one edge, and the winners follow a fixed rule (the
@@ -161,7 +186,7 @@ impl GpuKernels for FlipPredicate {
 fn edge_flip_round_kind() -> NodeKind {
     NodeKind::declare(
         "edge_flip_round",
-        "one parallel round of Lawson flips on the disk mesh (6 u32 per triangle: vertices, twin slots): every folded or illegal edge claims the triangles its flip writes; the edges holding their claims flip; `flips` counts them (0: the mesh is a valid, quasi-Delaunay triangulation)",
+        "`rounds` parallel rounds of Lawson flips on the disk mesh (6 u32 per triangle: vertices, twin slots): in each, every folded or illegal edge claims the triangles its flip writes and the edges holding their claims flip; the first round looks at every edge, the later ones at the edges near the round before's candidates only; `flips` counts the flips of all rounds (0: the mesh is a valid, quasi-Delaunay triangulation)",
     )
     .input(PortSpec::new(
         "positions",
@@ -180,6 +205,13 @@ fn edge_flip_round_kind() -> NodeKind {
         "the number of edges flipped (1 word)",
     ))
     .param(tolerance_param())
+    .param(ParamSpec::integer(
+        "rounds",
+        Some(4.0),
+        1.0,
+        16.0,
+        "Lawson rounds per evaluation, in place: the first looks at every edge, each later one only at the edges of the triangles the round before marked (its candidates' and degenerate edges'), which holds every edge that may have turned a candidate: the same mesh as that many single rounds",
+    ))
     .param(ParamSpec {
         name: "box",
         kind: ParamKind::Numbers {
@@ -194,6 +226,7 @@ fn edge_flip_round_kind() -> NodeKind {
         let b = p.numbers("box");
         Ok(Box::new(EdgeFlipRound {
             tolerance: p.number("tolerance"),
+            rounds: p.number("rounds") as u32,
             box_lengths: [b[0], b[1]],
         }))
     })
@@ -201,6 +234,7 @@ fn edge_flip_round_kind() -> NodeKind {
 
 pub struct EdgeFlipRound {
     tolerance: f64,
+    rounds: u32,
     box_lengths: [f64; 2],
 }
 
@@ -263,6 +297,28 @@ pub fn flip_round(mesh: &[u32], x: &[f64], l: [f64; 2], tolerance: f64) -> (Vec<
         flips += 1;
     }
     (out, flips)
+}
+
+/// `rounds` rounds of [`flip_round`] (fewer once one flips nothing: the rest would not
+/// change the mesh): the twin of an `edge_flip_round` evaluation. Returns the mesh and
+/// the flips of all rounds.
+pub fn flip_rounds(
+    mesh: &[u32],
+    x: &[f64],
+    l: [f64; 2],
+    tolerance: f64,
+    rounds: u32,
+) -> (Vec<u32>, u32) {
+    let (mut out, mut total) = (mesh.to_vec(), 0);
+    for _ in 0..rounds {
+        let (next, flips) = flip_round(&out, x, l, tolerance);
+        out = next;
+        total += flips;
+        if flips == 0 {
+            break;
+        }
+    }
+    (out, total)
 }
 
 /// A mesh input of a CPU reference (f64 words) as the u32 words the kernels read.
@@ -330,10 +386,19 @@ impl Node for EdgeFlipRound {
             ));
         }
         let tris = words as u64 / MESH_WORDS as u64;
-        Ok(
-            Signature::outputs(vec![mesh, ValueType::Indices { n: 1 }])
-                .with_scratch(vec![4 * tris]),
-        )
+        // A claim holds its slot in 27 bits below its round's tag.
+        if 3 * tris >= 1 << 27 {
+            return Err(PortError::new(
+                "mesh",
+                format!(
+                    "has {} slots; edge_flip_round's claims hold slots below 2^27 (N below 22369621)",
+                    3 * tris
+                ),
+            ));
+        }
+        // The claims and the marks of two rounds, a word per triangle each.
+        Ok(Signature::outputs(vec![mesh, ValueType::Indices { n: 1 }])
+            .with_scratch(vec![4 * tris; 3]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -354,7 +419,7 @@ impl Node for EdgeFlipRound {
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let x = &inputs[0].as_ref().expect("required").data;
         let mesh = reference_mesh(&inputs[1]);
-        let (out, flips) = flip_round(&mesh, x, self.box_lengths, self.tolerance);
+        let (out, flips) = flip_rounds(&mesh, x, self.box_lengths, self.tolerance, self.rounds);
         outputs[0].data = out.iter().map(|&v| v as f64).collect();
         outputs[1].data = vec![flips as f64];
     }
@@ -369,41 +434,92 @@ impl GpuKernels for EdgeFlipRound {
         let x = io.inputs[0].expect("required");
         let mesh = io.inputs[1].expect("required");
         let slots = (mesh.ty.words() / 2) as u32;
+        let source = cx.shader("disks/flip.wgsl")?;
+        let triangles = slots / 3;
+        let prepare = cx.kernel(&KernelSpec::new(
+            "edge_flip_prepare",
+            cx.shader("disks/flip_prepare.wgsl")?,
+            &[
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+                Binding::StorageReadWrite,
+                Binding::StorageReadWrite,
+            ],
+        ))?;
+        // The mesh's 12N words as 3N 16-byte quads.
+        let quads = mesh.ty.words() as u32 / 4;
+        let prepare_params = cx.uniform(
+            "edge flip prepare",
+            bytemuck::cast_slice(&[quads, triangles, 0, 0]),
+        );
+        let [claims, marks_a, marks_b] = [io.scratch[0], io.scratch[1], io.scratch[2]];
+        let mut out = vec![cx.dispatch(
+            &prepare,
+            &[
+                mesh.buffer,
+                io.outputs[0].buffer,
+                claims,
+                io.outputs[1].buffer,
+                &prepare_params,
+                marks_a,
+                marks_b,
+            ],
+            cx.grid_1d(quads.max(triangles) as u64, WG_1D),
+        )];
         let bindings = [
-            Binding::StorageRead,
             Binding::StorageRead,
             Binding::StorageReadWrite,
             Binding::StorageReadWrite,
             Binding::StorageReadWrite,
             Binding::Uniform,
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
         ];
-        let source = cx.shader("disks/flip.wgsl")?;
-        let words: [u32; 4] = [
-            slots,
-            (self.tolerance as f32).to_bits(),
-            (self.box_lengths[0] as f32).to_bits(),
-            (self.box_lengths[1] as f32).to_bits(),
-        ];
-        let params = cx.uniform("edge flip round", bytemuck::cast_slice(&words));
-        let buffers = [
-            x.buffer,
-            mesh.buffer,
-            io.outputs[0].buffer,
-            io.scratch[0],
-            io.outputs[1].buffer,
-            &params,
-        ];
-        let mut out = Vec::new();
-        for (entry, items) in [
-            ("prepare", 2 * slots as u64),
-            ("claim", slots as u64),
-            ("flip", slots as u64),
-        ] {
-            let kernel = cx.kernel(
+        let kernel = |cx: &mut CompileCtx<'_>, entry: &str| {
+            cx.kernel(
                 &KernelSpec::new(format!("edge_flip_{entry}"), source.clone(), &bindings)
                     .entry(entry),
-            )?;
-            out.push(cx.dispatch(&kernel, &buffers, cx.grid_1d(items, WG_1D)));
+            )
+        };
+        let (claim, claim_marked, flip) = (
+            kernel(cx, "claim")?,
+            kernel(cx, "claim_marked")?,
+            kernel(cx, "flip")?,
+        );
+        let grid = cx.grid_1d(triangles as u64, WG_1D);
+        for round in 0..self.rounds {
+            // Round j marks into one buffer and reads the other's marks (round j - 1's).
+            let (marks, marked) = if round % 2 == 0 {
+                (marks_a, marks_b)
+            } else {
+                (marks_b, marks_a)
+            };
+            let words: [u32; 8] = [
+                slots,
+                (self.tolerance as f32).to_bits(),
+                (self.box_lengths[0] as f32).to_bits(),
+                (self.box_lengths[1] as f32).to_bits(),
+                round,
+                self.rounds - 1 - round,
+                0,
+                0,
+            ];
+            let params = cx.uniform("edge flip round", bytemuck::cast_slice(&words));
+            let buffers = [
+                x.buffer,
+                io.outputs[0].buffer,
+                claims,
+                io.outputs[1].buffer,
+                &params,
+                marked,
+                marks,
+            ];
+            let first = if round == 0 { &claim } else { &claim_marked };
+            out.push(cx.dispatch(first, &buffers, grid));
+            out.push(cx.dispatch(&flip, &buffers, grid));
         }
         Ok(out)
     }

@@ -13,6 +13,7 @@
 //!   `abp_move_2d` (S1 eq. 10).
 //! - `mesh.rs`: the triangulation of the torus (layout, host construction, checks).
 //! - `flip.rs`: the edge-flip predicate and `edge_flip_round`; `overlap.rs`:
+//!   `vertex_fans` (each vertex's edges, walked once per mesh) and
 //!   `overlap_correction_round`. Their loops are `repeat` nodes (graphs/bd_delaunay.json).
 //! - `svg.rs`: a picture of a small system; `clusters.rs`: clusters of touching disks
 //!   through the mesh edges (the MIPS measure).

@@ -42,7 +42,7 @@ fn part(label: &str) -> &'static str {
         "force" | "cl" | "sorted_charges" | "verlet" | "short_sorted" | "short" | "species"
         | "charges" | "forces" => "forces",
         "flips" | "flip" | "settle" | "reflip" => "flips",
-        "overlaps" | "correct" => "overlap",
+        "fans" | "overlaps" | "correct" => "overlap",
         _ => "move",
     }
 }

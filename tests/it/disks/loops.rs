@@ -9,7 +9,9 @@ use mesoflow::exec::Profile;
 use mesoflow::gpu::GpuContext;
 use mesoflow::nodes::disks::flip::flip_round;
 use mesoflow::nodes::disks::mesh::{MESH_WORDS, check_torus_mesh, periodic_delaunay};
+use mesoflow::nodes::disks::overlap::vertex_fans;
 use mesoflow::nodes::disks::wrap;
+use mesoflow::plan::Launch;
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::disks::{LoopRun, disk_positions, run_with_loops, run_with_loops_profiled};
@@ -40,7 +42,7 @@ fn flip_graph(n: usize, repeat_params: &str) -> String {
         r#"{{"mesoflow": 1, "inputs": {{"positions": {x}, "mesh": {mesh}}},
   "nodes": [
     {{"id": "flips", "kind": "repeat", "params": {repeat_params}, "inputs": {{"initial": "inputs.mesh", "next": "round.mesh", "count": "round.flips"}}}},
-    {{"id": "round", "kind": "edge_flip_round", "params": {{"box": [{}, {}]}}, "inputs": {{"positions": "inputs.positions", "mesh": "flips.current"}}}}
+    {{"id": "round", "kind": "edge_flip_round", "params": {{"box": [{}, {}], "rounds": 1}}, "inputs": {{"positions": "inputs.positions", "mesh": "flips.current"}}}}
   ],
   "outputs": {{"mesh": {{"from": "flips.out"}}, "iterations": {{"from": "flips.iterations"}}, "flips": {{"from": "flips.total"}}}}
 }}"#,
@@ -59,6 +61,26 @@ fn moved_disks(seed: u64) -> (Vec<f64>, Vec<u32>) {
         .map(|(i, v)| wrap(v + rng.uniform(-0.2, 0.2), L[i % 2]) as f32 as f64)
         .collect();
     (x, mesh)
+}
+
+/// The ids of the nodes the plan runs in the body of the graph's loop.
+fn loop_body(gpu: &GpuContext, json: &str, inputs: &BTreeMap<String, HostArray>) -> Vec<String> {
+    let dir = util::tmpdir("disk_loop_body");
+    let g = util::load(&util::write_graph(&dir, "g.json", json));
+    let _ = std::fs::remove_dir_all(&dir);
+    let types = inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect();
+    let plan = util::plan_graph(&gpu.caps, &g, types, None, true);
+    let mut ids = Vec::new();
+    for launch in &plan.step {
+        if let Launch::Loop { body, .. } = launch {
+            for b in body {
+                if let Launch::Node { node, .. } = b {
+                    ids.push(g.nodes[*node].id.clone());
+                }
+            }
+        }
+    }
+    ids
 }
 
 fn inputs(x: &[f64], mesh: &[u32]) -> BTreeMap<String, HostArray> {
@@ -152,8 +174,9 @@ fn repeat_runs_a_fixed_count_and_refuses_past_its_cap() {
 }
 
 /// The overlap loop: `repeat` carrying the positions through `overlap_correction_round`
-/// on a fixed mesh until no pair along an edge overlaps, bit for bit the same as the
-/// node's rounds run one by one from the host (each of which `disks::overlap` checks
+/// on a fixed mesh (its fans made by `vertex_fans` before the loop, which the plan keeps
+/// out of the loop body) until no pair along an edge overlaps, bit for bit the same as
+/// the node's rounds run one by one from the host (each of which `disks::overlap` checks
 /// against the f64 round), with the same count of rounds and overlaps.
 #[test]
 fn repeat_carries_the_positions_through_the_overlap_rounds() {
@@ -167,6 +190,13 @@ fn repeat_carries_the_positions_through_the_overlap_rounds() {
     let mesh = periodic_delaunay(&x0, l).unwrap();
     let x: Vec<f64> = x0.iter().map(|&v| v as f32 as f64).collect();
     let params = r#"{"sigma": 1, "box": [24, 22]}"#;
+    let table = vertex_fans(&mesh, n, 10);
+    let fans = HostArray::u32(
+        ValueType::Indices {
+            n: table.len() as u32,
+        },
+        table,
+    );
     let (mut want, mut rounds, mut total) = (x.clone(), 0u32, 0u32);
     loop {
         let (out, _) = run_node_and_reference(
@@ -175,6 +205,7 @@ fn repeat_carries_the_positions_through_the_overlap_rounds() {
             &[
                 ("positions", flat_particles(&want, 2)),
                 ("mesh", inputs(&x, &mesh)["mesh"].clone()),
+                ("fans", fans.clone()),
             ],
         );
         want = out["positions"].data.to_f64();
@@ -191,7 +222,8 @@ fn repeat_carries_the_positions_through_the_overlap_rounds() {
         r#"{{"mesoflow": 1, "inputs": {{"positions": {}, "mesh": {}}},
   "nodes": [
     {{"id": "overlaps", "kind": "repeat", "inputs": {{"initial": "inputs.positions", "next": "round.positions", "count": "round.overlaps"}}}},
-    {{"id": "round", "kind": "overlap_correction_round", "params": {params}, "inputs": {{"positions": "overlaps.current", "mesh": "inputs.mesh"}}}}
+    {{"id": "fans", "kind": "vertex_fans", "inputs": {{"mesh": "inputs.mesh"}}}},
+    {{"id": "round", "kind": "overlap_correction_round", "params": {params}, "inputs": {{"positions": "overlaps.current", "mesh": "inputs.mesh", "fans": "fans.fans"}}}}
   ],
   "outputs": {{"positions": {{"from": "overlaps.out"}}, "iterations": {{"from": "overlaps.iterations"}}, "overlaps": {{"from": "overlaps.total"}}}}
 }}"#,
@@ -202,6 +234,7 @@ fn repeat_carries_the_positions_through_the_overlap_rounds() {
     );
     // The rounds above took the shared GPU in turn; the loop takes it now.
     let gpu = gpu().expect("checked above");
+    assert_eq!(loop_body(&gpu, &json, &inputs(&x, &mesh)), ["round"]);
     let (out, _) = run(&gpu, &json, &inputs(&x, &mesh), 1).unwrap();
     assert_eq!(u32s(&out["iterations"]), vec![rounds]);
     assert_eq!(u32s(&out["overlaps"]), vec![total]);

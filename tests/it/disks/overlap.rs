@@ -1,5 +1,6 @@
-//! `overlap_correction_round` against its f64 twin, and rounds repeated until no pair
-//! overlaps: no step above sigma / 4, no overlapping pair left (all pairs checked).
+//! `vertex_fans` against its exact twin, `overlap_correction_round` against its f64 twin,
+//! and rounds repeated until no pair overlaps: no step above sigma / 4, no overlapping
+//! pair left (all pairs checked).
 
 use mesoflow::nodes::disks::mesh::periodic_delaunay;
 use mesoflow::nodes::disks::minimum_image;
@@ -35,11 +36,31 @@ fn all_pair_overlaps(x: &[f64], sigma: f64) -> (usize, f64) {
     (count, closest)
 }
 
+/// The fan tables of a mesh on the GPU, each equal to its exact twin word for word, at
+/// the default width and at width 3 (most vertices of the mesh have more edges: their
+/// rounds finish the fan from the mesh).
+fn fan_tables(mesh: &HostArray, widths: &[u32]) -> Vec<HostArray> {
+    widths
+        .iter()
+        .map(|w| {
+            let (out, refs) = run_node_and_reference(
+                "vertex_fans",
+                &format!(r#"{{"width": {w}}}"#),
+                &[("mesh", mesh.clone())],
+            );
+            let want: Vec<u32> = refs[0].data.iter().map(|&v| v as u32).collect();
+            assert_eq!(u32s(&out["fans"]), want, "width {w}");
+            out["fans"].clone()
+        })
+        .collect()
+}
+
 /// 300 disks of diameter 1 placed at least 0.72 apart (packing 0.45): every pair closer
 /// than 1 is a Delaunay edge (0.72 > 1 / sqrt(2): no third point fits in its diametral
 /// circle), so the first round's count is the all-pairs count. Rounds on the GPU, each
-/// within f32 round-off of the f64 round, until one counts no overlap: every step at most
-/// sigma / 4, and no pair of all closer than sigma (up to f32 round-off).
+/// within f32 round-off of the f64 round (and bit for bit the same with the fan table 3
+/// wide, the rest of each fan walked on the mesh), until one counts no overlap: every
+/// step at most sigma / 4, and no pair of all closer than sigma (up to f32 round-off).
 #[test]
 fn overlap_rounds_remove_every_overlap() {
     if gpu().is_none() {
@@ -48,19 +69,30 @@ fn overlap_rounds_remove_every_overlap() {
     let mut rng = Rng::new(29);
     let x0 = disk_positions(&mut rng, 300, L, 0.72);
     let mesh = mesh_array(&periodic_delaunay(&x0, L).unwrap());
+    let fans = fan_tables(&mesh, &[10, 3]);
     let mut x: Vec<f64> = x0.iter().map(|&v| v as f32 as f64).collect();
     let (initial, _) = all_pair_overlaps(&x, 1.0);
     assert!(initial > 30, "{initial} overlapping pairs");
     let params = r#"{"sigma": 1, "box": [24, 22]}"#;
     let mut counts = Vec::new();
     loop {
-        let (out, refs) = run_node_and_reference(
-            "overlap_correction_round",
-            params,
-            &[("positions", flat_particles(&x, 2)), ("mesh", mesh.clone())],
-        );
+        let round = |fans: &HostArray| {
+            run_node_and_reference(
+                "overlap_correction_round",
+                params,
+                &[
+                    ("positions", flat_particles(&x, 2)),
+                    ("mesh", mesh.clone()),
+                    ("fans", fans.clone()),
+                ],
+            )
+        };
+        let (out, refs) = round(&fans[0]);
+        let (narrow, _) = round(&fans[1]);
         let y = out["positions"].data.to_f64();
         let count = u32s(&out["overlaps"])[0];
+        assert_eq!(narrow["positions"].data.to_f64(), y, "the narrow table");
+        assert_eq!(u32s(&narrow["overlaps"])[0], count, "the narrow table");
         assert_eq!(
             count as f64,
             refs[1].data[0],

@@ -54,6 +54,8 @@ fn table1_run(config: &str, n: usize, steps: u64, range: &str) -> (f64, f64, Vec
             ("n", &n_text),
             ("config", &config_text),
             ("range", &range_text),
+            // One Lawson round per loop iteration: flip_rounds counts S1's rounds.
+            ("lawson_rounds", "1"),
         ],
         steps,
         3,
