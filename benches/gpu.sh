@@ -46,7 +46,8 @@
 #               forces, flips, overlap correction for c0 to c4, long range, short range
 #               (cell list) and the Verlet variant, 2^10 to 2^20 (DISKS_SIZES,
 #               DISKS_CONFIGS to change), the long-range pair interactions per second;
-#               the long-range forces against an f64 sum (benches/disk_forces_check.py)
+#               the long-range forces against an f64 sum (benches/disk_forces_check.py);
+#               c0 at 2^16 and 2^20 with the disks numbered in lattice order
 #   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
 #   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
 #               request counts
@@ -359,6 +360,8 @@ suite_disks() {
   run python3 benches/disk_forces_check.py $bin 65536
   run $bin bench disks --configs ${DISKS_CONFIGS:-c0,c1,c2,c3,c4} --ranges long,short,verlet \
     --sizes ${DISKS_SIZES:-1024,16384,65536,262144,1048576} --reps 5
+  # The same start numbered in lattice order: the long-range force's one-image path.
+  run $bin bench disks --configs c0 --ranges long,short --sizes 65536,1048576 --reps 5 --order lattice
 }
 
 suite_overhead() {

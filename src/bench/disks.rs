@@ -7,7 +7,8 @@
 //! second (N^2 / the force launch's time) and GFLOP/s at `LONG_FLOPS` per pair.
 //!
 //! The disks start on the widest jittered triangular lattice in the box
-//! (`presets::lattice_disks`: spacing about 1.07 sigma at packing 0.79) and the
+//! (`presets::lattice_disks`: spacing about 1.07 sigma at packing 0.79; numbered at
+//! random, or in the lattice's order with `--order lattice`) and the
 //! mesh is built on the host (`periodic_delaunay`, seconds at 2^20 disks).
 
 use std::collections::BTreeMap;
@@ -16,7 +17,7 @@ use std::time::Duration;
 
 use mesoflow::expr::ParamValue;
 use mesoflow::nodes::disks::mesh::periodic_delaunay;
-use mesoflow::nodes::disks::presets::{configuration, lattice_disks};
+use mesoflow::nodes::disks::presets::{configuration, lattice_disks_in};
 use mesoflow::value::{HostArray, ValueType};
 
 use super::fcm::load;
@@ -28,6 +29,8 @@ pub struct DisksBench {
     pub ranges: Vec<String>,
     pub sizes: Vec<u32>,
     pub reps: u64,
+    /// The start's disks numbered in lattice order (`--order lattice`).
+    pub in_order: bool,
 }
 
 /// Flops per pair of the long-range kernel (shaders/disks/forces.wgsl, counted by hand:
@@ -92,9 +95,15 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
                 }
             };
             for &n in &bench.sizes {
-                let (x, _, l) =
-                    lattice_disks(n as usize, density, 1.0, fraction, 0x5EED ^ n as u64)
-                        .map_err(BenchError::Args)?;
+                let (x, _, l) = lattice_disks_in(
+                    n as usize,
+                    density,
+                    1.0,
+                    fraction,
+                    0x5EED ^ n as u64,
+                    bench.in_order,
+                )
+                .map_err(BenchError::Args)?;
                 let mesh = periodic_delaunay(&x, [l, l])
                     .map_err(|e| BenchError::Args(format!("the mesh of {n} disks: {e}")))?;
                 let g = load(

@@ -482,6 +482,11 @@ pub enum BenchCommand {
         /// Timed steps per size (after a warm-up).
         #[arg(long, default_value_t = 10)]
         reps: u64,
+        /// Numbering of the start's disks: random (the lattice's sites drawn in random
+        /// order), or lattice (the same sites in the lattice's row order: compact tiles
+        /// for the long-range force).
+        #[arg(long, default_value = "random", value_parser = ["random", "lattice"])]
+        order: String,
     },
     /// Direct pair mobilities (rpy_open.json, rpy_wall.json; translation and grand):
     /// time, pair interactions per second and GFLOP/s at the kernels' flop counts.
@@ -676,12 +681,14 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             ranges,
             sizes,
             reps,
+            order,
         } => disks::run(&disks::DisksBench {
             graph,
             configs,
             ranges,
             sizes,
             reps,
+            in_order: order == "lattice",
         }),
         BenchCommand::Nbody {
             graphs,
