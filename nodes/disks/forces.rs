@@ -183,15 +183,16 @@ impl GpuKernels for NonreciprocalForces {
             Binding::StorageReadWrite,
         ];
         let source = cx.shader("disks/forces.wgsl")?;
-        let bounds = cx.kernel(
-            &KernelSpec::new("nonreciprocal_forces bounds", source.clone(), &bindings)
-                .entry("bounds"),
-        )?;
-        let kernel = cx.kernel(&KernelSpec::new("nonreciprocal_forces", source, &bindings))?;
+        let kernel = cx.kernel(&KernelSpec::new(
+            "nonreciprocal_forces",
+            source.clone(),
+            &bindings,
+        ))?;
+        let cutoff2 = (self.cutoff * self.cutoff) as f32;
         let words: [u32; 8] = [
             n,
             self.short as u32,
-            ((self.cutoff * self.cutoff) as f32).to_bits(),
+            cutoff2.to_bits(),
             0, // zero: the shader reads its 0 from here (minimum_image)
             (self.box_lengths[0] as f32).to_bits(),
             (self.box_lengths[1] as f32).to_bits(),
@@ -206,10 +207,16 @@ impl GpuKernels for NonreciprocalForces {
             &params,
             io.scratch[0],
         ];
-        Ok(vec![
-            cx.dispatch(&bounds, &buffers, cx.grid_1d(n.div_ceil(WG) as u64, WG)),
-            cx.dispatch(&kernel, &buffers, cx.grid_1d(n as u64, WG)),
-        ])
+        let mut out = Vec::new();
+        // The tile boxes serve the long-range law without cutoff only (the shader's `fast`).
+        if !self.short && cutoff2 <= 0.0 {
+            let bounds = cx.kernel(
+                &KernelSpec::new("nonreciprocal_forces bounds", source, &bindings).entry("bounds"),
+            )?;
+            out.push(cx.dispatch(&bounds, &buffers, cx.grid_1d(n.div_ceil(WG) as u64, WG)));
+        }
+        out.push(cx.dispatch(&kernel, &buffers, cx.grid_1d(n as u64, WG)));
+        Ok(out)
     }
 }
 

@@ -70,26 +70,12 @@ pub(super) fn mpcd_measure_kind() -> NodeKind {
     .params(thermal_params())
     .param(bins_param())
     .param(super::rule_param())
-    .param(ParamSpec::integer(
-        "warmup",
-        Some(0.0),
-        0.0,
-        u32::MAX as f64,
-        "steps before the first sample",
-    ))
-    .param(ParamSpec::integer(
-        "every",
-        Some(1.0),
-        1.0,
-        u32::MAX as f64,
-        "steps between samples",
-    ))
+    .params(super::sampling_params())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
         let mut u = geo.thermal_uniform(p);
         u.bins = p.number("bins") as u32;
-        u.warmup = p.number("warmup") as u32;
-        u.every = p.number("every") as u32;
+        u.set_sampling(p);
         Ok(Box::new(MpcdMeasure {
             geo,
             u,
@@ -162,7 +148,7 @@ impl Node for MpcdMeasure {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], cx: RefCtx) {
         let step = cx.step as u32;
-        if step < self.u.warmup || !(step - self.u.warmup).is_multiple_of(self.u.every) {
+        if !self.u.sampled(step) {
             return;
         }
         let d = self.geo.dims();

@@ -593,6 +593,40 @@ pub(crate) fn fixed_scales(kt: f64, mass: f64) -> (f32, f32) {
     ((16_777_216.0 / vth) as f32, (65_536.0 / (vth * vth)) as f32)
 }
 
+/// `warmup` and `every`: the steps an accumulating node samples (from step `warmup` on,
+/// every `every`-th), for `Uniform::set_sampling`.
+pub(crate) fn sampling_params() -> Vec<ParamSpec> {
+    vec![
+        ParamSpec::integer(
+            "warmup",
+            Some(0.0),
+            0.0,
+            u32::MAX as f64,
+            "steps before the first sample",
+        ),
+        ParamSpec::integer(
+            "every",
+            Some(1.0),
+            1.0,
+            u32::MAX as f64,
+            "steps between samples",
+        ),
+    ]
+}
+
+impl Uniform {
+    /// `sampling_params` into the uniform.
+    pub(crate) fn set_sampling(&mut self, p: &Params) {
+        self.warmup = p.number("warmup") as u32;
+        self.every = p.number("every") as u32;
+    }
+
+    /// Whether `step` is sampled: the host's twin of `sampled` in shaders/mpcd/common.wgsl.
+    pub(crate) fn sampled(&self, step: u32) -> bool {
+        step >= self.warmup && (step - self.warmup).is_multiple_of(self.every)
+    }
+}
+
 /// Seed and stream of a kind's params into the uniform.
 pub(crate) fn key_into(u: &mut Uniform, p: &Params) {
     let seed = p.number("seed") as u64;

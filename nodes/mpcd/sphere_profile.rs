@@ -113,8 +113,7 @@ pub(super) fn mpcd_sphere_profile_kind() -> NodeKind {
     .param(ParamSpec::number("length", None, 1e-18, 1e18, "cylinder length L_C, centred on the sphere's centre; the cylinder within half a box length of the centre along each periodic axis (particles are taken at their nearest image of the centre)"))
     .param(ParamSpec::number("radius", None, 1e-18, 1e18, "cylinder radius R_C (the source: 0.1 R)"))
     .param(ParamSpec::number("bins_per_cell", Some(10.0), 1e-6, 1e6, "bins per cell length a (the source's alpha: 10)"))
-    .param(ParamSpec::integer("warmup", Some(0.0), 0.0, u32::MAX as f64, "steps before the first sample"))
-    .param(ParamSpec::integer("every", Some(1.0), 1.0, u32::MAX as f64, "steps between samples"))
+    .params(super::sampling_params())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
         if geo.dims() != 3 {
@@ -160,8 +159,7 @@ pub(super) fn mpcd_sphere_profile_kind() -> NodeKind {
             ));
         }
         let mut u = geo.thermal_uniform(p);
-        u.warmup = p.number("warmup") as u32;
-        u.every = p.number("every") as u32;
+        u.set_sampling(p);
         let unit = super::thermal_unit(p)?;
         let c = CylinderUniform {
             axis: [axis[0] as f32, axis[1] as f32, axis[2] as f32, 0.0],
@@ -273,7 +271,7 @@ impl Node for MpcdSphereProfile {
         let step = cx.step as u32;
         let bins = self.c.bins as usize;
         let acc = &mut outputs[0].data;
-        if step >= self.u.warmup && (step - self.u.warmup).is_multiple_of(self.u.every) {
+        if self.u.sampled(step) {
             let x = &inputs[0].as_ref().expect("required").data;
             let v = &inputs[1].as_ref().expect("required").data;
             let c = &inputs[2].as_ref().expect("required").data;

@@ -42,14 +42,12 @@ pub(super) fn mpcd_virial_kind() -> NodeKind {
     .params(thermal_params())
     .param(rule_param())
     .param(ParamSpec::number("dt", Some(0.1), 1e-30, 1e30, "collision interval tau"))
-    .param(ParamSpec::integer("warmup", Some(0.0), 0.0, u32::MAX as f64, "steps before the first sample"))
-    .param(ParamSpec::integer("every", Some(1.0), 1.0, u32::MAX as f64, "steps between samples"))
+    .params(super::sampling_params())
     .build(|p| {
         let geo = Geometry::from_params(p)?;
         thermal_unit(p)?;
         let mut u = geo.thermal_uniform(p);
-        u.warmup = p.number("warmup") as u32;
-        u.every = p.number("every") as u32;
+        u.set_sampling(p);
         u.mass = p.number("mass") as f32;
         u.dt = p.number("dt") as f32;
         Ok(Box::new(MpcdVirial { geo, u }))
@@ -99,7 +97,7 @@ impl Node for MpcdVirial {
         let step = cx.step as u32;
         let d = self.geo.dims();
         let acc = &mut outputs[0].data;
-        if step >= self.u.warmup && (step - self.u.warmup).is_multiple_of(self.u.every) {
+        if self.u.sampled(step) {
             let before = &inputs[0].as_ref().expect("required").data;
             let after = &inputs[1].as_ref().expect("required").data;
             let cell = &inputs[2].as_ref().expect("required").data;

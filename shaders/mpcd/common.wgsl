@@ -59,6 +59,12 @@ const CELL_WORDS: u32 = 8u;
 const SUM_V: u32 = 2u;
 
 // The low word of cell c's sum |v|^2.
+// Whether an accumulating node samples `step`: from `warmup` on, every `every`-th (the
+// host's twin: Uniform::sampled in nodes/mpcd/mod.rs).
+fn sampled(m: Mpcd, step: u32) -> bool {
+    return step >= m.warmup && (step - m.warmup) % m.every == 0u;
+}
+
 fn energy_word(m: Mpcd, c: u32) -> u32 {
     return m.ncells * CELL_WORDS + 2u * c;
 }

@@ -30,16 +30,11 @@ var<workgroup> bin_n: array<atomic<u32>, MAX_BINS>;
 var<workgroup> mom_lo: array<atomic<u32>, 3>;
 var<workgroup> mom_hi: array<atomic<i32>, 3>;
 
-
-fn sampled(step: u32) -> bool {
-    return step >= m.warmup && (step - m.warmup) % m.every == 0u;
-}
-
 @compute @workgroup_size(256)
 fn cells(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
          @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wid, nwg, lid, 256u);
-    let on = sampled(clock[0]);
+    let on = sampled(m, clock[0]);
     var dof = 0u;
     if (on && i < m.ncells) {
         let count = sums[i * CELL_WORDS];
@@ -67,7 +62,7 @@ fn cells(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
 fn particles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
              @builtin(local_invocation_index) lid: u32) {
     let p = flat_index(wid, nwg, lid, 256u);
-    let on = sampled(clock[0]);
+    let on = sampled(m, clock[0]);
     let bins = min(m.bins, MAX_BINS);
     for (var b = lid; b < bins; b = b + 256u) {
         atomicStore(&bin_lo[b], 0u);

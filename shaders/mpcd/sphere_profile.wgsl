@@ -32,13 +32,9 @@ struct Cylinder {
 
 #import mpcd/add64.wgsl
 
-fn sampled(step: u32) -> bool {
-    return step >= m.warmup && (step - m.warmup) % m.every == 0u;
-}
-
 @compute @workgroup_size(1)
 fn count() {
-    if (sampled(clock[0])) {
+    if (sampled(m, clock[0])) {
         atomicAdd(&sums64[0], 1u);
     }
 }
@@ -47,7 +43,7 @@ fn count() {
 fn particles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
              @builtin(local_invocation_index) lid: u32) {
     let p = flat_index(wid, nwg, lid, 256u);
-    if (p >= m.n || !sampled(clock[0])) {
+    if (p >= m.n || !sampled(m, clock[0])) {
         return;
     }
     let j = 3u * cyl.sphere;

@@ -18,15 +18,11 @@
 var<workgroup> w_lo: atomic<u32>;
 var<workgroup> w_hi: atomic<i32>;
 
-fn sampled(step: u32) -> bool {
-    return step >= m.warmup && (step - m.warmup) % m.every == 0u;
-}
-
 @compute @workgroup_size(256)
 fn particles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
              @builtin(local_invocation_index) lid: u32) {
     let p = flat_index(wid, nwg, lid, 256u);
-    let on = sampled(clock[0]);
+    let on = sampled(m, clock[0]);
     if (lid == 0u) {
         atomicStore(&w_lo, 0u);
         atomicStore(&w_hi, 0);
@@ -57,7 +53,7 @@ fn particles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg
 
 @compute @workgroup_size(1)
 fn finish() {
-    if (sampled(clock[0])) {
+    if (sampled(m, clock[0])) {
         atomicAdd(&sums64[0], 1u);
     }
     let samples = f32(atomicLoad(&sums64[0]));
