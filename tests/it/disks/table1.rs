@@ -14,14 +14,27 @@ use mesoflow::value::{HostArray, ValueType};
 use crate::util::disks::{lattice_disks, run_with_loops};
 use crate::util::{Rng, flat_particles, gpu, load_with, u32s};
 
-fn mesh_input(x: &[f64], l: f64) -> HostArray {
+/// The graph's inputs for disks at `x` in a box of side `l`: the positions and their
+/// mesh (charges, where a test needs them, go in beside).
+fn disk_inputs(x: &[f64], l: f64) -> BTreeMap<String, HostArray> {
     let mesh = periodic_delaunay(x, [l, l]).unwrap();
-    HostArray::u32(
+    let mesh = HostArray::u32(
         ValueType::Indices {
             n: mesh.len() as u32,
         },
         mesh,
-    )
+    );
+    BTreeMap::from([
+        ("positions".to_string(), flat_particles(x, 2)),
+        ("mesh".to_string(), mesh),
+    ])
+}
+
+/// `disk_inputs` with every charge zero (free disks, config custom).
+fn free_disk_inputs(x: &[f64], l: f64) -> BTreeMap<String, HostArray> {
+    let mut inputs = disk_inputs(x, l);
+    inputs.insert("charges".into(), flat_particles(&vec![0.0; x.len()], 2));
+    inputs
 }
 
 /// Mean iterations per step of the loop `name`.
@@ -39,10 +52,7 @@ fn table1_run(config: &str, n: usize, steps: u64, range: &str) -> (f64, f64, Vec
         .4;
     let mut rng = Rng::new(5);
     let (x, l) = lattice_disks(&mut rng, n, density, 1.0);
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x, 2)),
-        ("mesh".to_string(), mesh_input(&x, l)),
-    ]);
+    let inputs = disk_inputs(&x, l);
     let (n_text, config_text, range_text) = (
         n.to_string(),
         format!("\"{config}\""),
@@ -131,11 +141,7 @@ fn free_dilute_disks_diffuse_with_the_clipped_noise_msd() {
     let (n, density, dt, d, steps) = (1024usize, 0.01, 0.01, 1.0, 40u64);
     let mut rng = Rng::new(13);
     let (x0, l) = lattice_disks(&mut rng, n, density, 1.0);
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x0, 2)),
-        ("charges".to_string(), flat_particles(&vec![0.0; 2 * n], 2)),
-        ("mesh".to_string(), mesh_input(&x0, l)),
-    ]);
+    let inputs = free_disk_inputs(&x0, l);
     let g = load_with(
         "bd_delaunay.json",
         &[
@@ -190,10 +196,7 @@ fn graph_forces_sum_to_zero_when_alpha_equals_mu() {
         ("long", "c0"),
         ("short", "c0"),
     ] {
-        let mut inputs = BTreeMap::from([
-            ("positions".to_string(), flat_particles(&x, 2)),
-            ("mesh".to_string(), mesh_input(&x, l)),
-        ]);
+        let mut inputs = disk_inputs(&x, l);
         if config == "custom" {
             inputs.insert("charges".into(), flat_particles(&q, 2));
         }
@@ -232,10 +235,7 @@ fn a_pass_through_stops_the_run_at_its_step() {
     let n = 256usize;
     let mut rng = Rng::new(19);
     let (x, l) = lattice_disks(&mut rng, n, 0.79, 1.0);
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x, 2)),
-        ("mesh".to_string(), mesh_input(&x, l)),
-    ]);
+    let inputs = disk_inputs(&x, l);
     let g = load_with(
         "bd_delaunay.json",
         &[("n", "256"), ("config", "\"c0\""), ("dt", "100")],
@@ -316,11 +316,7 @@ fn active_disks_at_packing_0_7_gather_into_one_cluster() {
     let mut rng = Rng::new(23);
     let (x0, l) = lattice_disks(&mut rng, n, density, 1.0);
     let steps = 400u64;
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x0, 2)),
-        ("charges".to_string(), flat_particles(&vec![0.0; 2 * n], 2)),
-        ("mesh".to_string(), mesh_input(&x0, l)),
-    ]);
+    let inputs = free_disk_inputs(&x0, l);
     let g = load_with(
         "bd_delaunay.json",
         &[
