@@ -595,20 +595,19 @@ impl GpuKernels for MpcdStreamSpheres {
         let sphere_vel = moving.map_or(centres.buffer, |m| m.buffer);
         let (x, v) = (io.outputs[0].buffer, io.outputs[1].buffer);
         let grid = cx.grid_1d(n as u64, WG_1D);
+        // The bindings both streaming entries share, before their outputs.
+        let inputs = [
+            &params,
+            &sphere_params,
+            pos.buffer,
+            vel,
+            centres.buffer,
+            radii,
+            sphere_vel,
+        ];
         let main = cx.dispatch(
             &kernel,
-            &[
-                &params,
-                &sphere_params,
-                pos.buffer,
-                vel,
-                centres.buffer,
-                radii,
-                sphere_vel,
-                x,
-                v,
-                impulse.buffer,
-            ],
+            &[&inputs[..], &[x, v, impulse.buffer]].concat(),
             grid,
         );
         let mut out = vec![cx.fill(impulse.buffer, impulse.ty.words(), 0)?];
@@ -630,20 +629,7 @@ impl GpuKernels for MpcdStreamSpheres {
         out.push(
             cx.dispatch(
                 &stream_cell,
-                &[
-                    &params,
-                    &sphere_params,
-                    pos.buffer,
-                    vel,
-                    centres.buffer,
-                    radii,
-                    sphere_vel,
-                    xt,
-                    vt,
-                    impulse.buffer,
-                    ct,
-                    perm,
-                ],
+                &[&inputs[..], &[*xt, *vt, impulse.buffer, *ct, *perm]].concat(),
                 grid,
             )
             .on_steps(on),
