@@ -8,7 +8,10 @@
 //! Both laws run all pairs, tiled through workgroup memory (shaders/disks/forces.wgsl);
 //! the long-range law without cutoff takes one periodic image per (particle, tile) where
 //! the tile's bounding box allows it (a first launch writes the boxes to scratch), so
-//! particles in a spatial order run the pair loop without a minimum image. This node
+//! particles in a spatial order run the pair loop without a minimum image (the graphs
+//! sort the disks by Morton cell first). Where the particle tiles are too few to fill the
+//! GPU, the tiles are split into ranges summed by separate workgroups and added per
+//! particle in a fixed order after (`slices`). This node
 //! applies the short-range law's cutoff inside the all-pairs loop (O(N^2), exact); the
 //! graphs' short range goes through the 2-D cell list instead (`neighbour_sum`'s
 //! `nonreciprocal` kernel).
@@ -24,6 +27,20 @@ use crate::value::{PortType, RefArray, ValueType};
 
 /// Threads per workgroup and particles per tile (shaders/disks/forces.wgsl).
 const WG: u32 = 128;
+
+/// Workgroups the all-pairs launch aims for at least: about what an H100 or H200 holds
+/// resident at once (132 multiprocessors x 16 workgroups of 128 threads).
+const FILL_WORKGROUPS: u32 = 2048;
+
+/// The ranges the tiles are split into for `n` particles (the shader's `slices`) and the
+/// tiles in each: one range where the particle tiles alone fill the GPU, otherwise enough
+/// to reach FILL_WORKGROUPS, each range keeping at least 4 tiles (none left empty).
+fn slices(n: u32) -> (u32, u32) {
+    let tiles = n.div_ceil(WG).max(1);
+    let wanted = FILL_WORKGROUPS.div_ceil(tiles).min(tiles / 4).max(1);
+    let per_slice = tiles.div_ceil(wanted);
+    (tiles.div_ceil(per_slice), per_slice)
+}
 
 fn nonreciprocal_forces_kind() -> NodeKind {
     NodeKind::declare(
@@ -133,8 +150,18 @@ impl Node for NonreciprocalForces {
             ValueType::Particles { n, .. } => n.div_ceil(WG) as u64,
             _ => 1,
         };
-        // Each tile's bounding box (shaders/disks/forces.wgsl `bounds`).
-        Ok(Signature::outputs(vec![x]).with_scratch(vec![16 * tiles.max(1)]))
+        let n = match x {
+            ValueType::Particles { n, .. } => n,
+            _ => 1,
+        };
+        // Each tile's bounding box (shaders/disks/forces.wgsl `bounds`), and the slices'
+        // partial sums where there are several.
+        let partials = if slices(n).0 > 1 {
+            8 * slices(n).0 as u64 * n as u64
+        } else {
+            8
+        };
+        Ok(Signature::outputs(vec![x]).with_scratch(vec![16 * tiles.max(1), partials]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -147,7 +174,8 @@ impl Node for NonreciprocalForces {
             _ => 0,
         };
         vec![format!(
-            "all {n} x {n} pairs in tiles of {WG}, law r/|r|^{}{}",
+            "all {n} x {n} pairs in tiles of {WG} ({} slices), law r/|r|^{}{}",
+            slices(n).0,
             if self.short { 7 } else { 3 },
             if self.cutoff > 0.0 {
                 format!(", cut at {}", self.cutoff)
@@ -181,6 +209,7 @@ impl GpuKernels for NonreciprocalForces {
             Binding::StorageReadWrite,
             Binding::Uniform,
             Binding::StorageReadWrite,
+            Binding::StorageReadWrite,
         ];
         let source = cx.shader("disks/forces.wgsl")?;
         let kernel = cx.kernel(&KernelSpec::new(
@@ -189,6 +218,8 @@ impl GpuKernels for NonreciprocalForces {
             &bindings,
         ))?;
         let cutoff2 = (self.cutoff * self.cutoff) as f32;
+        let (slices, tiles_per_slice) = slices(n);
+        let tiles = n.div_ceil(WG);
         let words: [u32; 8] = [
             n,
             self.short as u32,
@@ -196,8 +227,8 @@ impl GpuKernels for NonreciprocalForces {
             0, // zero: the shader reads its 0 from here (minimum_image)
             (self.box_lengths[0] as f32).to_bits(),
             (self.box_lengths[1] as f32).to_bits(),
-            0,
-            0,
+            slices,
+            tiles_per_slice,
         ];
         let params = cx.uniform("nonreciprocal forces", bytemuck::cast_slice(&words));
         let buffers = [
@@ -206,16 +237,29 @@ impl GpuKernels for NonreciprocalForces {
             io.outputs[0].buffer,
             &params,
             io.scratch[0],
+            io.scratch[1],
         ];
         let mut out = Vec::new();
         // The tile boxes serve the long-range law without cutoff only (the shader's `fast`).
         if !self.short && cutoff2 <= 0.0 {
             let bounds = cx.kernel(
-                &KernelSpec::new("nonreciprocal_forces bounds", source, &bindings).entry("bounds"),
+                &KernelSpec::new("nonreciprocal_forces bounds", source.clone(), &bindings)
+                    .entry("bounds"),
             )?;
             out.push(cx.dispatch(&bounds, &buffers, cx.grid_1d(n.div_ceil(WG) as u64, WG)));
         }
-        out.push(cx.dispatch(&kernel, &buffers, cx.grid_1d(n as u64, WG)));
+        out.push(cx.dispatch(
+            &kernel,
+            &buffers,
+            cx.grid_1d(tiles as u64 * slices as u64 * WG as u64, WG),
+        ));
+        if slices > 1 {
+            let combine = cx.kernel(
+                &KernelSpec::new("nonreciprocal_forces combine", source, &bindings)
+                    .entry("combine"),
+            )?;
+            out.push(cx.dispatch(&combine, &buffers, cx.grid_1d(n as u64, WG)));
+        }
         Ok(out)
     }
 }

@@ -21,12 +21,20 @@
 //   unit beside the inverse square root).
 // Both paths give the minimum image, so the result does not depend on the order; the law
 // and the cutoff are decided once per thread, outside the loops.
+// - Few particles fill few workgroups (2^16 disks: 512 of 128 threads, a quarter of what
+//   an H100 holds at once): the tiles are then split into `slices` ranges, workgroup w
+//   summing particle tile w mod tiles_i over slice w / tiles_i into `partial`, and
+//   `combine` adds a particle's slices in slice order and applies mu (the same sum every
+//   run). With one slice `main` writes the force itself.
 #import common/index.wgsl
 
 const WG: u32 = 128u;
 
 // zero: 0, read from the uniform so that no compiler can see it (see minimum_image).
-struct Params { n: u32, law: u32, cutoff2: f32, zero: u32, box_len: vec2<f32> }
+// slices: ranges the tiles are split into; tiles_per_slice: tiles in each (the last may
+// hold fewer).
+struct Params { n: u32, law: u32, cutoff2: f32, zero: u32, box_len: vec2<f32>, slices: u32,
+                tiles_per_slice: u32 }
 
 @group(0) @binding(0) var<storage, read> x: array<vec2<f32>>;
 @group(0) @binding(1) var<storage, read> charges: array<vec2<f32>>;
@@ -34,6 +42,8 @@ struct Params { n: u32, law: u32, cutoff2: f32, zero: u32, box_len: vec2<f32> }
 @group(0) @binding(3) var<uniform> params: Params;
 // Per tile: (lower x, lower y, upper x, upper y).
 @group(0) @binding(4) var<storage, read_write> tile_box: array<vec4<f32>>;
+// With slices > 1: slice s's sum for particle i at s n + i (mu not applied).
+@group(0) @binding(5) var<storage, read_write> partial: array<vec2<f32>>;
 
 var<workgroup> tile: array<vec4<f32>, WG>;
 
@@ -62,15 +72,20 @@ fn tile_long(xi: vec2<f32>, l: vec2<f32>, inv_l: vec2<f32>) -> vec2<f32> {
     return f;
 }
 
-// The same when the whole tile is seen through one image: xs is x_i shifted to it.
+// The same when the whole tile is seen through one image: xs is x_i shifted to it. The
+// squared distance is clamped at R2_FLOOR instead of tested (one instruction, not two): a
+// pair at r = 0 (the particle itself) then adds 0 x 1e30 alpha, nothing; only a pair
+// closer than 1e-10 but not coincident, which f32 positions of disks never make, would
+// differ from the exact law.
+const R2_FLOOR: f32 = 1e-20;
 fn tile_long_one_image(xs: vec2<f32>) -> vec2<f32> {
     var f = vec2<f32>(0.0);
     for (var k = 0u; k < WG; k = k + 1u) {
         let p = tile[k];
         let r = xs - p.xy;
-        let r2 = dot(r, r);
-        let inv = select(0.0, inverseSqrt(r2), r2 > 0.0);
-        f = f + (p.z * inv * inv * inv) * r;
+        let inv = inverseSqrt(max(dot(r, r), R2_FLOOR));
+        // alpha / r^3 as (alpha / r) (1 / r^2): two independent products, then one.
+        f = f + ((p.z * inv) * (inv * inv)) * r;
     }
     return f;
 }
@@ -112,7 +127,13 @@ fn bounds(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
 @compute @workgroup_size(128)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let i = flat_index(wid, nwg, lid, WG);
+    let tiles = (params.n + WG - 1u) / WG;
+    let w = wid.y * nwg.x + wid.x;
+    let slice = w / tiles;
+    if (slice >= params.slices) {
+        return;
+    }
+    let i = (w % tiles) * WG + lid;
     let inside = i < params.n;
     let xi = x[min(i, params.n - 1u)];
     let l = max(params.box_len, vec2<f32>(0.0));
@@ -121,8 +142,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let half = select(vec2<f32>(3.4e38), 0.5 * l, periodic);
     let fast = params.law == 0u && params.cutoff2 <= 0.0;
     var f = vec2<f32>(0.0);
-    let tiles = (params.n + WG - 1u) / WG;
-    for (var t = 0u; t < tiles; t = t + 1u) {
+    let first = slice * params.tiles_per_slice;
+    let last = min(tiles, first + params.tiles_per_slice);
+    for (var t = first; t < last; t = t + 1u) {
         let j = t * WG + lid;
         if (j < params.n) {
             tile[lid] = vec4<f32>(x[j], charges[j].x, 0.0);
@@ -146,7 +168,27 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         }
         workgroupBarrier();
     }
-    if (inside) {
-        forces[i] = charges[i].y * f;
+    if (!inside) {
+        return;
     }
+    if (params.slices == 1u) {
+        forces[i] = charges[i].y * f;
+    } else {
+        partial[slice * params.n + i] = f;
+    }
+}
+
+// With slices > 1, after `main`: each particle's slices added in slice order, times mu.
+@compute @workgroup_size(128)
+fn combine(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+           @builtin(local_invocation_index) lid: u32) {
+    let i = flat_index(wid, nwg, lid, WG);
+    if (i >= params.n) {
+        return;
+    }
+    var f = vec2<f32>(0.0);
+    for (var s = 0u; s < params.slices; s = s + 1u) {
+        f = f + partial[s * params.n + i];
+    }
+    forces[i] = charges[i].y * f;
 }

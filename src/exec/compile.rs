@@ -2,7 +2,7 @@
 //! own dispatches (or a spectral node alone), a transform with what it folds in, a fused
 //! group, a state copy, a loop with its body.
 
-use super::{Compiled, CompiledLoop, ExecError, GATED_AHEAD, LoopGate, Program, engine_err};
+use super::{Compiled, CompiledLoop, ExecError, LoopGate, Program, engine_err, gated_ahead};
 use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo, NodePlan, Slot, WG_1D};
 use crate::graph::NodeId;
 use crate::node::Lowering;
@@ -276,7 +276,7 @@ impl<'a> Program<'a> {
         // A gated loop's speculative iterations cost only their launches once it has
         // stopped, so more of them go out ahead of the host's decisions.
         let in_flight = if kernels.stopped_word.is_some() {
-            1 + GATED_AHEAD
+            1 + gated_ahead()
         } else {
             2
         };

@@ -190,6 +190,15 @@ struct CompiledLoop {
 /// iteration is short, while each one run past the stop costs only its launches.
 const GATED_AHEAD: usize = 2;
 
+/// [`GATED_AHEAD`], or the environment's `MESOFLOW_LOOP_AHEAD` (0 to 8) where set: a
+/// tuning knob for benchmarks (the speculation changes no result, only the time).
+fn gated_ahead() -> usize {
+    std::env::var("MESOFLOW_LOOP_AHEAD")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+        .map_or(GATED_AHEAD, |v| v.min(8))
+}
+
 /// The indirect arguments of a gated loop's iteration: one (x, y, z) per dispatch of
 /// [`CompiledLoop::iteration`], in its order, that `dispatch` (shaders/engine/gate.wgsl)
 /// writes after `start` and after each iteration: the static counts while the loop runs,

@@ -31,15 +31,42 @@ fn nonreciprocal_forces_match_the_f64_sum() {
     if gpu().is_none() {
         return;
     }
-    // 300 particles: three tiles of 128, the last one partial.
+    // 300 particles: three tiles of 128, the last one partial, one range of tiles.
     let (x, q) = system(300, 7, false);
-    for (params, tol) in [
+    let cases = [
         // r^-2 forces summed over 300 terms in f32: a few ulps of the largest force.
         (r#"{"law": "long", "box": [24, 20]}"#, 2e-5),
         (r#"{"law": "short", "cutoff": 2.5, "box": [24, 20]}"#, 2e-5),
         // Open axes: plain differences.
         (r#"{"law": "long"}"#, 2e-5),
-    ] {
+    ];
+    check_forces(&x, &q, &cases);
+    // 1700 particles: 14 tiles, the last partial, split into 3 ranges of 5, 5 and 4 tiles
+    // summed apart and added per particle in range order. They fill a 36 x 30 patch moved
+    // across the corner of a 75 x 62 box: pairs wrap, but none is near half the box, where
+    // f32 and f64 differences may round to different images.
+    let l = [75.0, 62.0];
+    let mut rng = Rng::new(8);
+    let x: Vec<f64> = disk_positions(&mut rng, 1700, [36.0, 30.0], 0.5)
+        .chunks(2)
+        .flat_map(|p| {
+            let wrap = |v: f64, l: f64| (v + l / 2.0).rem_euclid(l) - l / 2.0;
+            [wrap(p[0] + l[0] / 2.0, l[0]), wrap(p[1] + l[1] / 2.0, l[1])]
+        })
+        .collect();
+    let q: Vec<f64> = (0..2 * 1700).map(|_| rng.uniform(-2.0, 2.0)).collect();
+    check_forces(
+        &flat_particles(&x, 2),
+        &flat_particles(&q, 2),
+        &[
+            (r#"{"law": "long", "box": [75, 62]}"#, 2e-5),
+            (r#"{"law": "short", "cutoff": 2.5, "box": [75, 62]}"#, 2e-5),
+        ],
+    );
+}
+
+fn check_forces(x: &HostArray, q: &HostArray, cases: &[(&str, f64)]) {
+    for &(params, tol) in cases {
         let (out, refs) = run_node_and_reference(
             "nonreciprocal_forces",
             params,
