@@ -250,7 +250,7 @@ impl GpuIterative for Lanczos {
             status_bytes: 4 * layout.status_words() as u64,
             answer: small.clone(),
             answer_offset: 4 * layout.answer() as u64,
-            stopped_word: None,
+            gpu_stop: None,
         })
     }
 

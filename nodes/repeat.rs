@@ -8,10 +8,11 @@
 //! The loop body is every node that depends on the `current` output and leads to the
 //! `next` and `count` inputs (`Lowering::Iterative`, as `lanczos`); it may read values
 //! from outside (the flips read the positions). Per iteration the GPU copies `next` to
-//! `current` and tallies the count (`shaders/repeat/repeat.wgsl`); the host reads four
-//! status words (one round trip per iteration) and stops when the GPU says the loop has
-//! stopped. The GPU decides the stop itself, so the iteration the executor runs ahead
-//! while the host reads (speculation, see `exec/run.rs`) changes nothing once it has.
+//! `current` and tallies the count (`shaders/repeat/repeat.wgsl`), and decides the stop
+//! itself (a zero count, or `max_iterations` reached): the executor runs batches of
+//! iterations and reads the status once per batch (one host round trip for a loop that
+//! takes as many iterations as at its last run, see `exec/run.rs`); the iterations of a
+//! batch past the stop change nothing.
 //! A `fixed` count is known when the program is compiled (`fixed_iterations`): the
 //! iterations are recorded one after the other within the step, no status read, and the
 //! steps batch as in a loop-free program. The body sees the same step counter in every
@@ -20,8 +21,8 @@
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo, WG_1D};
 use crate::node::{
-    Decision, GpuIterative, IterativeKernels, LoopError, Lowering, Node, NodeKind, ParamSpec,
-    PortError, PortSpec, RefCtx, Registry, Signature,
+    Decision, GpuIterative, GpuStop, IterativeKernels, LoopError, Lowering, Node, NodeKind,
+    ParamSpec, PortError, PortSpec, RefCtx, Registry, Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
@@ -97,10 +98,18 @@ fn repeat_kind() -> NodeKind {
         1e6,
         "until the count is 0: more iterations than this is an error",
     ))
+    .param(ParamSpec::integer(
+        "stop_word",
+        Some(0.0),
+        0.0,
+        1e6,
+        "the word of `count` whose 0 stops the loop (`total` sums word 0): edge_flip_round's word 1, the flips of its last round, stops the flip loops of bd_delaunay.json an iteration early",
+    ))
     .build(|p| {
         Ok(Box::new(Repeat {
             fixed: p.number("fixed") as u32,
             max_iterations: p.number("max_iterations") as u32,
+            stop_word: p.number("stop_word") as u32,
         }))
     })
 }
@@ -108,6 +117,7 @@ fn repeat_kind() -> NodeKind {
 pub struct Repeat {
     fixed: u32,
     max_iterations: u32,
+    stop_word: u32,
 }
 
 /// Words of the status: iterations, stopped, last count, total, halt.
@@ -151,6 +161,17 @@ impl Node for Repeat {
                 "is empty: the loop reads its first word",
             ));
         }
+        if let Some(ValueType::Indices { n }) = inputs[2]
+            && self.stop_word >= n
+        {
+            return Err(PortError::new(
+                "count",
+                format!(
+                    "has {n} words: stop_word {} is past its last",
+                    self.stop_word
+                ),
+            ));
+        }
         let one = ValueType::Indices { n: 1 };
         Ok(Signature::outputs(vec![initial, initial, one, one])
             .with_scratch(vec![4 * STATUS_WORDS]))
@@ -168,7 +189,7 @@ impl Node for Repeat {
             )
         } else {
             format!(
-                "until the count is 0, at most {} iterations; one host round trip per iteration",
+                "until the count is 0, at most {} iterations; one host round trip per batch of iterations",
                 self.max_iterations
             )
         }]
@@ -205,7 +226,16 @@ impl GpuIterative for Repeat {
         let words = initial.ty.words();
         let params = cx.uniform(
             "repeat params",
-            bytemuck::cast_slice(&[words as u32, self.fixed, counted, halts]),
+            bytemuck::cast_slice(&[
+                words as u32,
+                self.fixed,
+                counted,
+                halts,
+                self.max_iterations,
+                self.stop_word,
+                0,
+                0,
+            ]),
         );
         let status = io.scratch[0];
         let buffers = [
@@ -240,8 +270,12 @@ impl GpuIterative for Repeat {
             status_bytes: 4 * STATUS_WORDS,
             answer: status.clone(),
             answer_offset: 0,
-            // `tally` sets `stopped` (status[1]); `advance` and `tally` do nothing after.
-            stopped_word: Some(1),
+            // `tally` sets `stopped` (status[1]) and counts the iterations (status[0]);
+            // `advance` and `tally` do nothing after.
+            gpu_stop: Some(GpuStop {
+                stopped_word: 1,
+                iterations_word: 0,
+            }),
         })
     }
 
@@ -263,15 +297,16 @@ impl GpuIterative for Repeat {
                 "the GPU counted {counted} iterations, the host {iterations}"
             )));
         }
-        if stopped {
-            return Ok(Decision::Finish(Vec::new()));
+        if !stopped {
+            return Ok(Decision::Continue);
         }
-        if iterations >= self.max_iterations as usize {
+        // The GPU stops at max_iterations too: there with the count still nonzero.
+        if last != 0 {
             return Err(LoopError::NoConvergence(format!(
                 "the loop body's count is still {last} after {iterations} iterations (max_iterations)"
             )));
         }
-        Ok(Decision::Continue)
+        Ok(Decision::Finish(Vec::new()))
     }
 }
 

@@ -531,13 +531,24 @@ pub struct IterativeKernels {
     /// Where the host writes [`Decision::Finish`]'s bytes (from `answer_offset`).
     pub answer: wgpu::Buffer,
     pub answer_offset: u64,
-    /// For a loop whose GPU side knows when it has stopped (`repeat`): the index of a u32
-    /// word in `status` that `start` sets to 0 and `iterate` sets nonzero at the stop,
-    /// after which `iterate` changes nothing and the body's results are read by no one.
-    /// The executor then gates the iterations it runs past the stop: the body's and
-    /// `iterate`'s dispatches go out as indirect dispatches with zero workgroups (see
-    /// `exec/run.rs`). `None` where only the host's `decide` knows (`lanczos`).
-    pub stopped_word: Option<u32>,
+    /// For a loop whose GPU side knows when it has stopped (`repeat`): where in `status`
+    /// it says so. The executor then runs the loop in batches of iterations, reading the
+    /// status once per batch, and gates the iterations a batch holds past the stop: the
+    /// body's and `iterate`'s dispatches go out as indirect dispatches with zero
+    /// workgroups (see `exec/run.rs`). `None` where only the host's `decide` knows
+    /// (`lanczos`): one status read per iteration.
+    pub gpu_stop: Option<GpuStop>,
+}
+
+/// The status words of a loop that stops on the GPU (`IterativeKernels::gpu_stop`).
+#[derive(Clone, Copy, Debug)]
+pub struct GpuStop {
+    /// A u32 that `start` sets to 0 and `iterate` sets nonzero at the stop (at the latest
+    /// when the iterations reach the node's limit), after which `iterate` changes nothing
+    /// and the body's results are read by no one.
+    pub stopped_word: u32,
+    /// The iterations run before the stop, counted by `iterate`: what `decide` is given.
+    pub iterations_word: u32,
 }
 
 /// The host's verdict after reading an iterative node's status.

@@ -46,7 +46,9 @@
 //! winners therefore write disjoint triangles, and an outer edge that neither moves keeps
 //! its slot, so the twins it points to stay right. The lowest candidate always wins: a
 //! round with candidates flips at least one edge, and the winners follow a fixed rule (the
-//! same mesh every run). The count of flips made (a u32) tells a loop when to stop.
+//! same mesh every run). The counts of flips made, in all rounds and in the last one (two
+//! u32), tell a loop when to stop: none in the last round means none is needed, so a loop
+//! that stops on that word (`repeat`'s `stop_word` 1) spends no evaluation confirming it.
 
 use super::mesh::{MESH_WORDS, orient};
 use super::minimum_image;
@@ -186,7 +188,7 @@ impl GpuKernels for FlipPredicate {
 fn edge_flip_round_kind() -> NodeKind {
     NodeKind::declare(
         "edge_flip_round",
-        "`rounds` parallel rounds of Lawson flips on the disk mesh (6 u32 per triangle: vertices, twin slots): in each, every folded or illegal edge claims the triangles its flip writes and the edges holding their claims flip; the first round looks at every edge, the later ones at the edges near the round before's candidates only; `flips` counts the flips of all rounds (0: the mesh is a valid, quasi-Delaunay triangulation)",
+        "`rounds` parallel rounds of Lawson flips on the disk mesh (6 u32 per triangle: vertices, twin slots): in each, every folded or illegal edge claims the triangles its flip writes and the edges holding their claims flip; the first round looks at every edge, the later ones at the edges near the round before's candidates only; `flips` counts the flips of all rounds and of the last one (0 in either: the mesh is a valid, quasi-Delaunay triangulation)",
     )
     .input(PortSpec::new(
         "positions",
@@ -202,7 +204,7 @@ fn edge_flip_round_kind() -> NodeKind {
     .output(PortSpec::new(
         "flips",
         PortType::Indices,
-        "the number of edges flipped (1 word)",
+        "the edges flipped in all rounds, then in the last round (2 words): the last round flipping nothing means no edge needs a flip, so a loop may stop on word 1 without another evaluation",
     ))
     .param(tolerance_param())
     .param(ParamSpec::integer(
@@ -300,25 +302,26 @@ pub fn flip_round(mesh: &[u32], x: &[f64], l: [f64; 2], tolerance: f64) -> (Vec<
 }
 
 /// `rounds` rounds of [`flip_round`] (fewer once one flips nothing: the rest would not
-/// change the mesh): the twin of an `edge_flip_round` evaluation. Returns the mesh and
-/// the flips of all rounds.
+/// change the mesh): the twin of an `edge_flip_round` evaluation. Returns the mesh, the
+/// flips of all rounds and those of the last round (0 where one flipped nothing).
 pub fn flip_rounds(
     mesh: &[u32],
     x: &[f64],
     l: [f64; 2],
     tolerance: f64,
     rounds: u32,
-) -> (Vec<u32>, u32) {
-    let (mut out, mut total) = (mesh.to_vec(), 0);
+) -> (Vec<u32>, u32, u32) {
+    let (mut out, mut total, mut last) = (mesh.to_vec(), 0, 0);
     for _ in 0..rounds {
         let (next, flips) = flip_round(&out, x, l, tolerance);
         out = next;
         total += flips;
+        last = flips;
         if flips == 0 {
             break;
         }
     }
-    (out, total)
+    (out, total, last)
 }
 
 /// A mesh input of a CPU reference (f64 words) as the u32 words the kernels read.
@@ -397,7 +400,7 @@ impl Node for EdgeFlipRound {
             ));
         }
         // The claims and the marks of two rounds, a word per triangle each.
-        Ok(Signature::outputs(vec![mesh, ValueType::Indices { n: 1 }])
+        Ok(Signature::outputs(vec![mesh, ValueType::Indices { n: 2 }])
             .with_scratch(vec![4 * tris; 3]))
     }
 
@@ -419,9 +422,10 @@ impl Node for EdgeFlipRound {
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let x = &inputs[0].as_ref().expect("required").data;
         let mesh = reference_mesh(&inputs[1]);
-        let (out, flips) = flip_rounds(&mesh, x, self.box_lengths, self.tolerance, self.rounds);
+        let (out, flips, last) =
+            flip_rounds(&mesh, x, self.box_lengths, self.tolerance, self.rounds);
         outputs[0].data = out.iter().map(|&v| v as f64).collect();
-        outputs[1].data = vec![flips as f64];
+        outputs[1].data = vec![flips as f64, last as f64];
     }
 }
 

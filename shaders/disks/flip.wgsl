@@ -15,7 +15,8 @@
 // - `claim_marked` (later rounds): the same for the three edges of each triangle the
 //   round before marked, each by its smaller slot;
 // - `flip` (one thread per triangle): the edge holding the claim of its own triangle
-//   flips if it holds its other three claims too, and counts itself. A thread reads the
+//   flips if it holds its other three claims too, and counts itself (count[0]; in the
+//   last round count[1] too: 0 there means the mesh is final). A thread reads the
 //   words of a triangle only once it holds that triangle's claim, and a winner writes
 //   only triangles it holds: the flips of a round touch disjoint words, in place.
 // The lowest candidate always wins its claims, so a round with a candidate flips at least
@@ -192,4 +193,7 @@ fn flip(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     out[6u * (y_c / 3u) + 3u + y_c % 3u] = 3u * t + k;
     out[6u * (x_b / 3u) + 3u + x_b % 3u] = 3u * u + m;
     atomicAdd(&count[0], 1u);
+    if (params.tag == 0u) {
+        atomicAdd(&count[1], 1u);
+    }
 }

@@ -1,6 +1,6 @@
 // The start of an evaluation of shaders/disks/flip.wgsl (its rounds then flip in place): the mesh copied to the output in
 // 16-byte words (a quarter of the threads and loads of a word-wise copy; the mesh's 12N
-// words are 3N of them), every claim to 0xFFFFFFFF, both arrays of marks and the count
+// words are 3N of them), every claim to 0xFFFFFFFF, both arrays of marks and the two counts
 // to 0.
 #import common/index.wgsl
 
@@ -26,7 +26,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         marks_a[i] = 0u;
         marks_b[i] = 0u;
     }
-    if (i == 0u) {
-        count[0] = 0u;
+    if (i < 2u) {
+        count[i] = 0u;
     }
 }

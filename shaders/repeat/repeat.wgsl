@@ -5,7 +5,8 @@
 //   (when one is bound: a nonzero halt stops the loop at once and the host reports it);
 // - `advance` (after every body run): current = next, unless the loop has stopped;
 // - `tally` (one thread, after `advance`): unless stopped, count the iteration, add the
-//   body's count to the total, and stop when it is 0 (or at the fixed count). An
+//   body's count (word 0) to the total, and stop when its word stop_word is 0, at
+//   max_iterations (the host then reports the loop unconverged) or at the fixed count. An
 //   iteration the executor runs past the stop (speculatively, while the host reads the
 //   status) therefore changes nothing;
 // - `finish`: out = current, the iteration count and the total to their outputs.
@@ -13,7 +14,10 @@
 
 // counted: 0 for a fixed loop without a count (binding 2 then stands in, unread);
 // halts: 1 where a halt check is bound (binding 9; else a stand-in, unread).
-struct Params { words: u32, fixed: u32, counted: u32, halts: u32 }
+// max_iterations: the stop when the count never reaches 0 (the host reports it);
+// stop_word: the word of `count` whose 0 stops the loop (the total sums word 0).
+struct Params { words: u32, fixed: u32, counted: u32, halts: u32, max_iterations: u32,
+                stop_word: u32 }
 
 @group(0) @binding(0) var<storage, read> initial: array<u32>;
 @group(0) @binding(1) var<storage, read> next: array<u32>;
@@ -64,14 +68,16 @@ fn tally() {
         return;
     }
     var c = 0u;
+    var tallied = 0u;
     if (params.counted == 1u) {
-        c = count[0];
+        c = count[params.stop_word];
+        tallied = count[0];
     }
     let k = status[0] + 1u;
     status[0] = k;
     status[2] = c;
-    status[3] = status[3] + c;
-    if ((params.fixed == 0u && c == 0u) || k == params.fixed) {
+    status[3] = status[3] + tallied;
+    if ((params.fixed == 0u && (c == 0u || k >= params.max_iterations)) || k == params.fixed) {
         status[1] = 1u;
     }
 }

@@ -2,7 +2,7 @@
 //! own dispatches (or a spectral node alone), a transform with what it folds in, a fused
 //! group, a state copy, a loop with its body.
 
-use super::{Compiled, CompiledLoop, ExecError, LoopGate, Program, engine_err, gated_ahead};
+use super::{Compiled, CompiledLoop, ExecError, FIRST_BATCH, LoopGate, Program, engine_err};
 use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo, NodePlan, Slot, WG_1D};
 use crate::graph::NodeId;
 use crate::node::Lowering;
@@ -273,13 +273,9 @@ impl<'a> Program<'a> {
                 dispatches,
             ));
         }
-        // A gated loop's speculative iterations cost only their launches once it has
-        // stopped, so more of them go out ahead of the host's decisions.
-        let in_flight = if kernels.stopped_word.is_some() {
-            1 + gated_ahead()
-        } else {
-            2
-        };
+        // A gated loop reads its status once per batch of iterations; an ungated one
+        // after every iteration, with the next one in flight.
+        let in_flight = if kernels.gpu_stop.is_some() { 1 } else { 2 };
         let staging = (0..in_flight)
             .map(|i| {
                 self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -296,9 +292,10 @@ impl<'a> Program<'a> {
             body,
             staging,
             gate: None,
+            last_iterations: FIRST_BATCH.into(),
         };
-        if let Some(word) = lp.kernels.stopped_word {
-            lp.gate = Some(self.compile_gate(cx, &lp, word)?);
+        if let Some(stop) = lp.kernels.gpu_stop {
+            lp.gate = Some(self.compile_gate(cx, &lp, stop.stopped_word)?);
         }
         Ok(Compiled {
             label: inst.id.clone(),

@@ -181,23 +181,14 @@ struct CompiledLoop {
     /// Readback buffers for the status, one per iteration in flight: iteration k copies
     /// into `staging[k % staging.len()]`.
     staging: Vec<wgpu::Buffer>,
-    /// Where the GPU knows when the loop stopped (`IterativeKernels::stopped_word`).
+    /// Where the GPU knows when the loop stopped (`IterativeKernels::gpu_stop`).
     gate: Option<LoopGate>,
+    /// A gated loop's iterations at its last run: the size of its next first batch.
+    last_iterations: std::sync::atomic::AtomicUsize,
 }
 
-/// Iterations a gated loop runs ahead of the one the host is judging (an ungated loop
-/// runs one): enough that the GPU does not idle through a host round trip when an
-/// iteration is short, while each one run past the stop costs only its launches.
-const GATED_AHEAD: usize = 2;
-
-/// [`GATED_AHEAD`], or the environment's `MESOFLOW_LOOP_AHEAD` (0 to 8) where set: a
-/// tuning knob for benchmarks (the speculation changes no result, only the time).
-fn gated_ahead() -> usize {
-    std::env::var("MESOFLOW_LOOP_AHEAD")
-        .ok()
-        .and_then(|v| v.parse::<usize>().ok())
-        .map_or(GATED_AHEAD, |v| v.min(8))
-}
+/// Iterations of a gated loop's first batch, before any step has told how many it takes.
+const FIRST_BATCH: usize = 2;
 
 /// The indirect arguments of a gated loop's iteration: one (x, y, z) per dispatch of
 /// [`CompiledLoop::iteration`], in its order, that `dispatch` (shaders/engine/gate.wgsl)

@@ -4,9 +4,11 @@
 
 use std::time::{Duration, Instant};
 
-use super::{CompiledLoop, ExecError, Profile, Program, RunOptions, RunStats};
+use std::sync::atomic::Ordering;
+
+use super::{CompiledLoop, ExecError, LoopGate, Profile, Program, RunOptions, RunStats};
 use crate::gpu::{Dispatch, GpuError};
-use crate::node::{Decision, Lowering};
+use crate::node::{Decision, GpuStop, LoopError, Lowering};
 use crate::value::HostArray;
 
 impl Program<'_> {
@@ -74,10 +76,126 @@ impl Program<'_> {
     }
 
     /// Runs an iterative node: `pending` (work recorded before it) goes out with the
-    /// first iteration; each iteration ends with a host round trip that reads the node's
-    /// status and asks it whether to go on. Leaves the node's finishing dispatches in
-    /// `pending` and returns the number of iterations.
+    /// first iteration. Leaves the node's finishing dispatches in `pending` and returns the
+    /// number of iterations. A loop that stops on the GPU runs in batches (`run_batches`);
+    /// any other reads its status after every iteration (`run_iterations`).
     fn run_loop<'p>(
+        &'p self,
+        lp: &'p CompiledLoop,
+        pending: &mut Vec<&'p Dispatch>,
+        step: u64,
+    ) -> Result<u32, ExecError> {
+        match (&lp.gate, lp.kernels.gpu_stop) {
+            (Some(gate), Some(stop)) => self.run_batches(lp, gate, stop, pending, step),
+            _ => self.run_iterations(lp, pending, step),
+        }
+    }
+
+    /// Reads a loop's status: `status_bytes` of the node's status buffer, copied into
+    /// `staging` by submission `index`.
+    fn read_status(
+        &self,
+        lp: &CompiledLoop,
+        staging: &wgpu::Buffer,
+        index: wgpu::SubmissionIndex,
+    ) -> Result<Vec<u8>, ExecError> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.gpu.wait(index)?;
+        rx.recv()
+            .map_err(|_| GpuError::Device("buffer map callback never ran".into()))?
+            .map_err(|e| GpuError::Device(format!("mapping a status buffer failed: {e}")))?;
+        let status = staging
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| GpuError::Device(format!("reading a status buffer failed: {e}")))?
+            [..lp.kernels.status_bytes as usize]
+            .to_vec();
+        staging.unmap();
+        Ok(status)
+    }
+
+    /// A loop that stops on the GPU (`IterativeKernels::gpu_stop`): batches of
+    /// iterations, each one submission whose status the host reads once at its end. The
+    /// gate kernel, after each iteration, zeroes the indirect workgroup counts of the
+    /// iterations after it once the loop has stopped, so the iterations a batch holds past
+    /// the stop cost only their launches and change nothing. A batch is as long as the
+    /// loop's last run (`last_iterations`): a loop that takes as many iterations as at its
+    /// last step (the common case in a time loop) costs one host round trip.
+    fn run_batches<'p>(
+        &'p self,
+        lp: &'p CompiledLoop,
+        gate: &'p LoopGate,
+        stop: GpuStop,
+        pending: &mut Vec<&'p Dispatch>,
+        step: u64,
+    ) -> Result<u32, ExecError> {
+        let inst = &self.graph.nodes[lp.node];
+        let Lowering::Iterative(it) = inst.node().lowering() else {
+            unreachable!("compiled as a loop")
+        };
+        let bytes = lp.kernels.status_bytes.max(4).next_multiple_of(4);
+        let staging = &lp.staging[0];
+        let batch = lp.last_iterations.load(Ordering::Relaxed).max(1);
+        pending.extend(&lp.kernels.start);
+        // The first iteration's counts, the stopped word just cleared by `start`.
+        pending.push(&gate.dispatch);
+        let mut submitted = 0usize;
+        loop {
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                for d in pending.iter() {
+                    Self::record(&mut pass, std::slice::from_ref(*d), step);
+                }
+                for _ in 0..batch {
+                    for (i, d) in lp.iteration().enumerate() {
+                        if !d.workgroups.contains(&0) && d.runs_at(step) {
+                            Self::record_gated(&mut pass, d, &gate.args, i);
+                        }
+                    }
+                    Self::record(&mut pass, std::slice::from_ref(&gate.dispatch), step);
+                }
+            }
+            enc.copy_buffer_to_buffer(&lp.kernels.status, 0, staging, 0, bytes);
+            pending.clear();
+            let index = self.gpu.queue.submit([enc.finish()]);
+            submitted += batch;
+            let status = self.read_status(lp, staging, index)?;
+            let words: &[u32] = bytemuck::cast_slice(&status);
+            let iterations = words[stop.iterations_word as usize] as usize;
+            let failed = |source| ExecError::Loop {
+                node: inst.id.clone(),
+                kind: inst.kind,
+                step: step + 1,
+                source,
+            };
+            match it.decide(iterations, &status).map_err(failed)? {
+                Decision::Continue if iterations == submitted => {}
+                Decision::Continue => {
+                    return Err(failed(LoopError::Internal(format!(
+                        "the GPU ran {iterations} of {submitted} iterations without stopping"
+                    ))));
+                }
+                Decision::Finish(answer) => {
+                    self.gpu.queue.write_buffer(
+                        &lp.kernels.answer,
+                        lp.kernels.answer_offset,
+                        &answer,
+                    );
+                    pending.extend(&lp.kernels.finish);
+                    lp.last_iterations.store(iterations, Ordering::Relaxed);
+                    return Ok(iterations as u32);
+                }
+            }
+        }
+    }
+
+    /// A loop only the host can stop: each iteration ends with a host round trip that
+    /// reads the node's status and asks it whether to go on.
+    fn run_iterations<'p>(
         &'p self,
         lp: &'p CompiledLoop,
         pending: &mut Vec<&'p Dispatch>,
@@ -88,13 +206,10 @@ impl Program<'_> {
             unreachable!("compiled as a loop")
         };
         // Iteration k goes out with a copy of the status after it. While the host reads
-        // and judges iteration k, the next iterations already run (speculatively: when k
-        // finishes, their work is discarded; they only wrote basis rows past the answer,
-        // or values the loop no longer reads), so the GPU does not idle through the round
-        // trip: one ahead, or `GATED_AHEAD` where the node tells the GPU it has stopped.
-        // There the gate kernel, after each iteration, zeroes the indirect workgroup
-        // counts of the next iterations' dispatches once the loop has stopped, so those
-        // run past the stop cost only their launches.
+        // and judges iteration k, the next one already runs (speculatively: when k
+        // finishes, its work is discarded; it only wrote basis rows past the answer, or
+        // values the loop no longer reads), so the GPU does not idle through the round
+        // trip.
         let in_flight = lp.staging.len();
         let bytes = lp.kernels.status_bytes.max(4).next_multiple_of(4);
         let submit_iteration = |pending: &mut Vec<&'p Dispatch>, k: usize| {
@@ -104,20 +219,8 @@ impl Program<'_> {
                 for d in pending.iter() {
                     Self::record(&mut pass, std::slice::from_ref(*d), step);
                 }
-                match &lp.gate {
-                    None => {
-                        for d in lp.iteration() {
-                            Self::record(&mut pass, std::slice::from_ref(d), step);
-                        }
-                    }
-                    Some(gate) => {
-                        for (i, d) in lp.iteration().enumerate() {
-                            if !d.workgroups.contains(&0) && d.runs_at(step) {
-                                Self::record_gated(&mut pass, d, &gate.args, i);
-                            }
-                        }
-                        Self::record(&mut pass, std::slice::from_ref(&gate.dispatch), step);
-                    }
+                for d in lp.iteration() {
+                    Self::record(&mut pass, std::slice::from_ref(d), step);
                 }
             }
             enc.copy_buffer_to_buffer(&lp.kernels.status, 0, &lp.staging[k % in_flight], 0, bytes);
@@ -125,31 +228,13 @@ impl Program<'_> {
             self.gpu.queue.submit([enc.finish()])
         };
         pending.extend(&lp.kernels.start);
-        if let Some(gate) = &lp.gate {
-            // The first iteration's counts, the stopped word just cleared by `start`.
-            pending.push(&gate.dispatch);
-        }
         let mut submitted: std::collections::VecDeque<_> = (1..=in_flight)
             .map(|k| submit_iteration(pending, k))
             .collect();
         let mut iterations = 1usize;
         loop {
             let current = submitted.pop_front().expect("an iteration in flight");
-            let staging = &lp.staging[iterations % in_flight];
-            let (tx, rx) = std::sync::mpsc::channel();
-            staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-                let _ = tx.send(r);
-            });
-            self.gpu.wait(current)?;
-            rx.recv()
-                .map_err(|_| GpuError::Device("buffer map callback never ran".into()))?
-                .map_err(|e| GpuError::Device(format!("mapping a status buffer failed: {e}")))?;
-            let status =
-                staging.slice(..).get_mapped_range().map_err(|e| {
-                    GpuError::Device(format!("reading a status buffer failed: {e}"))
-                })?[..lp.kernels.status_bytes as usize]
-                    .to_vec();
-            staging.unmap();
+            let status = self.read_status(lp, &lp.staging[iterations % in_flight], current)?;
             match it.decide(iterations, &status) {
                 Ok(Decision::Continue) => {
                     // Its copy goes to the staging buffer just read.

@@ -32,8 +32,14 @@ fn run(
     out
 }
 
-/// The flip loop: `repeat` carrying the mesh through `edge_flip_round`.
+/// The flip loop: `repeat` carrying the mesh through `edge_flip_round` (one Lawson round
+/// per evaluation).
 fn flip_graph(n: usize, repeat_params: &str) -> String {
+    flip_graph_of_rounds(n, repeat_params, 1)
+}
+
+/// The same with `rounds` Lawson rounds per evaluation.
+fn flip_graph_of_rounds(n: usize, repeat_params: &str, rounds: u32) -> String {
     let x = input_decl(&ValueType::Particles { n: n as u32, k: 2 });
     let mesh = input_decl(&ValueType::Indices {
         n: (2 * MESH_WORDS * n) as u32,
@@ -42,7 +48,7 @@ fn flip_graph(n: usize, repeat_params: &str) -> String {
         r#"{{"mesoflow": 1, "inputs": {{"positions": {x}, "mesh": {mesh}}},
   "nodes": [
     {{"id": "flips", "kind": "repeat", "params": {repeat_params}, "inputs": {{"initial": "inputs.mesh", "next": "round.mesh", "count": "round.flips"}}}},
-    {{"id": "round", "kind": "edge_flip_round", "params": {{"box": [{}, {}], "rounds": 1}}, "inputs": {{"positions": "inputs.positions", "mesh": "flips.current"}}}}
+    {{"id": "round", "kind": "edge_flip_round", "params": {{"box": [{}, {}], "rounds": {rounds}}}, "inputs": {{"positions": "inputs.positions", "mesh": "flips.current"}}}}
   ],
   "outputs": {{"mesh": {{"from": "flips.out"}}, "iterations": {{"from": "flips.iterations"}}, "flips": {{"from": "flips.total"}}}}
 }}"#,
@@ -140,6 +146,44 @@ fn repeat_carries_the_mesh_through_the_flip_rounds() {
     let _ = std::fs::remove_dir_all(&dir);
     let stats = check_torus_mesh(&want, &x, L).unwrap();
     assert_eq!(stats.inverted, 0);
+}
+
+/// Stopping on the flips of an evaluation's last round (`stop_word` 1): with r Lawson
+/// rounds per evaluation, a cascade of R single rounds (the last flipping nothing) ends
+/// after ceil(R / r) evaluations, where stopping on all the evaluation's flips (word 0)
+/// takes ceil((R - 1) / r) + 1, one more whenever r divides R - 1; the mesh and the flips
+/// counted are the same either way.
+#[test]
+fn repeat_stops_on_the_last_rounds_flips() {
+    let Some(gpu) = gpu() else { return };
+    let (x, mesh) = moved_disks(31);
+    let (want, rounds, total) = host_flips(&x, &mesh, 0);
+    for r in [1u32, 2, 3] {
+        for (stop_word, iterations) in [(0, (rounds - 1).div_ceil(r) + 1), (1, rounds.div_ceil(r))]
+        {
+            let params = format!(r#"{{"stop_word": {stop_word}}}"#);
+            let (out, _) = run(
+                &gpu,
+                &flip_graph_of_rounds(300, &params, r),
+                &inputs(&x, &mesh),
+                1,
+            )
+            .unwrap();
+            let case = format!("{r} rounds, stop_word {stop_word}");
+            assert_eq!(u32s(&out["mesh"]), want, "{case}");
+            assert_eq!(u32s(&out["iterations"]), vec![iterations], "{case}");
+            assert_eq!(u32s(&out["flips"]), vec![total], "{case}");
+        }
+    }
+    // The flips are two words: there is no word 2.
+    let e = run(
+        &gpu,
+        &flip_graph(300, r#"{"stop_word": 2}"#),
+        &inputs(&x, &mesh),
+        1,
+    )
+    .unwrap_err();
+    assert!(e.contains("stop_word 2"), "{e}");
 }
 
 /// A fixed count runs exactly that many rounds; and a cap below the rounds needed is an
