@@ -20,7 +20,8 @@
 //!
 //! What it reads and writes per k: 6 n words of f (plus re-reads of f_x, f_y, f_z by the
 //! pressure threads, from cache), 6 n words out, 5 n + 6 table words (72 more for the
-//! slit); the chain moves about 60 n words per k through memory.
+//! slit): 17 n + 6; the chain moves about 82 n + 36 words per k through memory (every
+//! intermediate written and read back, the tables read by both solves).
 
 use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
