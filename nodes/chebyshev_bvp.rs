@@ -331,10 +331,7 @@ struct Bvp {
 impl Bvp {
     /// kappa = k H / 2 of every k.
     fn kappas(&self, dims: [u32; 3]) -> Vec<f64> {
-        wave_numbers(dims, self.lengths)
-            .into_iter()
-            .map(|k| k * self.height / 2.0)
-            .collect()
+        kappas(dims, self.lengths, self.height)
     }
 }
 
@@ -378,34 +375,89 @@ impl Node for Bvp {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let f = inputs[0].as_ref().expect("required");
-        let ValueType::HalfComplexGrid { dims, comps } = f.ty else {
-            unreachable!()
-        };
-        let kappas = self.kappas(dims);
-        let nk = kappas.len();
-        let n = dims[2] as usize;
-        let half = self.height / 2.0;
-        for c in 0..comps as usize {
-            for (ki, &kappa) in kappas.iter().enumerate() {
-                for part in 0..2 {
-                    let at = |z: usize| 2 * ((c * n + z) * nk + ki) + part;
-                    let line: Vec<f64> = (0..n).map(|z| half * half * f.data[at(z)]).collect();
-                    let (alpha, beta) = match &inputs[1] {
-                        Some(b) => {
-                            let bat = |z: usize| 2 * ((c * 2 + z) * nk + ki) + part;
-                            let scale = if kappa == 0.0 { 1.0 } else { half };
-                            (scale * b.data[bat(0)], scale * b.data[bat(1)])
-                        }
-                        None => (0.0, 0.0),
-                    };
-                    let y = solve_reference(&line, kappa, alpha, beta);
-                    for (z, v) in y.into_iter().enumerate() {
-                        outputs[0].data[at(z)] = v;
+        outputs[0] = reference(self.lengths, self.height, f, inputs[1].as_ref());
+    }
+}
+
+/// The f64 reference of `chebyshev_bvp` on [Lx, Ly] and a domain of `height`: y's
+/// coefficients for f's (a half spectrum), alpha and beta from `boundary` or 0, by the
+/// dense system per k, component and part (also `slab_solve`'s reference).
+pub(crate) fn reference(
+    lengths: [f64; 2],
+    height: f64,
+    f: &RefArray,
+    boundary: Option<&RefArray>,
+) -> RefArray {
+    let ValueType::HalfComplexGrid { dims, comps } = f.ty else {
+        unreachable!()
+    };
+    let kappas: Vec<f64> = wave_numbers(dims, lengths)
+        .into_iter()
+        .map(|k| k * height / 2.0)
+        .collect();
+    let nk = kappas.len();
+    let n = dims[2] as usize;
+    let half = height / 2.0;
+    let mut out = vec![0.0; f.data.len()];
+    for c in 0..comps as usize {
+        for (ki, &kappa) in kappas.iter().enumerate() {
+            for part in 0..2 {
+                let at = |z: usize| 2 * ((c * n + z) * nk + ki) + part;
+                let line: Vec<f64> = (0..n).map(|z| half * half * f.data[at(z)]).collect();
+                let (alpha, beta) = match boundary {
+                    Some(b) => {
+                        let bat = |z: usize| 2 * ((c * 2 + z) * nk + ki) + part;
+                        let scale = if kappa == 0.0 { 1.0 } else { half };
+                        (scale * b.data[bat(0)], scale * b.data[bat(1)])
                     }
+                    None => (0.0, 0.0),
+                };
+                let y = solve_reference(&line, kappa, alpha, beta);
+                for (z, v) in y.into_iter().enumerate() {
+                    out[at(z)] = v;
                 }
             }
         }
     }
+    RefArray::new(f.ty, out)
+}
+
+/// Rows of the per-k tables of `tables`: l, q, u, g0, g1 (n each), s_inv (4), kappa^2,
+/// whether k is 0.
+pub(crate) fn table_rows(n: usize) -> usize {
+    5 * n + 6
+}
+
+/// The per-k tables the solve kernels read (shaders/chebyshev/bvp.wgsl, slab_solve.wgsl),
+/// built in f64 and stored in f32, strided: row i of every k contiguous (word i nk + k).
+pub(crate) fn tables(kappas: &[f64], n: usize) -> Vec<f32> {
+    let nk = kappas.len();
+    let mut table = vec![0f32; table_rows(n) * nk];
+    for (ki, &kappa) in kappas.iter().enumerate() {
+        let fac = factors(n, kappa);
+        let mut put = |row: usize, v: f64| table[row * nk + ki] = v as f32;
+        for i in 0..n {
+            put(i, fac.l[i]);
+            put(n + i, fac.q[i]);
+            put(2 * n + i, fac.u[i]);
+            put(3 * n + i, fac.g[0][i]);
+            put(4 * n + i, fac.g[1][i]);
+        }
+        for (j, s) in fac.s_inv.iter().enumerate() {
+            put(5 * n + j, *s);
+        }
+        put(5 * n + 4, kappa * kappa);
+        put(5 * n + 5, if kappa == 0.0 { 1.0 } else { 0.0 });
+    }
+    table
+}
+
+/// kappa = |k| H / 2 of every k of a half spectrum of `dims` over [Lx, Ly].
+pub(crate) fn kappas(dims: [u32; 3], lengths: [f64; 2], height: f64) -> Vec<f64> {
+    wave_numbers(dims, lengths)
+        .into_iter()
+        .map(|k| k * height / 2.0)
+        .collect()
 }
 
 #[repr(C)]
@@ -433,26 +485,7 @@ impl GpuKernels for Bvp {
         };
         let kappas = self.kappas(dims);
         let (nk, n) = (kappas.len(), dims[2] as usize);
-        // Strided tables: entry i of every k contiguous. Per k: l, q, u (3n), g0, g1 (2n),
-        // s_inv (4), kappa^2 (1), whether k is 0 (1).
-        let rows = 5 * n + 6;
-        let mut table = vec![0f32; rows * nk];
-        for (ki, &kappa) in kappas.iter().enumerate() {
-            let fac = factors(n, kappa);
-            let mut put = |row: usize, v: f64| table[row * nk + ki] = v as f32;
-            for i in 0..n {
-                put(i, fac.l[i]);
-                put(n + i, fac.q[i]);
-                put(2 * n + i, fac.u[i]);
-                put(3 * n + i, fac.g[0][i]);
-                put(4 * n + i, fac.g[1][i]);
-            }
-            for (j, s) in fac.s_inv.iter().enumerate() {
-                put(5 * n + j, *s);
-            }
-            put(5 * n + 4, kappa * kappa);
-            put(5 * n + 5, if kappa == 0.0 { 1.0 } else { 0.0 });
-        }
+        let table = tables(&kappas, n);
         let half = self.height / 2.0;
         let shape = Shape {
             nk: nk as u32,

@@ -22,6 +22,7 @@ pub mod record;
 pub mod reduce;
 pub mod repeat;
 pub mod scan;
+pub mod slab_solve;
 pub mod sort;
 pub mod spectral;
 pub mod spread;
@@ -58,6 +59,7 @@ pub fn register_all(r: &mut Registry) {
     repeat::register(r);
     spread::register(r);
     stokes_slab::register(r);
+    slab_solve::register(r);
     scan::register(r);
     sort::register(r);
     spectral::register(r);

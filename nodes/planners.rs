@@ -152,6 +152,21 @@ static FUNCTIONS: &[HostFunction] = &[
         },
     },
     HostFunction {
+        name: "dpstokes_fused",
+        doc: "dpstokes_fused(slab, points): 1 where lib/dpstokes_mobility.json solves between its Chebyshev transforms with the fused slab_solve, 0 where with the chain of nodes: slab fused or chain as given, auto fused up to slab_solve's points",
+        call: |a| {
+            arity(a, 2)?;
+            let points = number(a, 1, "points")?;
+            let fused = match text(a, 0, "slab")? {
+                "fused" => true,
+                "chain" => false,
+                "auto" => points <= crate::nodes::slab_solve::MAX_POINTS as f64,
+                other => return Err(format!("slab must be auto, fused or chain, got `{other}`")),
+            };
+            Ok(ParamValue::Number(if fused { 1.0 } else { 0.0 }))
+        },
+    },
+    HostFunction {
         name: "next_fft",
         doc: "next_fft(n): the smallest size >= n whose prime factors are 2, 3, 5 and 7",
         call: |a| {

@@ -133,6 +133,150 @@ impl Slab {
     }
 }
 
+/// The f64 reference of the chain from the forcing's Chebyshev coefficients `f` (3
+/// components, a half spectrum over [Lx, Ly]) to the velocity's values along z with the
+/// walls (`walls`: 0 none, 1 bottom, 2 slit), node by node as graphs/lib/
+/// dpstokes_mobility.json runs them: chebyshev_derivative (f_z), slab_pressure_source,
+/// chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp with the
+/// boundary values, the inverse chebyshev, slab_walls (`slab_solve`'s reference).
+pub(crate) fn chain_reference(
+    lengths: [f64; 2],
+    viscosity: f64,
+    zmin: f64,
+    zmax: f64,
+    walls: u32,
+    f: &RefArray,
+) -> RefArray {
+    let (dims, _) = half_spectrum(&Some(f.ty)).expect("a half spectrum");
+    let nz = dims[2] as usize;
+    let height = zmax - zmin;
+    let grid = |comps: u32, data: Vec<f64>| {
+        RefArray::new(ValueType::HalfComplexGrid { dims, comps }, data)
+    };
+    let step = |step: Step| Slab {
+        step,
+        lengths,
+        viscosity,
+        zmin,
+        zmax,
+        walls,
+        scale: 1.0,
+    };
+    let plane = f.data.len() / (3 * nz);
+    // Each z line of `comps` components of `x`, from component `first`, mapped by `map`.
+    let lines = |x: &[f64], first: usize, comps: usize, map: &dyn Fn(&[f64]) -> Vec<f64>| {
+        let mut out = vec![0.0; comps * nz * plane];
+        for c in 0..comps {
+            for p in 0..plane {
+                let line: Vec<f64> = (0..nz)
+                    .map(|z| x[((first + c) * nz + z) * plane + p])
+                    .collect();
+                for (z, v) in map(&line).into_iter().enumerate() {
+                    out[(c * nz + z) * plane + p] = v;
+                }
+            }
+        }
+        out
+    };
+    let scale = 2.0 / height;
+    let dfz = grid(
+        1,
+        lines(&f.data, 2, 1, &|l| chebyshev::derivative(l, scale)),
+    );
+    let mut source = [grid(1, vec![0.0; nz * plane])];
+    step(Step::PressureSource).reference(&[Some(f.clone()), Some(dfz)], &mut source);
+    let [source] = source;
+    let p = super::chebyshev_bvp::reference(lengths, height, &source, None);
+    let dp = grid(
+        1,
+        lines(&p.data, 0, 1, &|l| chebyshev::derivative(l, scale)),
+    );
+    let mut sources = [
+        grid(3, vec![0.0; 3 * nz * plane]),
+        RefArray::new(
+            ValueType::HalfComplexGrid {
+                dims: [dims[0], dims[1], 2],
+                comps: 3,
+            },
+            vec![0.0; 3 * 2 * plane],
+        ),
+    ];
+    step(Step::VelocitySource).reference(&[Some(f.clone()), Some(p), Some(dp)], &mut sources);
+    let [rhs, boundary] = sources;
+    let v = super::chebyshev_bvp::reference(lengths, height, &rhs, Some(&boundary));
+    let m = chebyshev::matrix(nz, false);
+    let values = grid(
+        3,
+        lines(&v.data, 0, 3, &|l| {
+            (0..nz)
+                .map(|a| (0..nz).map(|b| m[a * nz + b] * l[b]).sum())
+                .collect()
+        }),
+    );
+    let mut out = [grid(3, vec![0.0; 3 * nz * plane])];
+    step(Step::Walls).reference(&[Some(values)], &mut out);
+    let [out] = out;
+    out
+}
+
+/// The per-k and per-point tables of the walls in f32: zeta_j and the top derivative row
+/// (n each), and for the slit the 6 x 6 complex inverse per k, word ((r 6 + c) 2 + part)
+/// nk + k after them (shaders/stokes_slab/walls.wgsl, slab_solve.wgsl).
+pub(crate) fn wall_tables(
+    lengths: [f64; 2],
+    zmin: f64,
+    zmax: f64,
+    walls: u32,
+    dims: [u32; 3],
+) -> (Vec<f32>, Vec<f32>) {
+    let s = Slab {
+        step: Step::Walls,
+        lengths,
+        viscosity: 1.0,
+        zmin,
+        zmax,
+        walls,
+        scale: 1.0,
+    };
+    let nz = dims[2] as usize;
+    let mut points: Vec<f32> = s.zetas(nz).iter().map(|&z| z as f32).collect();
+    points.extend(s.top_derivative_row(nz).iter().map(|&w| w as f32));
+    let mut per_k = Vec::new();
+    if walls == 2 {
+        let waves = s.waves(dims);
+        let nk = waves.len();
+        per_k.resize(72 * nk, 0.0);
+        let height = zmax - zmin;
+        for (kk, (k, _)) in waves.into_iter().enumerate() {
+            if k == [0.0, 0.0] {
+                continue;
+            }
+            let m = slit_inverse(k, height);
+            for (r, row) in m.iter().enumerate() {
+                for (c, x) in row.iter().enumerate() {
+                    let w = (r * 6 + c) * 2;
+                    per_k[w * nk + kk] = x.re as f32;
+                    per_k[(w + 1) * nk + kk] = x.im as f32;
+                }
+            }
+        }
+    }
+    (points, per_k)
+}
+
+/// The wall mode's code (0 none, 1 bottom, 2 slit) of a node's `walls` param.
+pub(crate) fn walls_code(p: &Params) -> u32 {
+    match p.get("walls") {
+        Some(crate::expr::ParamValue::Text(w)) => {
+            WALLS.iter().position(|x| x == w).expect("choice checked") as u32
+        }
+        _ => 0,
+    }
+}
+
+/// Wall modes, in the kernels' code order.
+pub(crate) const WALL_MODES: &[&str] = WALLS;
+
 /// The 6 x 6 map of the slit's unknowns (C, D) to the wall values (bottom, top) at one k,
 /// and its inverse (f64; Gaussian elimination with partial pivoting).
 fn slit_inverse(k: [f64; 2], height: f64) -> [[C64; 6]; 6] {
@@ -503,26 +647,9 @@ impl GpuKernels for Slab {
         buffers.extend(io.outputs.iter().map(|o| o.buffer));
         let table;
         if self.step == Step::Walls {
-            let mut words: Vec<f32> = self.zetas(nz).iter().map(|&z| z as f32).collect();
-            words.extend(self.top_derivative_row(nz).iter().map(|&w| w as f32));
-            if self.walls == 2 {
-                let base = words.len();
-                words.resize(base + 72 * nk, 0.0);
-                let height = self.zmax - self.zmin;
-                for (kk, (k, _)) in self.waves(dims).into_iter().enumerate() {
-                    if k == [0.0, 0.0] {
-                        continue;
-                    }
-                    let m = slit_inverse(k, height);
-                    for (r, row) in m.iter().enumerate() {
-                        for (c, x) in row.iter().enumerate() {
-                            let w = (r * 6 + c) * 2;
-                            words[base + w * nk + kk] = x.re as f32;
-                            words[base + (w + 1) * nk + kk] = x.im as f32;
-                        }
-                    }
-                }
-            }
+            let (mut words, per_k) =
+                wall_tables(self.lengths, self.zmin, self.zmax, self.walls, dims);
+            words.extend(per_k);
             table = cx.table("slab walls tables", bytemuck::cast_slice(&words));
             bindings.push(Binding::StorageRead);
             buffers.push(&table);

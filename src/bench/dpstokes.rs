@@ -9,7 +9,9 @@
 //! the slit (no closed form), as the largest relative difference. With
 //! MESOFLOW_BENCH_DISPATCHES the per-dispatch times, and the two boundary-value solves'
 //! rate: the words they must read and write once (f and y, the per-k tables) over their
-//! time, in GB/s.
+//! time, in GB/s (the chain's). `slab` (`--slab auto,fused,chain`): a row per way of
+//! solving between the Chebyshev transforms (lib/dpstokes_mobility.json's param), the
+//! fcm.json time shared.
 
 use std::f64::consts::PI;
 use std::path::PathBuf;
@@ -32,6 +34,8 @@ pub struct DpStokesBench {
     pub sizes: Vec<u32>,
     pub tolerance: f64,
     pub kernel: String,
+    /// lib/dpstokes_mobility.json's `slab` per row: auto, fused, chain.
+    pub slab: Vec<String>,
     pub reps: u64,
 }
 
@@ -108,7 +112,17 @@ fn accuracy(
 }
 
 fn sets(walls: &str, l: f64, bench: &DpStokesBench) -> Vec<(&'static str, ParamValue)> {
+    sets_with(walls, l, bench, "auto")
+}
+
+fn sets_with(
+    walls: &str,
+    l: f64,
+    bench: &DpStokesBench,
+    slab: &str,
+) -> Vec<(&'static str, ParamValue)> {
     vec![
+        ("slab", ParamValue::Text(slab.to_string())),
         ("kernel", ParamValue::Text(bench.kernel.clone())),
         ("box", ParamValue::Numbers(vec![l, l])),
         ("zmin", ParamValue::Number(0.0)),
@@ -129,8 +143,9 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
         end_to_end_clock(&gpu)
     );
     outln!(
-        "{:>7} {:>8} {:>7} {:>16} {:>10} {:>10} {:>16} {:>10} {:>6} {:>9}",
+        "{:>7} {:>6} {:>8} {:>7} {:>16} {:>10} {:>10} {:>16} {:>10} {:>6} {:>9}",
         "walls",
+        "slab",
         "N",
         "L",
         "grid",
@@ -159,14 +174,6 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
                 .map(|_| [0, 1, 2].map(|_| rng.uniform() - 0.5))
                 .collect();
             let inputs = mobility_inputs(&x, &f);
-            let run = time_loaded(
-                &gpu,
-                &g,
-                &inputs,
-                Some(vec!["velocities".into()]),
-                bench.reps,
-                true,
-            )?;
             // fcm.json on a periodic grid of at least as many points: the DP grid's x, y
             // and the FFT-friendly size above its Chebyshev points along z; the same
             // window family (FCM's ES at the tolerance ties its radius to this grid, so
@@ -196,39 +203,51 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
                 bench.reps,
                 true,
             )?;
-            let (t, tf) = (run.end_to_end(), fcm_run.end_to_end());
-            outln!(
-                "{:>7} {:>8} {:>7.1} {:>16} {:>10.1} {:>10.4} {:>16} {:>10.4} {:>6.2} {:>9}",
-                walls,
-                n,
-                l,
-                format!("{}x{}x{}", grid[0], grid[1], points),
-                run.memory as f64 / 1e6,
-                ms(t),
-                format!("{}x{}x{}", grid[0], grid[1], nz),
-                ms(tf),
-                t.as_secs_f64() / tf.as_secs_f64(),
-                error.map_or("-".to_string(), |e| format!("{e:.2e}"))
-            );
-            if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
-                // The boundary-value solves: f and y (2 words per complex value, nk values
-                // per z level), the per-k tables (5 nz + 6 words per k).
-                let nk = ((grid[0] / 2.0).floor() + 1.0) * grid[1];
-                for timing in &run.timings {
-                    out!("{}", timing.breakdown());
-                    // The pressure's solve has 1 component, the velocity's 3.
-                    let comps = if timing.label.contains("pressure") {
-                        1.0
-                    } else {
-                        3.0
-                    };
-                    for (kernel, median, _) in &timing.dispatches {
-                        if kernel.contains("bvp") {
-                            let words = nk * (2.0 * 2.0 * comps * points + 5.0 * points + 6.0);
-                            outln!(
-                                "      {kernel} ({comps} components): {:.1} GB/s at the words it reads and writes once",
-                                4.0 * words / median.as_secs_f64() / 1e9
-                            );
+            for slab in &bench.slab {
+                let g = load(&bench.graph, &sets_with(walls, l, bench, slab), &registry)?;
+                let run = time_loaded(
+                    &gpu,
+                    &g,
+                    &inputs,
+                    Some(vec!["velocities".into()]),
+                    bench.reps,
+                    true,
+                )?;
+                let (t, tf) = (run.end_to_end(), fcm_run.end_to_end());
+                outln!(
+                    "{:>7} {:>6} {:>8} {:>7.1} {:>16} {:>10.1} {:>10.4} {:>16} {:>10.4} {:>6.2} {:>9}",
+                    walls,
+                    slab,
+                    n,
+                    l,
+                    format!("{}x{}x{}", grid[0], grid[1], points),
+                    run.memory as f64 / 1e6,
+                    ms(t),
+                    format!("{}x{}x{}", grid[0], grid[1], nz),
+                    ms(tf),
+                    t.as_secs_f64() / tf.as_secs_f64(),
+                    error.map_or("-".to_string(), |e| format!("{e:.2e}"))
+                );
+                if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
+                    // The boundary-value solves: f and y (2 words per complex value, nk values
+                    // per z level), the per-k tables (5 nz + 6 words per k).
+                    let nk = ((grid[0] / 2.0).floor() + 1.0) * grid[1];
+                    for timing in &run.timings {
+                        out!("{}", timing.breakdown());
+                        // The pressure's solve has 1 component, the velocity's 3.
+                        let comps = if timing.label.contains("pressure") {
+                            1.0
+                        } else {
+                            3.0
+                        };
+                        for (kernel, median, _) in &timing.dispatches {
+                            if kernel.contains("bvp") {
+                                let words = nk * (2.0 * 2.0 * comps * points + 5.0 * points + 6.0);
+                                outln!(
+                                    "      {kernel} ({comps} components): {:.1} GB/s at the words it reads and writes once",
+                                    4.0 * words / median.as_secs_f64() / 1e9
+                                );
+                            }
                         }
                     }
                 }

@@ -459,6 +459,11 @@ pub enum BenchCommand {
         /// dpstokes.json's windows: es or gaussian.
         #[arg(long, default_value = "es")]
         kernel: String,
+        /// The solve between the Chebyshev transforms, a row each: auto (fused up to
+        /// slab_solve's points), fused (slab_solve, one kernel) or chain (the nodes one by
+        /// one); e.g. `--slab fused,chain`.
+        #[arg(long, value_delimiter = ',', default_values_t = ["auto".to_string()])]
+        slab: Vec<String>,
         #[arg(long, default_value_t = 10)]
         reps: u64,
     },
@@ -665,6 +670,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             sizes,
             tolerance,
             kernel,
+            slab,
             reps,
         } => dpstokes::run(&dpstokes::DpStokesBench {
             graph,
@@ -673,6 +679,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             sizes,
             tolerance,
             kernel,
+            slab,
             reps,
         }),
         BenchCommand::Disks {

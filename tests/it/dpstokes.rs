@@ -759,3 +759,81 @@ fn pair_mobilities_at_one_height_follow_rotne_prager_blake() {
         }
     }
 }
+
+/// The fused solve between the Chebyshev transforms (slab fused, slab_solve) and the chain
+/// of nodes (slab chain) give the same velocities and angular velocities, every wall
+/// mode, torques included (their curl enters the forcing the fused node reads; the angular
+/// velocities take the curl of its output).
+#[test]
+fn the_fused_slab_solve_gives_the_chains_mobility() {
+    let Some(gpu) = gpu() else { return };
+    let n = 12;
+    let x: Vec<V3> = (0..n)
+        .map(|i| {
+            let s = i as f64;
+            [
+                (7.3 * s).sin() * 9.0,
+                (3.1 * s + 1.0).cos() * 9.0,
+                1.2 + 0.4 * s,
+            ]
+        })
+        .collect();
+    let f: Vec<V3> = (0..n)
+        .map(|i| [0, 1, 2].map(|a| ((i * 3 + a) as f64 * 1.7).sin()))
+        .collect();
+    let t: Vec<V3> = (0..n)
+        .map(|i| [0, 1, 2].map(|a| ((i * 3 + a) as f64 * 0.9).cos()))
+        .collect();
+    let data: BTreeMap<String, HostArray> = [
+        ("positions".to_string(), particles(&x)),
+        ("forces".to_string(), particles(&f)),
+        ("torques".to_string(), particles(&t)),
+    ]
+    .into();
+    for walls in ["none", "bottom", "slit"] {
+        let run = |slab: &str| {
+            let g = load(&[
+                ("box", "[20.0, 24.0]".into()),
+                ("zmin", "0.0".into()),
+                ("zmax", "6.5".into()),
+                ("walls", format!("\"{walls}\"")),
+                ("rotation", "true".into()),
+                ("slab", format!("\"{slab}\"")),
+            ]);
+            let plan = plan_graph(
+                &gpu.caps,
+                &g,
+                types_of(&data),
+                Some(&["velocities", "angular_velocities"]),
+                true,
+            );
+            let ran_fused = !plan
+                .pruned
+                .iter()
+                .any(|&node| g.nodes[node].id == "mobility/fused_velocity_plane");
+            assert_eq!(
+                ran_fused,
+                slab == "fused",
+                "{walls}: the plan runs slab {slab}"
+            );
+            let mut program = compile_cached(&gpu, &g, &plan);
+            let out = run_program(&mut program, &data, 1);
+            (
+                out["velocities"].data.to_f64(),
+                out["angular_velocities"].data.to_f64(),
+            )
+        };
+        let (u0, w0) = run("chain");
+        let (u1, w1) = run("fused");
+        for (what, a, b) in [("velocities", &u0, &u1), ("angular velocities", &w0, &w1)] {
+            let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(scale > 0.0);
+            for (i, (p, q)) in a.iter().zip(b).enumerate() {
+                assert!(
+                    (p - q).abs() <= 1e-5 * scale,
+                    "{walls} {what} entry {i}: chain {p}, fused {q} (scale {scale})"
+                );
+            }
+        }
+    }
+}

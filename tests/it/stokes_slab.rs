@@ -5,7 +5,10 @@
 
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{Rng, gpu, rel_max_err, run_node_and_reference, run_out};
+use crate::util::{
+    Rng, gpu, input_decl, load, named, reference, rel_max_err, run_graph, run_node_and_reference,
+    run_out, tmpdir, write_graph,
+};
 
 fn spectrum(rng: &mut Rng, dims: [u32; 3], comps: u32) -> HostArray {
     rng.array(ValueType::HalfComplexGrid { dims, comps }, -1.0, 1.0)
@@ -99,4 +102,129 @@ fn slab_walls_leave_no_velocity_on_the_walls() {
             }
         }
     }
+}
+
+/// The chain slab_solve fuses, as graphs/lib/dpstokes_mobility.json runs it (the
+/// forcing's coefficients `f` to the velocity's values with the walls), beside slab_solve:
+/// a graph with both outputs, box [7, 5.5], eta 0.7, the domain [zmin, zmax].
+fn chain_and_fused_graph(f: &HostArray, zmin: f64, zmax: f64, walls: &str) -> String {
+    let node = |id: &str, kind: &str, p: &str, inputs: &str| {
+        format!(r#"{{"id": "{id}", "kind": "{kind}", "params": {{{p}}}, "inputs": {{{inputs}}}}}"#)
+    };
+    let height = zmax - zmin;
+    let b = r#""box": [7.0, 5.5]"#;
+    let eta = r#""viscosity": 0.7"#;
+    let domain = format!(r#""zmin": {zmin}, "zmax": {zmax}"#);
+    let walls = format!(r#""walls": "{walls}""#);
+    let nodes = [
+        node(
+            "fz",
+            "chebyshev_derivative",
+            &format!(r#""height": {height}, "first": 2, "count": 1"#),
+            r#""x": "inputs.f""#,
+        ),
+        node(
+            "ps",
+            "slab_pressure_source",
+            b,
+            r#""f": "inputs.f", "df": "fz.out""#,
+        ),
+        node(
+            "p",
+            "chebyshev_bvp",
+            &format!("{b}, {domain}"),
+            r#""f": "ps.out""#,
+        ),
+        node(
+            "pz",
+            "chebyshev_derivative",
+            &format!(r#""height": {height}"#),
+            r#""x": "p.out""#,
+        ),
+        node(
+            "vs",
+            "slab_velocity_source",
+            &format!("{b}, {eta}"),
+            r#""f": "inputs.f", "p": "p.out", "dp": "pz.out""#,
+        ),
+        node(
+            "v",
+            "chebyshev_bvp",
+            &format!("{b}, {domain}"),
+            r#""f": "vs.rhs", "boundary": "vs.boundary""#,
+        ),
+        node(
+            "values",
+            "chebyshev",
+            r#""direction": "inverse""#,
+            r#""x": "v.out""#,
+        ),
+        node(
+            "walls",
+            "slab_walls",
+            &format!("{b}, {domain}, {walls}"),
+            r#""v": "values.out""#,
+        ),
+        node(
+            "fused",
+            "slab_solve",
+            &format!("{b}, {eta}, {domain}, {walls}"),
+            r#""f": "inputs.f""#,
+        ),
+    ];
+    format!(
+        r#"{{"mesoflow": 1, "inputs": {{"f": {}}}, "nodes": [{}], "outputs": {{"chain": {{"from": "walls.out"}}, "fused": {{"from": "fused.out"}}}}}}"#,
+        input_decl(&f.ty),
+        nodes.join(", ")
+    )
+}
+
+/// slab_solve, the fused solve between the transforms, gives the chain of nodes' result
+/// (GPU against GPU) and its f64 reference (the chain's references) for every wall mode,
+/// on non-square grids of even sizes (unpaired Nyquist indices) and odd ones, random
+/// spectra (the k = 0 and Nyquist modes among them).
+#[test]
+fn slab_solve_matches_the_chain_of_nodes() {
+    let Some(gpu) = gpu() else { return };
+    let mut rng = Rng::new(79);
+    let dir = tmpdir("slab_solve_chain");
+    let (zmin, zmax) = (-1.5, 2.0);
+    for dims in [[16u32, 12, 17], [9, 7, 12]] {
+        let f = spectrum(&mut rng, dims, 3);
+        for walls in ["none", "bottom", "slit"] {
+            let json = chain_and_fused_graph(&f, zmin, zmax, walls);
+            let path = write_graph(&dir, &format!("{walls}-{}.json", dims[0]), &json);
+            let g = load(&path);
+            let out = run_graph(&gpu, &g, &named(&[("f", f.clone())]), None, 1, true);
+            let (chain, fused) = (out["chain"].data.to_f64(), out["fused"].data.to_f64());
+            let scale = chain.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            assert!(scale > 0.0);
+            let (mut worst, mut at) = (0.0f64, 0);
+            for (i, (a, b)) in chain.iter().zip(&fused).enumerate() {
+                let e = (a - b).abs() / scale;
+                if e > worst || e.is_nan() {
+                    (worst, at) = (e, i);
+                }
+            }
+            assert!(
+                worst <= 2e-5,
+                "slab_solve {walls} {dims:?} against the chain: {worst:e} at {at}"
+            );
+            // And against its f64 reference (the chain's references composed).
+            let want = reference(
+                "slab_solve",
+                &format!(
+                    r#"{{"box": [7.0, 5.5], "viscosity": 0.7, "zmin": {zmin}, "zmax": {zmax}, "walls": "{walls}"}}"#
+                ),
+                &[Some(&f)],
+            )
+            .remove(0);
+            let (err, at) = rel_max_err(&out["fused"], &want);
+            assert!(
+                err <= 2e-5,
+                "slab_solve {walls} {dims:?} against its reference: {err:e} at {at}"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

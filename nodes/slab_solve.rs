@@ -1,0 +1,259 @@
+//! `slab_solve`: the doubly periodic Stokes solve between the Chebyshev transforms in one
+//! kernel (shaders/chebyshev/slab_solve.wgsl): from the forcing's Chebyshev coefficients
+//! along z (a half spectrum in x, y) to the velocity's values at the Chebyshev points with
+//! the walls, which the chain `chebyshev_derivative` (f_z), `slab_pressure_source`,
+//! `chebyshev_bvp` (pressure), `chebyshev_derivative` (pressure), `slab_velocity_source`,
+//! `chebyshev_bvp` (3 velocity components), `chebyshev` (inverse), `slab_walls` computes
+//! with eight dispatches and a global-memory round trip of every intermediate
+//! (nodes/stokes_slab.rs has the maths; the chain stays, as the reference and for the
+//! other ports graphs need). Same conventions: wave numbers paired (i k zero on an
+//! unpaired Nyquist index) in the sources, |k| unpaired; the k = 0 rules of each wall mode.
+//!
+//! Per k, 6 threads (component, real or imaginary part), KS wave numbers a workgroup;
+//! each thread keeps its z line in registers. The pressure is solved by component 0's
+//! two threads and handed to the others through workgroup memory with its end values;
+//! every thread then forms its velocity source and boundary values, solves, takes its
+//! values along z by the dense inverse transform, and adds the walls' flow from the
+//! velocity's end values (workgroup memory again). The per-k tables (chebyshev_bvp's, the
+//! slit's 6 x 6 inverse) are built in f64 on the host, as the chain's nodes build them;
+//! the pressure and velocity solves share one table (the same k and domain).
+//!
+//! What it reads and writes per k: 6 n words of f (plus re-reads of f_x, f_y, f_z by the
+//! pressure threads, from cache), 6 n words out, 5 n + 6 table words (72 more for the
+//! slit): 17 n + 6; the chain moves about 82 n + 36 words per k through memory (every
+//! intermediate written and read back, the tables read by both solves).
+
+use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
+use crate::node::{
+    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
+    RefCtx, Registry, Signature,
+};
+use crate::value::{PortType, RefArray, ValueType, half_dims};
+
+use super::{chebyshev, chebyshev_bvp, stokes_slab};
+
+/// Chebyshev points the fused solve takes: its threads run a dense n x n inverse
+/// transform each, and lavapipe stops a thread past 65535 loop iterations (n^2 + about
+/// 15 n of them); longer lines go through the chain (graphs/lib/dpstokes_mobility.json's
+/// `slab`, `dpstokes_slab`).
+pub const MAX_POINTS: u32 = 160;
+
+/// Workgroup words the kernel's shared lines may take (of the 16 KiB every adapter has).
+const SHARED_WORDS: u32 = 3400;
+
+/// Wave numbers per workgroup: 16 (96 threads) where their pressure lines fit, fewer for
+/// long lines.
+fn wave_numbers_per_group(n: u32) -> u32 {
+    (SHARED_WORDS / (2 * n + 16)).clamp(1, 16)
+}
+
+struct SlabSolve {
+    lengths: [f64; 2],
+    viscosity: f64,
+    zmin: f64,
+    zmax: f64,
+    walls: u32,
+}
+
+impl SlabSolve {
+    fn from_params(p: &Params) -> Result<Self, String> {
+        let b = p.numbers("box");
+        let (zmin, zmax) = (p.number("zmin"), p.number("zmax"));
+        if zmax.partial_cmp(&zmin) != Some(std::cmp::Ordering::Greater) {
+            return Err(format!("`zmax` {zmax} must be above `zmin` {zmin}"));
+        }
+        Ok(SlabSolve {
+            lengths: [b[0], b[1]],
+            viscosity: p.number("viscosity"),
+            zmin,
+            zmax,
+            walls: stokes_slab::walls_code(p),
+        })
+    }
+}
+
+impl Node for SlabSolve {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+        let Some(ValueType::HalfComplexGrid { dims, comps }) = inputs[0] else {
+            unreachable!("port type checked")
+        };
+        if comps != 3 {
+            return Err(PortError::new(
+                "f",
+                format!("must have 3 components (the forcing), got {comps}"),
+            ));
+        }
+        if dims[2] < 2 || dims[2] > MAX_POINTS {
+            return Err(PortError::new(
+                "f",
+                format!(
+                    "has {} Chebyshev coefficients along z: the fused solve takes 2 to {MAX_POINTS} (the chain of nodes takes more: slab \"chain\")",
+                    dims[2]
+                ),
+            ));
+        }
+        Ok(Signature::outputs(vec![inputs[0].expect("required")]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let f = inputs[0].as_ref().expect("required");
+        outputs[0] = stokes_slab::chain_reference(
+            self.lengths,
+            self.viscosity,
+            self.zmin,
+            self.zmax,
+            self.walls,
+            f,
+        );
+    }
+}
+
+/// The kernel's uniform: shaders/stokes_slab/slab.wgsl's `Slab`, then the scales.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct SolveUniform {
+    nx: u32,
+    ny: u32,
+    nz: u32,
+    nk: u32,
+    kx_unit: f32,
+    ky_unit: f32,
+    inv_eta: f32,
+    scale: f32,
+    height: f32,
+    walls: u32,
+    pad: [u32; 2],
+    f_scale: f32,
+    bc_scale: f32,
+    dz_scale: f32,
+    pad2: u32,
+}
+
+impl GpuKernels for SlabSolve {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let f = io.inputs[0].expect("required");
+        let ValueType::HalfComplexGrid { dims, .. } = f.ty else {
+            unreachable!()
+        };
+        let half = half_dims(dims);
+        let nk = (half[0] * half[1]) as usize;
+        let n = dims[2] as usize;
+        let height = self.zmax - self.zmin;
+        let tau = 2.0 * std::f64::consts::PI;
+        let uniform = SolveUniform {
+            nx: dims[0],
+            ny: dims[1],
+            nz: dims[2],
+            nk: nk as u32,
+            kx_unit: (tau / self.lengths[0]) as f32,
+            ky_unit: (tau / self.lengths[1]) as f32,
+            inv_eta: (1.0 / self.viscosity) as f32,
+            scale: 1.0,
+            height: height as f32,
+            walls: self.walls,
+            pad: [0; 2],
+            f_scale: (height * height / 4.0) as f32,
+            bc_scale: (height / 2.0) as f32,
+            dz_scale: (2.0 / height) as f32,
+            pad2: 0,
+        };
+        let bvp = chebyshev_bvp::tables(&chebyshev_bvp::kappas(dims, self.lengths, height), n);
+        let (wall_points, minv) =
+            stokes_slab::wall_tables(self.lengths, self.zmin, self.zmax, self.walls, dims);
+        let mut points: Vec<f32> = chebyshev::matrix(n, false)
+            .iter()
+            .map(|&v| v as f32)
+            .collect();
+        points.extend(wall_points);
+        let ks = wave_numbers_per_group(n as u32);
+        let wg = 6 * ks;
+        let source = format!(
+            "const WG: u32 = {wg}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}",
+            cx.shader("chebyshev/slab_solve.wgsl")?
+        );
+        let kernel = cx.kernel(&KernelSpec::new(
+            "slab solve",
+            source,
+            &[
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::Uniform,
+            ],
+        ))?;
+        let bvp = cx.table("slab solve bvp tables", bytemuck::cast_slice(&bvp));
+        let points = cx.table("slab solve point tables", bytemuck::cast_slice(&points));
+        let minv = cx.table("slab solve slit tables", bytemuck::cast_slice(&minv));
+        let u = cx.uniform("slab solve shape", bytemuck::bytes_of(&uniform));
+        let groups = (nk as u64).div_ceil(ks as u64);
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &[f.buffer, io.outputs[0].buffer, &bvp, &points, &minv, &u],
+            cx.grid_1d(groups * wg as u64, wg),
+        )])
+    }
+}
+
+pub fn register(r: &mut Registry) {
+    r.add(
+        NodeKind::declare(
+            "slab_solve",
+            "the doubly periodic Stokes solve between the Chebyshev transforms in one kernel: from the forcing's Chebyshev coefficients along z (half spectrum in x, y) to the velocity's values at the Chebyshev points with the walls, as the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse), slab_walls computes it (6 threads a wave number, lines in registers, the pressure and the end values through workgroup memory; per-k tables in f64 on the host); 2 to 160 points along z",
+        )
+        .input(PortSpec::new(
+            "f",
+            PortType::HalfComplexGrid,
+            "the forcing's Chebyshev coefficients (3 components)",
+        ))
+        .output(PortSpec::new(
+            "out",
+            PortType::HalfComplexGrid,
+            "the velocity with the walls, values along z (3 components): irfft's input",
+        ))
+        .param(ParamSpec {
+            name: "box",
+            kind: ParamKind::Numbers {
+                len: Some(2),
+                min: f64::MIN_POSITIVE,
+                max: 1e18,
+            },
+            default: None,
+            doc: "the periodic lengths [Lx, Ly] (the wave numbers)",
+        })
+        .param(ParamSpec::f32_positive("viscosity", Some(1.0), "solvent viscosity eta"))
+        .param(ParamSpec::number("zmin", Some(-1.0), -1e18, 1e18, "the bottom of the domain (the bottom wall)"))
+        .param(ParamSpec::number("zmax", Some(1.0), -1e18, 1e18, "the top of the domain (the slit's top wall)"))
+        .param(ParamSpec::choice(
+            "walls",
+            "none",
+            stokes_slab::WALL_MODES,
+            "none (open z), bottom (no slip at zmin), slit (no slip at zmin and zmax)",
+        ))
+        .build(|p| Ok(Box::new(SlabSolve::from_params(p)?))),
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shared lines fit the workgroup memory every adapter has, at every length taken.
+    #[test]
+    fn the_shared_lines_fit() {
+        for n in 2..=MAX_POINTS {
+            let ks = wave_numbers_per_group(n);
+            assert!(ks >= 1 && ks * (2 * n + 16) <= SHARED_WORDS, "n {n}: {ks}");
+        }
+        assert_eq!(wave_numbers_per_group(31), 16);
+    }
+}

@@ -1,0 +1,318 @@
+// template: nodes/slab_solve.rs prepends the constants WG, KS and POINTS.
+//
+// slab_solve (nodes/slab_solve.rs): the doubly periodic Stokes solve of one wave number k
+// from the forcing's Chebyshev coefficients to the velocity's values along z with the
+// walls, the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp,
+// chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse),
+// slab_walls in one kernel. A workgroup takes KS wave numbers with 6 threads each, one per
+// (component c, real or imaginary part), laid out c first, then k, then the part, so a
+// component's words of KS neighbouring k are read by neighbouring threads. Each thread
+// keeps its line (POINTS words, fixed when the kernel is built, so the loops unroll) in
+// registers; the pressure (the threads of component 0 solve it, one per part) and the end
+// values of the velocity cross between a k's threads through workgroup memory.
+// f, out: word 2 ((c n + z) nk + k) + part. bvp: chebyshev_bvp's strided per-k tables.
+// points: the inverse transform's matrix (n x n), zeta_j, the weights of dv/dz at the top.
+// minv: the slit's 6 x 6 complex inverse per k, word ((r 6 + c) 2 + part) nk + k.
+#import common/index.wgsl
+#import stokes_slab/slab.wgsl
+
+struct Solve {
+    slab: Slab,
+    // (H/2)^2 on the sources, H/2 on the boundary values, 2 / H on a derivative.
+    f_scale: f32,
+    bc_scale: f32,
+    dz_scale: f32,
+    pad: u32,
+}
+
+@group(0) @binding(0) var<storage, read> f: array<f32>;
+@group(0) @binding(1) var<storage, read_write> out: array<f32>;
+@group(0) @binding(2) var<storage, read> bvp: array<f32>;
+@group(0) @binding(3) var<storage, read> points: array<f32>;
+@group(0) @binding(4) var<storage, read> minv_table: array<f32>;
+@group(0) @binding(5) var<uniform> u: Solve;
+
+// The pressure's coefficients per (k slot, part), then its values at the ends per (slot,
+// part): top, bottom; the velocity's values at the ends per (slot, component, part).
+var<workgroup> pressure: array<f32, KS * 2u * POINTS>;
+var<workgroup> pressure_ends: array<f32, KS * 4u>;
+var<workgroup> velocity_ends: array<f32, KS * 12u>;
+
+// This thread's line, and the solve's coefficients of y.
+var<private> line: array<f32, POINTS>;
+var<private> coef: array<f32, POINTS>;
+
+fn entry(row: u32, k: u32) -> f32 {
+    return bvp[row * u.slab.nk + k];
+}
+
+fn word(c: u32, z: u32, k: u32) -> u32 {
+    return slab_word(c, z, k, POINTS, u.slab.nk);
+}
+
+// The line's derivative coefficients in place, times 2 / H (chebyshev_derivative's
+// recurrence d_{m-1} = d_{m+1} + 2 m c_m from d_{n-1} = 0, d_0 halved).
+fn differentiate_line() {
+    var next = 0.0;
+    var here = 0.0;
+    for (var i = 0u; i + 1u < POINTS; i++) {
+        let m = POINTS - 1u - i;
+        let cm = line[m];
+        line[m] = u.dz_scale * here;
+        let prev = next + 2.0 * f32(m) * cm;
+        next = here;
+        here = prev;
+    }
+    line[0] = u.dz_scale * 0.5 * here;
+}
+
+// chebyshev_bvp's solve of k (shaders/chebyshev/bvp.wgsl): the line holds f (scaled by
+// (H/2)^2), alpha and beta are scaled; leaves y's coefficients in coef.
+fn solve(k: u32, alpha: f32, beta: f32) {
+    let n = POINTS;
+    var r0 = -alpha;
+    var r1 = -beta;
+    for (var z = 0u; z < n; z++) {
+        r0 += entry(3u * n + z, k) * line[z];
+        r1 += entry(4u * n + z, k) * line[z];
+    }
+    let y0 = entry(5u * n, k) * r0 + entry(5u * n + 1u, k) * r1;
+    let p0 = entry(5u * n + 2u, k) * r0 + entry(5u * n + 3u, k) * r1;
+    let kappa2 = entry(5u * n + 4u, k);
+    line[0] += kappa2 * y0;
+    if (n > 1u) {
+        line[1] += kappa2 * p0;
+    }
+    for (var z = 2u; z < n; z++) {
+        line[z] -= entry(z, k) * line[z - 2u];
+    }
+    for (var i = 0u; i < n; i++) {
+        let z = n - 1u - i;
+        var up = 0.0;
+        if (z + 2u < n) {
+            up = entry(2u * n + z, k) * line[z + 2u];
+        }
+        line[z] = (line[z] - up) * entry(n + z, k);
+    }
+    for (var m = 0u; m < n; m++) {
+        var v: f32;
+        if (m == 0u) {
+            v = y0;
+        } else if (m == 1u) {
+            v = p0 - 0.5 * derivative(2u, p0);
+        } else {
+            v = (derivative(m - 1u, p0) - derivative(m + 1u, p0)) / (2.0 * f32(m));
+        }
+        coef[m] = v;
+    }
+}
+
+// a_j of the line (0 past the end).
+fn a_at(j: u32) -> f32 {
+    if (j >= POINTS) {
+        return 0.0;
+    }
+    return line[j];
+}
+
+// y'_m from the a's (0 for m >= n).
+fn derivative(m: u32, p0: f32) -> f32 {
+    if (m >= POINTS) {
+        return 0.0;
+    }
+    if (m == 0u) {
+        return p0;
+    }
+    if (m == 1u) {
+        return a_at(0u) - 0.5 * a_at(2u);
+    }
+    return (a_at(m - 1u) - a_at(m + 1u)) / (2.0 * f32(m));
+}
+
+fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
+}
+
+fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
+    let w = ((r * 6u + c) * 2u) * u.slab.nk + k;
+    return vec2<f32>(minv_table[w], minv_table[w + u.slab.nk]);
+}
+
+// The velocity's value at end e (0 top, 1 bottom) of component c of slot `slot`.
+fn velocity_end(slot: u32, c: u32, e: u32) -> vec2<f32> {
+    let b = slot * 6u + c * 2u;
+    return vec2<f32>(velocity_ends[b * 2u + e], velocity_ends[(b + 1u) * 2u + e]);
+}
+
+@compute @workgroup_size(WG)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let n = POINTS;
+    let nk = u.slab.nk;
+    let part = lid % 2u;
+    let slot = (lid / 2u) % KS;
+    let c = lid / (2u * KS);
+    let k = (wid.y * nwg.x + wid.x) * KS + slot;
+    // Threads past the last k skip the work but meet every barrier.
+    let valid = k < nk;
+    let other = 1u - part;
+    // (i z) of part `part` is sign z of the other part.
+    let sign = select(-1.0, 1.0, part == 1u);
+    let q = slab_wave(u.slab, k, true);
+    let kk = slab_wave(u.slab, k, false);
+    let kabs = length(kk);
+
+    // The pressure: p'' - k^2 p = i k.f + df_z/dz, decaying conditions (component 0's
+    // threads, one per part).
+    if (c == 0u && valid) {
+        for (var z = 0u; z < n; z++) {
+            line[z] = f[word(2u, z, k) + part];
+        }
+        differentiate_line();
+        for (var z = 0u; z < n; z++) {
+            let ikf = sign * (q.x * f[word(0u, z, k) + other] + q.y * f[word(1u, z, k) + other]);
+            line[z] = u.f_scale * (ikf + line[z]);
+        }
+        solve(k, 0.0, 0.0);
+        var top = 0.0;
+        var bottom = 0.0;
+        let base = (slot * 2u + part) * n;
+        for (var z = 0u; z < n; z++) {
+            let p = coef[z];
+            pressure[base + z] = p;
+            top += p;
+            bottom += select(p, -p, z % 2u == 1u);
+        }
+        pressure_ends[(slot * 2u + part) * 2u] = top;
+        pressure_ends[(slot * 2u + part) * 2u + 1u] = bottom;
+    }
+    workgroupBarrier();
+
+    // The velocity: eta (v'' - k^2 v) = (i k p, dp/dz) - f with the force-free
+    // exterior's boundary values, then its values along z.
+    if (valid) {
+        let scale = u.f_scale * u.slab.inv_eta;
+        if (c == 2u) {
+            let base = (slot * 2u + part) * n;
+            for (var z = 0u; z < n; z++) {
+                line[z] = pressure[base + z];
+            }
+            differentiate_line();
+            for (var z = 0u; z < n; z++) {
+                line[z] = scale * (line[z] - f[word(2u, z, k) + part]);
+            }
+        } else {
+            let base = (slot * 2u + other) * n;
+            let qc = q[c];
+            for (var z = 0u; z < n; z++) {
+                line[z] = scale * (sign * qc * pressure[base + z] - f[word(c, z, k) + part]);
+            }
+        }
+        var alpha = 0.0;
+        var beta = 0.0;
+        if (kabs != 0.0) {
+            let h = 0.5 * u.slab.inv_eta * u.bc_scale;
+            if (c == 2u) {
+                alpha = h * pressure_ends[(slot * 2u + part) * 2u];
+                beta = h * pressure_ends[(slot * 2u + part) * 2u + 1u];
+            } else {
+                let g = sign * q[c] * h / kabs;
+                alpha = -g * pressure_ends[(slot * 2u + other) * 2u];
+                beta = g * pressure_ends[(slot * 2u + other) * 2u + 1u];
+            }
+        }
+        solve(k, alpha, beta);
+        // Values at the points (j = 0 the top): the inverse transform.
+        for (var j = 0u; j < n; j++) {
+            var acc = 0.0;
+            for (var m = 0u; m < n; m++) {
+                acc += points[j * n + m] * coef[m];
+            }
+            line[j] = acc;
+        }
+        let e = (slot * 6u + c * 2u + part) * 2u;
+        velocity_ends[e] = line[0];
+        velocity_ends[e + 1u] = line[n - 1u];
+    }
+    workgroupBarrier();
+    if (!valid) {
+        return;
+    }
+
+    // The walls (slab_walls), on this thread's values.
+    let zeta_at = n * n;
+    let row_at = n * n + n;
+    let walls = u.slab.walls;
+    if (kabs == 0.0) {
+        var slope = 0.0;
+        if (walls == 1u && c < 2u) {
+            for (var i = 0u; i < n; i++) {
+                slope -= points[row_at + i] * line[i];
+            }
+        }
+        let top = line[0];
+        let bottom = line[n - 1u];
+        for (var j = 0u; j < n; j++) {
+            let zeta = points[zeta_at + j];
+            var x = 0.0;
+            if (c < 2u) {
+                if (walls == 1u) {
+                    x = line[j] - bottom + zeta * slope;
+                } else if (walls == 2u) {
+                    let h = zeta / u.slab.height;
+                    x = line[j] - bottom * (1.0 - h) - top * h;
+                }
+            }
+            out[word(c, j, k) + part] = x;
+        }
+        return;
+    }
+    if (walls == 0u) {
+        for (var j = 0u; j < n; j++) {
+            out[word(c, j, k) + part] = line[j];
+        }
+        return;
+    }
+    var big_c: array<vec2<f32>, 3>;
+    var big_d: array<vec2<f32>, 3>;
+    for (var i = 0u; i < 3u; i++) {
+        big_c[i] = -velocity_end(slot, i, 1u);
+        big_d[i] = vec2<f32>(0.0);
+    }
+    if (walls == 2u) {
+        var w: array<vec2<f32>, 6>;
+        for (var i = 0u; i < 3u; i++) {
+            w[i] = big_c[i];
+            w[3u + i] = -velocity_end(slot, i, 0u);
+        }
+        for (var r = 0u; r < 3u; r++) {
+            var x = vec2<f32>(0.0);
+            var y = vec2<f32>(0.0);
+            for (var i = 0u; i < 6u; i++) {
+                x += cmul(minv(r, i, k), w[i]);
+                y += cmul(minv(3u + r, i, k), w[i]);
+            }
+            big_c[r] = x;
+            big_d[r] = y;
+        }
+    }
+    let a = big_c[2] - times_i(kk.x * big_c[0] + kk.y * big_c[1]) / kabs;
+    let b = -big_d[2] - times_i(kk.x * big_d[0] + kk.y * big_d[1]) / kabs;
+    let cc = big_c[c];
+    let dd = big_d[c];
+    for (var j = 0u; j < n; j++) {
+        let zeta = points[zeta_at + j];
+        let decay = exp(-kabs * zeta);
+        let grow = exp(kabs * (zeta - u.slab.height));
+        let az = a * zeta;
+        let bz = b * zeta;
+        var corr: vec2<f32>;
+        if (c == 2u) {
+            corr = (kabs * az + cc) * decay + (kabs * bz + dd) * grow;
+        } else {
+            let kc = kk[c];
+            corr = (times_i(-kc * az) + cc) * decay + (times_i(kc * bz) + dd) * grow;
+        }
+        out[word(c, j, k) + part] = line[j] + corr[part];
+    }
+}
