@@ -459,6 +459,10 @@ pub enum BenchCommand {
         /// dpstokes.json's windows: es or gaussian.
         #[arg(long, default_value = "es")]
         kernel: String,
+        /// dpstokes.json's spread_kernel, the kernels of spread_chebyshev and
+        /// interpolate_chebyshev: auto, workgroup or lanes.
+        #[arg(long, default_value = "auto")]
+        spread_kernel: String,
         #[arg(long, default_value_t = 10)]
         reps: u64,
     },
@@ -665,6 +669,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             sizes,
             tolerance,
             kernel,
+            spread_kernel,
             reps,
         } => dpstokes::run(&dpstokes::DpStokesBench {
             graph,
@@ -673,6 +678,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             sizes,
             tolerance,
             kernel,
+            spread_kernel,
             reps,
         }),
         BenchCommand::Disks {

@@ -1,0 +1,78 @@
+// template: imported by spread_lanes.wgsl and interpolate_lanes.wgsl after grid.wgsl
+// (nodes/chebyshev_spread.rs, kernel `lanes`); the node puts `const SEG: u32` (lanes per
+// particle: a power of two, at most the adapter's smallest subgroup) before the source.
+//
+// A segment of SEG consecutive subgroup lanes per particle, 64 / SEG particles per
+// workgroup, no workgroup memory and no barrier. The support's (x, y) columns are packed
+// densely over the lanes (a column of zero weight at the far end of either axis dropped,
+// so a support of 5.1 cells is 25 to 30 columns, one block of 32 lanes, x fastest: the
+// lanes of one row are consecutive grid words); each lane evaluates its own column's
+// x and y factors, and lane t the z factor of the t-th point of the particle's z range,
+// which the segment reads by shuffle as it walks the points. Every branch around a
+// shuffle depends on the particle alone, so a segment's lanes take it together, and a
+// shuffle reads lanes of its own segment only. Assumes full subgroups of consecutive
+// invocations (lane = invocation index mod subgroup size), as the FCM lane kernels do.
+
+struct LaneSupport {
+    u: vec2<f32>,       // position in cell-centre units along x, y
+    qz: f32,
+    first: vec2<i32>,   // first cell of the support along x, y
+    zr: vec2<u32>,      // the range of z points (z_range)
+    cols: vec2<u32>,    // columns along x, y (0 for a segment past the particles)
+    zl: f32,            // this lane's z factor: of point zr.x + k, or 0 past the range
+}
+
+// Particle p's support as lane k of its segment sees it; `live`: p is a particle.
+fn lane_support(p: u32, k: u32, live: bool, weighted: bool) -> LaneSupport {
+    let u = vec2<f32>(centre_units(pos[3u * p], 0u), centre_units(pos[3u * p + 1u], 1u));
+    let qz = pos[3u * p + 2u];
+    let first = vec2<i32>(ceil(u - geo.radius.xz));
+    let zr = z_range(qz);
+    let side = geo.shape.x + 1u;
+    var cols = vec2<u32>(0u);
+    if (live) {
+        cols = vec2<u32>(side);
+        // The last cell of an axis, when past the window's end (phi_x, phi_y zero there).
+        if (abs(f32(first.x + i32(side) - 1) - u.x) > geo.radius.x) {
+            cols.x -= 1u;
+        }
+        if (abs(f32(first.y + i32(side) - 1) - u.y) > geo.radius.z) {
+            cols.y -= 1u;
+        }
+    }
+    var zl = 0.0;
+    if (k <= zr.y - zr.x) {
+        zl = z_factor(zr.x + k, qz, weighted);
+    }
+    return LaneSupport(u, qz, first, zr, cols, zl);
+}
+
+// The packed column c's (x, y) weight and its cell in a z plane; weight 0 past the columns.
+struct LaneColumn {
+    w: f32,
+    cell: u32,
+}
+
+fn lane_column(sp: LaneSupport, c: u32) -> LaneColumn {
+    if (c >= sp.cols.x * sp.cols.y) {
+        return LaneColumn(0.0, 0u);
+    }
+    let cx = c % sp.cols.x;
+    let cy = c / sp.cols.x;
+    let ix = sp.first.x + i32(cx);
+    let iy = sp.first.y + i32(cy);
+    let w = phi_x(f32(ix) - sp.u.x) * phi_y(f32(iy) - sp.u.y);
+    let cell = wrap_cell(ix, geo.n.x) + geo.n.x * wrap_cell(iy, geo.n.y);
+    return LaneColumn(w, cell);
+}
+
+// The z factor of the t-th point of the range, by shuffle from lane t of the segment at
+// `base` (points past the segment's lanes computed here). Every lane of the segment calls
+// it with the same t.
+fn lane_z(sp: LaneSupport, t: u32, base: u32, weighted: bool) -> f32 {
+    var w = subgroupShuffle(sp.zl, base + min(t, SEG - 1u));
+    if (t >= SEG) {
+        w = z_factor(sp.zr.x + t, sp.qz, weighted);
+    }
+    return w;
+}
