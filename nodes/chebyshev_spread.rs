@@ -53,6 +53,11 @@ const WG: u32 = 64;
 /// Components the interpolation kernel sums per particle.
 const MAX_COMPS: u32 = 4;
 
+/// Threads per workgroup of the `lanes` kernels: 256 / seg consecutive particles on one
+/// multiprocessor, whose supports overlap where the particles are sorted (their grid
+/// reads shared in its L1), as FCM's lane kernels.
+const LANES_WG: u32 = 256;
+
 /// Most lanes per particle of the `lanes` kernels (a warp on NVIDIA): a support of 5.1
 /// cells packs 25 to 30 columns.
 const MAX_SEG: u32 = 32;
@@ -639,26 +644,32 @@ impl Node for SpreadChebyshev {
     }
 }
 
-/// A kernel's label, shader file and threads for `n` particles: one workgroup of WG
-/// threads per particle, or (`seg` lanes per particle) WG / seg particles per workgroup.
-fn launch(seg: Option<u32>, node: &str, op: &str, n: u32) -> (String, String, u64) {
+/// A kernel's label, shader file, threads for `n` particles and workgroup size: one
+/// workgroup of WG threads per particle, or (`seg` lanes per particle) LANES_WG / seg
+/// particles per workgroup of LANES_WG.
+fn launch(seg: Option<u32>, node: &str, op: &str, n: u32) -> (String, String, u64, u32) {
     match seg {
         Some(s) => (
             format!("{node} (lanes)"),
             format!("chebyshev/{op}_lanes.wgsl"),
-            (n as u64).div_ceil((WG / s) as u64) * WG as u64,
+            (n as u64).div_ceil((LANES_WG / s) as u64) * LANES_WG as u64,
+            LANES_WG,
         ),
         None => (
             node.to_string(),
             format!("chebyshev/{op}.wgsl"),
             n as u64 * WG as u64,
+            WG,
         ),
     }
 }
 
-/// The `lanes` kernels' lanes per particle, as WGSL put before their source.
+/// The `lanes` kernels' lanes per particle and workgroup size, as WGSL put before their
+/// source.
 fn seg_constant(seg: Option<u32>) -> String {
-    seg.map_or(String::new(), |s| format!("const SEG: u32 = {s}u;\n"))
+    seg.map_or(String::new(), |s| {
+        format!("const SEG: u32 = {s}u;\nconst LANES_WG: u32 = {LANES_WG}u;\n")
+    })
 }
 
 fn describe(g: &ChebyshevGrid) -> String {
@@ -700,7 +711,7 @@ impl GpuKernels for SpreadChebyshev {
             None => "spread/add_cas.wgsl",
         };
         let seg = self.g.segment(caps).map_err(CompileError::Unsupported)?;
-        let (label, file, threads) = launch(seg, "spread_chebyshev", "spread", n);
+        let (label, file, threads, wg) = launch(seg, "spread_chebyshev", "spread", n);
         let source = format!(
             "{}{}{}{}",
             seg_constant(seg),
@@ -742,7 +753,7 @@ impl GpuKernels for SpreadChebyshev {
         dispatches.push(cx.dispatch(
             &kernel,
             &[pos.buffer, vals.buffer, grid, &geo, &table],
-            cx.grid_1d(threads, WG),
+            cx.grid_1d(threads, wg),
         ));
         if let Some(e) = exp {
             dispatches.push(fixed::finish(cx, grid, out.buffer, out.ty.words(), e)?);
@@ -836,7 +847,7 @@ impl GpuKernels for InterpolateChebyshev {
             .g
             .segment(cx.caps())
             .map_err(CompileError::Unsupported)?;
-        let (label, file, threads) = launch(seg, "interpolate_chebyshev", "interpolate", n);
+        let (label, file, threads, wg) = launch(seg, "interpolate_chebyshev", "interpolate", n);
         let source = format!(
             "{}{}{}",
             seg_constant(seg),
@@ -865,7 +876,7 @@ impl GpuKernels for InterpolateChebyshev {
         Ok(vec![cx.dispatch(
             &kernel,
             &[pos.buffer, grid.buffer, io.outputs[0].buffer, &geo, &table],
-            cx.grid_1d(threads, WG),
+            cx.grid_1d(threads, wg),
         )])
     }
 }

@@ -1,4 +1,4 @@
-// template: composed after `const SEG` and a window (shaders/window/).
+// template: composed after `const SEG`, `const LANES_WG` and a window (shaders/window/).
 // nodes/chebyshev_spread.rs, kernel `lanes`: see chebyshev/lanes.wgsl. Each lane sums its
 // columns' u delta~ over the support's z points (the z factor times the quadrature
 // weight), then a shuffle butterfly adds the segment, in a fixed order.
@@ -11,13 +11,13 @@
 #import chebyshev/grid.wgsl
 #import chebyshev/lanes.wgsl
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(LANES_WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) lane: u32) {
     let k = lane % SEG;
     let base = lane - k;
-    let p = (wid.y * nwg.x + wid.x) * (64u / SEG) + lid / SEG;
+    let p = (wid.y * nwg.x + wid.x) * (LANES_WG / SEG) + lid / SEG;
     let live = p < geo.n.w;
     let pp = min(p, max(geo.n.w, 1u) - 1u);
     let comps = geo.shape.y;

@@ -1,9 +1,10 @@
 // template: imported by spread_lanes.wgsl and interpolate_lanes.wgsl after grid.wgsl
 // (nodes/chebyshev_spread.rs, kernel `lanes`); the node puts `const SEG: u32` (lanes per
-// particle: a power of two, at most the adapter's smallest subgroup) before the source.
+// particle: a power of two, at most the adapter's smallest subgroup) and `const
+// LANES_WG: u32` (the workgroup size) before the source.
 //
-// A segment of SEG consecutive subgroup lanes per particle, 64 / SEG particles per
-// workgroup, no workgroup memory and no barrier. The support's (x, y) columns are packed
+// A segment of SEG consecutive subgroup lanes per particle, LANES_WG / SEG consecutive
+// particles per workgroup, no workgroup memory and no barrier. The support's (x, y) columns are packed
 // densely over the lanes (a column of zero weight at the far end of either axis dropped,
 // so a support of 5.1 cells is 25 to 30 columns, one block of 32 lanes, x fastest: the
 // lanes of one row are consecutive grid words); each lane evaluates its own column's
@@ -57,13 +58,28 @@ fn lane_column(sp: LaneSupport, c: u32) -> LaneColumn {
     if (c >= sp.cols.x * sp.cols.y) {
         return LaneColumn(0.0, 0u);
     }
-    let cx = c % sp.cols.x;
-    let cy = c / sp.cols.x;
+    // c / cols.x in floats (exact: the quotient's fraction is at least 1 / (2 cols.x)
+    // from a whole number, far above the rounding), cheaper than an integer division.
+    let cy = u32((f32(c) + 0.5) / f32(sp.cols.x));
+    let cx = c - cy * sp.cols.x;
     let ix = sp.first.x + i32(cx);
     let iy = sp.first.y + i32(cy);
     let w = phi_x(f32(ix) - sp.u.x) * phi_y(f32(iy) - sp.u.y);
-    let cell = wrap_cell(ix, geo.n.x) + geo.n.x * wrap_cell(iy, geo.n.y);
+    let cell = wrap_near(ix, geo.n.x) + geo.n.x * wrap_near(iy, geo.n.y);
     return LaneColumn(w, cell);
+}
+
+// wrap_cell for i in [-n, 2 n), as a support's cells are (it is narrower than the grid,
+// its first cell within its half-width of a cell centre in the box): no integer modulo.
+fn wrap_near(i: i32, n: u32) -> u32 {
+    var j = i;
+    if (j < 0) {
+        j += i32(n);
+    }
+    if (j >= i32(n)) {
+        j -= i32(n);
+    }
+    return u32(j);
 }
 
 // The z factor of the t-th point of the range, by shuffle from lane t of the segment at

@@ -1,4 +1,4 @@
-// template: composed after `const SEG`, a window (shaders/window/) and an add
+// template: composed after `const SEG`, `const LANES_WG`, a window (shaders/window/) and an add
 // (shaders/spread/add_*.wgsl, which binds `grid` at 2 and defines grid_add).
 // nodes/chebyshev_spread.rs, kernel `lanes`: see chebyshev/lanes.wgsl. Each lane adds
 // its column's value at every z point of the support: one warp instruction per point and
@@ -11,13 +11,13 @@
 #import chebyshev/grid.wgsl
 #import chebyshev/lanes.wgsl
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(LANES_WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) lane: u32) {
     let k = lane % SEG;
     let base = lane - k;
-    let p = (wid.y * nwg.x + wid.x) * (64u / SEG) + lid / SEG;
+    let p = (wid.y * nwg.x + wid.x) * (LANES_WG / SEG) + lid / SEG;
     let live = p < geo.n.w;
     let pp = min(p, max(geo.n.w, 1u) - 1u);
     let comps = geo.shape.y;
