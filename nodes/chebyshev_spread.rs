@@ -25,11 +25,11 @@
 //! (shaders/chebyshev/spread.wgsl, interpolate.wgsl), and `lanes` (the default where the
 //! adapter has subgroups), a segment of up to 32 subgroup lanes per particle, several
 //! particles per workgroup (shaders/chebyshev/lanes.wgsl): the support's nonzero (x, y)
-//! columns packed over the lanes (25 to 30 of the 36 at a support of 5.1 cells), each lane
-//! evaluating its own column's factors and lane t the z factor of point t, shared by
-//! shuffle; interpolation adds the segment by a shuffle butterfly instead of the
-//! workgroup tree. Both give the same sums up to f32 rounding (the same weights; in
-//! deterministic runs the same spread bits).
+//! columns packed over the lanes (25 to 30 of the 49 (support + 1)^2 at a support of 5.1
+//! cells, the `support` param 6), each lane evaluating its own column's factors and lane
+//! t the z factor of point t, shared by shuffle; interpolation adds the segment by a
+//! shuffle butterfly instead of the workgroup tree. Both give the same sums up to f32
+//! rounding (the same weights; in deterministic runs the same spread bits).
 //!
 //! Particles must lie in [zmin, zmax] (the domain holds their support, or a wall bounds
 //! it): others are refused with their row.

@@ -5,8 +5,9 @@
 //
 // A segment of SEG consecutive subgroup lanes per particle, LANES_WG / SEG consecutive
 // particles per workgroup, no workgroup memory and no barrier. The support's (x, y) columns are packed
-// densely over the lanes (a column of zero weight at the far end of either axis dropped,
-// so a support of 5.1 cells is 25 to 30 columns, one block of 32 lanes, x fastest: the
+// densely over the lanes (the cells past the window's end at the far end of either axis
+// dropped: a support of 5.1 cells, 7 cells per axis in the workgroup kernels, is 5 or 6
+// cells, 25 to 30 columns, one block of 32 lanes, 36 in 1 % of places), x fastest: the
 // lanes of one row are consecutive grid words); each lane evaluates its own column's
 // x and y factors, and lane t the z factor of the t-th point of the particle's z range,
 // which the segment reads by shuffle as it walks the points. Every branch around a
@@ -32,12 +33,14 @@ fn lane_support(p: u32, k: u32, live: bool, weighted: bool) -> LaneSupport {
     let side = geo.shape.x + 1u;
     var cols = vec2<u32>(0u);
     if (live) {
+        // Up to the last cell of each axis within the window's end (phi_x and phi_y's
+        // test): support + 1 cells hold the 2 radius + 1 cells that may be in it, so the
+        // last one or two are past it (a support of 5.1 cells: 5 or 6 of the 7).
         cols = vec2<u32>(side);
-        // The last cell of an axis, when past the window's end (phi_x, phi_y zero there).
-        if (abs(f32(first.x + i32(side) - 1) - u.x) > geo.radius.x) {
+        while (cols.x > 0u && abs(f32(first.x + i32(cols.x) - 1) - u.x) > geo.radius.x) {
             cols.x -= 1u;
         }
-        if (abs(f32(first.y + i32(side) - 1) - u.y) > geo.radius.z) {
+        while (cols.y > 0u && abs(f32(first.y + i32(cols.y) - 1) - u.y) > geo.radius.z) {
             cols.y -= 1u;
         }
     }
