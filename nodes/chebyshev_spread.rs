@@ -20,6 +20,17 @@
 //!   is 2): the quadrature of the integral of u delta~, adjoint to spreading in that
 //!   inner product; the workgroup's sums added in a fixed order.
 //!
+//! Two pairs of kernels (`kernel`): `workgroup`, one workgroup of 64 threads per
+//! particle as above, its window factors computed into workgroup memory behind a barrier
+//! (shaders/chebyshev/spread.wgsl, interpolate.wgsl), and `lanes` (the default where the
+//! adapter has subgroups), a segment of up to 32 subgroup lanes per particle, several
+//! particles per workgroup (shaders/chebyshev/lanes.wgsl): the support's nonzero (x, y)
+//! columns packed over the lanes (25 to 30 of the 49 (support + 1)^2 at a support of 5.1
+//! cells, the `support` param 6), each lane evaluating its own column's factors and lane
+//! t the z factor of point t, shared by shuffle; interpolation adds the segment by a
+//! shuffle butterfly instead of the workgroup tree. Both give the same sums up to f32
+//! rounding (the same weights; in deterministic runs the same spread bits).
+//!
 //! Particles must lie in [zmin, zmax] (the domain holds their support, or a wall bounds
 //! it): others are refused with their row.
 
@@ -41,6 +52,38 @@ const WG: u32 = 64;
 
 /// Components the interpolation kernel sums per particle.
 const MAX_COMPS: u32 = 4;
+
+/// Threads per workgroup of the `lanes` kernels: 256 / seg consecutive particles on one
+/// multiprocessor, whose supports overlap where the particles are sorted (their grid
+/// reads shared in its L1), as FCM's lane kernels.
+const LANES_WG: u32 = 256;
+
+/// Most lanes per particle of the `lanes` kernels (a warp on NVIDIA): a support of 5.1
+/// cells packs 25 to 30 columns.
+const MAX_SEG: u32 = 32;
+
+/// The `kernel` param: which pair of kernels runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KernelChoice {
+    /// `lanes` where the adapter has subgroups, else `workgroup`.
+    Auto,
+    /// One workgroup of 64 threads per particle, the factors in workgroup memory
+    /// (shaders/chebyshev/spread.wgsl, interpolate.wgsl).
+    Workgroup,
+    /// A segment of subgroup lanes per particle (shaders/chebyshev/lanes.wgsl); an error
+    /// where the adapter has no subgroups.
+    Lanes,
+}
+
+impl KernelChoice {
+    fn parse(s: &str) -> KernelChoice {
+        match s {
+            "workgroup" => KernelChoice::Workgroup,
+            "lanes" => KernelChoice::Lanes,
+            _ => KernelChoice::Auto,
+        }
+    }
+}
 
 /// Image subtraction by the walls bounding z.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -74,6 +117,8 @@ pub struct ChebyshevGrid {
     /// (`particle_zmin`, `particle_zmax`: the physical domain, its open sides padded so a
     /// particle's support stays inside).
     pub particle_z: [f64; 2],
+    /// Which kernels run (`kernel`).
+    pub kernel: KernelChoice,
 }
 
 impl ChebyshevGrid {
@@ -251,6 +296,25 @@ impl ChebyshevGrid {
         }
     }
 
+    /// Lanes per particle of the `lanes` kernels on this adapter (the smallest subgroup,
+    /// at most MAX_SEG), or None for the workgroup kernels; an error where `lanes` was
+    /// asked for and the adapter has no subgroups (raised when the kernels are built, so
+    /// that planning without a device takes any choice).
+    fn segment(&self, caps: &DeviceCaps) -> Result<Option<u32>, String> {
+        let seg = match caps.subgroups {
+            Some((min, _)) if min.is_power_of_two() => Some(min.min(MAX_SEG)),
+            _ => None,
+        };
+        match self.kernel {
+            KernelChoice::Workgroup => Ok(None),
+            KernelChoice::Auto => Ok(seg),
+            KernelChoice::Lanes => seg.map(Some).ok_or_else(|| {
+                "kernel `lanes` needs subgroups (a power of two wide); this adapter has none"
+                    .to_string()
+            }),
+        }
+    }
+
     /// The z points then the quadrature weights, f32, for the kernels.
     fn table(&self) -> Vec<f32> {
         self.z_points()
@@ -404,6 +468,12 @@ fn grid_params() -> Vec<ParamSpec> {
             f64::MAX,
             "particles above this are refused by row (the physical domain's top inside a padded grid; never above zmax)",
         ),
+        ParamSpec::choice(
+            "kernel",
+            "auto",
+            &["auto", "workgroup", "lanes"],
+            "workgroup: one workgroup of 64 threads per particle, the window's factors in workgroup memory; lanes: a segment of subgroup lanes per particle (up to 32), its support's columns packed over the lanes, no workgroup memory or barrier (needs subgroups); auto: lanes where the adapter has subgroups",
+        ),
     ]
 }
 
@@ -454,6 +524,7 @@ fn grid_of(p: &Params) -> Result<ChebyshevGrid, String> {
             p.number("particle_zmin").max(zmin),
             p.number("particle_zmax").min(zmax),
         ],
+        kernel: KernelChoice::parse(p.text("kernel")),
     })
 }
 
@@ -573,9 +644,37 @@ impl Node for SpreadChebyshev {
     }
 }
 
+/// A kernel's label, shader file, threads for `n` particles and workgroup size: one
+/// workgroup of WG threads per particle, or (`seg` lanes per particle) LANES_WG / seg
+/// particles per workgroup of LANES_WG.
+fn launch(seg: Option<u32>, node: &str, op: &str, n: u32) -> (String, String, u64, u32) {
+    match seg {
+        Some(s) => (
+            format!("{node} (lanes)"),
+            format!("chebyshev/{op}_lanes.wgsl"),
+            (n as u64).div_ceil((LANES_WG / s) as u64) * LANES_WG as u64,
+            LANES_WG,
+        ),
+        None => (
+            node.to_string(),
+            format!("chebyshev/{op}.wgsl"),
+            n as u64 * WG as u64,
+            WG,
+        ),
+    }
+}
+
+/// The `lanes` kernels' lanes per particle and workgroup size, as WGSL put before their
+/// source.
+fn seg_constant(seg: Option<u32>) -> String {
+    seg.map_or(String::new(), |s| {
+        format!("const SEG: u32 = {s}u;\nconst LANES_WG: u32 = {LANES_WG}u;\n")
+    })
+}
+
 fn describe(g: &ChebyshevGrid) -> String {
     format!(
-        "{}x{}x{} grid (Chebyshev in z over [{}, {}]), {}, z support +-{:.4}, walls {:?}",
+        "{}x{}x{} grid (Chebyshev in z over [{}, {}]), {}, z support +-{:.4}, walls {:?}, kernel {:?}",
         g.cells[0],
         g.cells[1],
         g.points,
@@ -583,7 +682,8 @@ fn describe(g: &ChebyshevGrid) -> String {
         g.zmax,
         g.window.describe(),
         g.z_radius(),
-        g.walls
+        g.walls,
+        g.kernel
     )
 }
 
@@ -610,14 +710,17 @@ impl GpuKernels for SpreadChebyshev {
             None if caps.f32_atomics => "spread/add_atomic.wgsl",
             None => "spread/add_cas.wgsl",
         };
+        let seg = self.g.segment(caps).map_err(CompileError::Unsupported)?;
+        let (label, file, threads, wg) = launch(seg, "spread_chebyshev", "spread", n);
         let source = format!(
-            "{}{}{}",
+            "{}{}{}{}",
+            seg_constant(seg),
             cx.shader(self.g.window.shader())?,
             cx.shader(add)?,
-            cx.shader("chebyshev/spread.wgsl")?
+            cx.shader(&file)?
         );
         let mut spec = KernelSpec::new(
-            "spread_chebyshev",
+            label,
             source,
             &[
                 Binding::StorageRead,
@@ -650,7 +753,7 @@ impl GpuKernels for SpreadChebyshev {
         dispatches.push(cx.dispatch(
             &kernel,
             &[pos.buffer, vals.buffer, grid, &geo, &table],
-            cx.grid_1d(n as u64 * WG as u64, WG),
+            cx.grid_1d(threads, wg),
         ));
         if let Some(e) = exp {
             dispatches.push(fixed::finish(cx, grid, out.buffer, out.ty.words(), e)?);
@@ -740,13 +843,19 @@ impl GpuKernels for InterpolateChebyshev {
         let ValueType::Particles { n, k } = io.outputs[0].ty else {
             unreachable!()
         };
+        let seg = self
+            .g
+            .segment(cx.caps())
+            .map_err(CompileError::Unsupported)?;
+        let (label, file, threads, wg) = launch(seg, "interpolate_chebyshev", "interpolate", n);
         let source = format!(
-            "{}{}",
+            "{}{}{}",
+            seg_constant(seg),
             cx.shader(self.g.window.shader())?,
-            cx.shader("chebyshev/interpolate.wgsl")?
+            cx.shader(&file)?
         );
         let kernel = cx.kernel(&KernelSpec::new(
-            "interpolate_chebyshev",
+            label,
             source,
             &[
                 Binding::StorageRead,
@@ -767,7 +876,7 @@ impl GpuKernels for InterpolateChebyshev {
         Ok(vec![cx.dispatch(
             &kernel,
             &[pos.buffer, grid.buffer, io.outputs[0].buffer, &geo, &table],
-            cx.grid_1d(n as u64 * WG as u64, WG),
+            cx.grid_1d(threads, wg),
         )])
     }
 }

@@ -36,6 +36,8 @@ pub struct DpStokesBench {
     pub kernel: String,
     /// lib/dpstokes_mobility.json's `slab` per row: auto, fused, chain.
     pub slab: Vec<String>,
+    /// dpstokes.json's spread_kernel (auto, workgroup, lanes).
+    pub spread_kernel: String,
     pub reps: u64,
 }
 
@@ -124,6 +126,10 @@ fn sets_with(
     vec![
         ("slab", ParamValue::Text(slab.to_string())),
         ("kernel", ParamValue::Text(bench.kernel.clone())),
+        (
+            "spread_kernel",
+            ParamValue::Text(bench.spread_kernel.clone()),
+        ),
         ("box", ParamValue::Numbers(vec![l, l])),
         ("zmin", ParamValue::Number(0.0)),
         ("zmax", ParamValue::Number(ZMAX)),
@@ -136,9 +142,10 @@ pub fn run(bench: &DpStokesBench) -> Result<(), BenchError> {
     let gpu = open_gpu(bench.reps)?;
     let registry = mesoflow::nodes::registry();
     outln!(
-        "dpstokes.json M F at tolerance {}, {} windows: a = 1, eta = 1, heights uniform in [1.5, 10], zmin 0, zmax {ZMAX}, box side 128 sqrt(N / 10^5); time: median over {} runs end to end ({}); fcm.json (the same window family and tolerance) on a periodic grid of at least the same points, same N; error: the largest relative self-mobility error at h = 2 a and 6 a (L = 128; bottom: against Rotne-Prager-Blake, none: against the doubly periodic f64 sum, slit: -)",
+        "dpstokes.json M F at tolerance {}, {} windows, spread_kernel {}: a = 1, eta = 1, heights uniform in [1.5, 10], zmin 0, zmax {ZMAX}, box side 128 sqrt(N / 10^5); time: median over {} runs end to end ({}); fcm.json (the same window family and tolerance) on a periodic grid of at least the same points, same N; error: the largest relative self-mobility error at h = 2 a and 6 a (L = 128; bottom: against Rotne-Prager-Blake, none: against the doubly periodic f64 sum, slit: -)",
         bench.tolerance,
         bench.kernel,
+        bench.spread_kernel,
         bench.reps,
         end_to_end_clock(&gpu)
     );

@@ -464,6 +464,10 @@ pub enum BenchCommand {
         /// one); e.g. `--slab fused,chain`.
         #[arg(long, value_delimiter = ',', default_values_t = ["auto".to_string()])]
         slab: Vec<String>,
+        /// dpstokes.json's spread_kernel, the kernels of spread_chebyshev and
+        /// interpolate_chebyshev: auto, workgroup or lanes.
+        #[arg(long, default_value = "auto")]
+        spread_kernel: String,
         #[arg(long, default_value_t = 10)]
         reps: u64,
     },
@@ -671,6 +675,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             tolerance,
             kernel,
             slab,
+            spread_kernel,
             reps,
         } => dpstokes::run(&dpstokes::DpStokesBench {
             graph,
@@ -680,6 +685,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             tolerance,
             kernel,
             slab,
+            spread_kernel,
             reps,
         }),
         BenchCommand::Disks {

@@ -8,8 +8,8 @@ use std::f64::consts::PI;
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::{
-    Rng, compile_cached, erfc, f32s, flat_particles, gpu, load_single_node, named, plan_graph,
-    reference, rel_max_err, run_node, run_out, types_of, with_caps,
+    Rng, compile_cached, compile_error, erfc, f32s, flat_particles, gpu, load_single_node, named,
+    plan_graph, reference, rel_max_err, run_node, run_out, types_of, with_caps,
 };
 
 fn grid(dims: [u32; 3], comps: u32, values: &[f64]) -> HostArray {
@@ -365,6 +365,18 @@ const ES: &str = r#""window": "es", "support": 6, "beta": 13.8"#;
 /// either side in the kernel and the f64 reference.
 const ES_LENGTH: &str = r#""window": "es", "width": 1.3, "beta": 13.8"#;
 
+/// The kernels of spread_chebyshev and interpolate_chebyshev (their `kernel` param).
+const CHEB_KERNELS: [&str; 2] = ["workgroup", "lanes"];
+
+/// `params` (a JSON object) with `kernel` set.
+fn with_kernel(params: &str, kernel: &str) -> String {
+    let rest = params
+        .trim_start()
+        .strip_prefix('{')
+        .expect("a JSON object");
+    format!(r#"{{"kernel": "{kernel}", {rest}"#)
+}
+
 /// Positions in the domain with the hard places: on the bottom and top walls, a radius
 /// from them, at mid-height, on the periodic faces and a grid point.
 fn cheb_positions(rng: &mut Rng) -> Vec<f64> {
@@ -407,8 +419,11 @@ fn chebyshev_spreading_and_interpolation_match_their_references() {
         ("[8, 6]", ES),
         ("[8, 7.2]", ES_LENGTH),
     ] {
-        for walls in ["none", "bottom", "slit"] {
-            let p = cheb_params_in(box_, window, walls);
+        for (walls, kernel) in ["none", "bottom", "slit"]
+            .into_iter()
+            .flat_map(|w| CHEB_KERNELS.map(|k| (w, k)))
+        {
+            let p = with_kernel(&cheb_params_in(box_, window, walls), kernel);
             let (got, want) = run_out(
                 "spread_chebyshev",
                 &p,
@@ -418,7 +433,10 @@ fn chebyshev_spreading_and_interpolation_match_their_references() {
                 ],
             );
             let (err, at) = rel_max_err(&got, &want);
-            assert!(err <= 2e-6, "spread {window} {walls}: {err:e} at {at}");
+            assert!(
+                err <= 2e-6,
+                "spread {window} {walls} {kernel}: {err:e} at {at}"
+            );
             let (got, want) = run_out(
                 "interpolate_chebyshev",
                 &p,
@@ -428,7 +446,10 @@ fn chebyshev_spreading_and_interpolation_match_their_references() {
                 ],
             );
             let (err, at) = rel_max_err(&got, &want);
-            assert!(err <= 2e-6, "interpolate {window} {walls}: {err:e} at {at}");
+            assert!(
+                err <= 2e-6,
+                "interpolate {window} {walls} {kernel}: {err:e} at {at}"
+            );
         }
     }
 }
@@ -458,9 +479,12 @@ fn chebyshev_kernel_integrates_to_the_closed_forms() {
         },
         vec![1.0; 16 * 12 * 65],
     );
-    for walls in ["none", "bottom", "slit"] {
+    for (walls, kernel) in ["none", "bottom", "slit"]
+        .into_iter()
+        .flat_map(|w| CHEB_KERNELS.map(|k| (w, k)))
+    {
         let p = format!(
-            r#"{{"box": [8, 6], "grid": [16, 12], "zmin": -2, "zmax": 3, "points": 65, {GAUSSIAN}, "walls": "{walls}"}}"#
+            r#"{{"box": [8, 6], "grid": [16, 12], "zmin": -2, "zmax": 3, "points": 65, {GAUSSIAN}, "walls": "{walls}", "kernel": "{kernel}"}}"#
         );
         let (got, _) = run_out(
             "interpolate_chebyshev",
@@ -486,7 +510,7 @@ fn chebyshev_kernel_integrates_to_the_closed_forms() {
             };
             assert!(
                 (g - want).abs() < 2e-5,
-                "{walls}, height {d}: {g} against {want}"
+                "{walls} {kernel}, height {d}: {g} against {want}"
             );
         }
     }
@@ -530,8 +554,11 @@ fn chebyshev_interpolation_is_the_adjoint_of_spreading() {
         })
         .collect();
     assert!((w.iter().sum::<f64>() - 2.0).abs() < 1e-12);
-    for walls in ["none", "bottom", "slit"] {
-        let p = cheb_params(GAUSSIAN, walls);
+    for (walls, kernel) in ["none", "bottom", "slit"]
+        .into_iter()
+        .flat_map(|w| CHEB_KERNELS.map(|k| (w, k)))
+    {
+        let p = with_kernel(&cheb_params(GAUSSIAN, walls), kernel);
         let (spread, _) = run_out(
             "spread_chebyshev",
             &p,
@@ -558,7 +585,7 @@ fn chebyshev_interpolation_is_the_adjoint_of_spreading() {
         let rhs: f64 = f.iter().zip(interp.data.to_f64()).map(|(a, b)| a * b).sum();
         assert!(
             (lhs - rhs).abs() < 1e-5 * lhs.abs().max(rhs.abs()),
-            "{walls}: {lhs} against {rhs}"
+            "{walls} {kernel}: {lhs} against {rhs}"
         );
     }
 }
@@ -571,18 +598,20 @@ fn chebyshev_walls_take_particles_on_them_and_refuse_those_through() {
     }
     let p = cheb_params(GAUSSIAN, "slit");
     let on = [0.3, 0.1, -2.0, -1.0, 2.0, 3.0];
-    let (got, _) = run_out(
-        "spread_chebyshev",
-        &p,
-        &[
-            ("positions", flat_particles(&on, 3)),
-            ("values", flat_particles(&[1.0; 6], 3)),
-        ],
-    );
-    assert!(
-        got.data.to_f64().iter().all(|&v| v == 0.0),
-        "a particle on a wall spread something"
-    );
+    for kernel in CHEB_KERNELS {
+        let (got, _) = run_out(
+            "spread_chebyshev",
+            &with_kernel(&p, kernel),
+            &[
+                ("positions", flat_particles(&on, 3)),
+                ("values", flat_particles(&[1.0; 6], 3)),
+            ],
+        );
+        assert!(
+            got.data.to_f64().iter().all(|&v| v == 0.0),
+            "a particle on a wall spread something ({kernel})"
+        );
+    }
     let data = named(&[
         (
             "positions",
@@ -622,21 +651,28 @@ fn deterministic_chebyshev_spreading_does_not_depend_on_the_order() {
         ("positions", flat_particles(&reverse(&pos), 3)),
         ("values", flat_particles(&reverse(&vals), 3)),
     ]);
-    let (a, b) = with_caps(
+    let (a, b, c) = with_caps(
         &mut gpu,
         |c| c.deterministic = true,
         |gpu| {
+            let lanes = with_kernel(&p, "lanes");
+            let workgroup = with_kernel(&p, "workgroup");
             (
-                run_node(gpu, "spread_chebyshev", &p, &forward)
+                run_node(gpu, "spread_chebyshev", &lanes, &forward)
                     .remove("out")
                     .unwrap(),
-                run_node(gpu, "spread_chebyshev", &p, &backward)
+                run_node(gpu, "spread_chebyshev", &lanes, &backward)
+                    .remove("out")
+                    .unwrap(),
+                run_node(gpu, "spread_chebyshev", &workgroup, &backward)
                     .remove("out")
                     .unwrap(),
             )
         },
     );
     assert_eq!(f32s(&a), f32s(&b), "the two orders differ");
+    // The same weights: the two kernels' fixed-point sums are the same bits.
+    assert_eq!(f32s(&a), f32s(&c), "the two kernels differ");
     let want = &reference(
         "spread_chebyshev",
         &p,
@@ -644,4 +680,103 @@ fn deterministic_chebyshev_spreading_does_not_depend_on_the_order() {
     )[0];
     let (err, at) = rel_max_err(&a, want);
     assert!(err <= 2e-6, "{err:e} at {at}");
+}
+
+/// Every kernel against the references at 1, 3 and 4 components, every wall mode, the
+/// windows wider than a segment's lanes (the lane kernels' column blocks, and z ranges
+/// longer than a segment), particles on walls and periodic faces: the workgroup kernels,
+/// the lane kernels with the adapter's segment and with one narrower than its subgroup
+/// (several particles per subgroup), and `auto` on an adapter without subgroups (the
+/// workgroup kernels).
+#[test]
+fn chebyshev_kernels_match_their_references_at_every_component_count() {
+    let Some(mut gpu) = gpu() else { return };
+    let mut rng = Rng::new(11);
+    let pos = cheb_positions(&mut rng);
+    let n = pos.len() / 3;
+    type Subgroups = Option<Option<(u32, u32)>>;
+    let setups: [(&str, Subgroups); 4] = [
+        ("workgroup", None),
+        ("lanes", None),
+        ("lanes", Some(Some((4, 4)))),
+        ("auto", Some(None)),
+    ];
+    for comps in [1u32, 3, 4] {
+        let vals: Vec<f64> = (0..comps as usize * n)
+            .map(|_| rng.uniform(-1.0, 1.0))
+            .collect();
+        let field = rng.array(
+            ValueType::RealGrid {
+                dims: [16, 12, 33],
+                comps,
+            },
+            -1.0,
+            1.0,
+        );
+        let spread_in = named(&[
+            ("positions", flat_particles(&pos, 3)),
+            ("values", flat_particles(&vals, comps)),
+        ]);
+        let interp_in = named(&[("grid", field), ("positions", flat_particles(&pos, 3))]);
+        for (box_, window) in [("[8, 6]", GAUSSIAN), ("[8, 7.2]", ES_LENGTH)] {
+            for walls in ["none", "bottom", "slit"] {
+                let p = cheb_params_in(box_, window, walls);
+                let want_spread = reference(
+                    "spread_chebyshev",
+                    &p,
+                    &[spread_in.get("positions"), spread_in.get("values")],
+                )
+                .remove(0);
+                let want_interp = reference(
+                    "interpolate_chebyshev",
+                    &p,
+                    &[interp_in.get("grid"), interp_in.get("positions")],
+                )
+                .remove(0);
+                for (kernel, subgroups) in setups {
+                    let pk = with_kernel(&p, kernel);
+                    let (spread, interp) = with_caps(
+                        &mut gpu,
+                        |c| {
+                            if let Some(s) = subgroups {
+                                c.subgroups = s;
+                            }
+                        },
+                        |gpu| {
+                            (
+                                run_node(gpu, "spread_chebyshev", &pk, &spread_in)
+                                    .remove("out")
+                                    .unwrap(),
+                                run_node(gpu, "interpolate_chebyshev", &pk, &interp_in)
+                                    .remove("out")
+                                    .unwrap(),
+                            )
+                        },
+                    );
+                    let what = format!("{comps} comps, {window}, {walls}, {kernel} {subgroups:?}");
+                    let (err, at) = rel_max_err(&spread, &want_spread);
+                    assert!(err <= 2e-6, "spread, {what}: {err:e} at {at}");
+                    let (err, at) = rel_max_err(&interp, &want_interp);
+                    assert!(err <= 2e-6, "interpolate, {what}: {err:e} at {at}");
+                }
+            }
+        }
+    }
+}
+
+/// `kernel: lanes` on an adapter without subgroups is refused when the kernels are built.
+#[test]
+fn chebyshev_lanes_need_subgroups() {
+    let Some(mut gpu) = gpu() else { return };
+    let p = with_kernel(&cheb_params(ES, "bottom"), "lanes");
+    let data = named(&[
+        ("positions", flat_particles(&[0.0, 0.0, 1.0], 3)),
+        ("values", flat_particles(&[1.0; 3], 3)),
+    ]);
+    let err = with_caps(
+        &mut gpu,
+        |c| c.subgroups = None,
+        |gpu| compile_error(gpu, "spread_chebyshev", &p, &data),
+    );
+    assert!(err.contains("subgroups"), "{err}");
 }
