@@ -121,9 +121,10 @@ impl Program<'_> {
     /// iterations, each one submission whose status the host reads once at its end. The
     /// gate kernel, after each iteration, zeroes the indirect workgroup counts of the
     /// iterations after it once the loop has stopped, so the iterations a batch holds past
-    /// the stop cost only their launches and change nothing. A batch is as long as the
-    /// loop's last run (`last_iterations`): a loop that takes as many iterations as at its
-    /// last step (the common case in a time loop) costs one host round trip.
+    /// the stop cost only their launches and change nothing. A batch is one iteration
+    /// longer than the loop's last run (`last_iterations`): a loop that takes as many
+    /// iterations as at its last step, or one more (the common case in a time loop), costs
+    /// one host round trip.
     fn run_batches<'p>(
         &'p self,
         lp: &'p CompiledLoop,
@@ -138,7 +139,10 @@ impl Program<'_> {
         };
         let bytes = lp.kernels.status_bytes.max(4).next_multiple_of(4);
         let staging = &lp.staging[0];
-        let batch = lp.last_iterations.load(Ordering::Relaxed).max(1);
+        // One iteration more than the last run took: a loop that needs one more this time
+        // still stops within its first batch, while one that needs as many costs an
+        // iteration's launches (gated off).
+        let batch = lp.last_iterations.load(Ordering::Relaxed).max(1) + 1;
         pending.extend(&lp.kernels.start);
         // The first iteration's counts, the stopped word just cleared by `start`.
         pending.push(&gate.dispatch);
