@@ -42,8 +42,13 @@ const SLOT_MASK: u32 = 0x7FFFFFFu;
 // (marks hold round + 1 where this round marks.)
 @group(0) @binding(6) var<storage, read_write> marks: array<atomic<u32>>;
 
-fn minimum_image(r: vec2<f32>) -> vec2<f32> {
-    return r - params.box_len * round(r / params.box_len);
+// p - q by the minimum image. The image shift goes on p before the difference: p - k L
+// is exact (both are multiples of p's ulp) and so is the difference of two nearby
+// values, while (p - q) - k L first rounds p - q at the box's scale (an ulp of 1.2e-4 in
+// a box of 1257, enough to make the in-circle test of a quad across the periodic
+// boundary disagree with itself after a flip, which then never ends).
+fn image_difference(p: vec2<f32>, q: vec2<f32>) -> vec2<f32> {
+    return (p - params.box_len * round((p - q) / params.box_len)) - q;
 }
 
 fn vert(t: u32, k: u32) -> u32 {
@@ -81,8 +86,8 @@ fn claim_edge(t: u32, s: u32, us: u32, a: u32, pa: vec2<f32>, pb: vec2<f32>, pc:
         return;
     }
     let xd = x[d];
-    let code = flip_code(minimum_image(pa - xd), minimum_image(pb - xd),
-        minimum_image(pc - xd), params.tolerance);
+    let code = flip_code(image_difference(pa, xd), image_difference(pb, xd),
+        image_difference(pc, xd), params.tolerance);
     if (code != FLIP_KEEP) {
         let c = (params.tag << SLOT_BITS) | s;
         atomicMin(&claims[t], c);

@@ -12,8 +12,13 @@ struct Params { slots: u32, pad: u32, box_len: vec2<f32> }
 @group(0) @binding(3) var<storage, read_write> count: array<atomic<u32>>;
 @group(0) @binding(4) var<uniform> params: Params;
 
-fn minimum_image(r: vec2<f32>) -> vec2<f32> {
-    return r - params.box_len * round(r / params.box_len);
+// p - q by the minimum image. The image shift goes on p before the difference: p - k L
+// is exact (both are multiples of p's ulp) and so is the difference of two nearby
+// values, while (p - q) - k L first rounds p - q at the box's scale (an ulp of 1.2e-4 in
+// a box of 1257, enough to make the in-circle test of a quad across the periodic
+// boundary disagree with itself after a flip, which then never ends).
+fn image_difference(p: vec2<f32>, q: vec2<f32>) -> vec2<f32> {
+    return (p - params.box_len * round((p - q) / params.box_len)) - q;
 }
 
 @compute @workgroup_size(256)
@@ -30,8 +35,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     let b = mesh[6u * t + (k + 1u) % 3u];
     let c = mesh[6u * t + (k + 2u) % 3u];
-    let r0 = minimum_image(before[c] - before[b]);
-    let r1 = minimum_image(after[c] - after[b]);
+    let r0 = image_difference(before[c], before[b]);
+    let r1 = image_difference(after[c], after[b]);
     if (dot(r0, r1) < 0.0) {
         atomicAdd(&count[0], 1u);
     }
