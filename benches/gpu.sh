@@ -15,7 +15,8 @@
 #               where 10^5 at 1e-3 spends its time
 #   dpstokes    doubly periodic Stokes per wall mode at 10^4, 10^5, 10^6, ES windows then
 #               Gaussian (errors, fcm.json on a grid of the same points beside it), where
-#               bottom spends its time
+#               bottom spends its time with the fused or chained slab solve and the
+#               workgroup or lane kernels
 #               and 10^4, 10^6 (the boundary-value solves' GB/s), torch's copy bandwidth
 #   stream      bd_fcm.json at 10^6 for 1000 steps, with and without a frame every 100
 #               steps streamed to GSD and NPY (`run --every`): the run's wall time
@@ -47,7 +48,8 @@
 #               (cell list) and the Verlet variant, 2^10 to 2^20 (DISKS_SIZES,
 #               DISKS_CONFIGS to change), the long-range pair interactions per second;
 #               the long-range forces against an f64 sum (benches/disk_forces_check.py);
-#               c0 at 2^16 and 2^20 with the disks numbered in lattice order
+#               c0 and c4 short at 2^14 and 2^20 with the disks numbered in lattice
+#               order; c0's launches with fixed loops (benches/bd_delaunay_fixed.json)
 #   spread      spreading and interpolation (UAMMD's setups), the tile kernel per dispatch
 #   atomics     global and workgroup atomic-add rates by access pattern (CUDA), ncu's L2
 #               request counts
@@ -97,7 +99,10 @@ suite_fcm() {
 suite_dpstokes() {
   run $bin bench dpstokes --reps 10
   run $bin bench dpstokes --kernel gaussian --reps 10
-  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes --walls bottom --sizes 10000,100000,1000000 --reps 10
+  for k in workgroup lanes; do
+    MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes --walls bottom --sizes 10000,100000,1000000 \
+      --reps 10 --slab fused,chain --spread-kernel $k
+  done
   run python3 benches/torch_reduce.py
 }
 
@@ -360,8 +365,11 @@ suite_disks() {
   run python3 benches/disk_forces_check.py $bin 65536
   run $bin bench disks --configs ${DISKS_CONFIGS:-c0,c1,c2,c3,c4} --ranges long,short,verlet \
     --sizes ${DISKS_SIZES:-1024,16384,65536,262144,1048576} --reps 5
-  # The same start numbered in lattice order: the long-range force's one-image path.
-  run $bin bench disks --configs c0 --ranges long,short --sizes 65536,1048576 --reps 5 --order lattice
+  # The same start numbered in lattice order (memory locality of the mesh's kernels).
+  run $bin bench disks --configs c0,c4 --ranges short --sizes 16384,1048576 --reps 9 --order lattice
+  # Every launch of a step on the GPU clock: the loops run a fixed number of times.
+  MESOFLOW_BENCH_DISPATCHES=1 run $bin bench disks --graph benches/bd_delaunay_fixed.json \
+    --configs c0 --ranges short --sizes 1048576 --reps 5 --order lattice
 }
 
 suite_overhead() {
