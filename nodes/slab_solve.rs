@@ -9,12 +9,14 @@
 //! other ports graphs need). Same conventions: wave numbers paired (i k zero on an
 //! unpaired Nyquist index) in the sources, |k| unpaired; the k = 0 rules of each wall mode.
 //!
-//! Per k, 6 threads (component, real or imaginary part), KS wave numbers a workgroup;
-//! each thread keeps its z line in registers. The pressure is solved by component 0's
-//! two threads and handed to the others through workgroup memory with its end values;
-//! every thread then forms its velocity source and boundary values, solves, takes its
-//! values along z by the dense inverse transform, and adds the walls' flow from the
-//! velocity's end values (workgroup memory again). The per-k tables (chebyshev_bvp's, the
+//! Per k, 6 solving threads (component, real or imaginary part), KS wave numbers and WG
+//! threads (6 KS times 1, 2 or 10, from nk: `mapping`) a workgroup; each solving thread
+//! keeps its z line in registers. The pressure is solved by component 0's two threads and
+//! handed to the others through workgroup memory with its end values; every solving
+//! thread then forms its velocity source and boundary values, solves, and puts its
+//! coefficients (vec4s along m), end values and k = 0 slope in workgroup memory; the
+//! walls' C, D, a, b are formed per k, and all WG threads share the dense inverse
+//! transform and the walls' flow, one output (component, z, k, part) each in turn. The per-k tables (chebyshev_bvp's, the
 //! slit's 6 x 6 inverse) are built in f64 on the host, as the chain's nodes build them;
 //! the pressure and velocity solves share one table (the same k and domain).
 //!
@@ -32,9 +34,9 @@ use crate::value::{PortType, RefArray, ValueType, half_dims};
 
 use super::{chebyshev, chebyshev_bvp, stokes_slab};
 
-/// Chebyshev points the fused solve takes: its threads run a dense n x n inverse
-/// transform each, and lavapipe stops a thread past 65535 loop iterations (n^2 + about
-/// 15 n of them); longer lines go through the chain (graphs/lib/dpstokes_mobility.json's
+/// Chebyshev points the fused solve takes: a thread may run n / 4 steps of the inverse
+/// transform for each of n outputs (large grids), and lavapipe stops a thread past 65535
+/// loop iterations; longer lines go through the chain (graphs/lib/dpstokes_mobility.json's
 /// `slab`, `dpstokes_slab`).
 pub const MAX_POINTS: u32 = 160;
 
@@ -243,7 +245,7 @@ pub fn register(r: &mut Registry) {
     r.add(
         NodeKind::declare(
             "slab_solve",
-            "the doubly periodic Stokes solve between the Chebyshev transforms in one kernel: from the forcing's Chebyshev coefficients along z (half spectrum in x, y) to the velocity's values at the Chebyshev points with the walls, as the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse), slab_walls computes it (6 threads a wave number, lines in registers, the pressure and the end values through workgroup memory; per-k tables in f64 on the host); 2 to 160 points along z",
+            "the doubly periodic Stokes solve between the Chebyshev transforms in one kernel: from the forcing's Chebyshev coefficients along z (half spectrum in x, y) to the velocity's values at the Chebyshev points with the walls, as the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse), slab_walls computes it (6 threads a wave number solve with their lines in registers, the pressure and the end values through workgroup memory, then the workgroup's threads share the dense inverse transform and the walls from the coefficients in workgroup memory; per-k tables in f64 on the host); 2 to 160 points along z",
         )
         .input(PortSpec::new(
             "f",
