@@ -9,14 +9,12 @@
 //! other ports graphs need). Same conventions: wave numbers paired (i k zero on an
 //! unpaired Nyquist index) in the sources, |k| unpaired; the k = 0 rules of each wall mode.
 //!
-//! Per k, 6 solving threads (component, real or imaginary part), KS wave numbers and WG
-//! threads (6 KS times 1, 2 or 10, from nk: `mapping`) a workgroup; each solving thread
-//! keeps its z line in registers. The pressure is solved by component 0's two threads and
-//! handed to the others through workgroup memory with its end values; every solving
-//! thread then forms its velocity source and boundary values, solves, and puts its
-//! coefficients (vec4s along m), end values and k = 0 slope in workgroup memory; the
-//! walls' C, D, a, b are formed per k, and all WG threads share the dense inverse
-//! transform and the walls' flow, one output (component, z, k, part) each in turn. The per-k tables (chebyshev_bvp's, the
+//! Per k, 6 threads (component, real or imaginary part), KS wave numbers a workgroup;
+//! each thread keeps its z line in registers. The pressure is solved by component 0's
+//! two threads and handed to the others through workgroup memory with its end values;
+//! every thread then forms its velocity source and boundary values, solves, takes its
+//! values along z by the dense inverse transform, and adds the walls' flow from the
+//! velocity's end values (workgroup memory again). The per-k tables (chebyshev_bvp's, the
 //! slit's 6 x 6 inverse) are built in f64 on the host, as the chain's nodes build them;
 //! the pressure and velocity solves share one table (the same k and domain).
 //!
@@ -34,48 +32,19 @@ use crate::value::{PortType, RefArray, ValueType, half_dims};
 
 use super::{chebyshev, chebyshev_bvp, stokes_slab};
 
-/// Chebyshev points the fused solve takes: a thread may run n / 4 steps of the inverse
-/// transform for each of n outputs (large grids), and lavapipe stops a thread past 65535
-/// loop iterations; longer lines go through the chain (graphs/lib/dpstokes_mobility.json's
+/// Chebyshev points the fused solve takes: its threads run a dense n x n inverse
+/// transform each, and lavapipe stops a thread past 65535 loop iterations (n^2 + about
+/// 15 n of them); longer lines go through the chain (graphs/lib/dpstokes_mobility.json's
 /// `slab`, `dpstokes_slab`).
 pub const MAX_POINTS: u32 = 160;
 
 /// Workgroup words the kernel's shared lines may take (of the 16 KiB every adapter has).
-const SHARED_WORDS: u32 = 4000;
+const SHARED_WORDS: u32 = 3400;
 
-/// Threads a workgroup may take (every adapter's limit).
-const MAX_THREADS: u32 = 256;
-
-/// Vec4s a line of n coefficients takes in workgroup memory.
-fn quads(n: u32) -> u32 {
-    n.div_ceil(4)
-}
-
-/// Workgroup words per wave number: 6 lines of Q vec4s, the ends, slopes and the walls'
-/// C, D, a, b.
-fn words_per_wave_number(n: u32) -> u32 {
-    24 * quads(n) + 46
-}
-
-/// The mapping (wave numbers KS a workgroup, threads WG a workgroup, a multiple of 6 KS)
-/// for n points and nk wave numbers. The solves take 6 threads a wave number whatever
-/// the mapping; the dense inverse transform and the walls are shared by all WG threads.
-/// Large grids (enough wave numbers to fill the GPU with 6 KS-thread groups) keep 16
-/// wave numbers and 6 threads each; middling ones double the threads; small ones (the
-/// kernel is latency-bound there: too few threads, each with long serial chains) take
-/// 4 wave numbers and about 240 threads a workgroup, so the n^2 transform is spread over
-/// ten threads per line and the groups over more multiprocessors.
-fn mapping(n: u32, nk: u32) -> (u32, u32) {
-    let ks_max = (SHARED_WORDS / words_per_wave_number(n)).clamp(1, 16);
-    let (ks, r) = if nk >= 65536 {
-        (ks_max, 1)
-    } else if nk >= 8192 {
-        (ks_max, (MAX_THREADS / (6 * ks_max)).min(2))
-    } else {
-        let ks = ks_max.min(4);
-        (ks, MAX_THREADS / (6 * ks))
-    };
-    (ks, 6 * ks * r.max(1))
+/// Wave numbers per workgroup: 16 (96 threads) where their pressure lines fit, fewer for
+/// long lines.
+fn wave_numbers_per_group(n: u32) -> u32 {
+    (SHARED_WORDS / (2 * n + 16)).clamp(1, 16)
 }
 
 struct SlabSolve {
@@ -199,21 +168,15 @@ impl GpuKernels for SlabSolve {
         let bvp = chebyshev_bvp::tables(&chebyshev_bvp::kappas(dims, self.lengths, height), n);
         let (wall_points, minv) =
             stokes_slab::wall_tables(self.lengths, self.zmin, self.zmax, self.walls, dims);
-        // The matrix's rows padded to Q vec4s, then zeta_j (the walls' top-derivative
-        // row is not needed: the k = 0 slope comes from the coefficients).
-        let q = quads(n as u32) as usize;
-        let matrix = chebyshev::matrix(n, false);
-        let mut points = vec![0.0f32; n * q * 4];
-        for j in 0..n {
-            for m in 0..n {
-                points[j * q * 4 + m] = matrix[j * n + m] as f32;
-            }
-        }
-        points.extend(&wall_points[..n]);
-        points.resize(points.len().next_multiple_of(4), 0.0);
-        let (ks, wg) = mapping(n as u32, nk as u32);
+        let mut points: Vec<f32> = chebyshev::matrix(n, false)
+            .iter()
+            .map(|&v| v as f32)
+            .collect();
+        points.extend(wall_points);
+        let ks = wave_numbers_per_group(n as u32);
+        let wg = 6 * ks;
         let source = format!(
-            "const WG: u32 = {wg}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\nconst Q: u32 = {q}u;\n{}",
+            "const WG: u32 = {wg}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}",
             cx.shader("chebyshev/slab_solve.wgsl")?
         );
         let kernel = cx.kernel(&KernelSpec::new(
@@ -245,7 +208,7 @@ pub fn register(r: &mut Registry) {
     r.add(
         NodeKind::declare(
             "slab_solve",
-            "the doubly periodic Stokes solve between the Chebyshev transforms in one kernel: from the forcing's Chebyshev coefficients along z (half spectrum in x, y) to the velocity's values at the Chebyshev points with the walls, as the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse), slab_walls computes it (6 threads a wave number solve with their lines in registers, the pressure and the end values through workgroup memory, then the workgroup's threads share the dense inverse transform and the walls from the coefficients in workgroup memory; per-k tables in f64 on the host); 2 to 160 points along z",
+            "the doubly periodic Stokes solve between the Chebyshev transforms in one kernel: from the forcing's Chebyshev coefficients along z (half spectrum in x, y) to the velocity's values at the Chebyshev points with the walls, as the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse), slab_walls computes it (6 threads a wave number, lines in registers, the pressure and the end values through workgroup memory; per-k tables in f64 on the host); 2 to 160 points along z",
         )
         .input(PortSpec::new(
             "f",
@@ -288,17 +251,9 @@ mod tests {
     #[test]
     fn the_shared_lines_fit() {
         for n in 2..=MAX_POINTS {
-            for nk in [1, 1624, 15400, 157_000] {
-                let (ks, wg) = mapping(n, nk);
-                assert!(
-                    ks >= 1 && ks * words_per_wave_number(n) <= SHARED_WORDS,
-                    "n {n}: {ks}"
-                );
-                assert!(wg % (6 * ks) == 0 && wg <= MAX_THREADS, "n {n}: {ks} {wg}");
-            }
+            let ks = wave_numbers_per_group(n);
+            assert!(ks >= 1 && ks * (2 * n + 16) <= SHARED_WORDS, "n {n}: {ks}");
         }
-        assert_eq!(mapping(31, 157_000), (16, 96));
-        assert_eq!(mapping(31, 15400), (16, 192));
-        assert_eq!(mapping(31, 1624), (4, 240));
+        assert_eq!(wave_numbers_per_group(31), 16);
     }
 }
