@@ -22,8 +22,8 @@
 //! neighbouring words.
 use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, PortError, PortSpec, RefCtx,
-    Registry, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, PortError, PortSpec, RefCtx, Registry,
+    Signature,
 };
 use crate::value::{PortType, RefArray, ValueType};
 
@@ -284,16 +284,7 @@ fn bvp_kind() -> NodeKind {
         .optional(),
     )
     .output(PortSpec::new("out", PortType::HalfComplexGrid, "y's Chebyshev coefficients"))
-    .param(ParamSpec {
-        name: "box",
-        kind: ParamKind::Numbers {
-            len: Some(2),
-            min: f64::MIN_POSITIVE,
-            max: 1e18,
-        },
-        default: None,
-        doc: "the periodic lengths [Lx, Ly] (the wave numbers)",
-    })
+    .param(super::stokes_slab::box_param())
     .param(ParamSpec::number("zmin", Some(-1.0), -1e18, 1e18, "the bottom of the domain"))
     .param(ParamSpec::number("zmax", Some(1.0), -1e18, 1e18, "the top of the domain"))
     .param(ParamSpec::choice(

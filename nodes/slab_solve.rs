@@ -25,8 +25,8 @@
 
 use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
-    GpuKernels, Lowering, Node, NodeKind, ParamKind, ParamSpec, Params, PortError, PortSpec,
-    RefCtx, Registry, Signature,
+    GpuKernels, Lowering, Node, NodeKind, ParamSpec, Params, PortError, PortSpec, RefCtx, Registry,
+    Signature,
 };
 use crate::value::{PortType, RefArray, ValueType, half_dims};
 
@@ -116,17 +116,7 @@ impl Node for SlabSolve {
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct SolveUniform {
-    nx: u32,
-    ny: u32,
-    nz: u32,
-    nk: u32,
-    kx_unit: f32,
-    ky_unit: f32,
-    inv_eta: f32,
-    scale: f32,
-    height: f32,
-    walls: u32,
-    pad: [u32; 2],
+    slab: stokes_slab::SlabUniform,
     f_scale: f32,
     bc_scale: f32,
     dz_scale: f32,
@@ -149,17 +139,19 @@ impl GpuKernels for SlabSolve {
         let height = self.zmax - self.zmin;
         let tau = 2.0 * std::f64::consts::PI;
         let uniform = SolveUniform {
-            nx: dims[0],
-            ny: dims[1],
-            nz: dims[2],
-            nk: nk as u32,
-            kx_unit: (tau / self.lengths[0]) as f32,
-            ky_unit: (tau / self.lengths[1]) as f32,
-            inv_eta: (1.0 / self.viscosity) as f32,
-            scale: 1.0,
-            height: height as f32,
-            walls: self.walls,
-            pad: [0; 2],
+            slab: stokes_slab::SlabUniform {
+                nx: dims[0],
+                ny: dims[1],
+                nz: dims[2],
+                nk: nk as u32,
+                kx_unit: (tau / self.lengths[0]) as f32,
+                ky_unit: (tau / self.lengths[1]) as f32,
+                inv_eta: (1.0 / self.viscosity) as f32,
+                scale: 1.0,
+                height: height as f32,
+                walls: self.walls,
+                pad: [0; 2],
+            },
             f_scale: (height * height / 4.0) as f32,
             bc_scale: (height / 2.0) as f32,
             dz_scale: (2.0 / height) as f32,
@@ -220,16 +212,7 @@ pub fn register(r: &mut Registry) {
             PortType::HalfComplexGrid,
             "the velocity with the walls, values along z (3 components): irfft's input",
         ))
-        .param(ParamSpec {
-            name: "box",
-            kind: ParamKind::Numbers {
-                len: Some(2),
-                min: f64::MIN_POSITIVE,
-                max: 1e18,
-            },
-            default: None,
-            doc: "the periodic lengths [Lx, Ly] (the wave numbers)",
-        })
+        .param(stokes_slab::box_param())
         .param(ParamSpec::f32_positive("viscosity", Some(1.0), "solvent viscosity eta"))
         .param(ParamSpec::number("zmin", Some(-1.0), -1e18, 1e18, "the bottom of the domain (the bottom wall)"))
         .param(ParamSpec::number("zmax", Some(1.0), -1e18, 1e18, "the top of the domain (the slit's top wall)"))

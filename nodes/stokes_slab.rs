@@ -58,7 +58,8 @@ enum Step {
 /// Wall modes, in the kernel's code order.
 const WALLS: &[&str] = &["none", "bottom", "slit"];
 
-fn box_param() -> ParamSpec {
+/// The periodic lengths of a doubly periodic node (its wave numbers).
+pub(crate) fn box_param() -> ParamSpec {
     ParamSpec {
         name: "box",
         kind: ParamKind::Numbers {
@@ -592,18 +593,18 @@ impl Node for Slab {
 /// The kernels' uniform (shaders/stokes_slab/slab.wgsl).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct SlabUniform {
-    nx: u32,
-    ny: u32,
-    nz: u32,
-    nk: u32,
-    kx_unit: f32,
-    ky_unit: f32,
-    inv_eta: f32,
-    scale: f32,
-    height: f32,
-    walls: u32,
-    pad: [u32; 2],
+pub(crate) struct SlabUniform {
+    pub nx: u32,
+    pub ny: u32,
+    pub nz: u32,
+    pub nk: u32,
+    pub kx_unit: f32,
+    pub ky_unit: f32,
+    pub inv_eta: f32,
+    pub scale: f32,
+    pub height: f32,
+    pub walls: u32,
+    pub pad: [u32; 2],
 }
 
 impl GpuKernels for Slab {
