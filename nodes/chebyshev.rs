@@ -177,16 +177,41 @@ impl Node for Transform {
     }
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
-        let x = inputs[0].as_ref().expect("required");
-        let (_, n, _) = lines(&x.ty).expect("checked");
-        let n = n as usize;
-        let m = matrix(n, self.forward);
-        per_line(&x.ty, &x.data, &mut outputs[0].data, |line| {
-            (0..n)
-                .map(|a| (0..n).map(|b| m[a * n + b] * line[b]).sum())
-                .collect()
-        });
+        outputs[0] = transform_reference(inputs[0].as_ref().expect("required"), self.forward);
     }
+}
+
+/// The f64 reference of `chebyshev`: every z line of `x` through the dense transform
+/// (values to coefficients when `forward`, else back).
+pub(crate) fn transform_reference(x: &RefArray, forward: bool) -> RefArray {
+    let (_, n, _) = lines(&x.ty).expect("a grid");
+    let n = n as usize;
+    let m = matrix(n, forward);
+    let mut out = vec![0.0; x.data.len()];
+    per_line(&x.ty, &x.data, &mut out, |line| {
+        (0..n)
+            .map(|a| (0..n).map(|b| m[a * n + b] * line[b]).sum())
+            .collect()
+    });
+    RefArray::new(x.ty, out)
+}
+
+/// The f64 reference of `chebyshev_derivative`: `count` components of `x` from `first`
+/// (0: all the rest), their coefficients differentiated along z times `scale`.
+pub(crate) fn derivative_reference(x: &RefArray, first: u64, count: u64, scale: f64) -> RefArray {
+    let (comps, n, plane) = lines(&x.ty).expect("a grid");
+    let taken = components_taken(comps, first, count);
+    let block = (n * plane) as usize;
+    let from = first as usize * block;
+    let t = with_comps(x.ty, taken as u32);
+    let mut out = vec![0.0; taken as usize * block];
+    per_line(
+        &t,
+        &x.data[from..from + taken as usize * block],
+        &mut out,
+        |c| derivative(c, scale),
+    );
+    RefArray::new(t, out)
 }
 
 #[repr(C)]
@@ -335,11 +360,16 @@ struct Derivative {
 impl Derivative {
     /// The components taken from an input of `comps`.
     fn taken(&self, comps: u64) -> u64 {
-        if self.count == 0 {
-            comps.saturating_sub(self.first)
-        } else {
-            self.count
-        }
+        components_taken(comps, self.first, self.count)
+    }
+}
+
+/// `count` components from `first` of `comps` (0: all the rest).
+fn components_taken(comps: u64, first: u64, count: u64) -> u64 {
+    if count == 0 {
+        comps.saturating_sub(first)
+    } else {
+        count
     }
 }
 
@@ -407,17 +437,7 @@ impl Node for Derivative {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let x = inputs[0].as_ref().expect("required");
-        let (comps, n, plane) = lines(&x.ty).expect("checked in infer");
-        let taken = self.taken(comps);
-        let block = (n * plane) as usize;
-        let from = self.first as usize * block;
-        let part = &x.data[from..from + taken as usize * block];
-        per_line(
-            &with_comps(x.ty, taken as u32),
-            part,
-            &mut outputs[0].data,
-            |c| derivative(c, self.scale),
-        );
+        outputs[0] = derivative_reference(x, self.first, self.count, self.scale);
     }
 }
 

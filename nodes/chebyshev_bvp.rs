@@ -319,13 +319,6 @@ struct Bvp {
     order: Option<bool>,
 }
 
-impl Bvp {
-    /// kappa = k H / 2 of every k.
-    fn kappas(&self, dims: [u32; 3]) -> Vec<f64> {
-        kappas(dims, self.lengths, self.height)
-    }
-}
-
 impl Node for Bvp {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
         let Some(ValueType::HalfComplexGrid { dims, comps }) = inputs[0] else {
@@ -382,10 +375,7 @@ pub(crate) fn reference(
     let ValueType::HalfComplexGrid { dims, comps } = f.ty else {
         unreachable!()
     };
-    let kappas: Vec<f64> = wave_numbers(dims, lengths)
-        .into_iter()
-        .map(|k| k * height / 2.0)
-        .collect();
+    let kappas = kappas(dims, lengths, height);
     let nk = kappas.len();
     let n = dims[2] as usize;
     let half = height / 2.0;
@@ -474,7 +464,7 @@ impl GpuKernels for Bvp {
         let ValueType::HalfComplexGrid { dims, comps } = f.ty else {
             unreachable!()
         };
-        let kappas = self.kappas(dims);
+        let kappas = kappas(dims, self.lengths, self.height);
         let (nk, n) = (kappas.len(), dims[2] as usize);
         let table = tables(&kappas, n);
         let half = self.height / 2.0;

@@ -216,12 +216,7 @@ pub fn register(r: &mut Registry) {
         .param(ParamSpec::f32_positive("viscosity", Some(1.0), "solvent viscosity eta"))
         .param(ParamSpec::number("zmin", Some(-1.0), -1e18, 1e18, "the bottom of the domain (the bottom wall)"))
         .param(ParamSpec::number("zmax", Some(1.0), -1e18, 1e18, "the top of the domain (the slit's top wall)"))
-        .param(ParamSpec::choice(
-            "walls",
-            "none",
-            stokes_slab::WALL_MODES,
-            "none (open z), bottom (no slip at zmin), slit (no slip at zmin and zmax)",
-        ))
+        .param(stokes_slab::walls_param())
         .build(|p| Ok(Box::new(SlabSolve::from_params(p)?))),
     );
 }

@@ -93,12 +93,7 @@ impl Slab {
         if zmax.partial_cmp(&zmin) != Some(std::cmp::Ordering::Greater) {
             return Err(format!("`zmax` {zmax} must be above `zmin` {zmin}"));
         }
-        let walls = match p.get("walls") {
-            Some(crate::expr::ParamValue::Text(w)) => {
-                WALLS.iter().position(|x| x == w).expect("choice checked") as u32
-            }
-            _ => 0,
-        };
+        let walls = walls_code(p);
         Ok(Slab {
             step,
             lengths: [b[0], b[1]],
@@ -164,34 +159,13 @@ pub(crate) fn chain_reference(
         scale: 1.0,
     };
     let plane = f.data.len() / (3 * nz);
-    // Each z line of `comps` components of `x`, from component `first`, mapped by `map`.
-    let lines = |x: &[f64], first: usize, comps: usize, map: &dyn Fn(&[f64]) -> Vec<f64>| {
-        let mut out = vec![0.0; comps * nz * plane];
-        for c in 0..comps {
-            for p in 0..plane {
-                let line: Vec<f64> = (0..nz)
-                    .map(|z| x[((first + c) * nz + z) * plane + p])
-                    .collect();
-                for (z, v) in map(&line).into_iter().enumerate() {
-                    out[(c * nz + z) * plane + p] = v;
-                }
-            }
-        }
-        out
-    };
     let scale = 2.0 / height;
-    let dfz = grid(
-        1,
-        lines(&f.data, 2, 1, &|l| chebyshev::derivative(l, scale)),
-    );
+    let dfz = chebyshev::derivative_reference(f, 2, 1, scale);
     let mut source = [grid(1, vec![0.0; nz * plane])];
     step(Step::PressureSource).reference(&[Some(f.clone()), Some(dfz)], &mut source);
     let [source] = source;
     let p = super::chebyshev_bvp::reference(lengths, height, &source, None);
-    let dp = grid(
-        1,
-        lines(&p.data, 0, 1, &|l| chebyshev::derivative(l, scale)),
-    );
+    let dp = chebyshev::derivative_reference(&p, 0, 0, scale);
     let mut sources = [
         grid(3, vec![0.0; 3 * nz * plane]),
         RefArray::new(
@@ -205,15 +179,7 @@ pub(crate) fn chain_reference(
     step(Step::VelocitySource).reference(&[Some(f.clone()), Some(p), Some(dp)], &mut sources);
     let [rhs, boundary] = sources;
     let v = super::chebyshev_bvp::reference(lengths, height, &rhs, Some(&boundary));
-    let m = chebyshev::matrix(nz, false);
-    let values = grid(
-        3,
-        lines(&v.data, 0, 3, &|l| {
-            (0..nz)
-                .map(|a| (0..nz).map(|b| m[a * nz + b] * l[b]).sum())
-                .collect()
-        }),
-    );
+    let values = chebyshev::transform_reference(&v, false);
     let mut out = [grid(3, vec![0.0; 3 * nz * plane])];
     step(Step::Walls).reference(&[Some(values)], &mut out);
     let [out] = out;
@@ -265,6 +231,16 @@ pub(crate) fn wall_tables(
     (points, per_k)
 }
 
+/// The `walls` param of the nodes that add the walls' flow.
+pub(crate) fn walls_param() -> ParamSpec {
+    ParamSpec::choice(
+        "walls",
+        "none",
+        WALLS,
+        "none (open z), bottom (no slip at zmin), slit (no slip at zmin and zmax)",
+    )
+}
+
 /// The wall mode's code (0 none, 1 bottom, 2 slit) of a node's `walls` param.
 pub(crate) fn walls_code(p: &Params) -> u32 {
     match p.get("walls") {
@@ -274,9 +250,6 @@ pub(crate) fn walls_code(p: &Params) -> u32 {
         _ => 0,
     }
 }
-
-/// Wall modes, in the kernels' code order.
-pub(crate) const WALL_MODES: &[&str] = WALLS;
 
 /// The 6 x 6 map of the slit's unknowns (C, D) to the wall values (bottom, top) at one k,
 /// and its inverse (f64; Gaussian elimination with partial pivoting).
@@ -920,7 +893,7 @@ pub fn register(r: &mut Registry) {
         )
         .param(ParamSpec::number("zmin", Some(-1.0), -1e18, 1e18, "the bottom of the domain (the bottom wall)"))
         .param(ParamSpec::number("zmax", Some(1.0), -1e18, 1e18, "the top of the domain (the slit's top wall)"))
-        .param(ParamSpec::choice("walls", "none", WALLS, "none (open z), bottom (no slip at zmin), slit (no slip at zmin and zmax)"))
+        .param(walls_param())
         .output(spectrum_port("out", "the velocity with the walls (3 components)"))
         .build(|p| Ok(Box::new(Slab::from_params(Step::Walls, p)?))),
     );

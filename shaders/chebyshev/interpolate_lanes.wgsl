@@ -15,23 +15,17 @@
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) lane: u32) {
-    let k = lane % SEG;
-    let base = lane - k;
-    let p = (wid.y * nwg.x + wid.x) * (LANES_WG / SEG) + lid / SEG;
-    let live = p < geo.n.w;
-    let pp = min(p, max(geo.n.w, 1u) - 1u);
+    let lp = lane_particle(wid.y * nwg.x + wid.x, lid, lane, true);
+    let sp = lp.sp;
     let comps = geo.shape.y;
-    let sp = lane_support(pp, k, live, true);
     let plane = geo.n.x * geo.n.y;
     let comp_stride = geo.n.z * plane;
-    let count = select(0u, sp.zr.y - sp.zr.x + 1u, live);
-    let columns = sp.cols.x * sp.cols.y;
     var acc = vec4<f32>(0.0);
-    for (var b = 0u; b < columns; b += SEG) {
-        let col = lane_column(sp, b + k);
+    for (var b = 0u; b < lp.columns; b += SEG) {
+        let col = lane_column(sp, b + lp.k);
         var at = sp.zr.x * plane + col.cell;
-        for (var t = 0u; t < count; t++) {
-            let wz = lane_z(sp, t, base, true);
+        for (var t = 0u; t < lp.count; t++) {
+            let wz = lane_z(sp, t, lp.base, true);
             if (wz != 0.0 && col.w != 0.0) {
                 let w = col.w * wz;
                 acc.x += w * grid[at];
@@ -52,9 +46,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     for (var o = SEG / 2u; o > 0u; o >>= 1u) {
         acc += subgroupShuffleXor(acc, o);
     }
-    if (live && k == 0u) {
+    if (lp.live && lp.k == 0u) {
         for (var c = 0u; c < comps; c++) {
-            out[comps * p + c] = acc[c];
+            out[comps * lp.p + c] = acc[c];
         }
     }
 }

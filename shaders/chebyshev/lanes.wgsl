@@ -51,6 +51,32 @@ fn lane_support(p: u32, k: u32, live: bool, weighted: bool) -> LaneSupport {
     return LaneSupport(u, qz, first, zr, cols, zl);
 }
 
+// A segment's particle as lane k of it sees it: the segment's first lane, the particle p
+// (pp: p, or the last particle for a segment past them, so that reads stay in range),
+// whether it is one, its support, and the z points and packed columns to walk (none
+// past the particles).
+struct LaneParticle {
+    k: u32,
+    base: u32,
+    p: u32,
+    pp: u32,
+    live: bool,
+    sp: LaneSupport,
+    count: u32,
+    columns: u32,
+}
+
+// The particle of workgroup `group`'s invocation `lid`, subgroup lane `lane`.
+fn lane_particle(group: u32, lid: u32, lane: u32, weighted: bool) -> LaneParticle {
+    let k = lane % SEG;
+    let p = group * (LANES_WG / SEG) + lid / SEG;
+    let live = p < geo.n.w;
+    let pp = min(p, max(geo.n.w, 1u) - 1u);
+    let sp = lane_support(pp, k, live, weighted);
+    let count = select(0u, sp.zr.y - sp.zr.x + 1u, live);
+    return LaneParticle(k, lane - k, p, pp, live, sp, count, sp.cols.x * sp.cols.y);
+}
+
 // The packed column c's (x, y) weight and its cell in a z plane; weight 0 past the columns.
 struct LaneColumn {
     w: f32,

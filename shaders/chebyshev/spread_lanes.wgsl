@@ -15,26 +15,20 @@
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) lane: u32) {
-    let k = lane % SEG;
-    let base = lane - k;
-    let p = (wid.y * nwg.x + wid.x) * (LANES_WG / SEG) + lid / SEG;
-    let live = p < geo.n.w;
-    let pp = min(p, max(geo.n.w, 1u) - 1u);
+    let lp = lane_particle(wid.y * nwg.x + wid.x, lid, lane, false);
+    let sp = lp.sp;
     let comps = geo.shape.y;
-    let sp = lane_support(pp, k, live, false);
     var v = vec4<f32>(0.0);
     for (var c = 0u; c < comps; c++) {
-        v[c] = vals[comps * pp + c];
+        v[c] = vals[comps * lp.pp + c];
     }
     let plane = geo.n.x * geo.n.y;
     let comp_stride = geo.n.z * plane;
-    let count = select(0u, sp.zr.y - sp.zr.x + 1u, live);
-    let columns = sp.cols.x * sp.cols.y;
-    for (var b = 0u; b < columns; b += SEG) {
-        let col = lane_column(sp, b + k);
+    for (var b = 0u; b < lp.columns; b += SEG) {
+        let col = lane_column(sp, b + lp.k);
         var at = sp.zr.x * plane + col.cell;
-        for (var t = 0u; t < count; t++) {
-            let wz = lane_z(sp, t, base, false);
+        for (var t = 0u; t < lp.count; t++) {
+            let wz = lane_z(sp, t, lp.base, false);
             if (wz != 0.0 && col.w != 0.0) {
                 let w = col.w * wz;
                 grid_add(at, w * v.x);
