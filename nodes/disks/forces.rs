@@ -42,6 +42,18 @@ fn slices(n: u32) -> (u32, u32) {
     (tiles.div_ceil(per_slice), per_slice)
 }
 
+/// `every_lane`, which shaders/disks/forces.wgsl calls to choose the long-range path: with
+/// subgroups, whether the test holds on every lane of the subgroup (a warp whose lanes
+/// disagree takes the exact loop together rather than both loops one after the other);
+/// without, the thread's own test. Either gives the minimum image of every pair.
+pub fn every_lane_source(subgroups: bool) -> &'static str {
+    if subgroups {
+        "fn every_lane(b: bool) -> bool { return subgroupAll(b); }\n"
+    } else {
+        "fn every_lane(b: bool) -> bool { return b; }\n"
+    }
+}
+
 fn nonreciprocal_forces_kind() -> NodeKind {
     NodeKind::declare(
         "nonreciprocal_forces",
@@ -211,7 +223,11 @@ impl GpuKernels for NonreciprocalForces {
             Binding::StorageReadWrite,
             Binding::StorageReadWrite,
         ];
-        let source = cx.shader("disks/forces.wgsl")?;
+        let source = format!(
+            "{}{}",
+            every_lane_source(cx.caps().subgroups.is_some()),
+            cx.shader("disks/forces.wgsl")?
+        );
         let kernel = cx.kernel(&KernelSpec::new(
             "nonreciprocal_forces",
             source.clone(),

@@ -174,3 +174,24 @@ fn forces_sum_to_zero_when_alpha_equals_mu() {
         );
     }
 }
+
+/// The force shader is a template (its path choice, `every_lane`, comes before it): both
+/// forms validate, the subgroup one with subgroup operations, the other without them.
+#[test]
+fn forces_shader_validates_with_and_without_subgroups() {
+    use mesoflow::gpu::shaders;
+    use mesoflow::nodes::disks::forces::every_lane_source;
+    let body = shaders::source("disks/forces.wgsl").expect("the force shader resolves");
+    let plain = naga::valid::Capabilities::empty();
+    let subgroups = naga::valid::Capabilities::SUBGROUP;
+    crate::util::validate_wgsl(
+        "forces, subgroups",
+        &format!("{}{body}", every_lane_source(true)),
+        subgroups,
+    );
+    crate::util::validate_wgsl(
+        "forces, no subgroups",
+        &format!("{}{body}", every_lane_source(false)),
+        plain,
+    );
+}
