@@ -95,6 +95,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         outputs: Some(vec!["energies".into(), "kinetic_energy".into()]),
         inputs: inputs.iter().map(|(k, a)| (k.clone(), a.ty)).collect(),
         fuse: true,
+        in_place: true,
     };
     let p = plan::plan(&g, &opts, &gpu.caps)?;
     let mut program = Program::compile(&gpu, &g, &p, &mut KernelCache::default())?;

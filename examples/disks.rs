@@ -86,6 +86,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         outputs: None,
         inputs: inputs.iter().map(|(k, a)| (k.clone(), a.ty)).collect(),
         fuse: true,
+        in_place: true,
     };
     let p = plan::plan(&g, &opts, &gpu.caps)?;
     let mut program = Program::compile(&gpu, &g, &p, &mut KernelCache::default())?;

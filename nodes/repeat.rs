@@ -8,7 +8,9 @@
 //! The loop body is every node that depends on the `current` output and leads to the
 //! `next` and `count` inputs (`Lowering::Iterative`, as `lanczos`); it may read values
 //! from outside (the flips read the positions). Per iteration the GPU copies `next` to
-//! `current` and tallies the count (`shaders/repeat/repeat.wgsl`), and decides the stop
+//! `current` (unless the plan gave them one buffer: a body node that writes `next` in
+//! place of `current`, `PortSpec::refilled_from`, as the flip loops' `edge_flip_round`)
+//! and tallies the count (`shaders/repeat/repeat.wgsl`), and decides the stop
 //! itself (a zero count, or `max_iterations` reached): the executor runs batches of
 //! iterations and reads the status once per batch (one host round trip for a loop that
 //! takes as many iterations as at its last run, see `exec/run.rs`); the iterations of a
@@ -72,7 +74,10 @@ fn repeat_kind() -> NodeKind {
             PortType::RealOrIndices,
             "the value of this iteration: the loop body starts from it",
         )
-        .iterate(),
+        .iterate()
+        // `advance` sets it from `next` after every body run and `finish` reads it after
+        // the last; the gate keeps the body from running past the stop.
+        .refilled_from("next"),
     )
     .output(PortSpec::new(
         "iterations",
@@ -212,7 +217,16 @@ impl GpuIterative for Repeat {
         io: &NodeIo<'_>,
     ) -> Result<IterativeKernels, CompileError> {
         let initial = io.inputs[0].expect("required");
-        let next = io.inputs[1].expect("the planner connects the loop");
+        // The body's last node may write `next` in place of `current` (the plan gave both
+        // one buffer): then the value is already where `advance` would copy it. wgpu
+        // refuses a buffer bound read-only and read-write in one dispatch, so `initial`
+        // stands in for `next`'s binding, unread, and `advance` is not dispatched.
+        let in_place = io.in_place(1, 1);
+        let next = if in_place {
+            initial
+        } else {
+            io.inputs[1].expect("the planner connects the loop")
+        };
         // Without a count (a fixed loop) the tally reads none: any read-only buffer
         // stands in for its binding.
         let (count, counted) = match io.inputs[2] {
@@ -264,7 +278,11 @@ impl GpuIterative for Repeat {
         };
         Ok(IterativeKernels {
             start: vec![dispatch("start", groups)?],
-            iterate: vec![dispatch("advance", groups)?, dispatch("tally", [1, 1, 1])?],
+            iterate: if in_place {
+                vec![dispatch("tally", [1, 1, 1])?]
+            } else {
+                vec![dispatch("advance", groups)?, dispatch("tally", [1, 1, 1])?]
+            },
             finish: vec![dispatch("finish", groups)?],
             status: status.clone(),
             status_bytes: 4 * STATUS_WORDS,

@@ -81,6 +81,10 @@ pub enum Command {
         /// Do not fuse element-wise nodes.
         #[arg(long)]
         no_fuse: bool,
+        /// Give every output a buffer of its own, even one its node could write in place
+        /// of its input (the flip loops' meshes): to compare, or time, the copies.
+        #[arg(long)]
+        no_in_place: bool,
         /// Bitwise reproducible results from run to run on this adapter with this binary
         /// and these inputs: integer (fixed-point) sums where float atomics would add in
         /// any order, counting sorts stable inside a bin (README: Deterministic runs).
@@ -112,6 +116,9 @@ pub enum Command {
         steps: u64,
         #[arg(long)]
         no_fuse: bool,
+        /// Plan without in-place outputs (as `run --no-in-place`).
+        #[arg(long)]
+        no_in_place: bool,
         /// Plan a deterministic run (as `run --deterministic`).
         #[arg(long)]
         deterministic: bool,
@@ -199,6 +206,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             profile,
             profile_dispatches,
             no_fuse,
+            no_in_place,
             deterministic,
         } => {
             let profile = match (profile, profile_dispatches) {
@@ -223,6 +231,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
                 seed,
                 profile,
                 !no_fuse,
+                !no_in_place,
                 deterministic,
             )
         }
@@ -235,6 +244,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             outputs,
             steps,
             no_fuse,
+            no_in_place,
             deterministic,
             dot,
             graph_text,
@@ -249,6 +259,7 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             &outputs,
             steps,
             !no_fuse,
+            !no_in_place,
             deterministic,
             dot,
         ),
@@ -356,6 +367,7 @@ fn run(
     seed: Option<u64>,
     profile: Profile,
     fuse: bool,
+    in_place: bool,
     deterministic: bool,
 ) -> Result<(), CliError> {
     let steps = steps.or(scene.as_ref().and_then(|s| s.steps)).unwrap_or(1);
@@ -443,6 +455,7 @@ fn run(
         outputs: Some(requested.iter().map(|(name, _)| name.clone()).collect()),
         inputs: data.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse,
+        in_place,
     };
     let caps = DeviceCaps {
         deterministic,
@@ -880,6 +893,7 @@ fn validate_scene(registry: &Registry, path: &Path, s: &CompiledScene) -> Result
         outputs: None,
         inputs: s.inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse: true,
+        in_place: true,
     };
     let caps = DeviceCaps {
         max_binding: u64::MAX,
@@ -908,6 +922,7 @@ fn inspect(
     outputs: &[String],
     steps: u64,
     fuse: bool,
+    in_place: bool,
     deterministic: bool,
     dot: bool,
 ) -> Result<(), CliError> {
@@ -971,6 +986,7 @@ fn inspect(
         outputs: Some(outputs.to_vec()),
         inputs,
         fuse,
+        in_place,
     };
     let p = plan_requested(&g, &opts, outputs.is_empty(), &caps)?;
     if dot {
@@ -999,13 +1015,17 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
             );
         }
         for p in k.outputs() {
-            outln!(
-                "  out  {:<14} {}{} - {}",
-                p.name,
-                p.ty,
-                if p.persistent { " (persistent)" } else { "" },
-                p.doc
-            );
+            let mut marks = String::new();
+            if p.persistent {
+                marks.push_str(" (persistent)");
+            }
+            if let Some(i) = p.in_place_of {
+                marks.push_str(&format!(" (in place of {i} where the plan can)"));
+            }
+            if let Some(i) = p.refilled_from {
+                marks.push_str(&format!(" (refilled from {i}: the body may overwrite it)"));
+            }
+            outln!("  out  {:<14} {}{marks} - {}", p.name, p.ty, p.doc);
         }
         for p in k.params() {
             outln!("  prm  {:<14} {} - {}", p.name, p.describe(), p.doc);

@@ -31,6 +31,24 @@ pub struct PortSpec {
     /// node's loop body. An input so marked closes the loop: the body's result, read
     /// after every iteration. Edges into such an input are not cycles.
     pub iterate: bool,
+    /// Outputs only: the node can write this output into the buffer of the named input
+    /// (`edge_flip_round`'s `mesh`, which it otherwise copies from its input before
+    /// flipping in place). The planner gives the output that buffer where no one reads
+    /// the input after the node (`plan/memory.rs` says when), else a buffer of its own.
+    /// The node tells which by comparing the two buffers ([`NodeIo::in_place`]) and,
+    /// when they are one, skips the copy and binds the buffer once (wgpu refuses a
+    /// buffer bound read-only and read-write in one dispatch). Only for nodes that record
+    /// their own kernels (`Lowering::Kernels`), and the two ports' types must agree.
+    pub in_place_of: Option<&'static str>,
+    /// Iterate outputs only: the node's own kernels set this output from the named
+    /// iterate input after every run of the body and read it otherwise only after the
+    /// last iteration (`repeat`'s `current`, refilled from `next`), and no body runs
+    /// past the loop's stop (`IterativeKernels::gpu_stop` gates them off), so the body
+    /// may overwrite it: an in-place output in the body may take its buffer. When the
+    /// named input is that output (the body's last node writes `next` in place of
+    /// `current`), the two share a buffer and the node skips the refill, binding the
+    /// buffer once ([`NodeIo::in_place`]).
+    pub refilled_from: Option<&'static str>,
 }
 
 impl PortSpec {
@@ -42,6 +60,8 @@ impl PortSpec {
             optional: false,
             persistent: false,
             iterate: false,
+            in_place_of: None,
+            refilled_from: None,
         }
     }
 
@@ -57,6 +77,20 @@ impl PortSpec {
 
     pub const fn iterate(mut self) -> Self {
         self.iterate = true;
+        self
+    }
+
+    /// An output the node may write into the buffer of its input `input` (see
+    /// [`PortSpec::in_place_of`](PortSpec#structfield.in_place_of)).
+    pub const fn in_place_of(mut self, input: &'static str) -> Self {
+        self.in_place_of = Some(input);
+        self
+    }
+
+    /// An iterate output the node refills from its iterate input `input` after every run
+    /// of the body (see [`PortSpec::refilled_from`](PortSpec#structfield.refilled_from)).
+    pub const fn refilled_from(mut self, input: &'static str) -> Self {
+        self.refilled_from = Some(input);
         self
     }
 }
@@ -826,6 +860,30 @@ impl KindDecl {
         self,
         build: impl Fn(&Params) -> Result<Box<dyn Node>, String> + Send + Sync + 'static,
     ) -> NodeKind {
+        // A port naming an input the kind lacks is a declaration bug, found at start-up.
+        for o in &self.outputs {
+            let named = |input: &str, iterate: bool| {
+                self.inputs
+                    .iter()
+                    .any(|i| i.name == input && i.iterate == iterate)
+            };
+            if let Some(i) = o.in_place_of {
+                assert!(
+                    named(i, false) && !o.iterate && !o.persistent,
+                    "kind `{}`: output `{}` in place of `{i}`, not a plain input of it",
+                    self.name,
+                    o.name
+                );
+            }
+            if let Some(i) = o.refilled_from {
+                assert!(
+                    named(i, true) && o.iterate,
+                    "kind `{}`: output `{}` refilled from `{i}`, not an iterate input of it",
+                    self.name,
+                    o.name
+                );
+            }
+        }
         NodeKind {
             name: self.name,
             doc: self.doc,

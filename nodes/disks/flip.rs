@@ -26,10 +26,12 @@
 //! and its vertices' positions are read once.
 //!
 //! **Rounds per evaluation** (`rounds`, default 4): the output is copied from the input
-//! once and the rounds flip in place on it. In place is safe: a winner reads and writes
-//! only triangles whose claims it holds, and the flip pass reads a triangle's words only
-//! after seeing its claim held by the edge it checks, so no thread reads a word another
-//! writes in the same pass. Nothing is reset between rounds: a claim is its slot below
+//! once and the rounds flip in place on it; the output is declared in place of the
+//! input (`PortSpec::in_place_of`), so where the plan gives both one buffer (the flip
+//! loops: the mesh the loop carries, read by nothing after the node) there is no copy.
+//! In place is safe: a winner reads and writes only triangles whose claims it holds, and
+//! the flip pass reads a triangle's words only after seeing its claim held by the edge
+//! it checks, so no thread reads a word another writes in the same pass. Nothing is reset between rounds: a claim is its slot below
 //! its round's tag (later rounds win over earlier claims, which the flip pass ignores), a
 //! mark its round's number, in two arrays taken in turn. Only the first round looks at
 //! every edge (one thread per triangle); every candidate (and every edge left out as degenerate) marks its two
@@ -200,7 +202,14 @@ fn edge_flip_round_kind() -> NodeKind {
         PortType::Indices,
         "the triangulation of the torus (2N triangles x 6 words, nodes/disks/mesh.rs)",
     ))
-    .output(PortSpec::new("mesh", PortType::Indices, "the mesh after the round"))
+    .output(
+        PortSpec::new(
+            "mesh",
+            PortType::Indices,
+            "the mesh after the rounds",
+        )
+        .in_place_of("mesh"),
+    )
     .output(PortSpec::new(
         "flips",
         PortType::Indices,
@@ -455,15 +464,25 @@ impl GpuKernels for EdgeFlipRound {
         ))?;
         // The mesh's 12N words as 3N 16-byte quads.
         let quads = mesh.ty.words() as u32 / 4;
+        let [claims, marks_a, marks_b] = [io.scratch[0], io.scratch[1], io.scratch[2]];
+        // In place (the plan gave the output the input's buffer): the mesh is there
+        // already, so `prepare` copies nothing, and since wgpu refuses one buffer bound
+        // read-only and read-write in a dispatch, the positions stand in for its unread
+        // input binding.
+        let in_place = io.in_place(0, 1);
+        let (quads, copied) = if in_place {
+            (0, x.buffer)
+        } else {
+            (quads, mesh.buffer)
+        };
         let prepare_params = cx.uniform(
             "edge flip prepare",
             bytemuck::cast_slice(&[quads, triangles, 0, 0]),
         );
-        let [claims, marks_a, marks_b] = [io.scratch[0], io.scratch[1], io.scratch[2]];
         let mut out = vec![cx.dispatch(
             &prepare,
             &[
-                mesh.buffer,
+                copied,
                 io.outputs[0].buffer,
                 claims,
                 io.outputs[1].buffer,

@@ -421,6 +421,7 @@ impl Program {
             outputs: self.outputs.clone(),
             inputs,
             fuse: true,
+            in_place: true,
         };
         let planned = if self.outputs.is_some() {
             plan::plan(&self.graph, &opts, &self.gpu.caps).map_err(graph_error)?

@@ -1,7 +1,8 @@
 // The start of an evaluation of shaders/disks/flip.wgsl (its rounds then flip in place): the mesh copied to the output in
 // 16-byte words (a quarter of the threads and loads of a word-wise copy; the mesh's 12N
 // words are 3N of them), every claim to 0xFFFFFFFF, both arrays of marks and the two counts
-// to 0.
+// to 0. Where the output is the input's buffer (in place: nodes/disks/flip.rs), quads is 0
+// and `mesh` a stand-in, unread.
 #import common/index.wgsl
 
 struct Params { quads: u32, triangles: u32 }

@@ -3,7 +3,11 @@
 // status: [iterations, stopped, last count, total of the counts, halt]. Entries:
 // - `start`: current = initial, status = 0, status[4] = the `halt` check's first word
 //   (when one is bound: a nonzero halt stops the loop at once and the host reports it);
-// - `advance` (after every body run): current = next, unless the loop has stopped;
+// - `advance` (after every body run): current = next, unless the loop has stopped; not
+//   dispatched where the plan gave `next` the buffer of `current` (the body wrote it in
+//   place: nodes/repeat.rs; binding 1 then stands in, unread). The body runs no
+//   iteration past the stop (the executor gates it), so `current` holds the last value
+//   either way;
 // - `tally` (one thread, after `advance`): unless stopped, count the iteration, add the
 //   body's count (word 0) to the total, and stop when its word stop_word is 0, at
 //   max_iterations (the host then reports the loop unconverged) or at the fixed count. An

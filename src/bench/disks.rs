@@ -21,7 +21,7 @@ use mesoflow::nodes::disks::presets::{configuration, lattice_disks_in};
 use mesoflow::value::{HostArray, ValueType};
 
 use super::fcm::load;
-use super::{BenchError, ms, open_gpu, time_loaded};
+use super::{BenchError, ms, open_gpu, time_loaded_with};
 
 pub struct DisksBench {
     pub graph: PathBuf,
@@ -31,6 +31,9 @@ pub struct DisksBench {
     pub reps: u64,
     /// The start's disks numbered in lattice order (`--order lattice`).
     pub in_order: bool,
+    /// The flip loops' meshes written in place (`PlanOptions::in_place`; off with
+    /// `--no-in-place`).
+    pub in_place: bool,
 }
 
 /// Flops per pair of the long-range kernel (shaders/disks/forces.wgsl, counted by hand:
@@ -59,8 +62,13 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
          clock: loops read their status each iteration); parts: medians of each launch timed \
          alone (a loop with its body and round trips); iterations per step of the loops \
          (each counting its last, empty round); long range: pairs/s = N^2 / the all-pairs kernel time, \
-         GFLOP/s at {LONG_FLOPS} flops per pair",
-        bench.reps
+         GFLOP/s at {LONG_FLOPS} flops per pair; the flip loops' meshes {}",
+        bench.reps,
+        if bench.in_place {
+            "written in place (no copies per iteration)"
+        } else {
+            "copied (--no-in-place: the flip node's copy and repeat's per iteration)"
+        }
     );
     outln!(
         "{:>6} {:>7} {:>8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>7} {:>7} {:>7} {:>11} {:>8}",
@@ -137,7 +145,15 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
                 ]);
                 // A size that fails (a pass-through at this dt, the device's memory) is
                 // reported on its row and the table goes on.
-                let run = match time_loaded(&gpu, &g, &inputs, None, bench.reps, true) {
+                let run = match time_loaded_with(
+                    &gpu,
+                    &g,
+                    &inputs,
+                    None,
+                    bench.reps,
+                    true,
+                    bench.in_place,
+                ) {
                     Ok(run) => run,
                     Err(e) => {
                         outln!("{config:>6} {range:>7} {n:>8} failed: {e}");

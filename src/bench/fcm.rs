@@ -265,6 +265,7 @@ pub(super) fn plan_for(gpu: &GpuContext, g: &Graph, n: u32) -> Result<plan::Plan
             .into_iter()
             .collect(),
         fuse: true,
+        in_place: true,
     };
     Ok(plan::plan(g, &opts, &gpu.caps)?)
 }

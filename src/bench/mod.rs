@@ -242,10 +242,24 @@ pub fn time_loaded(
     reps: u64,
     fuse: bool,
 ) -> Result<TimedRun, BenchError> {
+    time_loaded_with(gpu, g, inputs, outputs, reps, fuse, true)
+}
+
+/// [`time_loaded`], outputs in place of their inputs (`PlanOptions::in_place`) or not.
+pub fn time_loaded_with(
+    gpu: &GpuContext,
+    g: &Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    outputs: Option<Vec<String>>,
+    reps: u64,
+    fuse: bool,
+    in_place: bool,
+) -> Result<TimedRun, BenchError> {
     let opts = PlanOptions {
         outputs,
         inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse,
+        in_place,
     };
     let p = plan::plan(g, &opts, &gpu.caps)?;
     let mut cache = KernelCache::default();
@@ -496,6 +510,10 @@ pub enum BenchCommand {
         /// for the long-range force).
         #[arg(long, default_value = "random", value_parser = ["random", "lattice"])]
         order: String,
+        /// Plan without in-place outputs (each flip evaluation copies the mesh and each
+        /// flip loop iteration copies it back): to time what they save.
+        #[arg(long)]
+        no_in_place: bool,
     },
     /// Direct pair mobilities (rpy_open.json, rpy_wall.json; translation and grand):
     /// time, pair interactions per second and GFLOP/s at the kernels' flop counts.
@@ -695,6 +713,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             sizes,
             reps,
             order,
+            no_in_place,
         } => disks::run(&disks::DisksBench {
             graph,
             configs,
@@ -702,6 +721,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             sizes,
             reps,
             in_order: order == "lattice",
+            in_place: !no_in_place,
         }),
         BenchCommand::Nbody {
             graphs,

@@ -53,6 +53,7 @@ pub fn run(nodes: usize, elements: u32, reps: u64) -> Result<(), BenchError> {
         outputs: None,
         inputs: [("x".to_string(), ty)].into_iter().collect(),
         fuse: false,
+        in_place: true,
     };
     let p = plan::plan(&g, &opts, &gpu.caps)?;
     let mut cache = KernelCache::default();

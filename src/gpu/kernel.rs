@@ -293,6 +293,14 @@ pub struct NodeIo<'a> {
 }
 
 impl NodeIo<'_> {
+    /// Whether the plan gave output `output` the buffer of input `input`: an output
+    /// declared in place of that input (`PortSpec::in_place_of`, or an iterative node's
+    /// `refilled_from`) that the planner aliased. The node then skips copying the input
+    /// and binds the buffer once. An output shares an input's buffer in no other case.
+    pub fn in_place(&self, output: usize, input: usize) -> bool {
+        self.inputs[input].is_some_and(|i| i.buffer == self.outputs[output].buffer)
+    }
+
     /// The node's planned decision as its own type. A node that decides in `infer` finds
     /// it here; its absence (or another type) is a planner bug.
     pub fn plan<T: NodeDecision>(&self) -> &T {

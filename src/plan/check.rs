@@ -69,6 +69,7 @@ pub fn validate_file(registry: &Registry, path: &Path) -> Result<Validation, Pro
             outputs,
             inputs: inputs.clone(),
             fuse: true,
+            in_place: true,
         };
         plan(&g, &opts, &caps)
     };

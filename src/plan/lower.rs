@@ -81,6 +81,7 @@ pub(super) fn lower(
         memory: MemoryReport::default(),
         pruned: schedule.pruned.clone(),
         forwarded: Vec::new(),
+        in_place: Vec::new(),
     }
 }
 
@@ -341,13 +342,18 @@ impl Lowerer<'_> {
                     fold,
                 }
             }
-            _ => Launch::Node {
+            lowering => Launch::Node {
                 node: n,
                 inputs,
                 outputs,
                 scratch,
                 notes,
                 plan,
+                // Only a node that binds its own buffers can tell an aliased output.
+                in_place: match lowering {
+                    Lowering::Kernels(_) => port_pairs(inst, |p| p.in_place_of),
+                    _ => Vec::new(),
+                },
             },
         }
     }
@@ -411,6 +417,7 @@ impl Lowerer<'_> {
             notes,
             plan,
             body: body_launches,
+            refills: port_pairs(&self.g.nodes[n], |p| p.refilled_from),
         }
     }
 
@@ -493,6 +500,23 @@ impl Lowerer<'_> {
             })
             .collect()
     }
+}
+
+/// The (output port, input port) pairs of a node whose outputs name an input by `link`
+/// (in place of it, refilled from it).
+fn port_pairs(
+    inst: &crate::graph::NodeInst,
+    link: impl Fn(&crate::node::PortSpec) -> Option<&'static str>,
+) -> Vec<(usize, usize)> {
+    inst.output_ports
+        .iter()
+        .enumerate()
+        .filter_map(|(o, p)| {
+            let name = link(p)?;
+            let i = inst.input_ports.iter().position(|q| q.name == name)?;
+            Some((o, i))
+        })
+        .collect()
 }
 
 /// What `inspect` says of a transform's share in a fold.

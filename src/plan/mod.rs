@@ -38,6 +38,9 @@ pub struct PlanOptions {
     pub inputs: BTreeMap<String, ValueType>,
     /// Fuse element-wise chains (on by default; off for comparisons and benchmarks).
     pub fuse: bool,
+    /// Give outputs declared in place of an input that input's buffer where it is safe
+    /// (`memory.rs`; on by default; off for comparisons and benchmarks).
+    pub in_place: bool,
 }
 
 crate::typed_id!(
@@ -149,6 +152,9 @@ pub enum Launch {
         notes: Vec<String>,
         /// The node's decision, handed back to it when it compiles (`Signature::plan`).
         plan: Option<NodePlan>,
+        /// (output port, input port) pairs its kind declares in place
+        /// (`PortSpec::in_place_of`): `memory.rs` decides which share a buffer.
+        in_place: Vec<(usize, usize)>,
     },
     /// A transform (see `crate::transform`), with what it folds in.
     Transform {
@@ -176,7 +182,21 @@ pub enum Launch {
         notes: Vec<String>,
         plan: Option<NodePlan>,
         body: Vec<Launch>,
+        /// (output port, input port) pairs: iterate outputs the node refills from an
+        /// iterate input after every body run (`PortSpec::refilled_from`), which an
+        /// in-place output in the body may overwrite.
+        refills: Vec<(usize, usize)>,
     },
+}
+
+/// An output written into its input's buffer (`PortSpec::in_place_of`): the node skips
+/// its copy, and where `output` is the loop's own result (`next`) of a loop that
+/// refills `input` from it (`repeat`'s `current`), the loop skips its copy too.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InPlace {
+    pub node: NodeId,
+    pub input: ValueId,
+    pub output: ValueId,
 }
 
 /// A state as planned.
@@ -228,6 +248,8 @@ pub struct Plan {
     /// Nodes read through: for these inputs their output is one of their inputs
     /// unchanged (see `Node::forwards`), so they do no work.
     pub forwarded: Vec<NodeId>,
+    /// Outputs given their input's buffer (`memory.rs`), in launch order.
+    pub in_place: Vec<InPlace>,
 }
 
 impl Plan {
@@ -255,7 +277,7 @@ pub fn plan(graph: &Graph, opts: &PlanOptions, caps: &DeviceCaps) -> Result<Plan
     let schedule = schedule::schedule(&graph, &demand, &types, &forwarded)?;
     let mut plan = lower::lower(&graph, opts, caps, &request, &demand, &types, &schedule);
     plan.forwarded = forwarded;
-    memory::assign(&mut plan);
+    memory::assign(&mut plan, opts.in_place);
     Ok(plan)
 }
 

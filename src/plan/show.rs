@@ -81,6 +81,16 @@ fn node_text(
     for note in notes {
         writeln!(out, "         note   {note}").unwrap();
     }
+    for a in plan.in_place.iter().filter(|a| a.node == node) {
+        writeln!(
+            out,
+            "         note   in place: {} is written into the buffer of {} ({}), no copy",
+            plan.values[a.output].name,
+            plan.values[a.input].name,
+            place(plan, a.input)
+        )
+        .unwrap();
+    }
     for v in inputs.iter().flatten() {
         writeln!(out, "         reads  {}", value(plan, *v)).unwrap();
     }
@@ -99,12 +109,29 @@ fn launch_text(out: &mut String, g: &Graph, plan: &Plan, i: usize, l: &Launch) {
                 scratch,
                 notes,
                 body,
+                refills,
                 ..
             } => {
                 let n = &g.nodes[*node];
                 writeln!(out, "  {:>3}. {} ({}), a loop:", i + 1, n.id, n.kind).unwrap();
                 for note in notes {
                     writeln!(out, "         note   {note}").unwrap();
+                }
+                // A refilled output its refill's input shares a buffer with: the body
+                // wrote the value in place, the loop copies nothing per iteration.
+                for &(o, r) in refills {
+                    if let Some(v) = inputs[r]
+                        && plan.values[v].storage == plan.values[outputs[o]].storage
+                    {
+                        writeln!(
+                            out,
+                            "         note   {} shares the buffer of {} ({}): no copy per iteration",
+                            plan.values[v].name,
+                            plan.values[outputs[o]].name,
+                            place(plan, v)
+                        )
+                        .unwrap();
+                    }
                 }
                 for v in inputs.iter().flatten() {
                     writeln!(out, "         reads  {}", value(plan, *v)).unwrap();

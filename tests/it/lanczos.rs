@@ -43,6 +43,7 @@ fn run(
         outputs: None,
         inputs: util::types_of(inputs),
         fuse: true,
+        in_place: true,
     };
     let p = plan::plan(&g, &opts, &gpu.caps).map_err(|e| e.to_string())?;
     let mut cache = KernelCache::default();
@@ -368,6 +369,7 @@ fn inspect_shows_the_loop_body_and_hoists_what_does_not_change() {
             ("matrix".to_string(), ValueType::Particles { n: 6, k: 6 }),
         ]),
         fuse: true,
+        in_place: true,
     };
     let p = plan::plan(&g, &opts, &mesoflow::gpu::DeviceCaps::baseline()).unwrap();
     let text = plan::to_text(&g, &p);

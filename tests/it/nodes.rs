@@ -158,6 +158,7 @@ fn spectra_take_no_scalar_broadcast() {
             .into_iter()
             .collect(),
         fuse: true,
+        in_place: true,
     };
     let e = mesoflow::plan::plan(&g, &opts, &mesoflow::gpu::DeviceCaps::baseline())
         .unwrap_err()

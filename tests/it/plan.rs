@@ -6,6 +6,7 @@ use mesoflow::gpu::DeviceCaps;
 use mesoflow::plan::{self, BufferRole, Launch, Plan, PlanOptions, Storage};
 use mesoflow::value::ValueType;
 
+use crate::util::probe::{Launches, probe_registry};
 use crate::util::{load, plan_graph, root, tmpdir, write_graph};
 
 fn plan_file(
@@ -46,6 +47,7 @@ fn unknown_output_is_a_plan_error() {
         outputs: Some(vec!["c".into()]),
         inputs: g.declared_input_types(),
         fuse: true,
+        in_place: true,
     };
     let e = plan::plan(&g, &opts, &DeviceCaps::baseline())
         .unwrap_err()
@@ -87,18 +89,172 @@ fn pooled_buffers_are_reused_along_a_chain() {
         .collect();
     assert_eq!(pool.len(), 2, "{:?}", p.buffers);
     assert_eq!(p.memory.pool_without_reuse, 5 * pool[0].bytes);
-    // No launch reads and writes the same buffer.
-    for (_, l) in p.launches() {
-        for r in l.reads() {
-            for w in l.writes() {
-                if let (Storage::Buffer(a), Storage::Buffer(b)) =
-                    (p.values[r].storage, p.values[w].storage)
-                {
-                    assert_ne!(a, b, "a launch reads and writes buffer {a}");
+    // No launch reads and writes the same buffer (no node here writes in place).
+    assert!(p.in_place.is_empty());
+    assert_shares_only_in_place(&p);
+}
+
+/// Every launch, loop bodies' included, reads and writes one buffer only where the plan
+/// put an output in place of that input (`Plan::in_place`).
+fn assert_shares_only_in_place(p: &Plan) {
+    fn check(p: &Plan, launches: &[Launch]) {
+        for l in launches {
+            // A loop reads values made before it, which live through it: its own
+            // launches are checked one by one.
+            if let Launch::Loop { body, .. } = l {
+                check(p, body);
+                continue;
+            }
+            for r in l.reads() {
+                for w in l.writes() {
+                    if let (Storage::Buffer(a), Storage::Buffer(b)) =
+                        (p.values[r].storage, p.values[w].storage)
+                        && a == b
+                    {
+                        assert!(
+                            p.in_place.iter().any(|x| x.input == r && x.output == w),
+                            "a launch reads {} and writes {} in buffer {a}, not in place",
+                            p.values[r].name,
+                            p.values[w].name
+                        );
+                    }
                 }
             }
         }
     }
+    check(p, &p.prologue);
+    check(p, &p.step);
+}
+
+/// The plan's in-place outputs as (node id, input value, output value).
+fn in_place_names(g: &mesoflow::graph::Graph, p: &Plan) -> Vec<(String, String, String)> {
+    p.in_place
+        .iter()
+        .map(|a| {
+            (
+                g.nodes[a.node].id.clone(),
+                p.values[a.input].name.clone(),
+                p.values[a.output].name.clone(),
+            )
+        })
+        .collect()
+}
+
+fn names(list: &[(&str, &str, &str)]) -> Vec<(String, String, String)> {
+    list.iter()
+        .map(|(n, i, o)| (n.to_string(), i.to_string(), o.to_string()))
+        .collect()
+}
+
+/// bd_delaunay.json and abp_delaunay.json: in both flip loops `edge_flip_round` writes the
+/// mesh into the buffer of the loop's `current` (read by nothing after it), so neither it
+/// nor `repeat` copies the mesh per iteration, and `inspect` says so; without in place
+/// (`PlanOptions::in_place` off) every value has a buffer of its own and the pool holds
+/// one mesh more.
+#[test]
+fn the_flip_loops_write_the_mesh_in_place() {
+    for name in ["bd_delaunay.json", "abp_delaunay.json"] {
+        let g = load(&root().join("graphs").join(name));
+        let plan_with = |in_place: bool| {
+            let opts = PlanOptions {
+                outputs: None,
+                inputs: g.declared_input_types(),
+                fuse: true,
+                in_place,
+            };
+            plan::plan(&g, &opts, &DeviceCaps::baseline()).unwrap_or_else(|e| panic!("{e}"))
+        };
+        let p = plan_with(true);
+        assert_eq!(
+            in_place_names(&g, &p),
+            names(&[
+                ("flip", "flips.current", "flip.mesh"),
+                ("reflip", "settle.current", "reflip.mesh"),
+            ]),
+            "{name}"
+        );
+        assert_shares_only_in_place(&p);
+        // Each loop's `next` (input 1) is its `current` (output 1): `repeat` skips its copy.
+        let mut loops = 0;
+        for l in &p.step {
+            if let Launch::Loop {
+                inputs, outputs, ..
+            } = l
+                && inputs[1].is_some_and(|n| p.values[n].name.ends_with(".mesh"))
+            {
+                assert_eq!(
+                    p.values[inputs[1].unwrap()].storage,
+                    p.values[outputs[1]].storage,
+                    "{name}"
+                );
+                loops += 1;
+            }
+        }
+        assert_eq!(loops, 2, "{name}");
+        let text = plan::to_text(&g, &p);
+        for want in [
+            "note   in place: flip.mesh is written into the buffer of flips.current",
+            "note   flip.mesh shares the buffer of flips.current",
+            "note   reflip.mesh shares the buffer of settle.current",
+            "flip.mesh (in place)",
+        ] {
+            assert!(text.contains(want), "{name}: no `{want}` in\n{text}");
+        }
+        let copied = plan_with(false);
+        assert!(copied.in_place.is_empty(), "{name}");
+        assert_shares_only_in_place(&copied);
+        let mesh = p.values[p.in_place[0].output].ty.bytes();
+        assert!(
+            copied.memory.pool >= p.memory.pool + mesh,
+            "{name}: pool {} in place, {} copied",
+            p.memory.pool,
+            copied.memory.pool
+        );
+        assert!(!plan::to_text(&g, &copied).contains("in place"), "{name}");
+    }
+}
+
+/// With the test kinds `countdown` and `countdown_in_place` (out in place of x): the last
+/// reader of a pooled value takes its buffer and an earlier reader does not; a graph
+/// input, a requested output and, in a loop body, a value from outside the loop (read
+/// again the next iteration) or one the body reads after the node keep buffers of their
+/// own.
+#[test]
+fn in_place_outputs_take_only_buffers_no_one_reads_after() {
+    let launches = Launches::default();
+    let reg = probe_registry(&launches);
+    let dir = tmpdir("plan-in-place");
+    let path = write_graph(
+        &dir,
+        "g.json",
+        r#"{"mesoflow": 1,
+ "inputs": {"x": {"type": "particles", "rows": 4, "cols": 1}},
+ "nodes": [
+   {"id": "a", "kind": "countdown", "inputs": {"x": "inputs.x"}},
+   {"id": "b", "kind": "countdown_in_place", "inputs": {"x": "a.out"}},
+   {"id": "c", "kind": "countdown_in_place", "inputs": {"x": "a.out", "y": "b.out"}},
+   {"id": "d", "kind": "countdown_in_place", "inputs": {"x": "c.out"}},
+   {"id": "e", "kind": "countdown_in_place", "inputs": {"x": "inputs.x"}},
+   {"id": "loop", "kind": "repeat", "params": {"fixed": 2}, "inputs": {"initial": "d.out", "next": "h.out"}},
+   {"id": "g", "kind": "countdown", "inputs": {"x": "inputs.x"}},
+   {"id": "h", "kind": "countdown_in_place", "inputs": {"x": "g.out", "y": "loop.current"}},
+   {"id": "k", "kind": "countdown_in_place", "inputs": {"x": "loop.out"}}
+ ],
+ "outputs": {"e": "e.out", "k": "k.out", "d": "d.count"}}"#,
+    );
+    let g =
+        mesoflow::graph::load(&path, &reg, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let inputs: BTreeMap<_, _> = [("x".to_string(), ValueType::Particles { n: 4, k: 1 })].into();
+    let p = plan_graph(&DeviceCaps::baseline(), &g, inputs, None, true);
+    // b reads a.out before c does: only c takes it; d (the last reader of c.out) takes c's
+    // buffer; e reads a graph input, k writes a requested output, h a value made before
+    // the loop.
+    assert_eq!(
+        in_place_names(&g, &p),
+        names(&[("c", "a.out", "c.out"), ("d", "c.out", "d.out")])
+    );
+    assert_shares_only_in_place(&p);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -151,6 +307,7 @@ fn absent_optional_inputs_drop_the_nodes_that_need_them() {
             outputs: Some(vec!["sum".into()]),
             inputs: only_x.clone(),
             fuse: true,
+            in_place: true,
         },
         &DeviceCaps::baseline(),
     )
@@ -176,6 +333,7 @@ fn absent_optional_inputs_drop_the_nodes_that_need_them() {
             outputs: None,
             inputs: only_x,
             fuse: true,
+            in_place: true,
         },
         &DeviceCaps::baseline(),
     )
@@ -198,6 +356,7 @@ fn inputs_sharing_a_size_must_agree() {
             outputs: None,
             inputs,
             fuse: true,
+            in_place: true,
         },
         &DeviceCaps::baseline(),
     )
@@ -231,6 +390,7 @@ fn values_larger_than_a_binding_are_plan_errors() {
             outputs: None,
             inputs,
             fuse: true,
+            in_place: true,
         },
         &caps,
     )
@@ -257,6 +417,7 @@ fn values_larger_than_a_binding_are_plan_errors() {
             outputs: None,
             inputs: BTreeMap::new(),
             fuse: true,
+            in_place: true,
         },
         &caps,
     )
@@ -310,6 +471,7 @@ fn an_input_larger_than_the_device_binds_is_refused_by_name() {
             outputs: None,
             inputs: [("x".to_string(), ValueType::Particles { n, k: 3 })].into(),
             fuse: true,
+            in_place: true,
         };
         plan::plan(&g, &opts, &caps)
     };
@@ -337,6 +499,7 @@ fn plan_problems(
         outputs: Some(outputs.iter().map(|s| s.to_string()).collect()),
         inputs,
         fuse: true,
+        in_place: true,
     };
     plan::plan(g, &opts, &caps).err().map(|e| e.to_string())
 }
@@ -436,6 +599,7 @@ fn load_or_plan_problems(name: &str, sets: &[(&str, &str)]) -> String {
         outputs: None,
         inputs: g.declared_input_types(),
         fuse: true,
+        in_place: true,
     };
     match plan::plan(&g, &opts, &DeviceCaps::baseline()) {
         Ok(_) => panic!("{name} with {sets:?} planned"),
@@ -617,6 +781,7 @@ fn disabled_nodes_are_left_out_with_the_reason() {
             outputs: Some(vec!["tripled".into()]),
             inputs: g.declared_input_types(),
             fuse: false,
+            in_place: true,
         },
         &DeviceCaps::baseline(),
     )

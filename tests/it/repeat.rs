@@ -2,22 +2,23 @@
 //! body reading the loop's value and values from outside it, state carried across
 //! steps), several values carried as columns, and its mistakes named. A loop until its
 //! count is 0 runs its body exactly as many times as it reports, the iterations the
-//! executor sends past the stop gated off, whatever the profile.
+//! executor sends past the stop gated off, whatever the profile, and the same with its
+//! body writing the carried value in place (`PortSpec::in_place_of`); a body node in
+//! place of a value read after it is not given its buffer; a step its `halt` stops keeps
+//! nothing, in place or not.
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex};
 
-use mesoflow::exec::Profile;
-use mesoflow::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
+use mesoflow::exec::{Profile, Program, RunOptions};
 use mesoflow::graph::{self, LoadOptions};
-use mesoflow::node::{
-    GpuKernels, Lowering, Node, NodeKind, PortError, PortSpec, RefCtx, Signature,
-};
-use mesoflow::value::{PortType, RefArray, ValueType};
+use mesoflow::plan::Plan;
+use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::disks::run_with_loops_profiled;
+use crate::util::probe::{Launches, probe_registry};
 use crate::util::{
-    f32s, gpu, load_or_plan_error, particles, registry, run_graph, tmpdir, u32s, write_graph,
+    compile_cached, f32s, gpu, load_or_plan_error, particles, plan_graph, run_graph, tmpdir,
+    types_of, u32s, write_graph,
 };
 
 /// x_(k+1) = alpha x_k + b, `count` times a step, the result kept as state; the body
@@ -148,143 +149,217 @@ fn repeat_mistakes_are_named() {
     }
 }
 
-/// A test probe: `out = x - 1` and `count = (out > 0)` on one value, each launch adding 1
-/// by an atomic to a buffer of its own that the test reads (`launches`): a side channel
-/// no graph has, so that work the executor runs past a loop's stop can be seen.
-struct Countdown {
-    launches: Arc<Mutex<Vec<wgpu::Buffer>>>,
+/// The plan's in-place outputs of a graph as (node id, input name, output name).
+fn in_place_of(g: &graph::Graph, p: &Plan) -> Vec<(String, String, String)> {
+    p.in_place
+        .iter()
+        .map(|a| {
+            (
+                g.nodes[a.node].id.clone(),
+                p.values[a.input].name.clone(),
+                p.values[a.output].name.clone(),
+            )
+        })
+        .collect()
 }
 
-const COUNTDOWN: &str = r#"
-@group(0) @binding(0) var<storage, read> x: array<f32>;
-@group(0) @binding(1) var<storage, read_write> out: array<f32>;
-@group(0) @binding(2) var<storage, read_write> count: array<u32>;
-@group(0) @binding(3) var<storage, read_write> launches: array<atomic<u32>>;
-
-@compute @workgroup_size(1)
-fn main() {
-    atomicAdd(&launches[0], 1u);
-    let v = x[0] - 1.0;
-    out[0] = v;
-    count[0] = select(0u, 1u, v > 0.0);
-}
-"#;
-
-impl Node for Countdown {
-    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
-        let x = inputs[0].expect("required");
-        Ok(Signature::outputs(vec![x, ValueType::Indices { n: 1 }]))
-    }
-
-    fn lowering(&self) -> Lowering<'_> {
-        Lowering::Kernels(self)
-    }
-
-    fn cpu_reference(&self, _: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
-        for o in outputs {
-            o.data.fill(f64::NAN);
-        }
-    }
-}
-
-impl GpuKernels for Countdown {
-    fn compile(
-        &self,
-        cx: &mut CompileCtx<'_>,
-        io: &NodeIo<'_>,
-    ) -> Result<Vec<Dispatch>, CompileError> {
-        let kernel = cx.kernel(&KernelSpec::new(
-            "countdown probe",
-            COUNTDOWN,
-            &[
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::StorageReadWrite,
-                Binding::StorageReadWrite,
-            ],
-        ))?;
-        let launches = cx.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("countdown launches"),
-            size: 16,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let d = cx.dispatch(
-            &kernel,
-            &[
-                io.inputs[0].expect("required").buffer,
-                io.outputs[0].buffer,
-                io.outputs[1].buffer,
-                &launches,
-            ],
-            [1, 1, 1],
-        );
-        self.launches.lock().expect("not poisoned").push(launches);
-        Ok(vec![d])
-    }
-}
-
+/// A loop until its count is 0 around the `countdown` probe, and around
+/// `countdown_in_place`, which the plan lets write `next` into `current`'s buffer (the
+/// loop then copies nothing per iteration): the same results, and the body runs exactly
+/// the iterations reported, whatever the profile (an iteration past the stop would
+/// subtract 1 more in place).
 #[test]
 fn repeat_runs_its_body_only_for_the_iterations_it_reports() {
     let Some(gpu) = gpu() else { return };
-    let launches = Arc::new(Mutex::new(Vec::new()));
-    let mut reg = registry().clone();
-    let shared = launches.clone();
-    reg.add(
-        NodeKind::declare("countdown", "test probe: x - 1 and whether it is positive")
-            .input(PortSpec::new("x", PortType::RealArray, "the value"))
-            .output(PortSpec::new("out", PortType::RealArray, "x - 1"))
-            .output(PortSpec::new("count", PortType::Indices, "1 while out > 0"))
-            .build(move |_| {
-                Ok(Box::new(Countdown {
-                    launches: shared.clone(),
-                }))
-            }),
-    );
+    let launches = Launches::default();
+    let reg = probe_registry(&launches);
     let dir = tmpdir("repeat_gated");
-    let json = r#"{"mesoflow": 1,
+    let steps = 3;
+    for kind in ["countdown", "countdown_in_place"] {
+        let json = r#"{"mesoflow": 1,
  "inputs": {"x": {"type": "particles", "rows": 1, "cols": 1}},
  "nodes": [
    {"id": "loop", "kind": "repeat", "inputs": {"initial": "inputs.x", "next": "tick.out", "count": "tick.count"}},
-   {"id": "tick", "kind": "countdown", "inputs": {"x": "loop.current"}}
+   {"id": "tick", "kind": "KIND", "inputs": {"x": "loop.current"}}
  ],
- "outputs": {"out": "loop.out", "iterations": "loop.iterations", "total": "loop.total"}}"#;
-    let path = write_graph(&dir, "countdown.json", json);
-    let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
-    let steps = 3;
-    for x in [1.0, 4.0] {
-        let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&[[x]]))].into();
-        // From x, the counts are 1 until x - k reaches 0: x iterations, the last
-        // counting 0, and out = 0 exactly (small integers in f32).
-        let k = x as u32;
-        for profile in [
-            Profile::Off,
-            Profile::Launches,
-            Profile::Dispatches,
-            Profile::Steps,
-        ] {
-            launches.lock().expect("not poisoned").clear();
-            let (out, iterations) = run_with_loops_profiled(&gpu, &g, &inputs, steps, profile)
-                .unwrap_or_else(|e| panic!("{e}"));
-            assert_eq!(f32s(&out["out"]), [0.0], "x {x}, {profile:?}");
-            assert_eq!(u32s(&out["iterations"]), [k], "x {x}, {profile:?}");
-            assert_eq!(u32s(&out["total"]), [k - 1], "x {x}, {profile:?}");
-            assert_eq!(
-                iterations,
-                [("loop".to_string(), vec![k; steps as usize])],
-                "x {x}, {profile:?}"
-            );
-            let ran: u32 = launches
-                .lock()
-                .expect("not poisoned")
-                .iter()
-                .map(|b| bytemuck::pod_read_unaligned::<u32>(&gpu.read_buffer(b, 4).unwrap()[..4]))
-                .sum();
-            assert_eq!(
-                ran,
-                k * steps as u32,
-                "x {x}, {profile:?}: the body ran {ran} times for {k} iterations a step over {steps} steps"
-            );
+ "outputs": {"out": "loop.out", "iterations": "loop.iterations", "total": "loop.total"}}"#
+            .replace("KIND", kind);
+        let path = write_graph(&dir, &format!("{kind}.json"), &json);
+        let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+        let types = [("x".to_string(), ValueType::Particles { n: 1, k: 1 })].into();
+        let p = plan_graph(&gpu.caps, &g, types, None, true);
+        let want: Vec<_> = match kind {
+            "countdown" => vec![],
+            _ => vec![("tick".into(), "loop.current".into(), "tick.out".into())],
+        };
+        assert_eq!(in_place_of(&g, &p), want, "{kind}");
+        for x in [1.0, 4.0] {
+            let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&[[x]]))].into();
+            // From x, the counts are 1 until x - k reaches 0: x iterations, the last
+            // counting 0, and out = 0 exactly (small integers in f32).
+            let k = x as u32;
+            for profile in [
+                Profile::Off,
+                Profile::Launches,
+                Profile::Dispatches,
+                Profile::Steps,
+            ] {
+                let case = format!("{kind}, x {x}, {profile:?}");
+                launches.clear();
+                let (out, iterations) = run_with_loops_profiled(&gpu, &g, &inputs, steps, profile)
+                    .unwrap_or_else(|e| panic!("{e}"));
+                assert_eq!(f32s(&out["out"]), [0.0], "{case}");
+                assert_eq!(u32s(&out["iterations"]), [k], "{case}");
+                assert_eq!(u32s(&out["total"]), [k - 1], "{case}");
+                assert_eq!(
+                    iterations,
+                    [("loop".to_string(), vec![k; steps as usize])],
+                    "{case}"
+                );
+                let ran = launches.total(&gpu);
+                assert_eq!(
+                    ran,
+                    k * steps as u32,
+                    "{case}: the body ran {ran} times for {k} iterations a step over {steps} steps"
+                );
+            }
         }
+    }
+}
+
+/// In place through a loop body: two in-place nodes in a row (the second in place of
+/// the first's output, made in the body; `next` ends in `current`'s buffer), and a body
+/// that reads `current` after the node that could take its buffer (which then does not:
+/// only the second node, in place of the first's output, does). Both against their
+/// recurrences, until the count is 0 and for a fixed count, two steps with state.
+#[test]
+fn repeat_bodies_write_in_place_only_where_nothing_reads_after() {
+    let Some(gpu) = gpu() else { return };
+    let launches = Launches::default();
+    let reg = probe_registry(&launches);
+    let dir = tmpdir("repeat_in_place");
+    let json = |loop_params: &str, second_y: &str| {
+        format!(
+            r#"{{"mesoflow": 1,
+ "inputs": {{"x": {{"type": "particles", "rows": 3, "cols": 1}}}},
+ "state": {{"s": {{"init": "inputs.x", "next": "loop.out"}}}},
+ "nodes": [
+   {{"id": "loop", "kind": "repeat", "params": {loop_params}, "inputs": {{"initial": "state.s", "next": "b.out", "count": "b.count"}}}},
+   {{"id": "a", "kind": "countdown_in_place", "inputs": {{"x": "loop.current"}}}},
+   {{"id": "b", "kind": "countdown_in_place", "inputs": {{"x": "a.out"{second_y}}}}}
+ ],
+ "outputs": {{"s": "state.s", "iterations": "loop.iterations"}}}}"#
+        )
+    };
+    let x0 = [[12.0], [7.0], [3.0]];
+    let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&x0))].into();
+    let types: BTreeMap<_, _> = [("x".to_string(), ValueType::Particles { n: 3, k: 1 })].into();
+    let steps = 2;
+    // x -> x - 2 until x[0] reaches 0: 12 -> 10 ... -> 0 in 6 iterations (2 steps: 6
+    // iterations, then the loop starts from 0 and runs 1 iteration more, to -2).
+    let chain = json("{}", "");
+    // x -> (x - 1) - 1 + x = 2x - 2, three times a step.
+    let reread = json(r#"{"fixed": 3}"#, r#", "y": "loop.current""#);
+    for (name, json, want_in_place) in [
+        (
+            "chain",
+            &chain,
+            vec![("a", "loop.current", "a.out"), ("b", "a.out", "b.out")],
+        ),
+        ("reread", &reread, vec![("b", "a.out", "b.out")]),
+    ] {
+        let path = write_graph(&dir, &format!("{name}.json"), json);
+        let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+        let p = plan_graph(&gpu.caps, &g, types.clone(), None, true);
+        let want_in_place: Vec<_> = want_in_place
+            .iter()
+            .map(|(n, i, o)| (n.to_string(), i.to_string(), o.to_string()))
+            .collect();
+        assert_eq!(in_place_of(&g, &p), want_in_place, "{name}");
+        let (out, loops) = run_with_loops_profiled(&gpu, &g, &inputs, steps, Profile::Off)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mut want: Vec<f32> = x0.iter().map(|r| r[0] as f32).collect();
+        let mut counts = Vec::new();
+        for _ in 0..steps {
+            let mut k = 0;
+            loop {
+                k += 1;
+                if name == "chain" {
+                    want.iter_mut().for_each(|v| *v -= 2.0);
+                    if want[0] <= 0.0 {
+                        break;
+                    }
+                } else {
+                    want.iter_mut().for_each(|v| *v = 2.0 * *v - 2.0);
+                    if k == 3 {
+                        break;
+                    }
+                }
+            }
+            counts.push(k);
+        }
+        assert_eq!(f32s(&out["s"]), want, "{name}");
+        assert_eq!(u32s(&out["iterations"]), [counts[1]], "{name}");
+        assert_eq!(loops.len(), usize::from(name == "chain"), "{name}");
+        if let Some((_, per_step)) = loops.first() {
+            assert_eq!(per_step, &counts, "{name}");
+        }
+    }
+}
+
+/// A halted step keeps nothing, its body's value written in place or not: the loop's
+/// first iteration runs before its tally sees the `halt` (overwriting `current` where the
+/// body writes in place), the step stops with the halt's error, and the next step, halt
+/// cleared, goes on from the state before it, as if it had never run.
+#[test]
+fn a_halted_step_keeps_nothing_in_place_or_not() {
+    let Some(gpu) = gpu() else { return };
+    let launches = Launches::default();
+    let reg = probe_registry(&launches);
+    let dir = tmpdir("repeat_halt");
+    let halt = |h: u32| {
+        BTreeMap::from([(
+            "h".to_string(),
+            HostArray::u32(ValueType::Indices { n: 1 }, vec![h]),
+        )])
+    };
+    for kind in ["countdown", "countdown_in_place"] {
+        let json = r#"{"mesoflow": 1,
+ "inputs": {"x": {"type": "particles", "rows": 1, "cols": 1}, "h": {"type": "indices", "rows": 1}},
+ "state": {"s": {"init": "inputs.x", "next": "loop.out"}},
+ "nodes": [
+   {"id": "loop", "kind": "repeat", "inputs": {"initial": "state.s", "next": "tick.out", "count": "tick.count", "halt": "inputs.h"}},
+   {"id": "tick", "kind": "KIND", "inputs": {"x": "loop.current"}}
+ ],
+ "outputs": {"s": "state.s"}}"#
+            .replace("KIND", kind);
+        let path = write_graph(&dir, &format!("{kind}.json"), &json);
+        let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+        let mut inputs = halt(0);
+        inputs.insert("x".into(), particles(&[[3.0]]));
+        let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
+        assert_eq!(p.in_place.len(), usize::from(kind == "countdown_in_place"));
+        let mut program = compile_cached(&gpu, &g, &p);
+        program.upload(&inputs).unwrap();
+        let one = RunOptions {
+            steps: 1,
+            profile: Profile::Off,
+            progress: false,
+        };
+        let s = |program: &Program| {
+            let out: BTreeMap<_, _> = program.read_outputs().unwrap().into_iter().collect();
+            f32s(&out["s"])
+        };
+        // 3 -> 2 -> 1 -> 0: the count 0 stops the loop.
+        program.run_on(&one).unwrap();
+        assert_eq!(s(&program), [0.0], "{kind}");
+        program.update_inputs(&halt(5)).unwrap();
+        let e = program.run_on(&one).unwrap_err().to_string();
+        assert!(e.contains("`halt` check is 5"), "{kind}: {e}");
+        program.update_inputs(&halt(0)).unwrap();
+        // 0 -> -1, the count 0 at once: from the state before the halted step.
+        program.run_on(&one).unwrap();
+        assert_eq!(s(&program), [-1.0], "{kind}");
+        assert_eq!(program.steps_done(), 2, "{kind}");
     }
 }

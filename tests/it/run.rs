@@ -1,11 +1,16 @@
-//! Graphs run end to end on the GPU: closed forms, fusion equivalence, states across
-//! steps, subgraphs, the shipped examples.
+//! Graphs run end to end on the GPU: closed forms, fusion equivalence, in-place outputs
+//! against copies, states across steps, subgraphs, the shipped examples.
 
 use std::collections::BTreeMap;
 
+use mesoflow::plan::PlanOptions;
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{Rng, f32s, gpu, load, named, plan_graph, root, run_graph, tmpdir, write_graph};
+use crate::util::probe::{Launches, probe_registry};
+use crate::util::{
+    Rng, compile_cached, f32s, gpu, load, named, particles, plan_graph, root, run_graph,
+    run_program, tmpdir, types_of, write_graph,
+};
 
 #[test]
 fn relax_example_matches_its_closed_form() {
@@ -246,6 +251,7 @@ fn whole_steps_are_timed_end_to_end_and_compute_what_unprofiled_runs_do() {
         outputs: None,
         inputs: [("x".to_string(), ty)].into_iter().collect(),
         fuse: false,
+        in_place: true,
     };
     let p = plan::plan(&g, &opts, &gpu.caps).unwrap();
     let mut cache = KernelCache::default();
@@ -301,6 +307,7 @@ fn refused_past_the_device_limits(
         outputs: None,
         inputs: [("x".to_string(), ValueType::Particles { n, k })].into(),
         fuse: true,
+        in_place: true,
     };
     let caps = mesoflow::gpu::DeviceCaps {
         max_binding: u64::MAX,
@@ -525,4 +532,59 @@ fn a_disabled_subgraph_with_a_refused_planner_loads() {
             (on, Err(e)) => panic!("enabled {on}: {e}"),
         }
     }
+}
+
+/// Outputs in place of their inputs (the `countdown_in_place` probe): two nodes read one
+/// pooled value, and only the second, the last to read it, writes into its buffer (the
+/// first would change what the second reads); a graph input is never written. The
+/// results are those of the plan that gives every output a buffer of its own.
+#[test]
+fn in_place_outputs_give_the_results_of_copies() {
+    let Some(gpu) = gpu() else { return };
+    let launches = Launches::default();
+    let reg = probe_registry(&launches);
+    let dir = tmpdir("run-in-place");
+    let path = write_graph(
+        &dir,
+        "g.json",
+        r#"{"mesoflow": 1,
+ "inputs": {"x": {"type": "particles", "rows": 5, "cols": 1}},
+ "nodes": [
+   {"id": "a", "kind": "countdown", "inputs": {"x": "inputs.x"}},
+   {"id": "b", "kind": "countdown_in_place", "inputs": {"x": "a.out"}},
+   {"id": "c", "kind": "countdown_in_place", "inputs": {"x": "a.out", "y": "b.out"}},
+   {"id": "d", "kind": "countdown", "inputs": {"x": "c.out"}},
+   {"id": "e", "kind": "countdown_in_place", "inputs": {"x": "inputs.x"}},
+   {"id": "f", "kind": "countdown", "inputs": {"x": "e.out", "y": "inputs.x"}}
+ ],
+ "outputs": {"d": "d.out", "f": "f.out"}}"#,
+    );
+    let g =
+        mesoflow::graph::load(&path, &reg, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let x: Vec<[f64; 1]> = (0..5).map(|i| [i as f64 - 1.5]).collect();
+    let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&x))].into();
+    let mut results = Vec::new();
+    for in_place in [true, false] {
+        let opts = PlanOptions {
+            outputs: None,
+            inputs: types_of(&inputs),
+            fuse: true,
+            in_place,
+        };
+        let p = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
+        let aliased: Vec<&str> = p
+            .in_place
+            .iter()
+            .map(|a| g.nodes[a.node].id.as_str())
+            .collect();
+        assert_eq!(aliased, if in_place { vec!["c"] } else { vec![] });
+        let mut program = compile_cached(&gpu, &g, &p);
+        let out = run_program(&mut program, &inputs, 1);
+        results.push((f32s(&out["d"]), f32s(&out["f"])));
+    }
+    // a = x - 1, b = x - 2, c = (a - 1) + b = 2x - 4, d = 2x - 5; e = x - 1, f = 2x - 2.
+    let d: Vec<f32> = x.iter().map(|r| (2.0 * r[0] - 5.0) as f32).collect();
+    let f: Vec<f32> = x.iter().map(|r| (2.0 * r[0] - 2.0) as f32).collect();
+    assert_eq!(results[0], (d.clone(), f.clone()), "in place");
+    assert_eq!(results[1], (d, f), "copied");
 }

@@ -48,6 +48,7 @@ fn plan_text(path: &Path, c: &CompiledScene) -> String {
         outputs: Some(vec!["positions".into()]),
         inputs: c.inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
         fuse: true,
+        in_place: true,
     };
     let p = plan::plan(&g, &opts, &DeviceCaps::baseline()).unwrap_or_else(|e| panic!("{e}"));
     plan::to_text(&g, &p)

@@ -49,6 +49,7 @@ fn generated_pointwise_kernels_validate() {
             outputs: None,
             inputs: inputs.clone(),
             fuse,
+            in_place: true,
         };
         let p = plan::plan(&g, &opts, &mesoflow::gpu::DeviceCaps::baseline()).unwrap();
         let mut generated = 0;

@@ -1,7 +1,7 @@
 //! graphs/bd_delaunay.json end to end, step by step: after every step the mesh is a valid
 //! triangulation of the torus with no inverted triangle and no illegal edge (f64, within
 //! the f32 tolerance), no pair of disks (all pairs) overlaps, and no edge was passed
-//! through.
+//! through; the same bit for bit with the flip loops' meshes written in place or copied.
 
 use std::collections::BTreeMap;
 
@@ -10,9 +10,9 @@ use mesoflow::gpu::KernelCache;
 use mesoflow::nodes::disks::mesh::{check_torus_mesh, illegal_edges, periodic_delaunay};
 use mesoflow::nodes::disks::minimum_image;
 use mesoflow::plan::{self, PlanOptions};
-use mesoflow::value::{HostArray, ValueType};
+use mesoflow::value::{HostArray, HostData, ValueType};
 
-use crate::util::disks::disk_positions;
+use crate::util::disks::{disk_positions, lattice_disks, run_with_loops_planned};
 use crate::util::{Rng, flat_particles, gpu, load_with, types_of, u32s};
 
 /// The smallest distance between two of the disks (minimum image, all pairs).
@@ -68,6 +68,7 @@ fn bd_delaunay_keeps_a_delaunay_mesh_and_no_overlaps_every_step() {
         outputs: None,
         inputs: types_of(&inputs),
         fuse: true,
+        in_place: true,
     };
     let p = plan::plan(&g, &opts, &gpu.caps).unwrap();
     let mut cache = KernelCache::default();
@@ -209,4 +210,61 @@ fn abp_delaunay_disks_follow_the_active_msd_and_never_overlap() {
     let stats = check_torus_mesh(&final_mesh, &x, [l, l]).unwrap();
     assert_eq!(stats.inverted, 0);
     assert_eq!(u32s(&out["pass_throughs"]), vec![0]);
+}
+
+/// The words of an array, f32 as their bits: equal words are bit for bit equal results.
+fn words(a: &HostArray) -> Vec<u32> {
+    match &a.data {
+        HostData::F32(v) => v.iter().map(|x| x.to_bits()).collect(),
+        HostData::U32(v) => v.clone(),
+    }
+}
+
+/// bd_delaunay.json with its flip loops' meshes written in place (the plan's default) and
+/// copied (`PlanOptions::in_place` off): 256 disks of c0 at packing 0.79, 4 steps, every
+/// output (positions, mesh, forces, flip rounds, flips, settle flips) and the loops'
+/// iterations per step bit for bit the same.
+#[test]
+fn bd_delaunay_is_the_same_with_its_meshes_in_place_or_copied() {
+    let Some(gpu) = gpu() else { return };
+    let n = 256usize;
+    let mut rng = Rng::new(53);
+    let (x0, l) = lattice_disks(&mut rng, n, 0.79, 1.0);
+    let mesh = periodic_delaunay(&x0, [l, l]).unwrap();
+    let inputs = BTreeMap::from([
+        ("positions".to_string(), flat_particles(&x0, 2)),
+        (
+            "mesh".to_string(),
+            HostArray::u32(
+                ValueType::Indices {
+                    n: mesh.len() as u32,
+                },
+                mesh,
+            ),
+        ),
+    ]);
+    let steps = 4;
+    let g = load_with(
+        "bd_delaunay.json",
+        &[("n", "256"), ("config", "\"c0\"")],
+        steps,
+        7,
+    );
+    let runs = [true, false].map(|in_place| {
+        run_with_loops_planned(&gpu, &g, &inputs, steps, Profile::Off, in_place)
+            .unwrap_or_else(|e| panic!("in place {in_place}: {e}"))
+    });
+    let [(a, loops_a), (b, loops_b)] = &runs;
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    for (name, v) in a {
+        assert_eq!(words(v), words(&b[name]), "output {name}");
+    }
+    assert_eq!(loops_a, loops_b);
+    let flips = &loops_a
+        .iter()
+        .find(|(l, _)| l == "flips")
+        .expect("flip loop")
+        .1;
+    assert!(flips.iter().all(|&k| k >= 1), "{loops_a:?}");
+    eprintln!("loop iterations per step {loops_a:?}");
 }

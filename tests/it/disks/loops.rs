@@ -14,7 +14,9 @@ use mesoflow::nodes::disks::wrap;
 use mesoflow::plan::Launch;
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::disks::{LoopRun, disk_positions, run_with_loops, run_with_loops_profiled};
+use crate::util::disks::{
+    LoopRun, disk_positions, run_with_loops, run_with_loops_planned, run_with_loops_profiled,
+};
 use crate::util::{self, Rng, flat_particles, gpu, input_decl, run_node_and_reference, u32s};
 
 const L: [f64; 2] = [18.0, 16.0];
@@ -146,6 +148,59 @@ fn repeat_carries_the_mesh_through_the_flip_rounds() {
     let _ = std::fs::remove_dir_all(&dir);
     let stats = check_torus_mesh(&want, &x, L).unwrap();
     assert_eq!(stats.inverted, 0);
+}
+
+/// The flip loop with the mesh written in place (the plan gives `edge_flip_round`'s
+/// output the buffer of the loop's `current`: no copies) and copied (in place refused,
+/// `PlanOptions::in_place` off): the mesh, the flips and the iterations bit for bit the
+/// same, and the f64 rounds', for one Lawson round per evaluation and four, stopping on
+/// either word of the count, two steps each from the given mesh, unprofiled and timed
+/// alone.
+#[test]
+fn the_flip_loop_is_the_same_in_place_or_copied() {
+    let Some(gpu) = gpu() else { return };
+    let (x, mesh) = moved_disks(31);
+    let (want, rounds, total) = host_flips(&x, &mesh, 0);
+    let dir = util::tmpdir("disk_loops_in_place");
+    for (r, stop_word) in [(1, 0), (4, 1)] {
+        let params = format!(r#"{{"stop_word": {stop_word}}}"#);
+        let json = flip_graph_of_rounds(300, &params, r);
+        let g = util::load(&util::write_graph(&dir, "g.json", &json));
+        let types = inputs(&x, &mesh)
+            .iter()
+            .map(|(k, v)| (k.clone(), v.ty))
+            .collect();
+        let p = util::plan_graph(&gpu.caps, &g, types, None, true);
+        assert_eq!(p.in_place.len(), 1, "the flip writes in place");
+        let iterations = if stop_word == 0 {
+            (rounds - 1).div_ceil(r) + 1
+        } else {
+            rounds.div_ceil(r)
+        };
+        for profile in [Profile::Off, Profile::Launches] {
+            let runs: Vec<LoopRun> = [true, false]
+                .map(|in_place| {
+                    run_with_loops_planned(&gpu, &g, &inputs(&x, &mesh), 2, profile, in_place)
+                        .unwrap()
+                })
+                .into();
+            let case = format!("{r} rounds, stop_word {stop_word}, {profile:?}");
+            for (name, a) in &runs[0].0 {
+                assert_eq!(a.data, runs[1].0[name].data, "{case}: {name}");
+            }
+            assert_eq!(runs[0].1, runs[1].1, "{case}: iterations");
+            let (out, loops) = &runs[0];
+            assert_eq!(u32s(&out["mesh"]), want, "{case}");
+            assert_eq!(u32s(&out["iterations"]), vec![iterations], "{case}");
+            assert_eq!(u32s(&out["flips"]), vec![total], "{case}");
+            assert_eq!(
+                loops,
+                &vec![("flips".to_string(), vec![iterations; 2])],
+                "{case}"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Stopping on the flips of an evaluation's last round (`stop_word` 1): with r Lawson

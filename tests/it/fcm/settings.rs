@@ -155,6 +155,7 @@ fn bad_settings_get_clear_errors() {
             .map(|(k, v)| (k.to_string(), v))
             .collect(),
         fuse: true,
+        in_place: true,
     };
     let e = mesoflow::plan::plan(&g, &opts, &caps)
         .unwrap_err()

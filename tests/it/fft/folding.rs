@@ -202,6 +202,7 @@ fn a_spectrum_with_other_readers_is_not_folded() {
         outputs: None,
         inputs: [("x".to_string(), ty)].into_iter().collect(),
         fuse: true,
+        in_place: true,
     };
     let p = mesoflow::plan::plan(&g, &opts, &caps_with(48 << 10, 1024)).unwrap();
     assert_eq!(p.step.len(), 3);

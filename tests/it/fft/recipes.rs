@@ -209,6 +209,7 @@ fn inspect_shows_the_recipe() {
         outputs: None,
         inputs: [("x".to_string(), ty)].into_iter().collect(),
         fuse: true,
+        in_place: true,
     };
     let p = mesoflow::plan::plan(&g, &opts, &caps_with(48 << 10, 1024)).unwrap();
     let text = mesoflow::plan::to_text(&g, &p);

@@ -353,6 +353,7 @@ fn bad_mpcd_input_gets_messages_naming_file_node_and_port() {
             outputs: None,
             inputs: g.declared_input_types(),
             fuse: true,
+            in_place: true,
         },
         &caps,
     )

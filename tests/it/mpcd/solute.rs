@@ -257,6 +257,7 @@ fn solute_refuses_mismatched_sums_and_takes_biased_collisions() {
             ]
             .into(),
             fuse: true,
+            in_place: true,
         };
         plan::plan(&g, &opts, &gpu.caps)
             .err()

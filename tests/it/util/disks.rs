@@ -33,10 +33,24 @@ pub fn run_with_loops_profiled(
     steps: u64,
     profile: Profile,
 ) -> Result<LoopRun, String> {
+    run_with_loops_planned(gpu, g, inputs, steps, profile, true)
+}
+
+/// [`run_with_loops_profiled`], outputs in place of their inputs
+/// (`PlanOptions::in_place`) or each in a buffer of its own.
+pub fn run_with_loops_planned(
+    gpu: &GpuContext,
+    g: &Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    steps: u64,
+    profile: Profile,
+    in_place: bool,
+) -> Result<LoopRun, String> {
     let opts = PlanOptions {
         outputs: None,
         inputs: types_of(inputs),
         fuse: true,
+        in_place,
     };
     let p = plan::plan(g, &opts, &gpu.caps).map_err(|e| e.to_string())?;
     let mut cache = KernelCache::default();

@@ -87,6 +87,7 @@ pub fn load_or_plan_error(path: &Path, overrides: BTreeMap<String, ParamValue>) 
         outputs: None,
         inputs: g.declared_input_types(),
         fuse: true,
+        in_place: true,
     };
     mesoflow::plan::plan(&g, &opts, &caps)
         .err()

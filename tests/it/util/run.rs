@@ -49,6 +49,7 @@ pub fn plan_graph(
         outputs: outputs.map(|o| o.iter().map(|s| s.to_string()).collect()),
         inputs,
         fuse,
+        in_place: true,
     };
     plan::plan(g, &opts, caps).unwrap_or_else(|e| panic!("{e}"))
 }
