@@ -5,20 +5,13 @@
 //! executor sends past the stop gated off, whatever the profile.
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex};
 
 use mesoflow::exec::Profile;
-use mesoflow::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use mesoflow::graph::{self, LoadOptions};
-use mesoflow::node::{
-    GpuKernels, Lowering, Node, NodeKind, PortError, PortSpec, RefCtx, Signature,
-};
-use mesoflow::value::{PortType, RefArray, ValueType};
 
 use crate::util::disks::run_with_loops_profiled;
-use crate::util::{
-    f32s, gpu, load_or_plan_error, particles, registry, run_graph, tmpdir, u32s, write_graph,
-};
+use crate::util::probe::countdown_registry;
+use crate::util::{f32s, gpu, load_or_plan_error, particles, run_graph, tmpdir, u32s, write_graph};
 
 /// x_(k+1) = alpha x_k + b, `count` times a step, the result kept as state; the body
 /// also outputs what the loop left after one step's iterations (`once`).
@@ -148,99 +141,10 @@ fn repeat_mistakes_are_named() {
     }
 }
 
-/// A test probe: `out = x - 1` and `count = (out > 0)` on one value, each launch adding 1
-/// by an atomic to a buffer of its own that the test reads (`launches`): a side channel
-/// no graph has, so that work the executor runs past a loop's stop can be seen.
-struct Countdown {
-    launches: Arc<Mutex<Vec<wgpu::Buffer>>>,
-}
-
-const COUNTDOWN: &str = r#"
-@group(0) @binding(0) var<storage, read> x: array<f32>;
-@group(0) @binding(1) var<storage, read_write> out: array<f32>;
-@group(0) @binding(2) var<storage, read_write> count: array<u32>;
-@group(0) @binding(3) var<storage, read_write> launches: array<atomic<u32>>;
-
-@compute @workgroup_size(1)
-fn main() {
-    atomicAdd(&launches[0], 1u);
-    let v = x[0] - 1.0;
-    out[0] = v;
-    count[0] = select(0u, 1u, v > 0.0);
-}
-"#;
-
-impl Node for Countdown {
-    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
-        let x = inputs[0].expect("required");
-        Ok(Signature::outputs(vec![x, ValueType::Indices { n: 1 }]))
-    }
-
-    fn lowering(&self) -> Lowering<'_> {
-        Lowering::Kernels(self)
-    }
-
-    fn cpu_reference(&self, _: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
-        for o in outputs {
-            o.data.fill(f64::NAN);
-        }
-    }
-}
-
-impl GpuKernels for Countdown {
-    fn compile(
-        &self,
-        cx: &mut CompileCtx<'_>,
-        io: &NodeIo<'_>,
-    ) -> Result<Vec<Dispatch>, CompileError> {
-        let kernel = cx.kernel(&KernelSpec::new(
-            "countdown probe",
-            COUNTDOWN,
-            &[
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::StorageReadWrite,
-                Binding::StorageReadWrite,
-            ],
-        ))?;
-        let launches = cx.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("countdown launches"),
-            size: 16,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let d = cx.dispatch(
-            &kernel,
-            &[
-                io.inputs[0].expect("required").buffer,
-                io.outputs[0].buffer,
-                io.outputs[1].buffer,
-                &launches,
-            ],
-            [1, 1, 1],
-        );
-        self.launches.lock().expect("not poisoned").push(launches);
-        Ok(vec![d])
-    }
-}
-
 #[test]
 fn repeat_runs_its_body_only_for_the_iterations_it_reports() {
     let Some(gpu) = gpu() else { return };
-    let launches = Arc::new(Mutex::new(Vec::new()));
-    let mut reg = registry().clone();
-    let shared = launches.clone();
-    reg.add(
-        NodeKind::declare("countdown", "test probe: x - 1 and whether it is positive")
-            .input(PortSpec::new("x", PortType::RealArray, "the value"))
-            .output(PortSpec::new("out", PortType::RealArray, "x - 1"))
-            .output(PortSpec::new("count", PortType::Indices, "1 while out > 0"))
-            .build(move |_| {
-                Ok(Box::new(Countdown {
-                    launches: shared.clone(),
-                }))
-            }),
-    );
+    let (reg, launches) = countdown_registry();
     let dir = tmpdir("repeat_gated");
     let json = r#"{"mesoflow": 1,
  "inputs": {"x": {"type": "particles", "rows": 1, "cols": 1}},
@@ -263,7 +167,7 @@ fn repeat_runs_its_body_only_for_the_iterations_it_reports() {
             Profile::Dispatches,
             Profile::Steps,
         ] {
-            launches.lock().expect("not poisoned").clear();
+            launches.clear();
             let (out, iterations) = run_with_loops_profiled(&gpu, &g, &inputs, steps, profile)
                 .unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(f32s(&out["out"]), [0.0], "x {x}, {profile:?}");
@@ -274,12 +178,7 @@ fn repeat_runs_its_body_only_for_the_iterations_it_reports() {
                 [("loop".to_string(), vec![k; steps as usize])],
                 "x {x}, {profile:?}"
             );
-            let ran: u32 = launches
-                .lock()
-                .expect("not poisoned")
-                .iter()
-                .map(|b| bytemuck::pod_read_unaligned::<u32>(&gpu.read_buffer(b, 4).unwrap()[..4]))
-                .sum();
+            let ran = launches.count(&gpu);
             assert_eq!(
                 ran,
                 k * steps as u32,

@@ -9,7 +9,8 @@
 //!
 //! The helpers of one topic (several test files each) stay in their own module:
 //! `mobility` (FCM and PSE: f64 mobility references, one-step evaluation, noise
-//! statistics), `mpcd`, `spread`, `fft`.
+//! statistics), `mpcd`, `spread`, `fft`, and `probe` (a node kind counting its launches,
+//! for `repeat` and `run`).
 
 mod compare;
 mod data;
@@ -18,6 +19,7 @@ pub mod fft;
 mod graphs;
 pub mod mobility;
 pub mod mpcd;
+pub mod probe;
 mod run;
 pub mod spread;
 
