@@ -3,6 +3,10 @@
 //! Rows are copied as raw 4-byte words, so f32 particle arrays and u32 index arrays alike.
 //! `columns` and `concat` take columns apart and put them together (forces and torques
 //! as one N x 6 array for a grand mobility, and its result back as two N x 3 arrays).
+//! `invert_permutation` and `relabel` renumber what refers to rows by id: a sort's perm
+//! inverted (where each row went), and ids stored in an array (a mesh's vertices) renamed
+//! through a lookup table, so that a mesh follows its points into a new order and back
+//! (graphs/bd_delaunay.json numbers its disks in a Morton order of its own).
 
 use crate::gpu::DeviceCaps;
 use crate::gpu::{Binding, CompileCtx, CompileError, Dispatch, KernelSpec, NodeIo, WG_1D};
@@ -555,9 +559,244 @@ impl GpuKernels for Concat {
     }
 }
 
+fn invert_permutation_kind() -> NodeKind {
+    NodeKind::declare(
+        "invert_permutation",
+        "out[index[i]] = i: the inverse of a permutation (for a sort's perm, where each input row went: its slot in the sorted order); entries no index points at hold 4294967295 (u32::MAX), indices past the end are skipped, with repeated indices the winner is unspecified",
+    )
+    .input(PortSpec::new(
+        "index",
+        PortType::Indices,
+        "a permutation of 0 .. N (a sort's perm: the input row of each sorted slot)",
+    ))
+    .output(PortSpec::new(
+        "out",
+        PortType::Indices,
+        "the inverse permutation (N words)",
+    ))
+    .build(|_| Ok(Box::new(InvertPermutation)))
+}
+
+struct InvertPermutation;
+
+impl Node for InvertPermutation {
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+        let index = inputs[0].expect("required");
+        Ok(Signature::outputs(vec![index]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let index = &inputs[0].as_ref().expect("required").data;
+        let n = index.len();
+        outputs[0].data.fill(u32::MAX as f64);
+        for (i, &dst) in index.iter().enumerate() {
+            if dst < n as f64 {
+                outputs[0].data[dst as usize] = i as f64;
+            }
+        }
+    }
+}
+
+impl GpuKernels for InvertPermutation {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let index = io.inputs[0].expect("required");
+        let out = io.outputs[0];
+        let n = out.ty.words();
+        let kernel = cx.kernel(&KernelSpec::new(
+            "invert_permutation",
+            cx.shader("permute/invert_permutation.wgsl")?,
+            &[
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
+        ))?;
+        let shape = cx.uniform("invert_permutation shape", bytemuck::bytes_of(&(n as u32)));
+        Ok(vec![
+            cx.fill(out.buffer, n, u32::MAX)?,
+            cx.dispatch(
+                &kernel,
+                &[index.buffer, out.buffer, &shape],
+                cx.grid_1d(n, WG_1D),
+            ),
+        ])
+    }
+}
+
+fn relabel_kind() -> NodeKind {
+    NodeKind::declare(
+        "relabel",
+        "out = x with the ids it holds renamed through a lookup table: in every row of `stride` words, each word w of columns first .. first + count becomes table[w] when w is below the table's length (ids past it, such as a u32::MAX sentinel, are kept), every other word is copied; a mesh's vertex ids follow its points into a new order (table: the inverse of the sort's perm, from invert_permutation) and back (table: the perm)",
+    )
+    .input(PortSpec::new(
+        "x",
+        PortType::Indices,
+        "the words holding ids (a multiple of `stride`)",
+    ))
+    .input(PortSpec::new(
+        "table",
+        PortType::Indices,
+        "the new id of each old id: new = table[old]",
+    ))
+    .output(PortSpec::new(
+        "out",
+        PortType::Indices,
+        "x with the ids renamed (as many words)",
+    ))
+    .param(ParamSpec::integer(
+        "stride",
+        Some(1.0),
+        1.0,
+        1024.0,
+        "words per row of x (a mesh of nodes/disks/mesh.rs: 6 per triangle)",
+    ))
+    .param(ParamSpec::integer(
+        "first",
+        Some(0.0),
+        0.0,
+        1023.0,
+        "the first column of a row holding ids (below stride)",
+    ))
+    .param(ParamSpec::integer(
+        "count",
+        Some(0.0),
+        0.0,
+        1024.0,
+        "how many columns from `first` hold ids (0: every column from `first` to the row's end; the mesh: 3, its vertices, not its twin slots)",
+    ))
+    .param(ParamSpec::flag(
+        "permutation",
+        false,
+        "the graph guarantees that the table is a permutation of 0 .. its length (a sort's perm or its inverse): ids are renamed one to one, so the checks of the nodes reading the output (a mesh's twins) apply to the data given for x, as behind a gather (Node::passes_rows)",
+    ))
+    .build(|p| {
+        let stride = p.number("stride") as u32;
+        let first = p.number("first") as u32;
+        let count = p.number("count") as u32;
+        if first >= stride {
+            return Err(format!(
+                "`first` {first} must be below `stride` {stride}: a column of the row"
+            ));
+        }
+        let count = if count == 0 { stride - first } else { count };
+        if first + count > stride {
+            return Err(format!(
+                "columns {first} to {} do not fit a row of {stride} words",
+                first + count - 1
+            ));
+        }
+        Ok(Box::new(Relabel {
+            stride,
+            first,
+            count,
+            permutation: p.flag("permutation"),
+        }))
+    })
+}
+
+struct Relabel {
+    stride: u32,
+    first: u32,
+    count: u32,
+    permutation: bool,
+}
+
+impl Relabel {
+    /// Whether word `w` of x lies in a column holding ids.
+    fn holds_id(&self, w: usize) -> bool {
+        let col = (w % self.stride as usize) as u32;
+        col >= self.first && col < self.first + self.count
+    }
+}
+
+impl Node for Relabel {
+    fn passes_rows(&self, port: usize) -> Option<usize> {
+        (self.permutation && port == 0).then_some(0)
+    }
+
+    fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
+        let Some(x @ ValueType::Indices { n }) = inputs[0] else {
+            unreachable!("port type checked")
+        };
+        if !n.is_multiple_of(self.stride) {
+            return Err(PortError::new(
+                "x",
+                format!(
+                    "has {n} words, not a whole number of rows of `stride` {} words",
+                    self.stride
+                ),
+            ));
+        }
+        Ok(Signature::outputs(vec![x]))
+    }
+
+    fn lowering(&self) -> Lowering<'_> {
+        Lowering::Kernels(self)
+    }
+
+    fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
+        let x = &inputs[0].as_ref().expect("required").data;
+        let table = &inputs[1].as_ref().expect("required").data;
+        for (w, (&v, o)) in x.iter().zip(outputs[0].data.iter_mut()).enumerate() {
+            *o = if self.holds_id(w) && v < table.len() as f64 {
+                table[v as usize]
+            } else {
+                v
+            };
+        }
+    }
+}
+
+impl GpuKernels for Relabel {
+    fn compile(
+        &self,
+        cx: &mut CompileCtx<'_>,
+        io: &NodeIo<'_>,
+    ) -> Result<Vec<Dispatch>, CompileError> {
+        let x = io.inputs[0].expect("required");
+        let table = io.inputs[1].expect("required");
+        let words = x.ty.words();
+        let kernel = cx.kernel(&KernelSpec::new(
+            "relabel",
+            cx.shader("permute/relabel.wgsl")?,
+            &[
+                Binding::StorageRead,
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
+        ))?;
+        let shape = cx.uniform(
+            "relabel shape",
+            bytemuck::cast_slice(&[
+                words as u32,
+                self.stride,
+                self.first,
+                self.count,
+                table.ty.words() as u32,
+            ]),
+        );
+        Ok(vec![cx.dispatch(
+            &kernel,
+            &[x.buffer, table.buffer, io.outputs[0].buffer, &shape],
+            cx.grid_1d(words, WG_1D),
+        )])
+    }
+}
+
 pub fn register(r: &mut Registry) {
     r.add(gather_kind());
     r.add(scatter_kind());
     r.add(columns_kind());
     r.add(concat_kind());
+    r.add(invert_permutation_kind());
+    r.add(relabel_kind());
 }

@@ -382,7 +382,54 @@ pub static KINDS: &[PointwiseKind] = &[
         },
         ..BASE
     },
+    PointwiseKind {
+        name: "unwrap",
+        doc: "out = unwrapped + the minimum image of (after - before), per component: an unwrapped trajectory advanced by one step of the wrapped one (positions wrapped into a periodic box before and after the step); exact while a step moves a particle less than half the box along each axis. Per component a box length, 0 for an open axis (the plain difference)",
+        inputs: &[
+            (
+                "unwrapped",
+                "the unwrapped positions before the step",
+                false,
+            ),
+            ("before", "the wrapped positions before the step", false),
+            ("after", "the wrapped positions after the step", false),
+        ],
+        params: || {
+            vec![ParamSpec {
+                name: "box",
+                kind: ParamKind::Numbers {
+                    len: None,
+                    min: 0.0,
+                    max: F32_PARAM_MAX,
+                },
+                default: None,
+                doc: "the box length along each component (column), at most 4; 0: an open axis",
+            }]
+        },
+        flatten: |p| p.numbers("box").iter().map(|&x| Param::Number(x)).collect(),
+        check: components_match,
+        body: "var t = array<f32, 4>(p0, p1, p2, p3);
+    let l = t[min(comp, 3u)];
+    let d = after - before;
+    if (l > 0.0) {
+        return unwrapped + (d - l * floor(d / l + 0.5));
+    }
+    return unwrapped + d;",
+        per_component: true,
+        reference: |i, e, p| i[0] + minimum_image_step(i[2] - i[1], p[e.comp as usize]),
+        ..BASE
+    },
 ];
+
+/// The minimum image of a difference `d` along an axis of length `l` (0: open), as
+/// `unwrap`'s body takes it: d - l floor(d / l + 1/2).
+fn minimum_image_step(d: f64, l: f64) -> f64 {
+    if l > 0.0 {
+        d - l * (d / l + 0.5).floor()
+    } else {
+        d
+    }
+}
 
 /// Positions of 3-D particles (the walls are planes of constant z).
 fn three_columns(t: &ValueType, _: &[f64]) -> Result<(), String> {

@@ -861,6 +861,18 @@ fn print_profile(stats: &RunStats) {
         "",
         total * 1e3
     );
+    let last: Vec<&str> = stats
+        .profile
+        .iter()
+        .filter(|r| r.last_step_only)
+        .map(|r| r.label.as_str())
+        .collect();
+    if !last.is_empty() {
+        outln!(
+            "  run on the last step only (only outputs read them): {}",
+            last.join(", ")
+        );
+    }
 }
 
 fn validate(registry: &Registry, graphs: &[PathBuf]) -> Result<(), CliError> {
@@ -906,7 +918,7 @@ fn validate_scene(registry: &Registry, path: &Path, s: &CompiledScene) -> Result
         s.species.typeid.len(),
         s.species.names.len(),
         g.nodes.len(),
-        p.step.len()
+        p.launches_every_step()
     ))
 }
 

@@ -711,10 +711,12 @@ pub trait Node: Send + Sync {
     }
 
     /// `Some(output)` when every row of that output is a row of input `port` unchanged or
-    /// a row of zeros (a gather, enabled or not): the checks of the nodes that read the
-    /// output then apply to the data given for the input (`Graph::check_input_data`), so
-    /// that sorting particles does not hide one outside a wall from the node that refuses
-    /// it. Default: none.
+    /// a row of zeros (a gather, enabled or not), or that row with the ids it holds
+    /// renamed one to one (`relabel` through a table its graph declares a permutation: a
+    /// mesh's vertices renumbered with its points): the checks of the nodes that read the
+    /// output (or a state it initialises) then apply to the data given for the input
+    /// (`Graph::check_input_data`), so that sorting particles does not hide one outside a
+    /// wall from the node that refuses it. Default: none.
     fn passes_rows(&self, port: usize) -> Option<usize> {
         let _ = port;
         None

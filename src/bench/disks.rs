@@ -1,14 +1,17 @@
 //! `mesoflow bench disks`: graphs/bd_delaunay.json (S1's Brownian disks with a Delaunay
 //! mesh) per configuration, force range and size: the time of a step end to end (host
 //! clock: the loops decide on the host), split by launch into forces (the all-pairs
-//! node, or the cell list, the neighbour sum and its scatter), the move, flips (the two
-//! flip loops, round trips included) and the overlap correction (its loop), with the
+//! node, or the cell list, the neighbour sum and its scatter), the move (with the
+//! unwrapped positions), flips (the two flip loops, round trips included) and the
+//! overlap correction (its loop; the scatters back into the user's numbering run on a
+//! run's last step only and are listed apart, `outputs`), with the
 //! loops' iterations per step and, for the long-range force, pair interactions per
 //! second (N^2 / the all-pairs launch's time) and GFLOP/s at `LONG_FLOPS` per pair.
 //!
 //! The disks start on the widest jittered triangular lattice in the box
 //! (`presets::lattice_disks`: spacing about 1.07 sigma at packing 0.79; numbered at
-//! random, or in the lattice's order with `--order lattice`) and the
+//! random, or in the lattice's order with `--order lattice`: the graph renumbers them
+//! in its own Morton order in the prologue either way) and the
 //! mesh is built on the host (`periodic_delaunay`, seconds at 2^20 disks).
 
 use std::collections::BTreeMap;
@@ -41,7 +44,9 @@ pub struct DisksBench {
 /// and accumulate 5).
 const LONG_FLOPS: f64 = 18.0;
 
-/// Which part of a step a launch is, by its node's id in bd_delaunay.json.
+/// Which part of a step a launch is, by its node's id in bd_delaunay.json: the scatters
+/// back into the user's numbering (`*_out`) are `outputs`, run on a run's last step only
+/// and left out of the parts.
 fn part(label: &str) -> &'static str {
     let id = label.split([' ', '/', ':', '(']).next().unwrap_or(label);
     match id {
@@ -50,6 +55,7 @@ fn part(label: &str) -> &'static str {
         | "forces" => "forces",
         "flips" | "flip" | "settle" | "reflip" => "flips",
         "fans" | "overlaps" | "correct" => "overlap",
+        _ if id.ends_with("_out") => "outputs",
         _ => "move",
     }
 }
@@ -161,7 +167,7 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
                     }
                 };
                 let mut parts: BTreeMap<&str, Duration> = BTreeMap::new();
-                for t in &run.timings {
+                for t in run.timings.iter().filter(|t| !t.last_step_only) {
                     *parts.entry(part(&t.label)).or_default() += t.median;
                 }
                 let mean = |name: &str| {

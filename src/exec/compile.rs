@@ -302,6 +302,7 @@ impl<'a> Program<'a> {
             kinds: format!("{} (loop of {})", inst.kind, lp.body.len()),
             dispatches: Vec::new(),
             looped: Some(std::sync::Arc::new(lp)),
+            last_only: false,
         })
     }
 

@@ -172,6 +172,9 @@ struct Compiled {
     dispatches: Vec<Dispatch>,
     /// An iterative node with its body (its `dispatches` are then empty).
     looped: Option<std::sync::Arc<CompiledLoop>>,
+    /// Only outputs read what it writes (`Plan::last_step_only`): it runs on the last
+    /// step of a run only.
+    last_only: bool,
 }
 
 struct CompiledLoop {
@@ -216,7 +219,14 @@ impl Compiled {
             kinds,
             dispatches,
             looped: None,
+            last_only: false,
         }
+    }
+
+    /// Whether it runs on a step: every step, or, when only outputs read it, the last
+    /// step of the run.
+    fn runs_on(&self, last_step: bool) -> bool {
+        last_step || !self.last_only
     }
 }
 
@@ -371,21 +381,26 @@ impl<'a> Program<'a> {
         }
         let mut even = Vec::new();
         let mut odd = Vec::new();
-        for l in &plan.step {
-            let c0 = program.compile_checked(&mut cx, l, 0)?;
+        for (i, l) in plan.step.iter().enumerate() {
+            let mut c0 = program.compile_checked(&mut cx, l, 0)?;
+            c0.last_only = plan.last_step_only.contains(&i);
             let touches_state = l
                 .reads()
                 .into_iter()
                 .chain(l.writes())
                 .any(|v| matches!(plan.values[v].storage, Storage::State { .. }));
             let c1 = if touches_state {
-                program.compile_checked(&mut cx, l, 1)?
+                Compiled {
+                    last_only: c0.last_only,
+                    ..program.compile_checked(&mut cx, l, 1)?
+                }
             } else {
                 Compiled {
                     label: c0.label.clone(),
                     kinds: c0.kinds.clone(),
                     dispatches: c0.dispatches.clone(),
                     looped: c0.looped.clone(),
+                    last_only: c0.last_only,
                 }
             };
             even.push(c0);
@@ -777,7 +792,8 @@ impl<'a> Program<'a> {
             .collect()
     }
 
-    /// Number of dispatches recorded per step (the clock tick included).
+    /// Number of dispatches recorded per step (the clock tick included; the launches
+    /// only outputs read, which run on a run's last step only, counted too).
     pub fn dispatches_per_step(&self) -> usize {
         self.step[0]
             .iter()

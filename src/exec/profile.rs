@@ -19,6 +19,9 @@ pub struct ProfileRow {
     pub samples: Vec<Duration>,
     /// With `Profile::Dispatches`: each dispatch's kernel label and its time per call.
     pub dispatch_samples: Vec<(String, Vec<Duration>)>,
+    /// Only outputs read the launch (`Plan::last_step_only`): it ran, and was timed, on
+    /// the last step of the run only.
+    pub last_step_only: bool,
 }
 
 impl ProfileRow {
@@ -35,6 +38,7 @@ impl ProfileRow {
                 .iter()
                 .map(|d| (d.kernel.label.clone(), Vec::new()))
                 .collect(),
+            last_step_only: c.last_only,
         }
     }
 
@@ -100,9 +104,10 @@ impl Program<'_> {
         let timer = use_gpu.then(|| StepTimer::new(self.gpu, self.timed_units(per_dispatch)));
         for s in 0..steps {
             let step = self.steps_done + s;
+            let last = s + 1 == steps;
             let counts = match &timer {
-                Some(timer) => self.profile_step_by_timestamps(timer, step, &mut rows)?,
-                None => self.profile_step_on_host(step, &mut rows)?,
+                Some(timer) => self.profile_step_by_timestamps(timer, step, last, &mut rows)?,
+                None => self.profile_step_on_host(step, last, &mut rows)?,
             };
             self.note_iterations(counts);
         }
@@ -143,15 +148,17 @@ impl Program<'_> {
         for s in 0..steps {
             let step = self.steps_done + s;
             let parity = (step % 2) as usize;
+            let last = s + 1 == steps;
             let Some(qs) = &queries else {
                 let t = Instant::now();
                 let idx = if self.has_loops() {
-                    let (idx, counts) = self.submit_step_with_loops(step)?;
+                    let (idx, counts) = self.submit_step_with_loops(step, last)?;
                     self.note_iterations(counts);
                     idx
                 } else {
                     let dispatches: Vec<&Dispatch> = self.step[parity]
                         .iter()
+                        .filter(|c| c.runs_on(last))
                         .flat_map(|c| &c.dispatches)
                         .chain(std::iter::once(&self.clock_tick))
                         .collect();
@@ -171,7 +178,7 @@ impl Program<'_> {
                         end_of_pass_write_index: Some(1),
                     }),
                 });
-                for c in &self.step[parity] {
+                for c in self.step[parity].iter().filter(|c| c.runs_on(last)) {
                     Self::record(&mut pass, &c.dispatches, step);
                 }
                 Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), step);
@@ -212,11 +219,14 @@ impl Program<'_> {
             .collect()
     }
 
-    /// One step, each unit in a compute pass of its own between two timestamps.
+    /// One step, each unit in a compute pass of its own between two timestamps. A launch
+    /// only outputs read runs on the run's `last` step only: on the others its pass is
+    /// empty and its row gets no sample.
     fn profile_step_by_timestamps(
         &self,
         timer: &StepTimer,
         step: u64,
+        last: bool,
         rows: &mut [ProfileRow],
     ) -> Result<Vec<u32>, ExecError> {
         let parity = (step % 2) as usize;
@@ -245,6 +255,9 @@ impl Program<'_> {
                     end_of_pass_write_index: Some(2 * u as u32 + 1),
                 }),
             });
+            if !c.runs_on(last) {
+                continue;
+            }
             match d {
                 Some(d) => Self::record(&mut pass, std::slice::from_ref(&c.dispatches[d]), step),
                 None => Self::record(&mut pass, &c.dispatches, step),
@@ -267,6 +280,9 @@ impl Program<'_> {
         let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
         let mut per_launch = vec![Duration::ZERO; rows.len()];
         for (u, &(i, d)) in timer.units.iter().enumerate() {
+            if !self.step[parity][i].runs_on(last) {
+                continue;
+            }
             let dt = match host_timed.iter().find(|(h, _)| *h == u) {
                 Some((_, dt)) => *dt,
                 None => Duration::from_nanos(
@@ -278,21 +294,28 @@ impl Program<'_> {
                 rows[i].dispatch_samples[d].1.push(dt);
             }
         }
-        for (row, dt) in rows.iter_mut().zip(per_launch) {
-            row.add(dt);
+        for ((row, dt), c) in rows.iter_mut().zip(per_launch).zip(&self.step[parity]) {
+            if c.runs_on(last) {
+                row.add(dt);
+            }
         }
         Ok(counts)
     }
 
-    /// One step, each launch submitted alone and timed on the host.
+    /// One step, each launch submitted alone and timed on the host (those only outputs
+    /// read on the run's `last` step only).
     fn profile_step_on_host(
         &self,
         step: u64,
+        last: bool,
         rows: &mut [ProfileRow],
     ) -> Result<Vec<u32>, ExecError> {
         let parity = (step % 2) as usize;
         let mut counts = Vec::new();
         for (i, c) in self.step[parity].iter().enumerate() {
+            if !c.runs_on(last) {
+                continue;
+            }
             if let Some(lp) = &c.looped {
                 let (dt, k) = self.time_loop(lp, step)?;
                 counts.push(k);

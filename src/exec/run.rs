@@ -266,16 +266,18 @@ impl Program<'_> {
         }
     }
 
-    /// Submits one step of a program with loops; returns the last submission and the
-    /// iterations of each loop.
+    /// Submits one step of a program with loops (`last`: the run's last step, which runs
+    /// the launches only outputs read); returns the last submission and the iterations of
+    /// each loop.
     pub(super) fn submit_step_with_loops(
         &self,
         step: u64,
+        last: bool,
     ) -> Result<(wgpu::SubmissionIndex, Vec<u32>), ExecError> {
         let parity = (step % 2) as usize;
         let mut pending: Vec<&Dispatch> = Vec::new();
         let mut counts = Vec::new();
-        for c in &self.step[parity] {
+        for c in self.step[parity].iter().filter(|c| c.runs_on(last)) {
             match &c.looped {
                 None => pending.extend(&c.dispatches),
                 Some(lp) => counts.push(self.run_loop(lp, &mut pending, step)?),
@@ -430,7 +432,8 @@ impl Program<'_> {
         if self.has_loops() {
             // Loops decide on the host, so steps go out one at a time.
             while done < opts.steps {
-                let (idx, counts) = self.submit_step_with_loops(self.steps_done + done)?;
+                let last = done + 1 == opts.steps;
+                let (idx, counts) = self.submit_step_with_loops(self.steps_done + done, last)?;
                 self.note_iterations(counts);
                 self.gpu.wait(idx)?;
                 done += 1;
@@ -448,7 +451,8 @@ impl Program<'_> {
                 for s in 0..n {
                     let step = self.steps_done + done + s;
                     let parity = (step % 2) as usize;
-                    for c in &self.step[parity] {
+                    let last = done + s + 1 == opts.steps;
+                    for c in self.step[parity].iter().filter(|c| c.runs_on(last)) {
                         Self::record(&mut pass, &c.dispatches, step);
                     }
                     Self::record(&mut pass, std::slice::from_ref(&self.clock_tick), step);

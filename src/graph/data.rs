@@ -22,7 +22,8 @@ impl Graph {
     /// The node ports (node, input port) that read graph input `input` as given: wired to
     /// it, or reading a state whose initial value it is (the first step reads the data;
     /// later steps read what nodes computed), directly or through nodes that pass its
-    /// rows on unchanged (`Node::passes_rows`: a gather that sorts particles).
+    /// rows on (`Node::passes_rows`: a gather that sorts particles, its output read by
+    /// nodes or the initial value of a state they read).
     pub fn readers_of_input(&self, input: usize) -> Vec<(NodeId, usize)> {
         let direct = |s: &Source| match *s {
             Source::Input(i) => i == input,
@@ -41,7 +42,11 @@ impl Graph {
             let Some(out) = built.node.passes_rows(port) else {
                 continue;
             };
-            let through = |s: &Source| *s == Source::Node { node: n, port: out };
+            let passed = Source::Node { node: n, port: out };
+            let through = |s: &Source| match *s {
+                Source::State(k) => self.states[k].init == passed,
+                other => other == passed,
+            };
             for reader in self.readers_where(through) {
                 if !readers.contains(&reader) {
                     readers.push(reader);

@@ -15,8 +15,8 @@ use crate::value::ValueType;
 #[derive(Clone, Debug)]
 pub struct Validation {
     pub nodes: usize,
-    /// Launches per step: the plan's, or where outputs plan separately, the most any
-    /// of them needs.
+    /// Launches every step runs (`Plan::launches_every_step`): the plan's, or where
+    /// outputs plan separately, the most any of them needs.
     pub launches: usize,
     /// Outputs that plan only without the optional inputs, or not at all, with the
     /// default params (each with the problems met).
@@ -77,7 +77,7 @@ pub fn validate_file(registry: &Registry, path: &Path) -> Result<Validation, Pro
         (Ok(p), Ok(q)) => {
             return Ok(Validation {
                 nodes: g.nodes.len(),
-                launches: p.step.len().max(q.step.len()),
+                launches: p.launches_every_step().max(q.launches_every_step()),
                 notes: Vec::new(),
             });
         }
@@ -91,9 +91,9 @@ pub fn validate_file(registry: &Registry, path: &Path) -> Result<Validation, Pro
         match plan_with(&required, only.clone()) {
             Ok(p) => {
                 planned += 1;
-                launches = launches.max(p.step.len());
+                launches = launches.max(p.launches_every_step());
                 match plan_with(&all, only) {
-                    Ok(q) => launches = launches.max(q.step.len()),
+                    Ok(q) => launches = launches.max(q.launches_every_step()),
                     Err(e_all) => notes.push(format!(
                         "output `{}` plans without the optional inputs only (with the defaults):\n{e_all}",
                         out.name

@@ -69,6 +69,7 @@ pub(super) fn lower(
     let mut step = lw.phase(Phase::Step, &schedule.step, &schedule.loops);
     let states = lw.state_plumbing(&state_slot, &mut prologue, &mut step);
     let outputs = lw.final_outputs(&request.outputs, &state_slot);
+    let last_step_only = only_for_outputs(&step, &lw.values);
     Plan {
         caps: caps.clone(),
         values: lw.values,
@@ -77,12 +78,48 @@ pub(super) fn lower(
         states,
         prologue,
         step,
+        last_step_only,
         outputs,
         memory: MemoryReport::default(),
         pruned: schedule.pruned.clone(),
         forwarded: Vec::new(),
         in_place: Vec::new(),
     }
+}
+
+/// The step launches (indices into `step`) whose values only the requested outputs read:
+/// nothing a later step sees depends on them (no state's next value, no persistent value,
+/// no loop and nothing a kept launch reads), so the executor runs them on the last step
+/// of each run only (an output is the value of the last step). Found backwards from the
+/// launches every step needs: loops (their host decisions and halts), state copies,
+/// launches writing a state's next value or a persistent value, and whatever those read.
+/// A plan that carries nothing from a step to the next (no state, no persistent value)
+/// keeps every launch in every step: its steps repeat one computation (a mobility timed
+/// by a benchmark), each step the whole of it.
+fn only_for_outputs(step: &[Launch], values: &IdVec<ValueId, PlanValue>) -> BTreeSet<usize> {
+    let carried = |v: &PlanValue| {
+        matches!(
+            v.storage,
+            Storage::State { .. } | Storage::Pending(BufferRole::Persistent)
+        )
+    };
+    if !values.iter().any(carried) {
+        return BTreeSet::new();
+    }
+    let mut needed: BTreeSet<ValueId> = BTreeSet::new();
+    let mut only = BTreeSet::new();
+    for (i, l) in step.iter().enumerate().rev() {
+        let kept = matches!(l, Launch::Loop { .. } | Launch::Copy { .. })
+            || l.writes()
+                .iter()
+                .any(|v| needed.contains(v) || carried(&values[*v]));
+        if kept {
+            needed.extend(l.reads());
+        } else {
+            only.insert(i);
+        }
+    }
+    only
 }
 
 /// What loop bodies read from outside them, and the results loops read back: both must
@@ -422,7 +459,9 @@ impl Lowerer<'_> {
     }
 
     /// Initial values are copied into the states before the first step; next values not
-    /// written in place are copied at the end of each step.
+    /// written in place are copied at the end of each step. A state whose next value is
+    /// itself (`"next": "state.NAME"`: a value kept unchanged, a permutation taken once)
+    /// gets its initial value in both of its buffers and no copy in the steps.
     fn state_plumbing(
         &mut self,
         state_slot: &BTreeMap<usize, usize>,
@@ -449,7 +488,21 @@ impl Lowerer<'_> {
                 dst: slot0,
             });
             let current = self.get(Source::State(s), Phase::Step);
-            if self.next_claimed.get(&def.next) != Some(&k) {
+            if def.next == Source::State(s) {
+                let slot1 = self.push(
+                    format!("state.{} (initial, both buffers)", def.name),
+                    ty,
+                    Phase::Prologue,
+                    Storage::State {
+                        state: k,
+                        next: true,
+                    },
+                );
+                prologue.push(Launch::Copy {
+                    src: init,
+                    dst: slot1,
+                });
+            } else if self.next_claimed.get(&def.next) != Some(&k) {
                 let src = self.get(def.next, Phase::Step);
                 let dst = self.push(
                     format!("state.{} (next)", def.name),

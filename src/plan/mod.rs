@@ -240,6 +240,12 @@ pub struct Plan {
     pub states: Vec<StatePlan>,
     pub prologue: Vec<Launch>,
     pub step: Vec<Launch>,
+    /// Step launches (indices into `step`) whose values only the requested outputs read
+    /// (a scatter back into the input's order, a relabelled mesh): the executor runs them
+    /// on the last step of each run only, the other steps skip them. Empty where nothing
+    /// is carried from a step to the next (no state, no persistent value): every step
+    /// is then the whole computation.
+    pub last_step_only: BTreeSet<usize>,
     /// Requested outputs and the value each reads after the last step.
     pub outputs: Vec<(String, ValueId)>,
     pub memory: MemoryReport,
@@ -253,6 +259,12 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// Step launches that run on every step (those only outputs read run on the last
+    /// step of a run only: `last_step_only`).
+    pub fn launches_every_step(&self) -> usize {
+        self.step.len() - self.last_step_only.len()
+    }
+
     pub fn launches(&self) -> impl Iterator<Item = (Phase, &Launch)> {
         self.prologue
             .iter()

@@ -251,7 +251,20 @@ pub fn to_text(g: &Graph, plan: &Plan) -> String {
     writeln!(out, "prologue (once, before the first step)").unwrap();
     launch_lines(&mut out, g, plan, &plan.prologue);
     writeln!(out, "step (every time step)").unwrap();
-    launch_lines(&mut out, g, plan, &plan.step);
+    for (i, l) in plan.step.iter().enumerate() {
+        let mut text = String::new();
+        launch_text(&mut text, g, plan, i, l);
+        for (k, line) in text.lines().enumerate() {
+            writeln!(out, "{line}").unwrap();
+            if k == 0 && plan.last_step_only.contains(&i) {
+                writeln!(
+                    out,
+                    "         note   on the last step of a run only: only outputs read it"
+                )
+                .unwrap();
+            }
+        }
+    }
     writeln!(out, "outputs (after the last step)").unwrap();
     for (name, v) in &plan.outputs {
         writeln!(out, "  {name} <- {}", value(plan, *v)).unwrap();
@@ -310,8 +323,14 @@ pub fn to_text(g: &Graph, plan: &Plan) -> String {
         human_bytes(m.persistent)
     )
     .unwrap();
-    let dispatches = plan.step.len();
-    writeln!(out, "        {dispatches} launches per step; node tables and constants are allocated when the plan is compiled").unwrap();
+    let every = plan.launches_every_step();
+    let last = plan.last_step_only.len();
+    let last_note = if last == 0 {
+        String::new()
+    } else {
+        format!(" (and {last} on the last step of a run only)")
+    };
+    writeln!(out, "        {every} launches per step{last_note}; node tables and constants are allocated when the plan is compiled").unwrap();
     out
 }
 

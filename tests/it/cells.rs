@@ -1,8 +1,11 @@
-//! Gather, scatter, histograms and cell hashing against their references.
+//! Gather, scatter, histograms and cell hashing against their references; a
+//! permutation's inverse and ids relabelled through a table (a mesh following its points
+//! into a new order and back).
 
+use mesoflow::nodes::disks::mesh::{MESH_WORDS, check_torus_mesh, periodic_delaunay};
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::{Rng, gpu, indices, run_out, validation_error};
+use crate::util::{Rng, gpu, indices, random_points, run_out, u32s, validation_error};
 
 fn permutation(rng: &mut Rng, n: u32) -> Vec<u32> {
     let mut p: Vec<u32> = (0..n).collect();
@@ -231,4 +234,165 @@ fn scatter_by_a_permutation_must_fill_its_output() {
         e.contains("with `permutation` the index must place every row"),
         "{e}"
     );
+}
+
+/// `invert_permutation` against its reference: out[perm[i]] = i for permutations of every
+/// size (one past a workgroup's reach too); with indices that are no permutation, those
+/// past the end are skipped and entries nothing points at hold u32::MAX.
+#[test]
+fn invert_permutation_inverts_a_sort_perm() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(61);
+    for n in [0u32, 1, 7, 1000, 70_001] {
+        let perm = permutation(&mut rng, n);
+        let (g, r) = run_out("invert_permutation", "{}", &[("index", indices(&perm))]);
+        let g = u32s(&g);
+        assert_eq!(
+            g.iter().map(|&v| v as f64).collect::<Vec<_>>(),
+            r.data,
+            "{n}"
+        );
+        for (i, &p) in perm.iter().enumerate() {
+            assert_eq!(g[p as usize], i as u32, "{n}: perm[{i}] = {p}");
+        }
+    }
+    let (g, r) = run_out(
+        "invert_permutation",
+        "{}",
+        &[("index", indices(&[2, 9, u32::MAX, 0]))],
+    );
+    assert_eq!(
+        u32s(&g).iter().map(|&v| v as f64).collect::<Vec<_>>(),
+        r.data
+    );
+    assert_eq!(u32s(&g), vec![3, u32::MAX, 0, u32::MAX]);
+}
+
+/// `relabel` against its reference, word for word: the ids in the chosen columns of each
+/// row renamed through the table, ids past the table (a u32::MAX sentinel, ids one past)
+/// and the other columns kept; every column layout of the params.
+#[test]
+fn relabel_renames_the_ids_of_the_chosen_columns() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(67);
+    for (rows, stride, params) in [
+        (0u32, 1u32, "{}"),
+        (1000, 1, "{}"),
+        (500, 6, r#"{"stride": 6, "count": 3}"#),
+        (333, 4, r#"{"stride": 4, "first": 1, "count": 2}"#),
+        (333, 4, r#"{"stride": 4, "first": 2}"#),
+        (70_001, 1, r#"{"permutation": true}"#),
+    ] {
+        let n = 1 + rows / 2;
+        let words: Vec<u32> = (0..rows * stride)
+            .map(|_| match rng.next_u64() % 8 {
+                0 => u32::MAX,
+                1 => n + (rng.next_u64() % 3) as u32,
+                _ => (rng.next_u64() % n as u64) as u32,
+            })
+            .collect();
+        let table: Vec<u32> = (0..n).map(|_| rng.next_u64() as u32).collect();
+        let (g, r) = run_out(
+            "relabel",
+            params,
+            &[("x", indices(&words)), ("table", indices(&table))],
+        );
+        let g = u32s(&g);
+        assert_eq!(
+            g.iter().map(|&v| v as f64).collect::<Vec<_>>(),
+            r.data,
+            "{rows} rows of {stride} words, {params}"
+        );
+        if params == r#"{"stride": 6, "count": 3}"# {
+            for (w, (&got, &was)) in g.iter().zip(&words).enumerate() {
+                let want = if w % 6 < 3 && was < n {
+                    table[was as usize]
+                } else {
+                    was
+                };
+                assert_eq!(got, want, "word {w}");
+            }
+        }
+    }
+}
+
+/// A mesh follows its points into a new order: the points gathered by a permutation
+/// (a sort's perm) and the mesh's vertex ids relabelled through its inverse
+/// (invert_permutation) make a valid mesh of the reordered points with the same
+/// triangles in the same slots, and relabelled back through the permutation it is the
+/// mesh given, word for word.
+#[test]
+fn a_mesh_relabelled_through_a_permutation_and_back_is_the_same_mesh() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = Rng::new(71);
+    let (n, l) = (500u32, [24.0, 24.0]);
+    let x = random_points(&mut rng, n as usize, &l);
+    let mesh = periodic_delaunay(&x, l).unwrap();
+    let perm = permutation(&mut rng, n);
+    let (inverse, _) = run_out("invert_permutation", "{}", &[("index", indices(&perm))]);
+    let params = r#"{"stride": 6, "count": 3, "permutation": true}"#;
+    let (inside, _) = run_out(
+        "relabel",
+        params,
+        &[("x", indices(&mesh)), ("table", inverse)],
+    );
+    let inside = u32s(&inside);
+    let gathered: Vec<f64> = perm
+        .iter()
+        .flat_map(|&p| [x[2 * p as usize], x[2 * p as usize + 1]])
+        .collect();
+    let stats = check_torus_mesh(&inside, &gathered, l).unwrap();
+    assert_eq!(stats.inverted, 0);
+    for (t, (a, b)) in inside
+        .chunks(MESH_WORDS)
+        .zip(mesh.chunks(MESH_WORDS))
+        .enumerate()
+    {
+        assert_eq!(&a[3..], &b[3..], "triangle {t}: the twin slots");
+        for k in 0..3 {
+            assert_eq!(perm[a[k] as usize], b[k], "triangle {t}, vertex {k}");
+        }
+    }
+    let (back, _) = run_out(
+        "relabel",
+        params,
+        &[("x", indices(&inside)), ("table", indices(&perm))],
+    );
+    assert_eq!(u32s(&back), mesh);
+}
+
+/// `relabel` names what its params and input cannot do.
+#[test]
+fn relabel_params_are_checked() {
+    let words = |n| ValueType::Indices { n };
+    let e = validation_error(
+        "relabel",
+        r#"{"stride": 6}"#,
+        &[("x", words(10)), ("table", words(4))],
+    );
+    assert!(
+        e.contains("has 10 words, not a whole number of rows"),
+        "{e}"
+    );
+    let e = validation_error(
+        "relabel",
+        r#"{"stride": 4, "first": 3, "count": 2}"#,
+        &[("x", words(8)), ("table", words(4))],
+    );
+    assert!(
+        e.contains("columns 3 to 4 do not fit a row of 4 words"),
+        "{e}"
+    );
+    let e = validation_error(
+        "relabel",
+        r#"{"stride": 4, "first": 4}"#,
+        &[("x", words(8)), ("table", words(4))],
+    );
+    assert!(e.contains("`first` 4 must be below `stride` 4"), "{e}");
 }

@@ -62,6 +62,25 @@ fn pointwise_kinds_match_their_references() {
             &[("x", P(5, 3)), ("y", P(5, 3))],
         ),
         ("affine", r#"{"scale": 3, "offset": -1}"#, &[("x", P(7, 2))]),
+        // Steps of up to 1.5 in boxes of 1 and 1.2: wrapped, and an open axis.
+        (
+            "unwrap",
+            r#"{"box": [1.0, 1.2]}"#,
+            &[
+                ("unwrapped", P(300, 2)),
+                ("before", P(300, 2)),
+                ("after", P(300, 2)),
+            ],
+        ),
+        (
+            "unwrap",
+            r#"{"box": [0.9, 0, 1.1]}"#,
+            &[
+                ("unwrapped", P(300, 3)),
+                ("before", P(300, 3)),
+                ("after", P(300, 3)),
+            ],
+        ),
         (
             "scale_components",
             r#"{"factors": [1, -2, 0.5]}"#,

@@ -811,3 +811,85 @@ fn disabled_nodes_are_left_out_with_the_reason() {
     assert!(err.contains("`enabled` must be true or false"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A state whose next value is itself (`"next": "state.k"`: a value kept unchanged) costs
+/// no copy in the steps: the prologue writes its initial value into both of its buffers.
+#[test]
+fn a_state_kept_unchanged_is_copied_once_into_both_buffers() {
+    let (_, p) = plan_file(&root().join("graphs/fixtures/kept_state.json"), None, true);
+    assert!(p.step.iter().all(|l| !matches!(l, Launch::Copy { .. })));
+    let k = p.states.iter().position(|s| s.name == "k").unwrap();
+    let written: Vec<Storage> = p
+        .prologue
+        .iter()
+        .filter_map(|l| match l {
+            Launch::Copy { dst, .. } => Some(p.values[*dst].storage),
+            _ => None,
+        })
+        .collect();
+    for next in [false, true] {
+        assert!(
+            written.contains(&Storage::State { state: k, next }),
+            "{written:?}"
+        );
+    }
+}
+
+/// The ids of the nodes of the step launches the plan runs on a run's last step only.
+fn last_step_only(g: &mesoflow::graph::Graph, p: &Plan) -> Vec<String> {
+    p.last_step_only
+        .iter()
+        .flat_map(|&i| p.step[i].nodes())
+        .map(|n| g.nodes[n].id.clone())
+        .collect()
+}
+
+/// Launches whose values only outputs read run on a run's last step only
+/// (`Plan::last_step_only`): a scatter of the next state and a node reading only it; the
+/// move (it writes the state), a record (a persistent output, fed through the scatter it
+/// then needs every step) and an element-wise output fused with the move run every step;
+/// in a graph without state, everything runs every step.
+#[test]
+fn launches_only_outputs_read_run_on_the_last_step_only() {
+    let dir = tmpdir("plan-last-step");
+    let graph = |record: bool| {
+        format!(
+            r#"{{"mesoflow": 1,
+ "inputs": {{"x": {{"type": "particles", "rows": 8, "cols": 2}}, "index": {{"type": "indices", "rows": 8}}}},
+ "state": {{"s": {{"init": "inputs.x", "next": "move.out"}}}},
+ "nodes": [
+   {{"id": "move", "kind": "affine", "params": {{"offset": 1}}, "inputs": {{"x": "state.s"}}}},
+   {{"id": "tripled", "kind": "scale", "params": {{"factor": 3}}, "inputs": {{"x": "move.out"}}}},
+   {{"id": "back", "kind": "scatter", "inputs": {{"values": "move.out", "index": "inputs.index"}}}},
+   {{"id": "twice", "kind": "scale", "params": {{"factor": 2}}, "inputs": {{"x": "back.out"}}}},
+   {{"id": "rec", "kind": "record", "enabled": {record}, "params": {{"frames": 4}}, "inputs": {{"x": "back.out"}}}}
+ ],
+ "outputs": {{"s": "state.s", "tripled": "tripled.out", "twice": "twice.out", "frames": "rec.out"}}}}"#
+        )
+    };
+    let path = write_graph(&dir, "last.json", &graph(false));
+    let (g, p) = plan_file(&path, Some(&["s", "tripled", "twice"]), false);
+    assert_eq!(last_step_only(&g, &p), ["tripled", "back", "twice"]);
+    assert_eq!(p.launches_every_step(), 1);
+    let text = plan::to_text(&g, &p);
+    assert!(
+        text.contains("on the last step of a run only: only outputs read it")
+            && text.contains("1 launches per step (and 3 on the last step of a run only)"),
+        "{text}"
+    );
+    // Fused with the move, the tripled output is written every step.
+    let (g, p) = plan_file(&path, Some(&["s", "tripled", "twice"]), true);
+    assert_eq!(last_step_only(&g, &p), ["back", "twice"]);
+    // Only the state asked for: nothing is for outputs alone.
+    let (_, p) = plan_file(&path, Some(&["s"]), false);
+    assert!(p.last_step_only.is_empty());
+    // A record keeps the scatter it reads in every step; the scale after it is still for
+    // the output alone.
+    let path = write_graph(&dir, "recorded.json", &graph(true));
+    let (g, p) = plan_file(&path, None, false);
+    assert_eq!(last_step_only(&g, &p), ["tripled", "twice"]);
+    // A graph that carries nothing from a step to the next (a mobility timed over many
+    // steps) runs everything every step, though only outputs read it.
+    let (_, p) = plan_file(&root().join("graphs/fixtures/branches.json"), None, false);
+    assert!(!p.step.is_empty() && p.last_step_only.is_empty());
+}

@@ -1,12 +1,16 @@
 //! Graphs run end to end on the GPU: closed forms, fusion equivalence, in-place outputs
-//! against copies, states across steps, subgraphs, the shipped examples.
+//! against copies, states across steps (one kept unchanged), launches only outputs read
+//! run on a run's last step only, subgraphs, the shipped examples.
 
 use std::collections::BTreeMap;
 
+use mesoflow::exec::{Profile, Program, RunOptions};
+use mesoflow::gpu::KernelCache;
+use mesoflow::graph::{self, LoadOptions};
 use mesoflow::plan::PlanOptions;
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::probe::{Launches, probe_registry};
+use crate::util::probe::{Launches, countdown_registry, probe_registry};
 use crate::util::{
     Rng, compile_cached, f32s, gpu, load, named, particles, plan_graph, root, run_graph,
     run_program, tmpdir, types_of, write_graph,
@@ -587,4 +591,95 @@ fn in_place_outputs_give_the_results_of_copies() {
     let f: Vec<f32> = x.iter().map(|r| (2.0 * r[0] - 2.0) as f32).collect();
     assert_eq!(results[0], (d.clone(), f.clone()), "in place");
     assert_eq!(results[1], (d, f), "copied");
+}
+
+/// A state kept unchanged (`"next": "state.k"`, no copy in the steps) holds its initial
+/// value through even and odd steps: y = x + 2 s x, k = 2 x.
+#[test]
+fn a_state_kept_unchanged_holds_its_value() {
+    let Some(gpu) = gpu() else { return };
+    let g = load(&root().join("graphs/fixtures/kept_state.json"));
+    let x = Rng::new(8).array(ValueType::Particles { n: 8, k: 2 }, -1.0, 1.0);
+    for steps in [1u64, 2, 5] {
+        let out = run_graph(&gpu, &g, &named(&[("x", x.clone())]), None, steps, true);
+        for ((y, k), x) in f32s(&out["y"]).iter().zip(f32s(&out["k"])).zip(f32s(&x)) {
+            assert_eq!(k, 2.0 * x, "{steps} steps");
+            let want = x as f64 * (1.0 + 2.0 * steps as f64);
+            assert!(
+                (*y as f64 - want).abs() < 1e-5,
+                "{steps} steps: {y} vs {want}"
+            );
+        }
+    }
+}
+
+/// A launch only outputs read (`Plan::last_step_only`: the probe on the next state, an
+/// output) runs on the last step of each run only, and the output is the last step's:
+/// under every profile, over `run_on` calls and `run_on_and_read` chunks; the same probe
+/// feeding the state runs every step.
+#[test]
+fn launches_only_outputs_read_run_on_the_last_step_of_each_run() {
+    let Some(gpu) = gpu() else { return };
+    let (reg, launches) = countdown_registry();
+    let dir = tmpdir("last_step_only");
+    let graph = |next: &str| {
+        format!(
+            r#"{{"mesoflow": 1,
+ "inputs": {{"x": {{"type": "particles", "rows": 1, "cols": 1}}}},
+ "state": {{"s": {{"init": "inputs.x", "next": "{next}"}}}},
+ "nodes": [
+   {{"id": "move", "kind": "affine", "params": {{"offset": 2}}, "inputs": {{"x": "state.s"}}}},
+   {{"id": "probe", "kind": "countdown", "inputs": {{"x": "move.out"}}}}
+ ],
+ "outputs": {{"y": "probe.out", "s": "state.s"}}}}"#
+        )
+    };
+    let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&[[10.0]]))].into();
+    let run = |json: &str, runs: &[(u64, Profile, bool)]| -> (Vec<f32>, u32) {
+        let path = write_graph(&dir, "g.json", json);
+        let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+        let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
+        launches.clear();
+        let mut cache = KernelCache::default();
+        let mut program = Program::compile(&gpu, &g, &p, &mut cache).unwrap();
+        program.upload(&inputs).unwrap();
+        let mut ys = Vec::new();
+        for &(steps, profile, and_read) in runs {
+            let opts = RunOptions {
+                steps,
+                profile,
+                progress: false,
+            };
+            let out: BTreeMap<String, HostArray> = if and_read {
+                let (_, out) = program.run_on_and_read(&opts).unwrap();
+                out.into_iter().collect()
+            } else {
+                program.run_on(&opts).unwrap();
+                program.read_outputs().unwrap().into_iter().collect()
+            };
+            ys.push(f32s(&out["y"])[0]);
+        }
+        (ys, launches.total(&gpu))
+    };
+    let runs = [
+        (5, Profile::Off, false),
+        (2, Profile::Launches, false),
+        (3, Profile::Steps, false),
+        (1, Profile::Dispatches, false),
+        (4, Profile::Off, true),
+    ];
+    // The probe reads the next state: after k steps in all, s = 10 + 2 k and y = s - 1.
+    let (ys, ran) = run(&graph("move.out"), &runs);
+    assert_eq!(ys, [19.0, 23.0, 29.0, 31.0, 39.0]);
+    assert_eq!(
+        ran,
+        runs.len() as u32,
+        "the probe ran {ran} times in {} runs",
+        runs.len()
+    );
+    // The probe's output is the next state: it runs every step; s = 10 + k = y.
+    let (ys, ran) = run(&graph("probe.out"), &runs);
+    assert_eq!(ys, [15.0, 17.0, 20.0, 21.0, 25.0]);
+    assert_eq!(ran, 15);
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -6,6 +6,7 @@ mod flip;
 mod forces;
 mod graph;
 mod loops;
+mod order;
 mod overlap;
 mod short_range;
 mod start;

@@ -181,3 +181,9 @@ pub fn probe_registry(launches: &Launches) -> Registry {
     reg.add(countdown_kind(true, launches));
     reg
 }
+
+/// [`probe_registry`] with counters of its own.
+pub fn countdown_registry() -> (Registry, Launches) {
+    let launches = Launches::default();
+    (probe_registry(&launches), launches)
+}
