@@ -7,14 +7,19 @@
 //!
 //! The loop body is every node that depends on the `current` output and leads to the
 //! `next` and `count` inputs (`Lowering::Iterative`, as `lanczos`); it may read values
-//! from outside (the flips read the positions). Per iteration the GPU copies `next` to
-//! `current` (unless the plan gave them one buffer: a body node that writes `next` in
-//! place of `current`, `PortSpec::refilled_from`, as the flip loops' `edge_flip_round`)
-//! and tallies the count (`shaders/repeat/repeat.wgsl`), and decides the stop
-//! itself (a zero count, or `max_iterations` reached): the executor runs batches of
-//! iterations and reads the status once per batch (one host round trip for a loop that
-//! takes as many iterations as at its last run, see `exec/run.rs`); the iterations of a
-//! batch past the stop change nothing.
+//! from outside (the flips read the positions). The GPU copies `initial` to `current` at
+//! the start and `current` to `out` at the finish, and per iteration `next` to `current`,
+//! each unless the plan gave the two one buffer: a pooled `initial` nothing reads after
+//! the loop starts (`PortSpec::started_from`: settle's mesh, flips.out, in
+//! bd_delaunay.json), a `current` nothing reads after the loop (`PortSpec::final_of`,
+//! `out` then where `current` lies, or `current` where `out` has a buffer of its own, a
+//! state's next value), a body node that writes `next` in place of `current`
+//! (`PortSpec::refilled_from`, as the flip loops' `edge_flip_round`). It tallies the
+//! count (`shaders/repeat/repeat.wgsl`), and decides the stop itself (a zero count, or
+//! `max_iterations` reached): the executor runs batches of iterations and reads the
+//! status once per batch (one host round trip for a loop that takes as many iterations
+//! as at its last run, see `exec/run.rs`); the iterations of a batch past the stop
+//! change nothing.
 //! A `fixed` count is known when the program is compiled (`fixed_iterations`): the
 //! iterations are recorded one after the other within the step, no status read, and the
 //! steps batch as in a loop-free program. The body sees the same step counter in every
@@ -63,11 +68,15 @@ fn repeat_kind() -> NodeKind {
         )
         .optional(),
     )
-    .output(PortSpec::new(
-        "out",
-        PortType::RealOrIndices,
-        "the value after the last iteration",
-    ))
+    .output(
+        PortSpec::new(
+            "out",
+            PortType::RealOrIndices,
+            "the value after the last iteration",
+        )
+        // `finish` sets it from `current`, and nothing else writes it.
+        .final_of("current"),
+    )
     .output(
         PortSpec::new(
             "current",
@@ -77,7 +86,9 @@ fn repeat_kind() -> NodeKind {
         .iterate()
         // `advance` sets it from `next` after every body run and `finish` reads it after
         // the last; the gate keeps the body from running past the stop.
-        .refilled_from("next"),
+        .refilled_from("next")
+        // `start` sets it from `initial`, which the node reads nowhere else.
+        .started_from("initial"),
     )
     .output(PortSpec::new(
         "iterations",
@@ -217,25 +228,33 @@ impl GpuIterative for Repeat {
         io: &NodeIo<'_>,
     ) -> Result<IterativeKernels, CompileError> {
         let initial = io.inputs[0].expect("required");
-        // The body's last node may write `next` in place of `current` (the plan gave both
-        // one buffer): then the value is already where `advance` would copy it. wgpu
-        // refuses a buffer bound read-only and read-write in one dispatch, so `initial`
-        // stands in for `next`'s binding, unread, and `advance` is not dispatched.
+        // The plan may give `current` (output 1) the buffer of `initial` (the loop starts
+        // where its value lies: `start` copies nothing), of `next` (the body's last node
+        // writes it in place: `advance` is not dispatched) and of `out` (output 0: the
+        // loop ends where its value lies, `finish` copies nothing). wgpu refuses a
+        // buffer bound read-only and read-write in one dispatch, so a stand-in, unread,
+        // takes the read-only binding of a buffer bound as `current`, and another,
+        // unwritten, `out`'s binding where it is `current`'s buffer.
+        let start_in_place = io.in_place(1, 0);
         let in_place = io.in_place(1, 1);
-        let next = if in_place {
-            initial
-        } else {
-            io.inputs[1].expect("the planner connects the loop")
-        };
-        // Without a count (a fixed loop) the tally reads none: any read-only buffer
-        // stands in for its binding.
+        let finish_in_place = io.same_output(0, 1);
+        let stand_in = cx.table("repeat stand-in", &[0; 16]);
+        let out_stand_in = cx.table("repeat out stand-in", &[0; 16]);
+        let current = io.outputs[1].buffer;
+        let next = unless_current(
+            io.inputs[1].expect("the planner connects the loop").buffer,
+            current,
+            &stand_in,
+        );
+        // Without a count (a fixed loop) the tally reads none: a stand-in takes its
+        // binding.
         let (count, counted) = match io.inputs[2] {
             Some(c) => (c.buffer, 1u32),
-            None => (initial.buffer, 0),
+            None => (&stand_in, 0),
         };
         let (halt, halts) = match io.inputs[3] {
             Some(h) => (h.buffer, 1u32),
-            None => (initial.buffer, 0),
+            None => (&stand_in, 0),
         };
         let words = initial.ty.words();
         let params = cx.uniform(
@@ -247,17 +266,21 @@ impl GpuIterative for Repeat {
                 halts,
                 self.max_iterations,
                 self.stop_word,
-                0,
-                0,
+                u32::from(!start_in_place),
+                u32::from(!finish_in_place),
             ]),
         );
         let status = io.scratch[0];
         let buffers = [
-            initial.buffer,
-            next.buffer,
+            unless_current(initial.buffer, current, &stand_in),
+            next,
             count,
             io.outputs[1].buffer,
-            io.outputs[0].buffer,
+            if finish_in_place {
+                &out_stand_in
+            } else {
+                io.outputs[0].buffer
+            },
             io.outputs[2].buffer,
             io.outputs[3].buffer,
             status,
@@ -270,6 +293,16 @@ impl GpuIterative for Repeat {
         bindings.push(Binding::StorageRead);
         let source = cx.shader("repeat/repeat.wgsl")?;
         let groups = cx.grid_1d(words.max(STATUS_WORDS), WG_1D);
+        // `start` and `finish` copy nothing where in place: their status and count words
+        // take one workgroup.
+        let copying = |copies: bool| {
+            if copies {
+                groups
+            } else {
+                cx.grid_1d(STATUS_WORDS, WG_1D)
+            }
+        };
+        let (start_groups, finish_groups) = (copying(!start_in_place), copying(!finish_in_place));
         let mut dispatch = |entry: &str, groups: [u32; 3]| -> Result<_, CompileError> {
             let k = cx.kernel(
                 &KernelSpec::new(format!("repeat {entry}"), source.clone(), &bindings).entry(entry),
@@ -277,13 +310,13 @@ impl GpuIterative for Repeat {
             Ok(cx.dispatch(&k, &buffers, groups))
         };
         Ok(IterativeKernels {
-            start: vec![dispatch("start", groups)?],
+            start: vec![dispatch("start", start_groups)?],
             iterate: if in_place {
                 vec![dispatch("tally", [1, 1, 1])?]
             } else {
                 vec![dispatch("advance", groups)?, dispatch("tally", [1, 1, 1])?]
             },
-            finish: vec![dispatch("finish", groups)?],
+            finish: vec![dispatch("finish", finish_groups)?],
             status: status.clone(),
             status_bytes: 4 * STATUS_WORDS,
             answer: status.clone(),
@@ -326,6 +359,16 @@ impl GpuIterative for Repeat {
         }
         Ok(Decision::Finish(Vec::new()))
     }
+}
+
+/// `buffer` for a read-only binding, or `stand_in` where it is `current`'s (bound
+/// read-write in the same dispatches).
+fn unless_current<'a>(
+    buffer: &'a wgpu::Buffer,
+    current: &wgpu::Buffer,
+    stand_in: &'a wgpu::Buffer,
+) -> &'a wgpu::Buffer {
+    if buffer == current { stand_in } else { buffer }
 }
 
 pub fn register(r: &mut Registry) {

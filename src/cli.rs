@@ -1037,6 +1037,16 @@ fn nodes(registry: &Registry, only: Option<&str>) -> Result<(), CliError> {
             if let Some(i) = p.refilled_from {
                 marks.push_str(&format!(" (refilled from {i}: the body may overwrite it)"));
             }
+            if let Some(i) = p.started_from {
+                marks.push_str(&format!(
+                    " (started from {i}: in its buffer where the plan can)"
+                ));
+            }
+            if let Some(c) = p.final_of {
+                marks.push_str(&format!(
+                    " (final value of {c}: in its buffer where the plan can)"
+                ));
+            }
             outln!("  out  {:<14} {}{marks} - {}", p.name, p.ty, p.doc);
         }
         for p in k.params() {

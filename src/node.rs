@@ -49,6 +49,20 @@ pub struct PortSpec {
     /// `current`), the two share a buffer and the node skips the refill, binding the
     /// buffer once ([`NodeIo::in_place`]).
     pub refilled_from: Option<&'static str>,
+    /// Iterate outputs only: the node's `start` kernels set this output from the named
+    /// plain input, which the node reads nowhere else (`repeat`'s `current`, from
+    /// `initial`). The planner gives the output the input's buffer where that input is
+    /// a pooled value nothing reads after the loop starts (not the body, not a later
+    /// launch: `plan/memory.rs`); the node, seeing the two buffers equal
+    /// ([`NodeIo::in_place`]), skips the copy and binds the buffer once.
+    pub started_from: Option<&'static str>,
+    /// Plain outputs only: the node's `finish` kernels set this output from the named
+    /// iterate output, its value after the last iteration, and nothing else writes it
+    /// (`repeat`'s `out`, from `current`). The planner gives the two one buffer where
+    /// nothing reads the iterate output after the loop (the output's own where it has
+    /// one: a state's next buffer, a requested output's); the node, seeing the buffers
+    /// equal ([`NodeIo::same_output`]), skips the copy.
+    pub final_of: Option<&'static str>,
 }
 
 impl PortSpec {
@@ -62,6 +76,8 @@ impl PortSpec {
             iterate: false,
             in_place_of: None,
             refilled_from: None,
+            started_from: None,
+            final_of: None,
         }
     }
 
@@ -91,6 +107,20 @@ impl PortSpec {
     /// of the body (see [`PortSpec::refilled_from`](PortSpec#structfield.refilled_from)).
     pub const fn refilled_from(mut self, input: &'static str) -> Self {
         self.refilled_from = Some(input);
+        self
+    }
+
+    /// An iterate output the node sets from its plain input `input` at the loop's start
+    /// (see [`PortSpec::started_from`](PortSpec#structfield.started_from)).
+    pub const fn started_from(mut self, input: &'static str) -> Self {
+        self.started_from = Some(input);
+        self
+    }
+
+    /// An output the node sets from its iterate output `output` after the last
+    /// iteration (see [`PortSpec::final_of`](PortSpec#structfield.final_of)).
+    pub const fn final_of(mut self, output: &'static str) -> Self {
+        self.final_of = Some(output);
         self
     }
 }
@@ -881,6 +911,24 @@ impl KindDecl {
                 assert!(
                     named(i, true) && o.iterate,
                     "kind `{}`: output `{}` refilled from `{i}`, not an iterate input of it",
+                    self.name,
+                    o.name
+                );
+            }
+            if let Some(i) = o.started_from {
+                assert!(
+                    named(i, false) && o.iterate,
+                    "kind `{}`: output `{}` started from `{i}`, not a plain input of it",
+                    self.name,
+                    o.name
+                );
+            }
+            if let Some(c) = o.final_of {
+                assert!(
+                    !o.iterate
+                        && !o.persistent
+                        && self.outputs.iter().any(|p| p.name == c && p.iterate),
+                    "kind `{}`: output `{}` the final value of `{c}`, not an iterate output of it",
                     self.name,
                     o.name
                 );

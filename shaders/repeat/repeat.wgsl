@@ -1,8 +1,10 @@
 // `repeat`: a value carried through a loop body until the body's count is zero (or for a
 // fixed number of iterations). The words are copied as bits, whatever their type.
 // status: [iterations, stopped, last count, total of the counts, halt]. Entries:
-// - `start`: current = initial, status = 0, status[4] = the `halt` check's first word
-//   (when one is bound: a nonzero halt stops the loop at once and the host reports it);
+// - `start`: current = initial (unless copy_start is 0: the plan gave both one buffer,
+//   binding 0 then a stand-in, unread), status = 0, status[4] = the `halt` check's first
+//   word (when one is bound: a nonzero halt stops the loop at once and the host reports
+//   it);
 // - `advance` (after every body run): current = next, unless the loop has stopped; not
 //   dispatched where the plan gave `next` the buffer of `current` (the body wrote it in
 //   place: nodes/repeat.rs; binding 1 then stands in, unread). The body runs no
@@ -13,15 +15,18 @@
 //   max_iterations (the host then reports the loop unconverged) or at the fixed count. An
 //   iteration the executor runs past the stop (speculatively, while the host reads the
 //   status) therefore changes nothing;
-// - `finish`: out = current, the iteration count and the total to their outputs.
+// - `finish`: out = current (unless copy_finish is 0: the plan gave both one buffer,
+//   binding 4 then a stand-in, unwritten), the iteration count and the total to their
+//   outputs.
 #import common/index.wgsl
 
 // counted: 0 for a fixed loop without a count (binding 2 then stands in, unread);
 // halts: 1 where a halt check is bound (binding 9; else a stand-in, unread).
 // max_iterations: the stop when the count never reaches 0 (the host reports it);
-// stop_word: the word of `count` whose 0 stops the loop (the total sums word 0).
+// stop_word: the word of `count` whose 0 stops the loop (the total sums word 0);
+// copy_start, copy_finish: 0 where `start` and `finish` copy nothing (nodes/repeat.rs).
 struct Params { words: u32, fixed: u32, counted: u32, halts: u32, max_iterations: u32,
-                stop_word: u32 }
+                stop_word: u32, copy_start: u32, copy_finish: u32 }
 
 @group(0) @binding(0) var<storage, read> initial: array<u32>;
 @group(0) @binding(1) var<storage, read> next: array<u32>;
@@ -38,7 +43,7 @@ struct Params { words: u32, fixed: u32, counted: u32, halts: u32, max_iterations
 fn start(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
          @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wid, nwg, lid, 256u);
-    if (i < params.words) {
+    if (params.copy_start == 1u && i < params.words) {
         current[i] = initial[i];
     }
     if (i < 4u) {
@@ -90,7 +95,7 @@ fn tally() {
 fn finish(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
           @builtin(local_invocation_index) lid: u32) {
     let i = flat_index(wid, nwg, lid, 256u);
-    if (i < params.words) {
+    if (params.copy_finish == 1u && i < params.words) {
         out[i] = current[i];
     }
     if (i == 0u) {

@@ -295,10 +295,18 @@ pub struct NodeIo<'a> {
 impl NodeIo<'_> {
     /// Whether the plan gave output `output` the buffer of input `input`: an output
     /// declared in place of that input (`PortSpec::in_place_of`, or an iterative node's
-    /// `refilled_from`) that the planner aliased. The node then skips copying the input
+    /// `refilled_from` or `started_from`) that the planner aliased. The node then skips copying the input
     /// and binds the buffer once. An output shares an input's buffer in no other case.
     pub fn in_place(&self, output: usize, input: usize) -> bool {
         self.inputs[input].is_some_and(|i| i.buffer == self.outputs[output].buffer)
+    }
+
+    /// Whether the plan gave outputs `a` and `b` one buffer: an iterative node's output
+    /// declared the final value of an iterate output (`PortSpec::final_of`) that the
+    /// planner aliased. The node then skips its copy at the loop's finish and binds the
+    /// buffer once.
+    pub fn same_output(&self, a: usize, b: usize) -> bool {
+        self.outputs[a].buffer == self.outputs[b].buffer
     }
 
     /// The node's planned decision as its own type. A node that decides in `infer` finds

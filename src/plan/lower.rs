@@ -455,6 +455,8 @@ impl Lowerer<'_> {
             plan,
             body: body_launches,
             refills: port_pairs(&self.g.nodes[n], |p| p.refilled_from),
+            starts: port_pairs(&self.g.nodes[n], |p| p.started_from),
+            finals: output_pairs(&self.g.nodes[n], |p| p.final_of),
         }
     }
 
@@ -568,6 +570,23 @@ fn port_pairs(
             let name = link(p)?;
             let i = inst.input_ports.iter().position(|q| q.name == name)?;
             Some((o, i))
+        })
+        .collect()
+}
+
+/// The (output port, output port) pairs of a node whose outputs name another output by
+/// `link` (the final value of it).
+fn output_pairs(
+    inst: &crate::graph::NodeInst,
+    link: impl Fn(&crate::node::PortSpec) -> Option<&'static str>,
+) -> Vec<(usize, usize)> {
+    inst.output_ports
+        .iter()
+        .enumerate()
+        .filter_map(|(o, p)| {
+            let name = link(p)?;
+            let c = inst.output_ports.iter().position(|q| q.name == name)?;
+            Some((o, c))
         })
         .collect()
 }

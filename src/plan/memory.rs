@@ -6,13 +6,18 @@
 //! packed greedily in launch order: a value takes the smallest free buffer that holds it,
 //! else grows the largest free one, else gets a new one. A launch's outputs are placed
 //! before the inputs it reads last are freed, so no launch reads and writes one buffer,
-//! except by choice: an output declared in place of an input (`PortSpec::in_place_of`)
-//! takes that input's buffer where nothing reads the input after it (`in_place_pairs`
-//! says when), and the node, seeing the two buffers equal, writes it in place.
+//! except by choice (`in_place_pairs` says when): an output declared in place of an
+//! input (`PortSpec::in_place_of`) takes that input's buffer where nothing reads the
+//! input after it, and the node, seeing the two buffers equal, writes it in place; a
+//! loop starts where its initial value lies (`PortSpec::started_from`) and ends where
+//! its carried value lies (`PortSpec::final_of`). Values so linked form a class that
+//! holds one buffer from its first value's write to its last value's last read; a class
+//! that ends in a value with a buffer of its own (a loop's final value that is a state's
+//! next value or a requested output) lives in that buffer throughout.
 
 use std::collections::{HashMap, HashSet};
 
-use super::{BufferId, BufferRole, InPlace, Launch, Plan, PlanBuffer, Storage, ValueId};
+use super::{BufferId, BufferRole, InPlace, Launch, Plan, PlanBuffer, Storage, ValueId, Via};
 use crate::ids::IdVec;
 
 /// Smallest buffer: bindings of zero bytes are invalid, and a value may be empty (N = 0).
@@ -41,14 +46,40 @@ pub fn assign(plan: &mut Plan, in_place: bool) {
     } else {
         Vec::new()
     };
-    // Output -> the input whose buffer it takes; the inputs so handed over are not freed
-    // when they die (their output now holds the buffer).
-    let alias_of: HashMap<ValueId, ValueId> = aliases.iter().map(|a| (a.output, a.input)).collect();
-    let handed: HashSet<ValueId> = aliases.iter().map(|a| a.input).collect();
+    // Classes of values sharing a buffer: each alias puts its output in its input's
+    // class (aliases come in launch order, so an input's class is settled before it is
+    // handed on); a class is named by its first value.
+    let mut root: HashMap<ValueId, ValueId> = HashMap::new();
+    for a in &aliases {
+        let r = root.get(&a.input).copied().unwrap_or(a.input);
+        root.insert(a.input, r);
+        root.insert(a.output, r);
+    }
+    // A class's end: the last read of any of its values (its buffer is freed there).
+    let mut end: HashMap<ValueId, usize> = HashMap::new();
+    for (v, r) in &root {
+        let e = end.entry(*r).or_insert(0);
+        *e = (*e).max(last[v]);
+    }
+    // A class's home: its value with a buffer of its own (only a loop's final value,
+    // `Via::Finish`, may be one; `in_place_pairs` checks that no one else uses it).
+    let home: HashMap<ValueId, ValueId> = aliases
+        .iter()
+        .filter(|a| plan.values[a.output].storage != Storage::Pending(BufferRole::Pool))
+        .map(|a| (root[&a.output], a.output))
+        .collect();
+    for (v, r) in &root {
+        if let Some(&h) = home.get(r)
+            && let st @ Storage::State { .. } = plan.values[h].storage
+        {
+            plan.values[*v].storage = st;
+        }
+    }
 
     let mut buffers: IdVec<BufferId, PlanBuffer> = IdVec::new();
     let mut assigned: HashMap<ValueId, BufferId> = HashMap::new();
-    // Own buffers first: outputs and persistent values are never shared.
+    // Own buffers first: outputs and persistent values are never shared, except with the
+    // values of a class they are the home of.
     for (v, val) in plan.values.iter_enumerated() {
         if let Storage::Pending(role @ (BufferRole::Output | BufferRole::Persistent)) = val.storage
         {
@@ -58,6 +89,12 @@ pub fn assign(plan: &mut Plan, in_place: bool) {
                 holds: vec![val.name.clone()],
             });
             assigned.insert(v, b);
+        }
+    }
+    let mut class_buffer: HashMap<ValueId, BufferId> = HashMap::new();
+    for (r, h) in &home {
+        if let Some(&b) = assigned.get(h) {
+            class_buffer.insert(*r, b);
         }
     }
     // Pooled values by interval.
@@ -74,10 +111,11 @@ pub fn assign(plan: &mut Plan, in_place: bool) {
             }
             let need = padded(val.ty.bytes());
             pool_without_reuse += need;
-            // The input is written earlier in launch order (before the launch, or, in a
-            // loop, by the loop node or an earlier body launch): it has its buffer.
-            if let Some(input) = alias_of.get(&v) {
-                let b = assigned[input];
+            // A class's buffer, taken by its first value written (in launch order; in a
+            // loop, its values are all written by the loop's launch).
+            let class = root.get(&v).copied();
+            if let Some(b) = class.and_then(|r| class_buffer.get(&r).copied()) {
+                buffers[b].bytes = buffers[b].bytes.max(need);
                 buffers[b].holds.push(format!("{} (in place)", val.name));
                 assigned.insert(v, b);
                 continue;
@@ -109,10 +147,13 @@ pub fn assign(plan: &mut Plan, in_place: bool) {
             };
             buffers[b].holds.push(val.name.clone());
             assigned.insert(v, b);
+            if let Some(r) = class {
+                class_buffer.insert(r, b);
+            }
         }
         for v in launch.reads().into_iter().chain(launch.writes()) {
             if last.get(&v) == Some(&i)
-                && !handed.contains(&v)
+                && root.get(&v).is_none_or(|r| end[r] == i)
                 && let Some(&b) = assigned.get(&v)
                 && buffers[b].role == BufferRole::Pool
                 && !free.contains(&b)
@@ -154,26 +195,53 @@ pub fn assign(plan: &mut Plan, in_place: bool) {
     plan.in_place = aliases;
 }
 
-/// The in-place outputs that may take their input's buffer, in launch order. An output
-/// declared in place of an input (`Launch::Node::in_place`) may where
-/// - both are pooled values of one type (not a graph input, a state, a requested output
-///   or a persistent value, which others read or keep), and the launch reads the input
-///   through that port only;
-/// - at the top level, no later launch reads the input;
-/// - in a loop body, no later launch of the body and nothing after the loop reads it,
-///   the loop node does not read it, and it is made inside the loop, where the body
-///   rewrites it every iteration: by an earlier launch of the body, or as the loop
+/// The values that may take the buffer of a value read for the last time where they are
+/// written, in launch order:
+/// - an output declared in place of an input (`Launch::Node::in_place`, [`Via::Node`])
+///   where both are pooled values of one type (not a graph input, a state, a requested
+///   output or a persistent value, which others read or keep), and the launch reads the
+///   input through that port only; at the top level, where no later launch reads the
+///   input; in a loop body, where no later launch of the body and nothing after the loop
+///   reads it, the loop node does not read it, and it is made inside the loop, where the
+///   body rewrites it every iteration: by an earlier launch of the body, or as the loop
 ///   node's iterate output that the node refills after every body run
-///   (`Launch::Loop::refills`: `repeat`'s `current`), provided the node reads the
-///   output through that refill's input only (there it sees the buffers shared). A
-///   value from outside the loop is read again the next iteration, and no other output
-///   of the loop node is the body's to overwrite.
+///   (`Launch::Loop::refills`: `repeat`'s `current`), provided the node reads the output
+///   through that refill's input only (there it sees the buffers shared). A value from
+///   outside the loop is read again the next iteration, and no other output of the loop
+///   node is the body's to overwrite;
+/// - a loop's iterate output that the node starts from a plain input
+///   (`Launch::Loop::starts`, [`Via::Start`]: `repeat`'s `current` from `initial`)
+///   where both are pooled values of one type, the loop is the input's last reader and
+///   reads it through that port only, its body not at all (the body would see it
+///   overwritten). So never a state (a step the `halt` check stops keeps it as it was),
+///   a graph input or a requested output;
+/// - a loop's output that the node sets from an iterate output after the last iteration
+///   (`Launch::Loop::finals`, [`Via::Finish`]: `repeat`'s `out` from `current`) where
+///   the iterate output is pooled, of the output's type, read by nothing after the loop
+///   nor by the loop node as an input; the output pooled, a requested output or a
+///   state's next value that no other launch value shares (its buffer then holds the
+///   whole class: every value before it is dead when the loop finishes, and the state's
+///   next buffer holds nothing else during a step).
 fn in_place_pairs(
     plan: &Plan,
     launches: &[&Launch],
     last: &HashMap<ValueId, usize>,
 ) -> Vec<InPlace> {
     let pooled = |v: ValueId| plan.values[v].storage == Storage::Pending(BufferRole::Pool);
+    let same_type = |a: ValueId, b: ValueId| plan.values[a].ty == plan.values[b].ty;
+    // Every value a launch reads or writes (a loop's body included).
+    let used: HashSet<ValueId> = launches
+        .iter()
+        .flat_map(|l| l.reads().into_iter().chain(l.writes()))
+        .collect();
+    // A loop's final value may hold its class where its storage is its own.
+    let home_for_class = |out: ValueId| match plan.values[out].storage {
+        Storage::Pending(BufferRole::Pool | BufferRole::Output) => true,
+        st @ Storage::State { next: true, .. } => used
+            .iter()
+            .all(|&v| v == out || plan.values[v].storage != st),
+        _ => false,
+    };
     // The candidates of a node launch: (node, input, output) where the launch itself
     // allows it.
     let candidates = |l: &Launch| -> Vec<InPlace> {
@@ -192,22 +260,24 @@ fn in_place_pairs(
             .filter_map(|&(o, i)| {
                 let (input, output) = (inputs[i]?, outputs[o]);
                 let once = inputs.iter().filter(|v| **v == Some(input)).count() == 1;
-                (once
-                    && pooled(input)
-                    && pooled(output)
-                    && plan.values[input].ty == plan.values[output].ty)
-                    .then_some(InPlace {
+                (once && pooled(input) && pooled(output) && same_type(input, output)).then_some(
+                    InPlace {
                         node: *node,
                         input,
                         output,
-                    })
+                        via: Via::Node,
+                    },
+                )
             })
             .collect()
     };
     let mut pairs: Vec<InPlace> = Vec::new();
+    // Values handed on to a value written after them (each to one only, except a loop's
+    // carried value, handed to its body and then to the loop's final value: the body's
+    // values are dead when the loop finishes).
     let mut taken: HashSet<ValueId> = HashSet::new();
-    let mut take = |a: InPlace, pairs: &mut Vec<InPlace>| {
-        if taken.insert(a.input) {
+    let take = |a: InPlace, pairs: &mut Vec<InPlace>, taken: &mut HashSet<ValueId>| {
+        if taken.insert(a.input) || a.via == Via::Finish {
             pairs.push(a);
         }
     };
@@ -216,17 +286,42 @@ fn in_place_pairs(
             Launch::Node { .. } => {
                 for a in candidates(l) {
                     if last.get(&a.input) == Some(&i) {
-                        take(a, &mut pairs);
+                        take(a, &mut pairs, &mut taken);
                     }
                 }
             }
             Launch::Loop {
+                node,
                 inputs: node_inputs,
                 outputs: node_outputs,
                 body,
                 refills,
+                starts,
+                finals,
                 ..
             } => {
+                for &(o, r) in starts {
+                    let (Some(initial), current) = (node_inputs[r], node_outputs[o]) else {
+                        continue;
+                    };
+                    let once = node_inputs.iter().filter(|v| **v == Some(initial)).count() == 1;
+                    let body_reads = body.iter().any(|k| k.reads().contains(&initial));
+                    if pooled(initial)
+                        && pooled(current)
+                        && same_type(initial, current)
+                        && last.get(&initial) == Some(&i)
+                        && once
+                        && !body_reads
+                    {
+                        let a = InPlace {
+                            node: *node,
+                            input: initial,
+                            output: current,
+                            via: Via::Start,
+                        };
+                        take(a, &mut pairs, &mut taken);
+                    }
+                }
                 for (j, b) in body.iter().enumerate() {
                     for a in candidates(b) {
                         let read_later = body[j + 1..].iter().any(|k| k.reads().contains(&a.input));
@@ -244,8 +339,25 @@ fn in_place_pairs(
                             && !read_by_node
                             && (made_before || refilled)
                         {
-                            take(a, &mut pairs);
+                            take(a, &mut pairs, &mut taken);
                         }
+                    }
+                }
+                for &(o, c) in finals {
+                    let (out, current) = (node_outputs[o], node_outputs[c]);
+                    if pooled(current)
+                        && home_for_class(out)
+                        && same_type(current, out)
+                        && last.get(&current) == Some(&i)
+                        && !node_inputs.contains(&Some(current))
+                    {
+                        let a = InPlace {
+                            node: *node,
+                            input: current,
+                            output: out,
+                            via: Via::Finish,
+                        };
+                        take(a, &mut pairs, &mut taken);
                     }
                 }
             }

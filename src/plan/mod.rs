@@ -186,17 +186,44 @@ pub enum Launch {
         /// iterate input after every body run (`PortSpec::refilled_from`), which an
         /// in-place output in the body may overwrite.
         refills: Vec<(usize, usize)>,
+        /// (output port, input port) pairs: iterate outputs the node sets from a plain
+        /// input at the start (`PortSpec::started_from`: `repeat`'s `current`).
+        starts: Vec<(usize, usize)>,
+        /// (output port, output port) pairs: outputs the node sets from an iterate
+        /// output after the last iteration (`PortSpec::final_of`: `repeat`'s `out`).
+        finals: Vec<(usize, usize)>,
     },
 }
 
-/// An output written into its input's buffer (`PortSpec::in_place_of`): the node skips
-/// its copy, and where `output` is the loop's own result (`next`) of a loop that
-/// refills `input` from it (`repeat`'s `current`), the loop skips its copy too.
+/// A value written into the buffer of another whose last read comes before it
+/// (`memory.rs` decides; see [`Via`]): the copy between them is skipped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct InPlace {
     pub node: NodeId,
+    /// The value whose buffer is handed on (read for the last time where `output` is
+    /// written).
     pub input: ValueId,
+    /// The value written into it.
     pub output: ValueId,
+    pub via: Via,
+}
+
+/// Which copy an [`InPlace`] saves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Via {
+    /// A node's output in place of its input (`PortSpec::in_place_of`): the node skips
+    /// its copy, and where `output` is the loop's own result (`next`) of a loop that
+    /// refills `input` from it (`repeat`'s `current`), the loop skips its copy too.
+    Node,
+    /// A loop's iterate output (`input`: a plain input of the loop node; `output`: the
+    /// iterate output it starts from it, `PortSpec::started_from`): the loop starts where
+    /// the value lies, its `start` copies nothing.
+    Start,
+    /// A loop's final value (`input`: the iterate output; `output`: the output set from
+    /// it after the last iteration, `PortSpec::final_of`): the loop's `finish` copies
+    /// nothing. Where `output` has a buffer of its own (a state's next value, a requested
+    /// output), every value sharing with `input` lives there.
+    Finish,
 }
 
 /// A state as planned.
@@ -254,7 +281,8 @@ pub struct Plan {
     /// Nodes read through: for these inputs their output is one of their inputs
     /// unchanged (see `Node::forwards`), so they do no work.
     pub forwarded: Vec<NodeId>,
-    /// Outputs given their input's buffer (`memory.rs`), in launch order.
+    /// Values given the buffer of a value read for the last time where they are written
+    /// (`memory.rs`), in launch order.
     pub in_place: Vec<InPlace>,
 }
 

@@ -2,7 +2,7 @@
 
 use std::fmt::Write;
 
-use super::{BufferRole, Launch, Plan, Storage, TransformFold, ValueId};
+use super::{BufferRole, Launch, Plan, Storage, TransformFold, ValueId, Via};
 use crate::graph::{Graph, NodeId, Source};
 
 /// Bytes for people.
@@ -81,7 +81,11 @@ fn node_text(
     for note in notes {
         writeln!(out, "         note   {note}").unwrap();
     }
-    for a in plan.in_place.iter().filter(|a| a.node == node) {
+    for a in plan
+        .in_place
+        .iter()
+        .filter(|a| a.node == node && a.via == Via::Node)
+    {
         writeln!(
             out,
             "         note   in place: {} is written into the buffer of {} ({}), no copy",
@@ -132,6 +136,24 @@ fn launch_text(out: &mut String, g: &Graph, plan: &Plan, i: usize, l: &Launch) {
                         )
                         .unwrap();
                     }
+                }
+                // The loop starts where its initial value lies, ends where its carried
+                // value lies.
+                for a in plan.in_place.iter().filter(|a| a.node == *node) {
+                    let (i, o) = (&plan.values[a.input].name, &plan.values[a.output].name);
+                    let at = place(plan, a.output);
+                    match a.via {
+                        Via::Start => writeln!(
+                            out,
+                            "         note   in place: {o} starts in the buffer of {i} ({at}), no copy at the start"
+                        ),
+                        Via::Finish => writeln!(
+                            out,
+                            "         note   in place: {o} is {i} where it lies ({at}), no copy at the finish"
+                        ),
+                        Via::Node => Ok(()),
+                    }
+                    .unwrap();
                 }
                 for v in inputs.iter().flatten() {
                     writeln!(out, "         reads  {}", value(plan, *v)).unwrap();

@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 
 use mesoflow::gpu::DeviceCaps;
-use mesoflow::plan::{self, BufferRole, Launch, Plan, PlanOptions, Storage};
+use mesoflow::plan::{self, BufferRole, Launch, Plan, PlanOptions, Storage, Via};
 use mesoflow::value::ValueType;
 
 use crate::util::probe::{Launches, probe_registry};
@@ -140,6 +140,24 @@ fn in_place_names(g: &mesoflow::graph::Graph, p: &Plan) -> Vec<(String, String, 
         .collect()
 }
 
+/// The storage of the plan's value named `name` (of the step: the prologue's come first).
+fn storage_of(p: &Plan, name: &str) -> Storage {
+    p.values
+        .iter()
+        .rev()
+        .find(|v| v.name == name)
+        .unwrap_or_else(|| panic!("no value {name}"))
+        .storage
+}
+
+/// The storage of a state's buffer in a step: its current or its next value.
+fn state_storage(p: &Plan, name: &str, next: bool) -> Storage {
+    Storage::State {
+        state: p.states.iter().position(|s| s.name == name).unwrap(),
+        next,
+    }
+}
+
 fn names(list: &[(&str, &str, &str)]) -> Vec<(String, String, String)> {
     list.iter()
         .map(|(n, i, o)| (n.to_string(), i.to_string(), o.to_string()))
@@ -148,12 +166,19 @@ fn names(list: &[(&str, &str, &str)]) -> Vec<(String, String, String)> {
 
 /// bd_delaunay.json and abp_delaunay.json: in both flip loops `edge_flip_round` writes the
 /// mesh into the buffer of the loop's `current` (read by nothing after it), so neither it
-/// nor `repeat` copies the mesh per iteration, and `inspect` says so; without in place
-/// (`PlanOptions::in_place` off) every value has a buffer of its own and the pool holds
-/// one mesh more.
+/// nor `repeat` copies the mesh per iteration; every loop ends where its value lies (its
+/// `current` read by nothing after it), and the overlap and settle loops start where
+/// theirs lies (the move's positions, the flip loop's mesh, each read last by the loop):
+/// the mesh lives in the state's next buffer from the flip loop's start to the step's end,
+/// copied once a step (the flip loop starts from the state, which a halted step must keep
+/// as it was); `inspect` says so. Without in place (`PlanOptions::in_place` off) every
+/// value has a buffer of its own and the pool holds two meshes more.
 #[test]
 fn the_flip_loops_write_the_mesh_in_place() {
-    for name in ["bd_delaunay.json", "abp_delaunay.json"] {
+    for (name, moved) in [
+        ("bd_delaunay.json", "move.out"),
+        ("abp_delaunay.json", "propel.out"),
+    ] {
         let g = load(&root().join("graphs").join(name));
         let plan_with = |in_place: bool| {
             let opts = PlanOptions {
@@ -169,8 +194,27 @@ fn the_flip_loops_write_the_mesh_in_place() {
             in_place_names(&g, &p),
             names(&[
                 ("flip", "flips.current", "flip.mesh"),
+                ("flips", "flips.current", "flips.out"),
+                ("overlaps", moved, "overlaps.current"),
+                ("overlaps", "overlaps.current", "overlaps.out"),
+                ("settle", "flips.out", "settle.current"),
                 ("reflip", "settle.current", "reflip.mesh"),
+                ("settle", "settle.current", "settle.out"),
             ]),
+            "{name}"
+        );
+        let vias: Vec<Via> = p.in_place.iter().map(|a| a.via).collect();
+        assert_eq!(
+            vias,
+            [
+                Via::Node,
+                Via::Finish,
+                Via::Start,
+                Via::Finish,
+                Via::Start,
+                Via::Node,
+                Via::Finish
+            ],
             "{name}"
         );
         assert_shares_only_in_place(&p);
@@ -191,21 +235,41 @@ fn the_flip_loops_write_the_mesh_in_place() {
             }
         }
         assert_eq!(loops, 2, "{name}");
+        // Every mesh of the loops in the state's next buffer, the positions too from the
+        // move on; the state's current buffers only read.
+        let mesh = state_storage(&p, "mesh", true);
+        let x = state_storage(&p, "x", true);
+        for v in [
+            "flips.current",
+            "flip.mesh",
+            "flips.out",
+            "settle.current",
+            "reflip.mesh",
+            "settle.out",
+        ] {
+            assert_eq!(storage_of(&p, v), mesh, "{name}: {v}");
+        }
+        for v in [moved, "overlaps.current", "overlaps.out"] {
+            assert_eq!(storage_of(&p, v), x, "{name}: {v}");
+        }
         let text = plan::to_text(&g, &p);
         for want in [
             "note   in place: flip.mesh is written into the buffer of flips.current",
             "note   flip.mesh shares the buffer of flips.current",
             "note   reflip.mesh shares the buffer of settle.current",
-            "flip.mesh (in place)",
+            "note   in place: flips.out is flips.current where it lies (state mesh next), no copy at the finish",
+            "note   in place: settle.current starts in the buffer of flips.out (state mesh next), no copy at the start",
+            "note   in place: settle.out is settle.current where it lies (state mesh next), no copy at the finish",
         ] {
             assert!(text.contains(want), "{name}: no `{want}` in\n{text}");
         }
+        assert!(!text.contains("flips.current starts"), "{name}: {text}");
         let copied = plan_with(false);
         assert!(copied.in_place.is_empty(), "{name}");
         assert_shares_only_in_place(&copied);
         let mesh = p.values[p.in_place[0].output].ty.bytes();
         assert!(
-            copied.memory.pool >= p.memory.pool + mesh,
+            copied.memory.pool >= p.memory.pool + 2 * mesh,
             "{name}: pool {} in place, {} copied",
             p.memory.pool,
             copied.memory.pool
@@ -248,13 +312,132 @@ fn in_place_outputs_take_only_buffers_no_one_reads_after() {
     let p = plan_graph(&DeviceCaps::baseline(), &g, inputs, None, true);
     // b reads a.out before c does: only c takes it; d (the last reader of c.out) takes c's
     // buffer; e reads a graph input, k writes a requested output, h a value made before
-    // the loop.
+    // the loop. The loop (d.out's last reader) starts in d.out's buffer and ends in it.
     assert_eq!(
         in_place_names(&g, &p),
-        names(&[("c", "a.out", "c.out"), ("d", "c.out", "d.out")])
+        names(&[
+            ("c", "a.out", "c.out"),
+            ("d", "c.out", "d.out"),
+            ("loop", "d.out", "loop.current"),
+            ("loop", "loop.current", "loop.out")
+        ])
     );
     assert_shares_only_in_place(&p);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Loops start where their initial value lies only where it is a pooled value the loop
+/// reads last, through `initial` only: not a value read after the loop (l1), a state
+/// (l2: a step the `halt` check stops keeps its state), a graph input (l3) or a value
+/// the body reads too (l4); c.out, read by l5 only, is where l5 starts. Every loop ends
+/// where its value lies, `current` read by nothing after it: in a pooled buffer, in the
+/// state's next buffer (l2, whose `out` is the state's next value) or in a requested
+/// output's (l5, with c.out and its body's values). Off, nothing shares.
+#[test]
+fn loops_start_and_end_where_their_values_lie_only_where_nothing_reads_after() {
+    let launches = Launches::default();
+    let reg = probe_registry(&launches);
+    let dir = tmpdir("plan-loop-in-place");
+    let path = write_graph(
+        &dir,
+        "g.json",
+        r#"{"mesoflow": 1,
+ "inputs": {"x": {"type": "particles", "rows": 4, "cols": 1}},
+ "state": {"s": {"init": "inputs.x", "next": "l2.out"}},
+ "nodes": [
+   {"id": "a", "kind": "countdown", "inputs": {"x": "state.s"}},
+   {"id": "l1", "kind": "repeat", "params": {"fixed": 2}, "inputs": {"initial": "a.out", "next": "t1.out"}},
+   {"id": "t1", "kind": "countdown", "inputs": {"x": "l1.current"}},
+   {"id": "r", "kind": "countdown", "inputs": {"x": "a.out", "y": "l1.out"}},
+   {"id": "l2", "kind": "repeat", "params": {"fixed": 2}, "inputs": {"initial": "state.s", "next": "t2.out"}},
+   {"id": "t2", "kind": "countdown", "inputs": {"x": "l2.current", "y": "r.out"}},
+   {"id": "l3", "kind": "repeat", "params": {"fixed": 2}, "inputs": {"initial": "inputs.x", "next": "t3.out"}},
+   {"id": "t3", "kind": "countdown", "inputs": {"x": "l3.current"}},
+   {"id": "b", "kind": "countdown", "inputs": {"x": "l3.out"}},
+   {"id": "l4", "kind": "repeat", "params": {"fixed": 2}, "inputs": {"initial": "b.out", "next": "t4.out"}},
+   {"id": "t4", "kind": "countdown", "inputs": {"x": "l4.current", "y": "b.out"}},
+   {"id": "c", "kind": "countdown", "inputs": {"x": "l4.out"}},
+   {"id": "l5", "kind": "repeat", "params": {"fixed": 2}, "inputs": {"initial": "c.out", "next": "t5.out"}},
+   {"id": "t5", "kind": "countdown_in_place", "inputs": {"x": "l5.current"}}
+ ],
+ "outputs": {"s": "state.s", "l5": "l5.out"}}"#,
+    );
+    let g =
+        mesoflow::graph::load(&path, &reg, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    let inputs: BTreeMap<_, _> = [("x".to_string(), ValueType::Particles { n: 4, k: 1 })].into();
+    let p = plan_graph(&DeviceCaps::baseline(), &g, inputs.clone(), None, true);
+    let mut got: Vec<(String, String, String, Via)> = p
+        .in_place
+        .iter()
+        .map(|a| {
+            (
+                g.nodes[a.node].id.clone(),
+                p.values[a.input].name.clone(),
+                p.values[a.output].name.clone(),
+                a.via,
+            )
+        })
+        .collect();
+    got.sort_by(|a, b| (&a.0, &a.1).cmp(&(&b.0, &b.1)));
+    let want: Vec<(String, String, String, Via)> = [
+        ("l1", "l1.current", "l1.out", Via::Finish),
+        ("l2", "l2.current", "l2.out", Via::Finish),
+        ("l3", "l3.current", "l3.out", Via::Finish),
+        ("l4", "l4.current", "l4.out", Via::Finish),
+        ("l5", "c.out", "l5.current", Via::Start),
+        ("l5", "l5.current", "l5.out", Via::Finish),
+        ("t5", "l5.current", "t5.out", Via::Node),
+    ]
+    .iter()
+    .map(|(n, i, o, v)| (n.to_string(), i.to_string(), o.to_string(), *v))
+    .collect();
+    assert_eq!(got, want);
+    assert_shares_only_in_place(&p);
+    // l2 runs in the state's next buffer; the state's current is read only.
+    let next = state_storage(&p, "s", true);
+    for v in ["l2.current", "t2.out", "l2.out"] {
+        assert_eq!(storage_of(&p, v) == next, v != "t2.out", "{v}");
+    }
+    // l5 and the values it starts from live in the output's buffer.
+    let Storage::Buffer(out) = storage_of(&p, "l5.out") else {
+        panic!("l5.out has no buffer")
+    };
+    assert_eq!(p.buffers[out].role, BufferRole::Output);
+    for v in ["c.out", "l5.current", "t5.out"] {
+        assert_eq!(storage_of(&p, v), Storage::Buffer(out), "{v}");
+    }
+    for v in ["a.out", "l1.current", "b.out", "l4.current", "l3.current"] {
+        assert_ne!(storage_of(&p, v), Storage::Buffer(out), "{v}");
+        assert_ne!(storage_of(&p, v), next, "{v}");
+    }
+    let text = plan::to_text(&g, &p);
+    for want in [
+        "note   in place: l5.current starts in the buffer of c.out",
+        "note   in place: l2.out is l2.current where it lies (state s next), no copy at the finish",
+        "l5.current (in place)",
+    ] {
+        assert!(text.contains(want), "no `{want}` in\n{text}");
+    }
+    let copied = plan_graph_in_place(&g, inputs, false);
+    assert!(copied.in_place.is_empty());
+    assert_shares_only_in_place(&copied);
+    assert!(!plan::to_text(&g, &copied).contains("in place"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A plan with or without in-place outputs, on the baseline capabilities.
+fn plan_graph_in_place(
+    g: &mesoflow::graph::Graph,
+    inputs: BTreeMap<String, ValueType>,
+    in_place: bool,
+) -> Plan {
+    let opts = PlanOptions {
+        outputs: None,
+        inputs,
+        fuse: true,
+        in_place,
+    };
+    plan::plan(g, &opts, &DeviceCaps::baseline()).unwrap_or_else(|e| panic!("{e}"))
 }
 
 #[test]

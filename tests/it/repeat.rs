@@ -5,13 +5,13 @@
 //! executor sends past the stop gated off, whatever the profile, and the same with its
 //! body writing the carried value in place (`PortSpec::in_place_of`); a body node in
 //! place of a value read after it is not given its buffer; a step its `halt` stops keeps
-//! nothing, in place or not.
+//! nothing, in place or not, the loop starting from the state or in its next buffer.
 
 use std::collections::BTreeMap;
 
 use mesoflow::exec::{Profile, Program, RunOptions};
 use mesoflow::graph::{self, LoadOptions};
-use mesoflow::plan::Plan;
+use mesoflow::plan::{Plan, Via};
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::disks::run_with_loops_profiled;
@@ -188,9 +188,14 @@ fn repeat_runs_its_body_only_for_the_iterations_it_reports() {
         let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
         let types = [("x".to_string(), ValueType::Particles { n: 1, k: 1 })].into();
         let p = plan_graph(&gpu.caps, &g, types, None, true);
+        // The loop ends where its value lies (the requested output's buffer).
+        let finish = ("loop".into(), "loop.current".into(), "loop.out".into());
         let want: Vec<_> = match kind {
-            "countdown" => vec![],
-            _ => vec![("tick".into(), "loop.current".into(), "tick.out".into())],
+            "countdown" => vec![finish],
+            _ => vec![
+                ("tick".into(), "loop.current".into(), "tick.out".into()),
+                finish,
+            ],
         };
         assert_eq!(in_place_of(&g, &p), want, "{kind}");
         for x in [1.0, 4.0] {
@@ -264,9 +269,20 @@ fn repeat_bodies_write_in_place_only_where_nothing_reads_after() {
         (
             "chain",
             &chain,
-            vec![("a", "loop.current", "a.out"), ("b", "a.out", "b.out")],
+            vec![
+                ("a", "loop.current", "a.out"),
+                ("b", "a.out", "b.out"),
+                ("loop", "loop.current", "loop.out"),
+            ],
         ),
-        ("reread", &reread, vec![("b", "a.out", "b.out")]),
+        (
+            "reread",
+            &reread,
+            vec![
+                ("b", "a.out", "b.out"),
+                ("loop", "loop.current", "loop.out"),
+            ],
+        ),
     ] {
         let path = write_graph(&dir, &format!("{name}.json"), json);
         let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
@@ -307,10 +323,13 @@ fn repeat_bodies_write_in_place_only_where_nothing_reads_after() {
     }
 }
 
-/// A halted step keeps nothing, its body's value written in place or not: the loop's
-/// first iteration runs before its tally sees the `halt` (overwriting `current` where the
-/// body writes in place), the step stops with the halt's error, and the next step, halt
-/// cleared, goes on from the state before it, as if it had never run.
+/// A halted step keeps nothing, its body's value written in place or not, the loop
+/// starting from the state or from a value made from it (`pre`, which the loop starts in:
+/// with the loop's values, in the state's next buffer, as the mesh of bd_delaunay.json's
+/// settle loop): the loop's first iteration runs before its tally sees the `halt`
+/// (overwriting `current`, the state's next buffer where the loop ends in it), the step
+/// stops with the halt's error, and the next step, halt cleared, goes on from the state
+/// before it, as if it had never run.
 #[test]
 fn a_halted_step_keeps_nothing_in_place_or_not() {
     let Some(gpu) = gpu() else { return };
@@ -324,42 +343,63 @@ fn a_halted_step_keeps_nothing_in_place_or_not() {
         )])
     };
     for kind in ["countdown", "countdown_in_place"] {
-        let json = r#"{"mesoflow": 1,
+        for pre in [false, true] {
+            let case = format!("{kind}, pre {pre}");
+            let json = r#"{"mesoflow": 1,
  "inputs": {"x": {"type": "particles", "rows": 1, "cols": 1}, "h": {"type": "indices", "rows": 1}},
  "state": {"s": {"init": "inputs.x", "next": "loop.out"}},
  "nodes": [
-   {"id": "loop", "kind": "repeat", "inputs": {"initial": "state.s", "next": "tick.out", "count": "tick.count", "halt": "inputs.h"}},
+   {"id": "pre", "kind": "countdown", "inputs": {"x": "state.s"}},
+   {"id": "loop", "kind": "repeat", "inputs": {"initial": "INITIAL", "next": "tick.out", "count": "tick.count", "halt": "inputs.h"}},
    {"id": "tick", "kind": "KIND", "inputs": {"x": "loop.current"}}
  ],
  "outputs": {"s": "state.s"}}"#
-            .replace("KIND", kind);
-        let path = write_graph(&dir, &format!("{kind}.json"), &json);
-        let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
-        let mut inputs = halt(0);
-        inputs.insert("x".into(), particles(&[[3.0]]));
-        let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
-        assert_eq!(p.in_place.len(), usize::from(kind == "countdown_in_place"));
-        let mut program = compile_cached(&gpu, &g, &p);
-        program.upload(&inputs).unwrap();
-        let one = RunOptions {
-            steps: 1,
-            profile: Profile::Off,
-            progress: false,
-        };
-        let s = |program: &Program| {
-            let out: BTreeMap<_, _> = program.read_outputs().unwrap().into_iter().collect();
-            f32s(&out["s"])
-        };
-        // 3 -> 2 -> 1 -> 0: the count 0 stops the loop.
-        program.run_on(&one).unwrap();
-        assert_eq!(s(&program), [0.0], "{kind}");
-        program.update_inputs(&halt(5)).unwrap();
-        let e = program.run_on(&one).unwrap_err().to_string();
-        assert!(e.contains("`halt` check is 5"), "{kind}: {e}");
-        program.update_inputs(&halt(0)).unwrap();
-        // 0 -> -1, the count 0 at once: from the state before the halted step.
-        program.run_on(&one).unwrap();
-        assert_eq!(s(&program), [-1.0], "{kind}");
-        assert_eq!(program.steps_done(), 2, "{kind}");
+                .replace("KIND", kind)
+                .replace("INITIAL", if pre { "pre.out" } else { "state.s" });
+            let path = write_graph(&dir, &format!("{kind}_{pre}.json"), &json);
+            let g =
+                graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+            let mut inputs = halt(0);
+            inputs.insert("x".into(), particles(&[[3.0]]));
+            let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
+            // The loop ends in the state's next buffer; it starts in pre's, never in the
+            // state's.
+            let vias: Vec<Via> = p.in_place.iter().map(|a| a.via).collect();
+            let mut want = Vec::new();
+            if pre {
+                want.push(Via::Start);
+            }
+            if kind == "countdown_in_place" {
+                want.push(Via::Node);
+            }
+            want.push(Via::Finish);
+            assert_eq!(vias, want, "{case}");
+            let mut program = compile_cached(&gpu, &g, &p);
+            program.upload(&inputs).unwrap();
+            let one = RunOptions {
+                steps: 1,
+                profile: Profile::Off,
+                progress: false,
+            };
+            let s = |program: &Program| {
+                let out: BTreeMap<_, _> = program.read_outputs().unwrap().into_iter().collect();
+                f32s(&out["s"])
+            };
+            // 3 -> 2 -> 1 -> 0 (pre: 3 -> 2, then 1 -> 0): the count 0 stops the loop.
+            program.run_on(&one).unwrap();
+            assert_eq!(s(&program), [0.0], "{case}");
+            program.update_inputs(&halt(5)).unwrap();
+            let e = program.run_on(&one).unwrap_err().to_string();
+            assert!(e.contains("`halt` check is 5"), "{case}: {e}");
+            // The state after the last step that ran, though the halted one wrote its next
+            // buffer.
+            assert_eq!(s(&program), [0.0], "{case}");
+            program.update_inputs(&halt(0)).unwrap();
+            // 0 -> -1 (pre: 0 -> -1 -> -2), the count 0 at once: from the state before
+            // the halted step.
+            program.run_on(&one).unwrap();
+            assert_eq!(s(&program), [if pre { -2.0 } else { -1.0 }], "{case}");
+            assert_eq!(program.steps_done(), 2, "{case}");
+        }
     }
 }

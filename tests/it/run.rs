@@ -683,3 +683,90 @@ fn launches_only_outputs_read_run_on_the_last_step_of_each_run() {
     assert_eq!(ran, 15);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Loops that start and end where their values lie (`repeat`'s `current` in the buffer of
+/// its initial value, its `out` in that of `current`), with the probe in place in a body
+/// stopped by its count (gated batches) and a fixed loop after it, carrying a state: the
+/// chain from the value made from the state to the state's next value in one buffer
+/// (the state's next), or with the first loop's result requested (its buffer then holds
+/// that loop's values, which the second copies from). Three steps, against the plan
+/// that copies everything and against the recurrence, exactly (quarters in f32).
+#[test]
+fn loops_in_place_give_the_results_of_copies() {
+    let Some(gpu) = gpu() else { return };
+    let launches = Launches::default();
+    let reg = probe_registry(&launches);
+    let dir = tmpdir("run-loops-in-place");
+    let x: Vec<[f64; 1]> = [4.5, 1.0, 2.25, -1.0, 0.25].map(|v| [v]).into();
+    let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&x))].into();
+    let steps = 3;
+    // a = s - 1; l1: v -= 1 until v[0] <= 0 (at least once); l2: v = v - 1 + x, 3 times.
+    let mut s: Vec<f64> = x.iter().map(|r| r[0]).collect();
+    let mut l1 = Vec::new();
+    for _ in 0..steps {
+        let mut v: Vec<f64> = s.iter().map(|s| s - 1.0).collect();
+        loop {
+            v.iter_mut().for_each(|v| *v -= 1.0);
+            if v[0] <= 0.0 {
+                break;
+            }
+        }
+        l1 = v.clone();
+        for _ in 0..3 {
+            v.iter_mut().zip(&x).for_each(|(v, x)| *v = *v - 1.0 + x[0]);
+        }
+        s = v;
+    }
+    let f = |v: &[f64]| v.iter().map(|v| *v as f32).collect::<Vec<f32>>();
+    for requested in [false, true] {
+        let json = r#"{"mesoflow": 1,
+ "inputs": {"x": {"type": "particles", "rows": 5, "cols": 1}},
+ "state": {"s": {"init": "inputs.x", "next": "l2.out"}},
+ "nodes": [
+   {"id": "a", "kind": "countdown", "inputs": {"x": "state.s"}},
+   {"id": "l1", "kind": "repeat", "inputs": {"initial": "a.out", "next": "t1.out", "count": "t1.count"}},
+   {"id": "t1", "kind": "countdown_in_place", "inputs": {"x": "l1.current"}},
+   {"id": "l2", "kind": "repeat", "params": {"fixed": 3}, "inputs": {"initial": "l1.out", "next": "t2.out"}},
+   {"id": "t2", "kind": "countdown", "inputs": {"x": "l2.current", "y": "inputs.x"}}
+ ],
+ "outputs": {"s": "state.s"OUTPUTS}}"#
+            .replace("OUTPUTS", if requested { r#", "l1": "l1.out""# } else { "" });
+        let path = write_graph(&dir, &format!("g{requested}.json"), &json);
+        let g = mesoflow::graph::load(&path, &reg, &Default::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut results = Vec::new();
+        for in_place in [true, false] {
+            let opts = PlanOptions {
+                outputs: None,
+                inputs: types_of(&inputs),
+                fuse: true,
+                in_place,
+            };
+            let p = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
+            // l1 starts in a.out, t1 writes in place, l1 ends in its current; l2 starts in
+            // l1.out unless it is requested, and ends in the state's next buffer.
+            let aliased: Vec<&str> = p
+                .in_place
+                .iter()
+                .map(|a| g.nodes[a.node].id.as_str())
+                .collect();
+            let want = match (in_place, requested) {
+                (false, _) => vec![],
+                (true, false) => vec!["l1", "t1", "l1", "l2", "l2"],
+                (true, true) => vec!["l1", "t1", "l1", "l2"],
+            };
+            assert_eq!(aliased, want, "requested {requested}");
+            let mut program = compile_cached(&gpu, &g, &p);
+            let out = run_program(&mut program, &inputs, steps);
+            results.push(out);
+        }
+        let case = format!("requested {requested}");
+        for (name, a) in &results[0] {
+            assert_eq!(a.data, results[1][name].data, "{case}: {name}");
+        }
+        assert_eq!(f32s(&results[0]["s"]), f(&s), "{case}");
+        if requested {
+            assert_eq!(f32s(&results[0]["l1"]), f(&l1), "{case}");
+        }
+    }
+}
