@@ -11,8 +11,7 @@
 // registers; the pressure (the threads of component 0 solve it, one per part) and the end
 // values of the velocity cross between a k's threads through workgroup memory.
 // f, out: word 2 ((c n + z) nk + k) + part. bvp: chebyshev_bvp's strided per-k tables.
-// points: the inverse transform's matrix (n x n), zeta_j, then the weights of dv/dz at the top
-// on the values, which slab_walls reads (this kernel takes the slope from the coefficients).
+// points: the inverse transform's matrix (n x n), zeta_j, the weights of dv/dz at the top.
 // minv: the slit's 6 x 6 complex inverse per k, word ((r 6 + c) 2 + part) nk + k.
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
@@ -145,15 +144,6 @@ fn velocity_end(slot: u32, c: u32, e: u32) -> vec2<f32> {
     return vec2<f32>(velocity_ends[b * 2u + e], velocity_ends[(b + 1u) * 2u + e]);
 }
 
-// The velocity's value at point j (j = 0 the top): row j of the inverse transform.
-fn value_at(j: u32) -> f32 {
-    var acc = 0.0;
-    for (var m = 0u; m < POINTS; m++) {
-        acc += points[j * POINTS + m] * coef[m];
-    }
-    return acc;
-}
-
 @compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
@@ -199,9 +189,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     workgroupBarrier();
 
     // The velocity: eta (v'' - k^2 v) = (i k p, dp/dz) - f with the force-free
-    // exterior's boundary values, then its values at the ends.
-    var top = 0.0;
-    var bottom = 0.0;
+    // exterior's boundary values, then its values along z.
     if (valid) {
         let scale = u.f_scale * u.slab.inv_eta;
         if (c == 2u) {
@@ -234,19 +222,17 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             }
         }
         solve(k, alpha, beta);
-        // The values at the ends straight from the coefficients (T_m(1) = 1, T_m(-1) =
-        // (-1)^m): the walls need every component's before any value, and the values
-        // themselves are taken in the output loop below, from `coef`. No private array is
-        // written or read at an index a rolled loop computes: a driver that keeps such a
-        // loop rolled puts the whole array in local memory, and every step of the
-        // recurrences above then waits on it.
-        for (var m = 0u; m < n; m++) {
-            top += coef[m];
-            bottom += select(coef[m], -coef[m], m % 2u == 1u);
+        // Values at the points (j = 0 the top): the inverse transform.
+        for (var j = 0u; j < n; j++) {
+            var acc = 0.0;
+            for (var m = 0u; m < n; m++) {
+                acc += points[j * n + m] * coef[m];
+            }
+            line[j] = acc;
         }
         let e = (slot * 6u + c * 2u + part) * 2u;
-        velocity_ends[e] = top;
-        velocity_ends[e + 1u] = bottom;
+        velocity_ends[e] = line[0];
+        velocity_ends[e + 1u] = line[n - 1u];
     }
     workgroupBarrier();
     if (!valid) {
@@ -255,25 +241,26 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
 
     // The walls (slab_walls), on this thread's values.
     let zeta_at = n * n;
+    let row_at = n * n + n;
     let walls = u.slab.walls;
     if (kabs == 0.0) {
-        // dv/dz at the top: sum_m m^2 c_m (T_m'(1) = m^2) times 2 / H.
         var slope = 0.0;
         if (walls == 1u && c < 2u) {
-            for (var m = 0u; m < n; m++) {
-                slope -= f32(m * m) * coef[m];
+            for (var i = 0u; i < n; i++) {
+                slope -= points[row_at + i] * line[i];
             }
-            slope *= u.dz_scale;
         }
+        let top = line[0];
+        let bottom = line[n - 1u];
         for (var j = 0u; j < n; j++) {
             let zeta = points[zeta_at + j];
             var x = 0.0;
             if (c < 2u) {
                 if (walls == 1u) {
-                    x = value_at(j) - bottom + zeta * slope;
+                    x = line[j] - bottom + zeta * slope;
                 } else if (walls == 2u) {
                     let h = zeta / u.slab.height;
-                    x = value_at(j) - bottom * (1.0 - h) - top * h;
+                    x = line[j] - bottom * (1.0 - h) - top * h;
                 }
             }
             out[word(c, j, k) + part] = x;
@@ -282,7 +269,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     if (walls == 0u) {
         for (var j = 0u; j < n; j++) {
-            out[word(c, j, k) + part] = value_at(j);
+            out[word(c, j, k) + part] = line[j];
         }
         return;
     }
@@ -311,9 +298,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     }
     let a = big_c[2] - times_i(kk.x * big_c[0] + kk.y * big_c[1]) / kabs;
     let b = -big_d[2] - times_i(kk.x * big_d[0] + kk.y * big_d[1]) / kabs;
-    // This component's C and D, picked by constant indices (see above).
-    let cc = select(select(big_c[0], big_c[1], c == 1u), big_c[2], c == 2u);
-    let dd = select(select(big_d[0], big_d[1], c == 1u), big_d[2], c == 2u);
+    let cc = big_c[c];
+    let dd = big_d[c];
     for (var j = 0u; j < n; j++) {
         let zeta = points[zeta_at + j];
         let decay = exp(-kabs * zeta);
@@ -327,6 +313,6 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             let kc = kk[c];
             corr = (times_i(-kc * az) + cc) * decay + (times_i(kc * bz) + dd) * grow;
         }
-        out[word(c, j, k) + part] = value_at(j) + corr[part];
+        out[word(c, j, k) + part] = line[j] + corr[part];
     }
 }
