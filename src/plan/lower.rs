@@ -558,20 +558,12 @@ impl Lowerer<'_> {
 }
 
 /// The (output port, input port) pairs of a node whose outputs name an input by `link`
-/// (in place of it, refilled from it).
+/// (in place of it, refilled from it, started from it).
 fn port_pairs(
     inst: &crate::graph::NodeInst,
     link: impl Fn(&crate::node::PortSpec) -> Option<&'static str>,
 ) -> Vec<(usize, usize)> {
-    inst.output_ports
-        .iter()
-        .enumerate()
-        .filter_map(|(o, p)| {
-            let name = link(p)?;
-            let i = inst.input_ports.iter().position(|q| q.name == name)?;
-            Some((o, i))
-        })
-        .collect()
+    linked_ports(&inst.output_ports, &inst.input_ports, link)
 }
 
 /// The (output port, output port) pairs of a node whose outputs name another output by
@@ -580,13 +572,23 @@ fn output_pairs(
     inst: &crate::graph::NodeInst,
     link: impl Fn(&crate::node::PortSpec) -> Option<&'static str>,
 ) -> Vec<(usize, usize)> {
-    inst.output_ports
+    linked_ports(&inst.output_ports, &inst.output_ports, link)
+}
+
+/// (index in `outputs`, index in `targets`) of every output that names a target port by
+/// `link`.
+fn linked_ports(
+    outputs: &[crate::node::PortSpec],
+    targets: &[crate::node::PortSpec],
+    link: impl Fn(&crate::node::PortSpec) -> Option<&'static str>,
+) -> Vec<(usize, usize)> {
+    outputs
         .iter()
         .enumerate()
         .filter_map(|(o, p)| {
             let name = link(p)?;
-            let c = inst.output_ports.iter().position(|q| q.name == name)?;
-            Some((o, c))
+            let t = targets.iter().position(|q| q.name == name)?;
+            Some((o, t))
         })
         .collect()
 }
