@@ -538,6 +538,29 @@ fn a_disabled_subgraph_with_a_refused_planner_loads() {
     }
 }
 
+/// `g` planned for `inputs` with in-place outputs on or off, and the ids of the nodes
+/// whose outputs the plan put in place, in the plan's order.
+fn plan_in_place(
+    gpu: &mesoflow::gpu::GpuContext,
+    g: &graph::Graph,
+    inputs: &BTreeMap<String, HostArray>,
+    in_place: bool,
+) -> (mesoflow::plan::Plan, Vec<String>) {
+    let opts = PlanOptions {
+        outputs: None,
+        inputs: types_of(inputs),
+        fuse: true,
+        in_place,
+    };
+    let p = mesoflow::plan::plan(g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
+    let aliased = p
+        .in_place
+        .iter()
+        .map(|a| g.nodes[a.node].id.clone())
+        .collect();
+    (p, aliased)
+}
+
 /// Outputs in place of their inputs (the `countdown_in_place` probe): two nodes read one
 /// pooled value, and only the second, the last to read it, writes into its buffer (the
 /// first would change what the second reads); a graph input is never written. The
@@ -569,18 +592,7 @@ fn in_place_outputs_give_the_results_of_copies() {
     let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&x))].into();
     let mut results = Vec::new();
     for in_place in [true, false] {
-        let opts = PlanOptions {
-            outputs: None,
-            inputs: types_of(&inputs),
-            fuse: true,
-            in_place,
-        };
-        let p = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
-        let aliased: Vec<&str> = p
-            .in_place
-            .iter()
-            .map(|a| g.nodes[a.node].id.as_str())
-            .collect();
+        let (p, aliased) = plan_in_place(&gpu, &g, &inputs, in_place);
         assert_eq!(aliased, if in_place { vec!["c"] } else { vec![] });
         let mut program = compile_cached(&gpu, &g, &p);
         let out = run_program(&mut program, &inputs, 1);
@@ -736,20 +748,9 @@ fn loops_in_place_give_the_results_of_copies() {
             .unwrap_or_else(|e| panic!("{e}"));
         let mut results = Vec::new();
         for in_place in [true, false] {
-            let opts = PlanOptions {
-                outputs: None,
-                inputs: types_of(&inputs),
-                fuse: true,
-                in_place,
-            };
-            let p = mesoflow::plan::plan(&g, &opts, &gpu.caps).unwrap_or_else(|e| panic!("{e}"));
             // l1 starts in a.out, t1 writes in place, l1 ends in its current; l2 starts in
             // l1.out unless it is requested, and ends in the state's next buffer.
-            let aliased: Vec<&str> = p
-                .in_place
-                .iter()
-                .map(|a| g.nodes[a.node].id.as_str())
-                .collect();
+            let (p, aliased) = plan_in_place(&gpu, &g, &inputs, in_place);
             let want = match (in_place, requested) {
                 (false, _) => vec![],
                 (true, false) => vec!["l1", "t1", "l1", "l2", "l2"],
