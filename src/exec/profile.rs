@@ -105,10 +105,12 @@ impl Program<'_> {
         for s in 0..steps {
             let step = self.steps_done + s;
             let last = s + 1 == steps;
-            let counts = match &timer {
-                Some(timer) => self.profile_step_by_timestamps(timer, step, last, &mut rows)?,
-                None => self.profile_step_on_host(step, last, &mut rows)?,
+            let counted = match &timer {
+                Some(timer) => self.profile_step_by_timestamps(timer, step, last, &mut rows),
+                None => self.profile_step_on_host(step, last, &mut rows),
             };
+            // A failed step keeps the steps before it (see run_batched).
+            let counts = counted.inspect_err(|_| self.steps_done += s)?;
             self.note_iterations(counts);
         }
         self.steps_done += steps;
@@ -152,7 +154,10 @@ impl Program<'_> {
             let Some(qs) = &queries else {
                 let t = Instant::now();
                 let idx = if self.has_loops() {
-                    let (idx, counts) = self.submit_step_with_loops(step, last)?;
+                    // A failed step keeps the steps before it (see run_batched).
+                    let (idx, counts) = self
+                        .submit_step_with_loops(step, last)
+                        .inspect_err(|_| self.steps_done += s)?;
                     self.note_iterations(counts);
                     idx
                 } else {

@@ -433,7 +433,17 @@ impl Program<'_> {
             // Loops decide on the host, so steps go out one at a time.
             while done < opts.steps {
                 let last = done + 1 == opts.steps;
-                let (idx, counts) = self.submit_step_with_loops(self.steps_done + done, last)?;
+                let (idx, counts) = match self.submit_step_with_loops(self.steps_done + done, last)
+                {
+                    Ok(step) => step,
+                    Err(e) => {
+                        // The steps before this one ran and are kept: the next run goes on
+                        // from them (their step number, so their random draws and which of
+                        // a state's two buffers holds it), not from this run's start.
+                        self.steps_done += done;
+                        return Err(e);
+                    }
+                };
                 self.note_iterations(counts);
                 self.gpu.wait(idx)?;
                 done += 1;

@@ -403,3 +403,47 @@ fn a_halted_step_keeps_nothing_in_place_or_not() {
         }
     }
 }
+
+/// A run that halts after some good steps keeps them: the state is the last good step's,
+/// and the steps counted are those that ran (the next run goes on from there, with their
+/// step number and state buffer), under every way of running steps. The halt is the
+/// `countdown` probe's count on the state,
+/// nonzero once the state passes 1: from -1 the state runs -1, 0, 1, 2 and the fourth
+/// step halts.
+#[test]
+fn a_run_halted_after_good_steps_keeps_them() {
+    let Some(gpu) = gpu() else { return };
+    let launches = Launches::default();
+    let reg = probe_registry(&launches);
+    let dir = tmpdir("repeat_halt_later");
+    let json = r#"{"mesoflow": 1,
+ "inputs": {"x": {"type": "particles", "rows": 1, "cols": 1}},
+ "state": {"s": {"init": "inputs.x", "next": "inc.out"}},
+ "nodes": [
+   {"id": "inc", "kind": "affine", "params": {"offset": 1}, "inputs": {"x": "state.s"}},
+   {"id": "check", "kind": "countdown", "inputs": {"x": "state.s"}},
+   {"id": "loop", "kind": "repeat", "inputs": {"initial": "state.s", "next": "tick.out", "count": "tick.count", "halt": "check.count"}},
+   {"id": "tick", "kind": "countdown", "inputs": {"x": "loop.current"}}
+ ],
+ "outputs": {"s": "state.s", "left": "loop.out"}}"#;
+    let path = write_graph(&dir, "halt_later.json", json);
+    let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&[[-1.0]]))].into();
+    let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
+    for profile in [Profile::Off, Profile::Launches, Profile::Steps] {
+        let mut program = compile_cached(&gpu, &g, &p);
+        program.upload(&inputs).unwrap();
+        let e = program
+            .run_on(&RunOptions {
+                steps: 10,
+                profile,
+                progress: false,
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`halt` check is 1"), "{profile:?}: {e}");
+        assert_eq!(program.steps_done(), 3, "{profile:?}");
+        let out: BTreeMap<_, _> = program.read_outputs().unwrap().into_iter().collect();
+        assert_eq!(f32s(&out["s"]), [2.0], "{profile:?}");
+    }
+}
