@@ -136,8 +136,8 @@ pub struct Repeat {
     stop_word: u32,
 }
 
-/// Words of the status: iterations, stopped, last count, total, halt.
-const STATUS_WORDS: u64 = 5;
+/// Words of the status: iterations, stopped, last count, total, halt, done.
+const STATUS_WORDS: u64 = 6;
 
 impl Node for Repeat {
     fn infer(&self, inputs: &[Option<ValueType>], _: &DeviceCaps) -> Result<Signature, PortError> {
@@ -322,10 +322,12 @@ impl GpuIterative for Repeat {
             answer: status.clone(),
             answer_offset: 0,
             // `tally` sets `stopped` (status[1]) and counts the iterations (status[0]);
-            // `advance` and `tally` do nothing after.
+            // `advance` and `tally` do nothing after; `done` (status[5]) where `decide`
+            // will finish with no answer.
             gpu_stop: Some(GpuStop {
                 stopped_word: 1,
                 iterations_word: 0,
+                done_word: 5,
             }),
         })
     }

@@ -613,6 +613,12 @@ pub struct GpuStop {
     pub stopped_word: u32,
     /// The iterations run before the stop, counted by `iterate`: what `decide` is given.
     pub iterations_word: u32,
+    /// A u32 that `start` sets to 0 and `iterate` sets nonzero, with `stopped_word`, where
+    /// the loop stopped as `decide` will accept, finishing with an empty answer (its
+    /// `finish` needs nothing from the host). The executor chains the rest of a step on
+    /// it: what follows the loop runs, in the same submission, only where it is set
+    /// (exec/run.rs, `StepChain`).
+    pub done_word: u32,
 }
 
 /// The host's verdict after reading an iterative node's status.

@@ -1,6 +1,9 @@
 // `repeat`: a value carried through a loop body until the body's count is zero (or for a
 // fixed number of iterations). The words are copied as bits, whatever their type.
-// status: [iterations, stopped, last count, total of the counts, halt]. Entries:
+// status: [iterations, stopped, last count, total of the counts, halt, done]; done is set
+// with stopped where the loop ended as the host will accept (its count 0 or the fixed
+// number reached, no halt): what the executor's chained steps run the rest of the step on
+// (exec/run.rs). Entries:
 // - `start`: current = initial (unless copy_start is 0: the plan gave both one buffer,
 //   binding 0 then a stand-in, unread), status = 0, status[4] = the `halt` check's first
 //   word (when one is bound: a nonzero halt stops the loop at once and the host reports
@@ -46,7 +49,7 @@ fn start(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     if (params.copy_start == 1u && i < params.words) {
         current[i] = initial[i];
     }
-    if (i < 4u) {
+    if (i < 4u || i == 5u) {
         status[i] = 0u;
     }
     if (i == 4u) {
@@ -88,6 +91,11 @@ fn tally() {
     status[3] = status[3] + tallied;
     if ((params.fixed == 0u && (c == 0u || k >= params.max_iterations)) || k == params.fixed) {
         status[1] = 1u;
+        // At max_iterations with the count still nonzero the host reports the loop
+        // unconverged: stopped, not done.
+        if (c == 0u || k == params.fixed) {
+            status[5] = 1u;
+        }
     }
 }
 

@@ -37,6 +37,9 @@ pub struct DisksBench {
     /// The flip loops' meshes written in place (`PlanOptions::in_place`; off with
     /// `--no-in-place`).
     pub in_place: bool,
+    /// Each step's loops chained in one submission (`Program::set_chain_loops`; off with
+    /// `--no-chain`).
+    pub chain_loops: bool,
 }
 
 /// Flops per pair of the long-range kernel (shaders/disks/forces.wgsl, counted by hand:
@@ -65,11 +68,16 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
     let registry = mesoflow::nodes::registry();
     outln!(
         "bd_delaunay.json, dt 0.01, D 0.01, sigma 1; step: median over {} steps end to end (host \
-         clock: loops read their status each iteration); parts: medians of each launch timed \
+         clock; {}); parts: medians of each launch timed \
          alone (a loop with its body and round trips); iterations per step of the loops \
          (each counting its last, empty round); long range: pairs/s = N^2 / the all-pairs kernel time, \
          GFLOP/s at {LONG_FLOPS} flops per pair; the flip loops' meshes {}",
         bench.reps,
+        if bench.chain_loops {
+            "a step's loops chained in one submission, one status read a step"
+        } else {
+            "--no-chain: a host round trip per loop"
+        },
         if bench.in_place {
             "written in place (no copies per iteration)"
         } else {
@@ -159,6 +167,7 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
                     bench.reps,
                     true,
                     bench.in_place,
+                    bench.chain_loops,
                 ) {
                     Ok(run) => run,
                     Err(e) => {

@@ -249,7 +249,7 @@ pub fn time_loaded(
     reps: u64,
     fuse: bool,
 ) -> Result<TimedRun, BenchError> {
-    time_loaded_with(gpu, g, inputs, outputs, reps, fuse, true)
+    time_loaded_with(gpu, g, inputs, outputs, reps, fuse, true, true)
 }
 
 /// [`time_loaded`], outputs in place of their inputs (`PlanOptions::in_place`) or not.
@@ -261,6 +261,7 @@ pub fn time_loaded_with(
     reps: u64,
     fuse: bool,
     in_place: bool,
+    chain_loops: bool,
 ) -> Result<TimedRun, BenchError> {
     let opts = PlanOptions {
         outputs,
@@ -271,6 +272,7 @@ pub fn time_loaded_with(
     let p = plan::plan(g, &opts, &gpu.caps)?;
     let mut cache = KernelCache::default();
     let mut program = Program::compile(gpu, g, &p, &mut cache)?;
+    program.set_chain_loops(chain_loops);
     program.upload(inputs)?;
     warm_up(&mut program)?;
     let timed = |program: &mut Program, profile| {
@@ -524,6 +526,11 @@ pub enum BenchCommand {
         /// flip loop iteration copies it back): to time what they save.
         #[arg(long)]
         no_in_place: bool,
+        /// Run each step's loops with a host round trip each (the step's launches after a
+        /// loop submitted once the host has read its status) instead of chained in one
+        /// submission a step: to time what chaining saves.
+        #[arg(long)]
+        no_chain: bool,
     },
     /// Direct pair mobilities (rpy_open.json, rpy_wall.json; translation and grand):
     /// time, pair interactions per second and GFLOP/s at the kernels' flop counts.
@@ -724,6 +731,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             reps,
             order,
             no_in_place,
+            no_chain,
         } => disks::run(&disks::DisksBench {
             graph,
             configs,
@@ -732,6 +740,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), BenchError> {
             reps,
             in_order: order == "lattice",
             in_place: !no_in_place,
+            chain_loops: !no_chain,
         }),
         BenchCommand::Nbody {
             graphs,

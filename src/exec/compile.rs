@@ -2,7 +2,9 @@
 //! own dispatches (or a spectral node alone), a transform with what it folds in, a fused
 //! group, a state copy, a loop with its body.
 
-use super::{Compiled, CompiledLoop, ExecError, FIRST_BATCH, LoopGate, Program, engine_err};
+use super::{
+    Compiled, CompiledLoop, ExecError, FIRST_BATCH, LoopGate, Program, StepChain, engine_err,
+};
 use crate::gpu::{Binding, CompileCtx, CompileError, KernelSpec, NodeIo, NodePlan, Slot, WG_1D};
 use crate::graph::NodeId;
 use crate::node::Lowering;
@@ -306,6 +308,29 @@ impl<'a> Program<'a> {
         })
     }
 
+    /// The gate kernel (shaders/engine/gate.wgsl) at `entry`: `main` for a loop's gate,
+    /// `tail` for a chained step's tail gates.
+    fn gate_kernel(
+        cx: &mut CompileCtx,
+        entry: &str,
+    ) -> Result<std::sync::Arc<crate::gpu::Kernel>, ExecError> {
+        cx.kernel(
+            &KernelSpec::new(
+                format!("loop gate {entry}"),
+                cx.shader("engine/gate.wgsl").map_err(engine_err)?,
+                &[
+                    Binding::StorageRead,
+                    Binding::StorageRead,
+                    Binding::StorageReadWrite,
+                    Binding::Uniform,
+                    Binding::StorageReadWrite,
+                ],
+            )
+            .entry(entry),
+        )
+        .map_err(engine_err)
+    }
+
     /// The gate of a loop whose node sets status word `stopped_word` at the stop: the
     /// static workgroup counts of its iteration's dispatches, the indirect arguments and
     /// the kernel that writes them from the counts and the word.
@@ -317,33 +342,110 @@ impl<'a> Program<'a> {
     ) -> Result<LoopGate, ExecError> {
         let counts: Vec<u32> = lp.iteration().flat_map(|d| d.workgroups).collect();
         let static_counts = cx.table("loop gate counts", bytemuck::cast_slice(&counts));
-        let args = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("loop gate args"),
-            size: (4 * counts.len() as u64).max(16).next_multiple_of(16),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::INDIRECT,
-            mapped_at_creation: false,
-        });
-        let kernel = cx
-            .kernel(&KernelSpec::new(
-                "loop gate",
-                cx.shader("engine/gate.wgsl").map_err(engine_err)?,
-                &[
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::Uniform,
-                ],
-            ))
-            .map_err(engine_err)?;
+        let args = indirect_args(self.gpu, "loop gate args", counts.len());
+        let kernel = Self::gate_kernel(cx, "main")?;
         let params = cx.uniform(
             "loop gate params",
-            bytemuck::cast_slice(&[counts.len() as u32, stopped_word]),
+            bytemuck::cast_slice(&[counts.len() as u32, stopped_word, 0, 0]),
         );
         let dispatch = cx.dispatch(
             &kernel,
-            &[&static_counts, &lp.kernels.status, &args, &params],
+            &[
+                &static_counts,
+                &lp.kernels.status,
+                &args,
+                &params,
+                &self.loop_chain,
+            ],
             cx.grid_1d(counts.len() as u64, WG_1D),
         );
         Ok(LoopGate { args, dispatch })
     }
+
+    /// The chained form of a parity's step (`StepChain`), where it has loops and every
+    /// one stops on the GPU and runs on every step; `None` otherwise.
+    pub(super) fn compile_chain(
+        &self,
+        cx: &mut CompileCtx,
+        parity: usize,
+    ) -> Result<Option<StepChain>, ExecError> {
+        let step = &self.step[parity];
+        let loops: Vec<&CompiledLoop> = step.iter().filter_map(|c| c.looped.as_deref()).collect();
+        let chainable = |c: &Compiled| {
+            c.looped
+                .as_ref()
+                .is_none_or(|lp| !c.last_only && lp.gate.is_some() && lp.kernels.gpu_stop.is_some())
+        };
+        if loops.is_empty() || !step.iter().all(chainable) {
+            return Ok(None);
+        }
+        // The slots in recording order (`run.rs`, `record_chained`): from the first
+        // loop's finish on, every dispatch but the loops' gates and iterations.
+        let mut counts: Vec<u32> = Vec::new();
+        let mut tail_first = Vec::new();
+        let mut after_loop = false;
+        for c in step {
+            match &c.looped {
+                None if after_loop => counts.extend(c.dispatches.iter().flat_map(|d| d.workgroups)),
+                None => {}
+                Some(lp) => {
+                    if after_loop {
+                        counts.extend(lp.kernels.start.iter().flat_map(|d| d.workgroups));
+                    }
+                    tail_first.push(counts.len() / 3);
+                    counts.extend(lp.kernels.finish.iter().flat_map(|d| d.workgroups));
+                    after_loop = true;
+                }
+            }
+        }
+        counts.extend(self.clock_tick.workgroups);
+        let slots = counts.len() / 3;
+        let static_counts = cx.table("step chain counts", bytemuck::cast_slice(&counts));
+        let args = indirect_args(self.gpu, "step chain args", counts.len());
+        let kernel = Self::gate_kernel(cx, "tail")?;
+        let tails = loops
+            .iter()
+            .enumerate()
+            .map(|(k, lp)| {
+                let end = tail_first.get(k + 1).copied().unwrap_or(slots);
+                let first = tail_first[k];
+                let stop = lp.kernels.gpu_stop.expect("chainable");
+                let params = cx.uniform(
+                    "step chain tail params",
+                    bytemuck::cast_slice(&[
+                        3 * (end - first) as u32,
+                        stop.stopped_word,
+                        3 * first as u32,
+                        stop.done_word,
+                    ]),
+                );
+                cx.dispatch(
+                    &kernel,
+                    &[
+                        &static_counts,
+                        &lp.kernels.status,
+                        &args,
+                        &params,
+                        &self.loop_chain,
+                    ],
+                    [1, 1, 1],
+                )
+            })
+            .collect();
+        Ok(Some(StepChain {
+            args,
+            tails,
+            tail_first,
+        }))
+    }
+}
+
+/// A buffer of `words` indirect dispatch arguments that a gate kernel writes.
+fn indirect_args(gpu: &crate::gpu::GpuContext, label: &str, words: usize) -> wgpu::Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: (4 * words as u64).max(16).next_multiple_of(16),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::INDIRECT,
+        mapped_at_creation: false,
+    })
 }

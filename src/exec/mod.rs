@@ -202,6 +202,25 @@ struct LoopGate {
     dispatch: Dispatch,
 }
 
+/// A step whose loops all stop on the GPU, recorded as one submission (exec/run.rs,
+/// `submit_step_chained`): everything after its first loop's batch goes out as indirect
+/// dispatches whose workgroup counts `tails` write (shaders/engine/gate.wgsl `tail`), one
+/// after each loop's batch, for the dispatches up to the next loop's batch (its `finish`,
+/// the launches between, the next loop's `start`; after the last loop, the clock tick
+/// too): the static counts where the loop is done and every loop before it too, zeros
+/// otherwise. The host reads the loops' statuses once, at the end; a loop its batch did
+/// not finish goes on in further batches, then the step from that loop's tail on goes out
+/// again.
+struct StepChain {
+    /// One (x, y, z) per slot: the dispatches after the first loop's batch in recording
+    /// order (every dispatch of the step's launches, whether it runs on this step or not).
+    args: wgpu::Buffer,
+    /// After each loop (in the step's order), the gate of its tail.
+    tails: Vec<Dispatch>,
+    /// Each loop's first slot (its `finish`'s first dispatch).
+    tail_first: Vec<usize>,
+}
+
 impl CompiledLoop {
     /// One iteration's dispatches: the body's, then the node's `iterate`.
     fn iteration(&self) -> impl Iterator<Item = &Dispatch> {
@@ -209,6 +228,22 @@ impl CompiledLoop {
             .iter()
             .flat_map(|c| &c.dispatches)
             .chain(&self.kernels.iterate)
+    }
+
+    /// A gated loop's batch: one iteration more than its last run took, so a loop that
+    /// needs one more this time still stops within its first batch, while one that needs
+    /// as many costs an iteration's launches (gated off).
+    fn next_batch(&self) -> usize {
+        self.last_iterations
+            .load(std::sync::atomic::Ordering::Relaxed)
+            .max(1)
+            + 1
+    }
+
+    /// Copies the loop's status into its first staging buffer.
+    fn copy_status(&self, enc: &mut wgpu::CommandEncoder) {
+        let bytes = self.kernels.status_bytes.max(4).next_multiple_of(4);
+        enc.copy_buffer_to_buffer(&self.kernels.status, 0, &self.staging[0], 0, bytes);
     }
 }
 
@@ -243,6 +278,13 @@ pub struct Program<'a> {
     /// Step launches for even and odd steps (they differ only in state buffers).
     step: [Vec<Compiled>; 2],
     clock_tick: Dispatch,
+    /// The chained form of each parity's step, where every loop stops on the GPU.
+    chains: [Option<StepChain>; 2],
+    /// Whether steps with loops go out chained (`chains`); on by default.
+    chain_loops: bool,
+    /// The chain word the loop gates and tail gates share (gate.wgsl): 1 while every
+    /// loop of the step so far is done.
+    loop_chain: wgpu::Buffer,
     /// Pipelines built for this program (cache misses).
     pub kernels_built: usize,
     /// Bytes nodes allocated for uniforms and tables.
@@ -349,6 +391,9 @@ impl<'a> Program<'a> {
             prologue: Vec::new(),
             step: [Vec::new(), Vec::new()],
             clock_tick,
+            chains: [None, None],
+            chain_loops: true,
+            loop_chain: storage_buffer(gpu, "loop chain", 4),
             kernels_built: 0,
             table_bytes: 0,
             steps_done: 0,
@@ -409,6 +454,10 @@ impl<'a> Program<'a> {
         let table_bytes = cx.allocated.get();
         program.prologue = prologue;
         program.step = [even, odd];
+        program.chains = [
+            program.compile_chain(&mut cx, 0)?,
+            program.compile_chain(&mut cx, 1)?,
+        ];
         program.table_bytes = table_bytes;
         program.kernels_built = cache.built - built_before;
         gpu.take_errors()?;

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use std::sync::atomic::Ordering;
 
-use super::{CompiledLoop, ExecError, LoopGate, Profile, Program, RunOptions, RunStats};
+use super::{CompiledLoop, ExecError, LoopGate, Profile, Program, RunOptions, RunStats, StepChain};
 use crate::gpu::{Dispatch, GpuError};
 use crate::node::{Decision, GpuStop, LoopError, Lowering};
 use crate::value::HostArray;
@@ -122,9 +122,9 @@ impl Program<'_> {
     /// gate kernel, after each iteration, zeroes the indirect workgroup counts of the
     /// iterations after it once the loop has stopped, so the iterations a batch holds past
     /// the stop cost only their launches and change nothing. A batch is one iteration
-    /// longer than the loop's last run (`last_iterations`): a loop that takes as many
-    /// iterations as at its last step, or one more (the common case in a time loop), costs
-    /// one host round trip.
+    /// longer than the loop's last run (`CompiledLoop::next_batch`): a loop that takes as
+    /// many iterations as at its last step, or one more (the common case in a time loop),
+    /// costs one host round trip.
     fn run_batches<'p>(
         &'p self,
         lp: &'p CompiledLoop,
@@ -133,68 +133,256 @@ impl Program<'_> {
         pending: &mut Vec<&'p Dispatch>,
         step: u64,
     ) -> Result<u32, ExecError> {
-        let inst = &self.graph.nodes[lp.node];
-        let Lowering::Iterative(it) = inst.node().lowering() else {
-            unreachable!("compiled as a loop")
-        };
-        let bytes = lp.kernels.status_bytes.max(4).next_multiple_of(4);
-        let staging = &lp.staging[0];
-        // One iteration more than the last run took: a loop that needs one more this time
-        // still stops within its first batch, while one that needs as many costs an
-        // iteration's launches (gated off).
-        let batch = lp.last_iterations.load(Ordering::Relaxed).max(1) + 1;
         pending.extend(&lp.kernels.start);
         // The first iteration's counts, the stopped word just cleared by `start`.
         pending.push(&gate.dispatch);
-        let mut submitted = 0usize;
+        let (iterations, answer) = self.batches_until_stop(lp, gate, stop, pending, step, 0)?;
+        self.gpu
+            .queue
+            .write_buffer(&lp.kernels.answer, lp.kernels.answer_offset, &answer);
+        pending.extend(&lp.kernels.finish);
+        Ok(iterations as u32)
+    }
+
+    /// Sets the chain word (shaders/engine/gate.wgsl) to 1 for the next submission: the
+    /// loop gates run their loops only while it is set, and a chained step's tail gates
+    /// clear it where a loop did not finish.
+    fn open_chain(&self) {
+        self.gpu
+            .queue
+            .write_buffer(&self.loop_chain, 0, bytemuck::bytes_of(&1u32));
+    }
+
+    /// Batches of a gated loop's iterations (`pending`, recorded before them, goes out
+    /// with the first), `submitted` of them already run, until the loop stops: its
+    /// iterations and its answer. Stores the iterations as the loop's last run.
+    fn batches_until_stop<'p>(
+        &'p self,
+        lp: &'p CompiledLoop,
+        gate: &'p LoopGate,
+        stop: GpuStop,
+        pending: &mut Vec<&'p Dispatch>,
+        step: u64,
+        mut submitted: usize,
+    ) -> Result<(usize, Vec<u8>), ExecError> {
+        let batch = lp.next_batch();
         loop {
+            // Where a chained step's tail gate found this loop unfinished, it cleared the
+            // chain word.
+            self.open_chain();
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
             {
                 let mut pass = enc.begin_compute_pass(&Default::default());
                 for d in pending.iter() {
                     Self::record(&mut pass, std::slice::from_ref(*d), step);
                 }
-                for _ in 0..batch {
-                    for (i, d) in lp.iteration().enumerate() {
-                        if !d.workgroups.contains(&0) && d.runs_at(step) {
-                            Self::record_gated(&mut pass, d, &gate.args, i);
-                        }
-                    }
-                    Self::record(&mut pass, std::slice::from_ref(&gate.dispatch), step);
-                }
+                Self::record_batch(&mut pass, lp, gate, batch, step);
             }
-            enc.copy_buffer_to_buffer(&lp.kernels.status, 0, staging, 0, bytes);
+            lp.copy_status(&mut enc);
             pending.clear();
             let index = self.gpu.queue.submit([enc.finish()]);
             submitted += batch;
-            let status = self.read_status(lp, staging, index)?;
-            let words: &[u32] = bytemuck::cast_slice(&status);
-            let iterations = words[stop.iterations_word as usize] as usize;
-            let failed = |source| ExecError::Loop {
-                node: inst.id.clone(),
-                kind: inst.kind,
-                step: step + 1,
-                source,
-            };
-            match it.decide(iterations, &status).map_err(failed)? {
-                Decision::Continue if iterations == submitted => {}
-                Decision::Continue => {
-                    return Err(failed(LoopError::Internal(format!(
-                        "the GPU ran {iterations} of {submitted} iterations without stopping"
-                    ))));
-                }
-                Decision::Finish(answer) => {
-                    self.gpu.queue.write_buffer(
-                        &lp.kernels.answer,
-                        lp.kernels.answer_offset,
-                        &answer,
-                    );
-                    pending.extend(&lp.kernels.finish);
-                    lp.last_iterations.store(iterations, Ordering::Relaxed);
-                    return Ok(iterations as u32);
-                }
+            let status = self.read_status(lp, &lp.staging[0], index)?;
+            if let Some(finished) = self.judge(lp, stop, &status, submitted, step)? {
+                lp.last_iterations.store(finished.0, Ordering::Relaxed);
+                return Ok(finished);
             }
         }
+    }
+
+    /// `batch` iterations of a gated loop, each followed by its gate.
+    fn record_batch(
+        pass: &mut wgpu::ComputePass,
+        lp: &CompiledLoop,
+        gate: &LoopGate,
+        batch: usize,
+        step: u64,
+    ) {
+        for _ in 0..batch {
+            for (i, d) in lp.iteration().enumerate() {
+                if !d.workgroups.contains(&0) && d.runs_at(step) {
+                    Self::record_gated(pass, d, &gate.args, i);
+                }
+            }
+            Self::record(pass, std::slice::from_ref(&gate.dispatch), step);
+        }
+    }
+
+    /// The host's reading of a gated loop's status after `submitted` iterations went out:
+    /// `None` where it goes on (every one of them ran), its iterations and answer where it
+    /// finished, the loop's error where it failed. The node's `done` word must agree with
+    /// its `decide` (a chained step ran, or skipped, the rest of the step on it).
+    fn judge(
+        &self,
+        lp: &CompiledLoop,
+        stop: GpuStop,
+        status: &[u8],
+        submitted: usize,
+        step: u64,
+    ) -> Result<Option<(usize, Vec<u8>)>, ExecError> {
+        let inst = &self.graph.nodes[lp.node];
+        let Lowering::Iterative(it) = inst.node().lowering() else {
+            unreachable!("compiled as a loop")
+        };
+        let words: &[u32] = bytemuck::cast_slice(status);
+        let iterations = words[stop.iterations_word as usize] as usize;
+        let done = words[stop.done_word as usize] != 0;
+        let failed = |source| ExecError::Loop {
+            node: inst.id.clone(),
+            kind: inst.kind,
+            step: step + 1,
+            source,
+        };
+        let decision = it.decide(iterations, status);
+        let disagree = |verdict: &str| {
+            failed(LoopError::Internal(format!(
+                "the loop {verdict} after {iterations} iterations, but its node's `done` word \
+                 says {}",
+                if done { "done" } else { "not done" }
+            )))
+        };
+        match decision {
+            Err(_) | Ok(Decision::Continue) if done => Err(disagree("did not finish")),
+            Err(source) => Err(failed(source)),
+            Ok(Decision::Continue) if iterations == submitted => Ok(None),
+            Ok(Decision::Continue) => Err(failed(LoopError::Internal(format!(
+                "the GPU ran {iterations} of {submitted} iterations without stopping"
+            )))),
+            Ok(Decision::Finish(answer)) if done && answer.is_empty() => {
+                Ok(Some((iterations, answer)))
+            }
+            Ok(Decision::Finish(_)) => Err(disagree("finished with an answer")),
+        }
+    }
+
+    /// One step whose loops all stop on the GPU as one submission (`StepChain`): the
+    /// launches before the first loop, each loop's start, gate and batch, then its tail
+    /// gate and, gated by it, its finish and everything up to the next loop's batch, the
+    /// clock tick last. The host then reads the loops' statuses in order; a loop its batch
+    /// did not finish goes on in batches of its own, and the step from its tail on goes
+    /// out again (the launches after it were gated off). Returns the last submission and
+    /// the loops' iterations.
+    fn submit_step_chained(
+        &self,
+        chain: &StepChain,
+        step: u64,
+        last: bool,
+    ) -> Result<(wgpu::SubmissionIndex, Vec<u32>), ExecError> {
+        let parity = (step % 2) as usize;
+        let loops: Vec<&CompiledLoop> = self.step[parity]
+            .iter()
+            .filter_map(|c| c.looped.as_deref())
+            .collect();
+        let mut counts = vec![0u32; loops.len()];
+        let mut from = None;
+        loop {
+            self.open_chain();
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            let batches = self.record_chained(&mut enc, chain, parity, step, last, from);
+            let first = from.map_or(0, |f| f + 1);
+            let index = self.gpu.queue.submit([enc.finish()]);
+            let mut goes_on = None;
+            for (k, lp) in loops.iter().enumerate().skip(first) {
+                let (Some(gate), Some(stop)) = (&lp.gate, lp.kernels.gpu_stop) else {
+                    unreachable!("a chained step's loops are gated")
+                };
+                let status = self.read_status(lp, &lp.staging[0], index.clone())?;
+                match self.judge(lp, stop, &status, batches[k], step)? {
+                    Some((iterations, _)) => {
+                        lp.last_iterations.store(iterations, Ordering::Relaxed);
+                        counts[k] = iterations as u32;
+                    }
+                    None => {
+                        let (iterations, _) = self.batches_until_stop(
+                            lp,
+                            gate,
+                            stop,
+                            &mut Vec::new(),
+                            step,
+                            batches[k],
+                        )?;
+                        counts[k] = iterations as u32;
+                        goes_on = Some(k);
+                        break;
+                    }
+                }
+            }
+            match goes_on {
+                None => return Ok((index, counts)),
+                Some(k) => from = Some(k),
+            }
+        }
+    }
+
+    /// Records a chained step from its start (`from` None) or from loop `from`'s tail
+    /// gate on (the loops before it and their launches done); returns the batch recorded
+    /// for each loop (0 for those not recorded). The slots of the gated dispatches follow
+    /// the layout `compile_chain` counted. Each loop's status is copied for the host right
+    /// after its tail gate (a pass ends there): it lies in the node's scratch, which
+    /// launches after the loop may reuse.
+    fn record_chained(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        chain: &StepChain,
+        parity: usize,
+        step: u64,
+        last: bool,
+        from: Option<usize>,
+    ) -> Vec<usize> {
+        // A dispatch before the first loop's batch goes out as recorded; one after it
+        // through its slot of the chain's arguments (counted whether it runs or not).
+        let emit =
+            |pass: &mut wgpu::ComputePass, d: &Dispatch, slot: &mut Option<usize>, runs| match slot
+            {
+                None if runs => Self::record(pass, std::slice::from_ref(d), step),
+                None => {}
+                Some(s) => {
+                    if runs && !d.workgroups.contains(&0) && d.runs_at(step) {
+                        Self::record_gated(pass, d, &chain.args, *s);
+                    }
+                    *s += 1;
+                }
+            };
+        let mut batches = vec![0; chain.tails.len()];
+        let mut slot = None;
+        let mut k = 0;
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        for c in &self.step[parity] {
+            let Some(lp) = &c.looped else {
+                if from.is_none_or(|f| k > f) {
+                    for d in &c.dispatches {
+                        emit(&mut pass, d, &mut slot, c.runs_on(last));
+                    }
+                }
+                continue;
+            };
+            let gate = lp.gate.as_ref().expect("a chained step's loops are gated");
+            let batched = from.is_none_or(|f| k > f);
+            if batched {
+                for d in &lp.kernels.start {
+                    emit(&mut pass, d, &mut slot, true);
+                }
+                Self::record(&mut pass, std::slice::from_ref(&gate.dispatch), step);
+                batches[k] = lp.next_batch();
+                Self::record_batch(&mut pass, lp, gate, batches[k], step);
+            }
+            if from.is_none_or(|f| k >= f) {
+                debug_assert!(slot.is_none_or(|s| s == chain.tail_first[k]));
+                Self::record(&mut pass, std::slice::from_ref(&chain.tails[k]), step);
+                if batched {
+                    drop(pass);
+                    lp.copy_status(enc);
+                    pass = enc.begin_compute_pass(&Default::default());
+                }
+                slot = Some(chain.tail_first[k]);
+                for d in &lp.kernels.finish {
+                    emit(&mut pass, d, &mut slot, true);
+                }
+            }
+            k += 1;
+        }
+        emit(&mut pass, &self.clock_tick, &mut slot, true);
+        batches
     }
 
     /// A loop only the host can stop: each iteration ends with a host round trip that
@@ -275,6 +463,9 @@ impl Program<'_> {
         last: bool,
     ) -> Result<(wgpu::SubmissionIndex, Vec<u32>), ExecError> {
         let parity = (step % 2) as usize;
+        if let (true, Some(chain)) = (self.chain_loops, &self.chains[parity]) {
+            return self.submit_step_chained(chain, step, last);
+        }
         let mut pending: Vec<&Dispatch> = Vec::new();
         let mut counts = Vec::new();
         for c in self.step[parity].iter().filter(|c| c.runs_on(last)) {
@@ -391,6 +582,12 @@ impl Program<'_> {
     /// values, step counter at 0 (the same draws as the first run, for the same seed).
     pub fn reset(&mut self) {
         self.steps_done = 0;
+    }
+
+    /// Whether steps whose loops all stop on the GPU go out as one submission each
+    /// (`StepChain`; on by default), or with a host round trip per loop (for comparisons).
+    pub fn set_chain_loops(&mut self, on: bool) {
+        self.chain_loops = on;
     }
 
     /// Steps run since the prologue.

@@ -447,3 +447,65 @@ fn a_run_halted_after_good_steps_keeps_them() {
         assert_eq!(f32s(&out["s"]), [2.0], "{profile:?}");
     }
 }
+
+/// Two loops in a step, the second's value made from the first's, run as one submission
+/// a step (`StepChain`, the default) and with a host round trip per loop: the same
+/// results and iterations under every way of running steps. The state s grows by 1 a
+/// step, the first loop counts down from s (s iterations) and the second from 2 s + what
+/// the first left (0): the first batch (2 + 1 iterations, then one more than the last
+/// step's) cannot hold the first loop at the first step nor the second at any, so the
+/// chained steps go on with further batches and submit the rest of the step again; the
+/// probes count that every body ran exactly the iterations reported, none past a stop.
+#[test]
+fn chained_loops_run_as_the_host_decided_ones() {
+    let Some(gpu) = gpu() else { return };
+    let launches = Launches::default();
+    let reg = probe_registry(&launches);
+    let dir = tmpdir("repeat_chained");
+    let json = r#"{"mesoflow": 1,
+ "inputs": {"x": {"type": "particles", "rows": 1, "cols": 1}},
+ "state": {"s": {"init": "inputs.x", "next": "up.out"}},
+ "nodes": [
+   {"id": "up", "kind": "affine", "params": {"offset": 1}, "inputs": {"x": "state.s"}},
+   {"id": "a", "kind": "repeat", "inputs": {"initial": "state.s", "next": "ta.out", "count": "ta.count"}},
+   {"id": "ta", "kind": "countdown", "inputs": {"x": "a.current"}},
+   {"id": "twice", "kind": "axpy", "params": {"alpha": 2}, "inputs": {"x": "state.s", "y": "a.out"}},
+   {"id": "b", "kind": "repeat", "inputs": {"initial": "twice.out", "next": "tb.out", "count": "tb.count"}},
+   {"id": "tb", "kind": "countdown", "inputs": {"x": "b.current"}}
+ ],
+ "outputs": {"s": "state.s", "a_left": "a.out", "b_left": "b.out", "b_iterations": "b.iterations", "b_total": "b.total"}}"#;
+    let path = write_graph(&dir, "two_loops.json", json);
+    let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let x0 = 4u32;
+    let steps = 4u64;
+    let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&[[x0 as f64]]))].into();
+    let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
+    let a_want: Vec<u32> = (0..steps as u32).map(|k| x0 + k).collect();
+    let b_want: Vec<u32> = a_want.iter().map(|a| 2 * a).collect();
+    for chain in [true, false] {
+        for profile in [Profile::Off, Profile::Steps, Profile::Launches] {
+            let case = format!("chained {chain}, {profile:?}");
+            launches.clear();
+            let mut program = compile_cached(&gpu, &g, &p);
+            program.set_chain_loops(chain);
+            let out = crate::util::try_run_program(&mut program, &inputs, steps, profile)
+                .unwrap_or_else(|e| panic!("{case}: {e}"));
+            assert_eq!(
+                program.loop_iterations(),
+                [
+                    ("a".to_string(), a_want.clone()),
+                    ("b".to_string(), b_want.clone())
+                ],
+                "{case}"
+            );
+            assert_eq!(f32s(&out["s"]), [(x0 + steps as u32) as f32], "{case}");
+            assert_eq!(f32s(&out["a_left"]), [0.0], "{case}");
+            assert_eq!(f32s(&out["b_left"]), [0.0], "{case}");
+            let b_last = *b_want.last().unwrap();
+            assert_eq!(u32s(&out["b_iterations"]), [b_last], "{case}");
+            assert_eq!(u32s(&out["b_total"]), [b_last - 1], "{case}");
+            let want: u32 = a_want.iter().chain(&b_want).sum();
+            assert_eq!(launches.total(&gpu), want, "{case}: body launches");
+        }
+    }
+}
