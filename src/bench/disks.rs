@@ -24,7 +24,7 @@ use mesoflow::nodes::disks::presets::{configuration, lattice_disks_in};
 use mesoflow::value::{HostArray, ValueType};
 
 use super::fcm::load;
-use super::{BenchError, ms, open_gpu, time_loaded_with};
+use super::{BenchError, Engine, ms, open_gpu, time_loaded_with};
 
 pub struct DisksBench {
     pub graph: PathBuf,
@@ -165,9 +165,11 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
                     &inputs,
                     None,
                     bench.reps,
-                    true,
-                    bench.in_place,
-                    bench.chain_loops,
+                    Engine {
+                        fuse: true,
+                        in_place: bench.in_place,
+                        chain_loops: bench.chain_loops,
+                    },
                 ) {
                     Ok(run) => run,
                     Err(e) => {

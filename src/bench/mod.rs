@@ -249,30 +249,43 @@ pub fn time_loaded(
     reps: u64,
     fuse: bool,
 ) -> Result<TimedRun, BenchError> {
-    time_loaded_with(gpu, g, inputs, outputs, reps, fuse, true, true)
+    let engine = Engine {
+        fuse,
+        in_place: true,
+        chain_loops: true,
+    };
+    time_loaded_with(gpu, g, inputs, outputs, reps, engine)
 }
 
-/// [`time_loaded`], outputs in place of their inputs (`PlanOptions::in_place`) or not.
+/// What the planner and executor may do, to time what each saves.
+pub struct Engine {
+    /// Fuse element-wise chains (`PlanOptions::fuse`).
+    pub fuse: bool,
+    /// Outputs in place of their inputs (`PlanOptions::in_place`).
+    pub in_place: bool,
+    /// A step's loops chained in one submission (`Program::set_chain_loops`).
+    pub chain_loops: bool,
+}
+
+/// [`time_loaded`] with the engine's choices given.
 pub fn time_loaded_with(
     gpu: &GpuContext,
     g: &Graph,
     inputs: &BTreeMap<String, HostArray>,
     outputs: Option<Vec<String>>,
     reps: u64,
-    fuse: bool,
-    in_place: bool,
-    chain_loops: bool,
+    engine: Engine,
 ) -> Result<TimedRun, BenchError> {
     let opts = PlanOptions {
         outputs,
         inputs: inputs.iter().map(|(k, v)| (k.clone(), v.ty)).collect(),
-        fuse,
-        in_place,
+        fuse: engine.fuse,
+        in_place: engine.in_place,
     };
     let p = plan::plan(g, &opts, &gpu.caps)?;
     let mut cache = KernelCache::default();
     let mut program = Program::compile(gpu, g, &p, &mut cache)?;
-    program.set_chain_loops(chain_loops);
+    program.set_chain_loops(engine.chain_loops);
     program.upload(inputs)?;
     warm_up(&mut program)?;
     let timed = |program: &mut Program, profile| {
