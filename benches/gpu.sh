@@ -43,7 +43,8 @@
 #               A = 0.01, Monte-Carlo thermostat; (a) dt 0.01, F 1.5e-4; (b) dt 0.005,
 #               F 2.5e-4; 200000 steps of warm-up, 300000 averaged): the mean velocity
 #               against 0.0436 and 0.0406 (benches/poiseuille.py)
-#   disks       Brownian disks with a Delaunay mesh (bd_delaunay.json): the step split into
+#   disks       Brownian disks with a Delaunay mesh (bd_delaunay.json): c0 and c4 short at
+#               2^20 with the step's loops chained and with --no-chain; the step split into
 #               forces, flips, overlap correction for c0 to c4, long range, short range
 #               (cell list) and the Verlet variant, 2^10 to 2^20 (DISKS_SIZES,
 #               DISKS_CONFIGS to change), the long-range pair interactions per second;
@@ -362,6 +363,10 @@ suite_poiseuille() {
 }
 
 suite_disks() {
+  # What chaining a step's loops in one submission saves (the same binary, --no-chain:
+  # a host round trip per loop).
+  run $bin bench disks --configs c0,c4 --ranges short --sizes 1048576 --reps 9
+  run $bin bench disks --configs c0,c4 --ranges short --sizes 1048576 --reps 9 --no-chain
   run python3 benches/disk_forces_check.py $bin 65536
   run $bin bench disks --configs ${DISKS_CONFIGS:-c0,c1,c2,c3,c4} --ranges long,short,verlet \
     --sizes ${DISKS_SIZES:-1024,16384,65536,262144,1048576} --reps 5
