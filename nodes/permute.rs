@@ -34,6 +34,31 @@ fn with_rows(t: ValueType, rows: u32) -> ValueType {
     }
 }
 
+/// The dispatch of the kernel `shaders/permute/{name}.wgsl` over `threads` items of a
+/// 1-D grid. The kernels of these nodes all bind alike, so one function builds each: the
+/// inputs read-only in order, then the one output the kernel writes, then a uniform of
+/// u32 sizes (`shape`, labelled `{name} shape`).
+fn permute_pass(
+    cx: &mut CompileCtx<'_>,
+    name: &str,
+    inputs: &[&wgpu::Buffer],
+    out: &wgpu::Buffer,
+    shape: &[u32],
+    threads: u64,
+) -> Result<Dispatch, CompileError> {
+    let mut bindings = vec![Binding::StorageRead; inputs.len()];
+    bindings.extend([Binding::StorageReadWrite, Binding::Uniform]);
+    let kernel = cx.kernel(&KernelSpec::new(
+        name,
+        cx.shader(&format!("permute/{name}.wgsl"))?,
+        &bindings,
+    ))?;
+    let shape = cx.uniform(&format!("{name} shape"), bytemuck::cast_slice(shape));
+    let mut buffers = inputs.to_vec();
+    buffers.extend([out, &shape]);
+    Ok(cx.dispatch(&kernel, &buffers, cx.grid_1d(threads, WG_1D)))
+}
+
 fn gather_kind() -> NodeKind {
     NodeKind::declare(
         "gather",
@@ -123,26 +148,14 @@ impl GpuKernels for Gather {
         let index = io.inputs[1].expect("required");
         let (in_rows, k) = rows_of(values.ty);
         let (out_rows, _) = rows_of(io.outputs[0].ty);
-        let kernel = cx.kernel(&KernelSpec::new(
+        Ok(vec![permute_pass(
+            cx,
             "gather",
-            cx.shader("permute/gather.wgsl")?,
-            &[
-                Binding::StorageRead,
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::Uniform,
-            ],
-        ))?;
-        let shape = cx.uniform(
-            "gather shape",
-            bytemuck::cast_slice(&[out_rows, in_rows, k]),
-        );
-        let groups = cx.grid_1d(out_rows as u64 * k as u64, WG_1D);
-        Ok(vec![cx.dispatch(
-            &kernel,
-            &[values.buffer, index.buffer, io.outputs[0].buffer, &shape],
-            groups,
-        )])
+            &[values.buffer, index.buffer],
+            io.outputs[0].buffer,
+            &[out_rows, in_rows, k],
+            out_rows as u64 * k as u64,
+        )?])
     }
 }
 
@@ -259,30 +272,18 @@ impl GpuKernels for Scatter {
         let out = io.outputs[0];
         let (in_rows, k) = rows_of(values.ty);
         let (out_rows, _) = rows_of(out.ty);
-        let kernel = cx.kernel(&KernelSpec::new(
-            "scatter",
-            cx.shader("permute/scatter.wgsl")?,
-            &[
-                Binding::StorageRead,
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::Uniform,
-            ],
-        ))?;
-        let shape = cx.uniform(
-            "scatter shape",
-            bytemuck::cast_slice(&[in_rows, out_rows, k]),
-        );
-        let groups = cx.grid_1d(in_rows as u64 * k as u64, WG_1D);
         let mut out_dispatches = Vec::new();
         if !self.permutation {
             out_dispatches.push(cx.fill(out.buffer, out.ty.words(), 0)?);
         }
-        out_dispatches.push(cx.dispatch(
-            &kernel,
-            &[values.buffer, index.buffer, out.buffer, &shape],
-            groups,
-        ));
+        out_dispatches.push(permute_pass(
+            cx,
+            "scatter",
+            &[values.buffer, index.buffer],
+            out.buffer,
+            &[in_rows, out_rows, k],
+            in_rows as u64 * k as u64,
+        )?);
         Ok(out_dispatches)
     }
 }
@@ -301,21 +302,14 @@ fn copy_columns(
     out_first: u32,
     count: u32,
 ) -> Result<Dispatch, CompileError> {
-    let kernel = cx.kernel(&KernelSpec::new(
+    permute_pass(
+        cx,
         "columns",
-        cx.shader("permute/columns.wgsl")?,
-        &[
-            Binding::StorageRead,
-            Binding::StorageReadWrite,
-            Binding::Uniform,
-        ],
-    ))?;
-    let shape = cx.uniform(
-        "columns shape",
-        bytemuck::cast_slice(&[rows, in_cols, out_cols, in_first, out_first, count]),
-    );
-    let groups = cx.grid_1d(rows as u64 * count as u64, WG_1D);
-    Ok(cx.dispatch(&kernel, &[x, out, &shape], groups))
+        &[x],
+        out,
+        &[rows, in_cols, out_cols, in_first, out_first, count],
+        rows as u64 * count as u64,
+    )
 }
 
 fn columns_kind() -> NodeKind {
@@ -610,23 +604,16 @@ impl GpuKernels for InvertPermutation {
         let index = io.inputs[0].expect("required");
         let out = io.outputs[0];
         let n = out.ty.words();
-        let kernel = cx.kernel(&KernelSpec::new(
-            "invert_permutation",
-            cx.shader("permute/invert_permutation.wgsl")?,
-            &[
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::Uniform,
-            ],
-        ))?;
-        let shape = cx.uniform("invert_permutation shape", bytemuck::bytes_of(&(n as u32)));
         Ok(vec![
             cx.fill(out.buffer, n, u32::MAX)?,
-            cx.dispatch(
-                &kernel,
-                &[index.buffer, out.buffer, &shape],
-                cx.grid_1d(n, WG_1D),
-            ),
+            permute_pass(
+                cx,
+                "invert_permutation",
+                &[index.buffer],
+                out.buffer,
+                &[n as u32],
+                n,
+            )?,
         ])
     }
 }
@@ -764,31 +751,20 @@ impl GpuKernels for Relabel {
         let x = io.inputs[0].expect("required");
         let table = io.inputs[1].expect("required");
         let words = x.ty.words();
-        let kernel = cx.kernel(&KernelSpec::new(
+        Ok(vec![permute_pass(
+            cx,
             "relabel",
-            cx.shader("permute/relabel.wgsl")?,
+            &[x.buffer, table.buffer],
+            io.outputs[0].buffer,
             &[
-                Binding::StorageRead,
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::Uniform,
-            ],
-        ))?;
-        let shape = cx.uniform(
-            "relabel shape",
-            bytemuck::cast_slice(&[
                 words as u32,
                 self.stride,
                 self.first,
                 self.count,
                 table.ty.words() as u32,
-            ]),
-        );
-        Ok(vec![cx.dispatch(
-            &kernel,
-            &[x.buffer, table.buffer, io.outputs[0].buffer, &shape],
-            cx.grid_1d(words, WG_1D),
-        )])
+            ],
+            words,
+        )?])
     }
 }
 

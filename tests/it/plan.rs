@@ -6,7 +6,7 @@ use mesoflow::gpu::DeviceCaps;
 use mesoflow::plan::{self, BufferRole, Launch, Plan, PlanOptions, Storage, Via};
 use mesoflow::value::ValueType;
 
-use crate::util::probe::{Launches, probe_registry};
+use crate::util::probe::load_probe_graph;
 use crate::util::{load, plan_graph, root, tmpdir, write_graph};
 
 fn plan_file(
@@ -285,10 +285,8 @@ fn the_flip_loops_write_the_mesh_in_place() {
 /// own.
 #[test]
 fn in_place_outputs_take_only_buffers_no_one_reads_after() {
-    let launches = Launches::default();
-    let reg = probe_registry(&launches);
     let dir = tmpdir("plan-in-place");
-    let path = write_graph(
+    let g = load_probe_graph(
         &dir,
         "g.json",
         r#"{"mesoflow": 1,
@@ -306,8 +304,6 @@ fn in_place_outputs_take_only_buffers_no_one_reads_after() {
  ],
  "outputs": {"e": "e.out", "k": "k.out", "d": "d.count"}}"#,
     );
-    let g =
-        mesoflow::graph::load(&path, &reg, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
     let inputs: BTreeMap<_, _> = [("x".to_string(), ValueType::Particles { n: 4, k: 1 })].into();
     let p = plan_graph(&DeviceCaps::baseline(), &g, inputs, None, true);
     // b reads a.out before c does: only c takes it; d (the last reader of c.out) takes c's
@@ -335,10 +331,8 @@ fn in_place_outputs_take_only_buffers_no_one_reads_after() {
 /// output's (l5, with c.out and its body's values). Off, nothing shares.
 #[test]
 fn loops_start_and_end_where_their_values_lie_only_where_nothing_reads_after() {
-    let launches = Launches::default();
-    let reg = probe_registry(&launches);
     let dir = tmpdir("plan-loop-in-place");
-    let path = write_graph(
+    let g = load_probe_graph(
         &dir,
         "g.json",
         r#"{"mesoflow": 1,
@@ -362,8 +356,6 @@ fn loops_start_and_end_where_their_values_lie_only_where_nothing_reads_after() {
  ],
  "outputs": {"s": "state.s", "l5": "l5.out"}}"#,
     );
-    let g =
-        mesoflow::graph::load(&path, &reg, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
     let inputs: BTreeMap<_, _> = [("x".to_string(), ValueType::Particles { n: 4, k: 1 })].into();
     let p = plan_graph(&DeviceCaps::baseline(), &g, inputs.clone(), None, true);
     let mut got: Vec<(String, String, String, Via)> = p

@@ -6,14 +6,14 @@ use std::collections::BTreeMap;
 
 use mesoflow::exec::{Profile, Program, RunOptions};
 use mesoflow::gpu::KernelCache;
-use mesoflow::graph::{self, LoadOptions};
+use mesoflow::graph;
 use mesoflow::plan::PlanOptions;
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::probe::{Launches, countdown_registry, probe_registry};
+use crate::util::probe::{countdown_registry, load_probe_graph};
 use crate::util::{
-    Rng, compile_cached, f32s, gpu, load, named, particles, plan_graph, root, run_graph,
-    run_program, tmpdir, types_of, write_graph,
+    Rng, compile_cached, f32s, gpu, load, load_with_registry, named, particles, plan_graph, root,
+    run_graph, run_program, tmpdir, types_of, write_graph,
 };
 
 #[test]
@@ -568,10 +568,8 @@ fn plan_in_place(
 #[test]
 fn in_place_outputs_give_the_results_of_copies() {
     let Some(gpu) = gpu() else { return };
-    let launches = Launches::default();
-    let reg = probe_registry(&launches);
     let dir = tmpdir("run-in-place");
-    let path = write_graph(
+    let g = load_probe_graph(
         &dir,
         "g.json",
         r#"{"mesoflow": 1,
@@ -586,8 +584,6 @@ fn in_place_outputs_give_the_results_of_copies() {
  ],
  "outputs": {"d": "d.out", "f": "f.out"}}"#,
     );
-    let g =
-        mesoflow::graph::load(&path, &reg, &Default::default()).unwrap_or_else(|e| panic!("{e}"));
     let x: Vec<[f64; 1]> = (0..5).map(|i| [i as f64 - 1.5]).collect();
     let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&x))].into();
     let mut results = Vec::new();
@@ -648,8 +644,7 @@ fn launches_only_outputs_read_run_on_the_last_step_of_each_run() {
     };
     let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&[[10.0]]))].into();
     let run = |json: &str, runs: &[(u64, Profile, bool)]| -> (Vec<f32>, u32) {
-        let path = write_graph(&dir, "g.json", json);
-        let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+        let g = load_with_registry(&write_graph(&dir, "g.json", json), &reg);
         let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
         launches.clear();
         let mut cache = KernelCache::default();
@@ -706,8 +701,6 @@ fn launches_only_outputs_read_run_on_the_last_step_of_each_run() {
 #[test]
 fn loops_in_place_give_the_results_of_copies() {
     let Some(gpu) = gpu() else { return };
-    let launches = Launches::default();
-    let reg = probe_registry(&launches);
     let dir = tmpdir("run-loops-in-place");
     let x: Vec<[f64; 1]> = [4.5, 1.0, 2.25, -1.0, 0.25].map(|v| [v]).into();
     let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&x))].into();
@@ -743,9 +736,7 @@ fn loops_in_place_give_the_results_of_copies() {
  ],
  "outputs": {"s": "state.s"OUTPUTS}}"#
             .replace("OUTPUTS", if requested { r#", "l1": "l1.out""# } else { "" });
-        let path = write_graph(&dir, &format!("g{requested}.json"), &json);
-        let g = mesoflow::graph::load(&path, &reg, &Default::default())
-            .unwrap_or_else(|e| panic!("{e}"));
+        let g = load_probe_graph(&dir, &format!("g{requested}.json"), &json);
         let mut results = Vec::new();
         for in_place in [true, false] {
             // l1 starts in a.out, t1 writes in place, l1 ends in its current; l2 starts in

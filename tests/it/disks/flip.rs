@@ -7,10 +7,9 @@ use mesoflow::nodes::disks::mesh::{
     MESH_WORDS, check_torus_mesh, illegal_edges, in_circle, periodic_delaunay,
 };
 use mesoflow::nodes::disks::{minimum_image, wrap};
-use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::disks::disk_positions;
-use crate::util::{Rng, flat_particles, gpu, run_node_and_reference, u32s};
+use crate::util::{Rng, flat_particles, gpu, indices, run_node_and_reference, u32s};
 
 fn codes_of(quads: &[[f64; 8]]) -> (Vec<u32>, Vec<u32>) {
     let flat: Vec<f64> = quads.iter().flatten().copied().collect();
@@ -106,15 +105,6 @@ fn flip_predicate_matches_its_f64_twin_on_degenerate_quads() {
     assert!(compared > 3900, "{compared} quads compared");
 }
 
-fn mesh_array(mesh: &[u32]) -> HostArray {
-    HostArray::u32(
-        ValueType::Indices {
-            n: mesh.len() as u32,
-        },
-        mesh.to_vec(),
-    )
-}
-
 fn edge_set(mesh: &[u32]) -> Vec<(u32, u32)> {
     let mut e: Vec<(u32, u32)> = mesh
         .chunks(MESH_WORDS)
@@ -174,7 +164,7 @@ fn flip_rounds_restore_the_delaunay_triangulation() {
                 params,
                 &[
                     ("positions", flat_particles(&x, 2)),
-                    ("mesh", mesh_array(&mesh)),
+                    ("mesh", indices(&mesh)),
                 ],
             );
             let next = u32s(&out["mesh"]);
@@ -244,7 +234,7 @@ fn pass_through_count_finds_a_disk_moved_through_its_neighbour() {
             &[
                 ("before", flat_particles(&before, 2)),
                 ("after", flat_particles(after, 2)),
-                ("mesh", mesh_array(&mesh)),
+                ("mesh", indices(&mesh)),
             ],
         );
         let got = u32s(&out["count"])[0];

@@ -10,9 +10,11 @@ use mesoflow::gpu::KernelCache;
 use mesoflow::nodes::disks::mesh::{check_torus_mesh, illegal_edges, periodic_delaunay};
 use mesoflow::nodes::disks::minimum_image;
 use mesoflow::plan::{self, PlanOptions};
-use mesoflow::value::{HostArray, HostData, ValueType};
+use mesoflow::value::{HostArray, HostData};
 
-use crate::util::disks::{disk_positions, lattice_disks, run_with_loops_planned};
+use crate::util::disks::{
+    disk_graph_inputs, disk_positions, lattice_disks, random_headings, run_with_loops_planned,
+};
 use crate::util::{Rng, flat_particles, gpu, load_with, types_of, u32s};
 
 /// The smallest distance between two of the disks (minimum image, all pairs).
@@ -44,19 +46,7 @@ fn bd_delaunay_keeps_a_delaunay_mesh_and_no_overlaps_every_step() {
         .flat_map(|i| if i % 2 == 0 { [1.0, 1.0] } else { [-1.0, 1.0] })
         .collect();
     let mesh = periodic_delaunay(&x0, [l, l]).unwrap();
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x0, 2)),
-        ("charges".to_string(), flat_particles(&charges, 2)),
-        (
-            "mesh".to_string(),
-            HostArray::u32(
-                ValueType::Indices {
-                    n: mesh.len() as u32,
-                },
-                mesh.clone(),
-            ),
-        ),
-    ]);
+    let inputs = disk_graph_inputs(&x0, &mesh, [("charges", flat_particles(&charges, 2))]);
     let steps = 6;
     let g = load_with(
         "bd_delaunay.json",
@@ -142,23 +132,9 @@ fn abp_delaunay_disks_follow_the_active_msd_and_never_overlap() {
         .iter()
         .map(|&v| v as f32 as f64)
         .collect();
-    let theta0: Vec<f64> = (0..n)
-        .map(|_| rng.uniform(0.0, 2.0 * std::f64::consts::PI) as f32 as f64)
-        .collect();
+    let theta0 = random_headings(&mut rng, n);
     let mesh = periodic_delaunay(&x0, [l, l]).unwrap();
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x0, 2)),
-        ("angles".to_string(), flat_particles(&theta0, 1)),
-        (
-            "mesh".to_string(),
-            HostArray::u32(
-                ValueType::Indices {
-                    n: mesh.len() as u32,
-                },
-                mesh,
-            ),
-        ),
-    ]);
+    let inputs = disk_graph_inputs(&x0, &mesh, [("angles", flat_particles(&theta0, 1))]);
     let g = load_with(
         "abp_delaunay.json",
         &[
@@ -231,18 +207,7 @@ fn bd_delaunay_is_the_same_with_its_meshes_in_place_or_copied() {
     let mut rng = Rng::new(53);
     let (x0, l) = lattice_disks(&mut rng, n, 0.79, 1.0);
     let mesh = periodic_delaunay(&x0, [l, l]).unwrap();
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x0, 2)),
-        (
-            "mesh".to_string(),
-            HostArray::u32(
-                ValueType::Indices {
-                    n: mesh.len() as u32,
-                },
-                mesh,
-            ),
-        ),
-    ]);
+    let inputs = disk_graph_inputs(&x0, &mesh, []);
     let steps = 4;
     let g = load_with(
         "bd_delaunay.json",

@@ -15,9 +15,12 @@ use mesoflow::plan::{Launch, Via};
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::disks::{
-    LoopRun, disk_positions, run_with_loops, run_with_loops_planned, run_with_loops_profiled,
+    LoopRun, disk_graph_inputs, disk_positions, run_with_loops, run_with_loops_planned,
+    run_with_loops_profiled,
 };
-use crate::util::{self, Rng, flat_particles, gpu, input_decl, run_node_and_reference, u32s};
+use crate::util::{
+    self, Rng, flat_particles, gpu, indices, input_decl, run_node_and_reference, u32s,
+};
 
 const L: [f64; 2] = [18.0, 16.0];
 
@@ -91,21 +94,6 @@ fn loop_body(gpu: &GpuContext, json: &str, inputs: &BTreeMap<String, HostArray>)
     ids
 }
 
-fn inputs(x: &[f64], mesh: &[u32]) -> BTreeMap<String, HostArray> {
-    BTreeMap::from([
-        ("positions".to_string(), flat_particles(x, 2)),
-        (
-            "mesh".to_string(),
-            HostArray::u32(
-                ValueType::Indices {
-                    n: mesh.len() as u32,
-                },
-                mesh.to_vec(),
-            ),
-        ),
-    ])
-}
-
 /// The f64 rounds until one flips nothing (or `fixed` rounds): the mesh, the rounds run
 /// and the flips made.
 fn host_flips(x: &[f64], mesh: &[u32], fixed: usize) -> (Vec<u32>, u32, u32) {
@@ -135,7 +123,8 @@ fn repeat_carries_the_mesh_through_the_flip_rounds() {
     let g = util::load(&util::write_graph(&dir, "g.json", &flip_graph(300, "{}")));
     for profile in [Profile::Off, Profile::Launches] {
         let (out, loops) =
-            run_with_loops_profiled(&gpu, &g, &inputs(&x, &mesh), 2, profile).unwrap();
+            run_with_loops_profiled(&gpu, &g, &disk_graph_inputs(&x, &mesh, []), 2, profile)
+                .unwrap();
         assert_eq!(u32s(&out["mesh"]), want, "{profile:?}");
         assert_eq!(u32s(&out["iterations"]), vec![rounds], "{profile:?}");
         assert_eq!(u32s(&out["flips"]), vec![total], "{profile:?}");
@@ -166,7 +155,7 @@ fn the_flip_loop_is_the_same_in_place_or_copied() {
         let params = format!(r#"{{"stop_word": {stop_word}}}"#);
         let json = flip_graph_of_rounds(300, &params, r);
         let g = util::load(&util::write_graph(&dir, "g.json", &json));
-        let types = inputs(&x, &mesh)
+        let types = disk_graph_inputs(&x, &mesh, [])
             .iter()
             .map(|(k, v)| (k.clone(), v.ty))
             .collect();
@@ -183,8 +172,15 @@ fn the_flip_loop_is_the_same_in_place_or_copied() {
         for profile in [Profile::Off, Profile::Launches] {
             let runs: Vec<LoopRun> = [true, false]
                 .map(|in_place| {
-                    run_with_loops_planned(&gpu, &g, &inputs(&x, &mesh), 2, profile, in_place)
-                        .unwrap()
+                    run_with_loops_planned(
+                        &gpu,
+                        &g,
+                        &disk_graph_inputs(&x, &mesh, []),
+                        2,
+                        profile,
+                        in_place,
+                    )
+                    .unwrap()
                 })
                 .into();
             let case = format!("{r} rounds, stop_word {stop_word}, {profile:?}");
@@ -223,7 +219,7 @@ fn repeat_stops_on_the_last_rounds_flips() {
             let (out, _) = run(
                 &gpu,
                 &flip_graph_of_rounds(300, &params, r),
-                &inputs(&x, &mesh),
+                &disk_graph_inputs(&x, &mesh, []),
                 1,
             )
             .unwrap();
@@ -237,7 +233,7 @@ fn repeat_stops_on_the_last_rounds_flips() {
     let e = run(
         &gpu,
         &flip_graph(300, r#"{"stop_word": 2}"#),
-        &inputs(&x, &mesh),
+        &disk_graph_inputs(&x, &mesh, []),
         1,
     )
     .unwrap_err();
@@ -255,7 +251,7 @@ fn repeat_runs_a_fixed_count_and_refuses_past_its_cap() {
     let (out, _) = run(
         &gpu,
         &flip_graph(300, r#"{"fixed": 2}"#),
-        &inputs(&x, &mesh),
+        &disk_graph_inputs(&x, &mesh, []),
         1,
     )
     .unwrap();
@@ -265,7 +261,7 @@ fn repeat_runs_a_fixed_count_and_refuses_past_its_cap() {
     let e = run(
         &gpu,
         &flip_graph(300, r#"{"max_iterations": 2}"#),
-        &inputs(&x, &mesh),
+        &disk_graph_inputs(&x, &mesh, []),
         1,
     )
     .unwrap_err();
@@ -293,12 +289,7 @@ fn repeat_carries_the_positions_through_the_overlap_rounds() {
     let x: Vec<f64> = x0.iter().map(|&v| v as f32 as f64).collect();
     let params = r#"{"sigma": 1, "box": [24, 22]}"#;
     let table = vertex_fans(&mesh, n, 10);
-    let fans = HostArray::u32(
-        ValueType::Indices {
-            n: table.len() as u32,
-        },
-        table,
-    );
+    let fans = indices(&table);
     let (mut want, mut rounds, mut total) = (x.clone(), 0u32, 0u32);
     loop {
         let (out, _) = run_node_and_reference(
@@ -306,7 +297,7 @@ fn repeat_carries_the_positions_through_the_overlap_rounds() {
             params,
             &[
                 ("positions", flat_particles(&want, 2)),
-                ("mesh", inputs(&x, &mesh)["mesh"].clone()),
+                ("mesh", indices(&mesh)),
                 ("fans", fans.clone()),
             ],
         );
@@ -336,8 +327,11 @@ fn repeat_carries_the_positions_through_the_overlap_rounds() {
     );
     // The rounds above took the shared GPU in turn; the loop takes it now.
     let gpu = gpu().expect("checked above");
-    assert_eq!(loop_body(&gpu, &json, &inputs(&x, &mesh)), ["round"]);
-    let (out, _) = run(&gpu, &json, &inputs(&x, &mesh), 1).unwrap();
+    assert_eq!(
+        loop_body(&gpu, &json, &disk_graph_inputs(&x, &mesh, [])),
+        ["round"]
+    );
+    let (out, _) = run(&gpu, &json, &disk_graph_inputs(&x, &mesh, []), 1).unwrap();
     assert_eq!(u32s(&out["iterations"]), vec![rounds]);
     assert_eq!(u32s(&out["overlaps"]), vec![total]);
     assert_eq!(out["positions"].data.to_f64(), want);

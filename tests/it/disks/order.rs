@@ -14,17 +14,8 @@ use mesoflow::nodes::disks::minimum_image;
 use mesoflow::plan::{Launch, Plan};
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::disks::{lattice_disks, run_with_loops};
-use crate::util::{Rng, flat_particles, gpu, load_with, plan_graph, types_of, u32s};
-
-fn mesh_array(mesh: &[u32]) -> HostArray {
-    HostArray::u32(
-        ValueType::Indices {
-            n: mesh.len() as u32,
-        },
-        mesh.to_vec(),
-    )
-}
+use crate::util::disks::{disk_graph_inputs, lattice_disks, random_headings, run_with_loops};
+use crate::util::{Rng, flat_particles, gpu, indices, load_with, plan_graph, types_of, u32s};
 
 /// The undirected edges of a mesh, each as (lower id, higher id).
 fn edges(mesh: &[u32]) -> BTreeSet<(u32, u32)> {
@@ -80,7 +71,7 @@ fn renumbered(inputs: &BTreeMap<String, HostArray>, perm: &[usize]) -> BTreeMap<
                             ]
                         })
                         .collect();
-                    mesh_array(&m)
+                    indices(&m)
                 }
             };
             (name.clone(), moved)
@@ -112,21 +103,11 @@ fn renumbered_disks_give_the_same_run_up_to_the_permutation() {
     let q: Vec<f64> = (0..n)
         .flat_map(|i| if i % 3 == 0 { [1.0, 1.0] } else { [-1.0, 2.0] })
         .collect();
-    let theta: Vec<f64> = (0..n)
-        .map(|_| rng.uniform(0.0, std::f64::consts::TAU) as f32 as f64)
-        .collect();
+    let theta = random_headings(&mut rng, n);
     let perm = shuffled(&mut rng, n);
     let steps = 6;
-    let bd = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x, 2)),
-        ("charges".to_string(), flat_particles(&q, 2)),
-        ("mesh".to_string(), mesh_array(&mesh)),
-    ]);
-    let abp = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x, 2)),
-        ("angles".to_string(), flat_particles(&theta, 1)),
-        ("mesh".to_string(), mesh_array(&mesh)),
-    ]);
+    let bd = disk_graph_inputs(&x, &mesh, [("charges", flat_particles(&q, 2))]);
+    let abp = disk_graph_inputs(&x, &mesh, [("angles", flat_particles(&theta, 1))]);
     let cases: [Case; 3] = [
         (
             "bd_delaunay.json",
@@ -286,15 +267,9 @@ fn unwrapped_positions_follow_the_wrapped_path() {
     let n = 64usize;
     let mut rng = Rng::new(89);
     let (x, l) = lattice_disks(&mut rng, n, 0.05, 1.0);
-    let mesh = mesh_array(&periodic_delaunay(&x, [l, l]).unwrap());
-    let theta: Vec<f64> = (0..n)
-        .map(|_| rng.uniform(0.0, std::f64::consts::TAU) as f32 as f64)
-        .collect();
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x, 2)),
-        ("angles".to_string(), flat_particles(&theta, 1)),
-        ("mesh".to_string(), mesh.clone()),
-    ]);
+    let mesh = periodic_delaunay(&x, [l, l]).unwrap();
+    let theta = random_headings(&mut rng, n);
+    let inputs = disk_graph_inputs(&x, &mesh, [("angles", flat_particles(&theta, 1))]);
     let g = load_with(
         "abp_delaunay.json",
         &[
@@ -313,11 +288,8 @@ fn unwrapped_positions_follow_the_wrapped_path() {
         l / 2.0
     );
     assert!(far > n / 4, "{far} of {n} disks went past half the box");
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x, 2)),
-        ("charges".to_string(), flat_particles(&vec![0.0; 2 * n], 2)),
-        ("mesh".to_string(), mesh),
-    ]);
+    let charges = flat_particles(&vec![0.0; 2 * n], 2);
+    let inputs = disk_graph_inputs(&x, &mesh, [("charges", charges)]);
     let g = load_with(
         "bd_delaunay.json",
         &[
@@ -432,10 +404,7 @@ fn a_broken_given_mesh_is_refused_as_given() {
     let mut mesh = periodic_delaunay(&x, [l, l]).unwrap();
     let t = 5;
     mesh[MESH_WORDS * t + 3] = mesh[MESH_WORDS * t + 4];
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x, 2)),
-        ("mesh".to_string(), mesh_array(&mesh)),
-    ]);
+    let inputs = disk_graph_inputs(&x, &mesh, []);
     let g = load_with("bd_delaunay.json", &[("n", "64"), ("density", "0.3")], 1, 0);
     let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
     let mut cache = KernelCache::default();

@@ -4,21 +4,12 @@
 
 use mesoflow::nodes::disks::mesh::periodic_delaunay;
 use mesoflow::nodes::disks::minimum_image;
-use mesoflow::value::{HostArray, ValueType};
+use mesoflow::value::HostArray;
 
 use crate::util::disks::disk_positions;
-use crate::util::{Rng, flat_particles, gpu, run_node_and_reference, u32s};
+use crate::util::{Rng, flat_particles, gpu, indices, run_node_and_reference, u32s};
 
 const L: [f64; 2] = [24.0, 22.0];
-
-fn mesh_array(mesh: &[u32]) -> HostArray {
-    HostArray::u32(
-        ValueType::Indices {
-            n: mesh.len() as u32,
-        },
-        mesh.to_vec(),
-    )
-}
 
 /// Overlapping pairs among all pairs (minimum image), and the smallest distance.
 fn all_pair_overlaps(x: &[f64], sigma: f64) -> (usize, f64) {
@@ -68,7 +59,7 @@ fn overlap_rounds_remove_every_overlap() {
     }
     let mut rng = Rng::new(29);
     let x0 = disk_positions(&mut rng, 300, L, 0.72);
-    let mesh = mesh_array(&periodic_delaunay(&x0, L).unwrap());
+    let mesh = indices(&periodic_delaunay(&x0, L).unwrap());
     let fans = fan_tables(&mesh, &[10, 3]);
     let mut x: Vec<f64> = x0.iter().map(|&v| v as f32 as f64).collect();
     let (initial, _) = all_pair_overlaps(&x, 1.0);

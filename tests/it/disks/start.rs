@@ -6,15 +6,12 @@
 //! than a diameter, left the mesh folded with disks 0.08 sigma apart, and step 2 counted
 //! pass-throughs (`flips` halt 68 to 75 on lavapipe, c0 short at N = 16384).
 
-use std::collections::BTreeMap;
-
 use mesoflow::nodes::disks::mesh::{check_torus_mesh, illegal_edges, periodic_delaunay};
 use mesoflow::nodes::disks::minimum_image;
 use mesoflow::nodes::disks::presets::lattice_disks;
-use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::disks::run_with_loops;
-use crate::util::{flat_particles, gpu, load_with, u32s};
+use crate::util::disks::{disk_graph_inputs, run_with_loops};
+use crate::util::{gpu, load_with, u32s};
 
 /// The shortest edge of a torus mesh (the nearest pair, the mesh being Delaunay).
 fn shortest_edge(mesh: &[u32], x: &[f64], l: f64) -> f64 {
@@ -44,18 +41,7 @@ fn lattice_start_at_16384_runs_without_pass_through() {
     assert_eq!(illegal_edges(&mesh, &x32, [l, l], 0.0), Vec::<usize>::new());
 
     let Some(gpu) = gpu() else { return };
-    let inputs = BTreeMap::from([
-        ("positions".to_string(), flat_particles(&x32, 2)),
-        (
-            "mesh".to_string(),
-            HostArray::u32(
-                ValueType::Indices {
-                    n: mesh.len() as u32,
-                },
-                mesh,
-            ),
-        ),
-    ]);
+    let inputs = disk_graph_inputs(&x32, &mesh, []);
     let steps = 3;
     let n_text = n.to_string();
     let g = load_with(

@@ -11,23 +11,13 @@ use mesoflow::nodes::disks::mesh::periodic_delaunay;
 use mesoflow::nodes::disks::minimum_image;
 use mesoflow::value::{HostArray, ValueType};
 
-use crate::util::disks::{lattice_disks, run_with_loops};
+use crate::util::disks::{disk_graph_inputs, lattice_disks, random_headings, run_with_loops};
 use crate::util::{Rng, flat_particles, gpu, load_with, u32s};
 
 /// The graph's inputs for disks at `x` in a box of side `l`: the positions and their
 /// mesh (charges, where a test needs them, go in beside).
 fn disk_inputs(x: &[f64], l: f64) -> BTreeMap<String, HostArray> {
-    let mesh = periodic_delaunay(x, [l, l]).unwrap();
-    let mesh = HostArray::u32(
-        ValueType::Indices {
-            n: mesh.len() as u32,
-        },
-        mesh,
-    );
-    BTreeMap::from([
-        ("positions".to_string(), flat_particles(x, 2)),
-        ("mesh".to_string(), mesh),
-    ])
+    disk_graph_inputs(x, &periodic_delaunay(x, [l, l]).unwrap(), [])
 }
 
 /// `disk_inputs` with every charge zero (free disks, config custom).
@@ -332,9 +322,7 @@ fn active_disks_at_packing_0_7_gather_into_one_cluster() {
     let mut x = out["positions"].data.to_f64();
     let mut mesh = out["mesh"].clone();
     let passive = fractions(&u32s(&mesh), &x, l);
-    let mut angles: Vec<f64> = (0..n)
-        .map(|_| rng.uniform(0.0, 2.0 * std::f64::consts::PI) as f32 as f64)
-        .collect();
+    let mut angles = random_headings(&mut rng, n);
     let (chunk, chunks) = (100u64, 4);
     let mut active = Vec::new();
     for k in 0..chunks {

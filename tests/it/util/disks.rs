@@ -1,5 +1,6 @@
 //! Helpers of the 2-D disk tests (`disks/`): disk packings with a minimum separation,
-//! graphs with loops run with their iterations per step.
+//! random headings, a graph's disk inputs, graphs with loops run with their iterations per
+//! step.
 
 use std::collections::BTreeMap;
 
@@ -9,7 +10,7 @@ use mesoflow::graph::Graph;
 use mesoflow::plan::{self, PlanOptions};
 use mesoflow::value::HostArray;
 
-use super::{Rng, try_run_program, types_of};
+use super::{Rng, flat_particles, indices, try_run_program, types_of};
 
 /// Outputs by name and the iterations of each loop per step.
 pub type LoopRun = (BTreeMap<String, HostArray>, Vec<(String, Vec<u32>)>);
@@ -114,4 +115,27 @@ pub fn lattice_disks(rng: &mut Rng, n: usize, density: f64, sigma: f64) -> (Vec<
         })
         .collect();
     (x, l)
+}
+
+/// The inputs `positions` (N x 2) and `mesh` (nodes/disks/mesh.rs's words) of a disk
+/// graph (bd_delaunay.json, abp_delaunay.json, the loop tests' graphs), with the per-disk
+/// arrays a graph reads beside them by name (bd's `charges` N x 2, abp's `angles` N x 1).
+pub fn disk_graph_inputs<'a>(
+    x: &[f64],
+    mesh: &[u32],
+    per_disk: impl IntoIterator<Item = (&'a str, HostArray)>,
+) -> BTreeMap<String, HostArray> {
+    let mut inputs = BTreeMap::from([
+        ("positions".to_string(), flat_particles(x, 2)),
+        ("mesh".to_string(), indices(mesh)),
+    ]);
+    inputs.extend(per_disk.into_iter().map(|(name, a)| (name.to_string(), a)));
+    inputs
+}
+
+/// `n` headings uniform in [0, 2 pi), f32 values (abp_delaunay.json's `angles`).
+pub fn random_headings(rng: &mut Rng, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|_| rng.uniform(0.0, std::f64::consts::TAU) as f32 as f64)
+        .collect()
 }

@@ -7,6 +7,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use mesoflow::expr::ParamValue;
 use mesoflow::graph::{self, Graph, LoadOptions};
+use mesoflow::node::Registry;
 use mesoflow::value::ValueType;
 
 use super::{registry, root, tmpdir};
@@ -21,7 +22,13 @@ pub fn write_graph(dir: &Path, name: &str, json: &str) -> PathBuf {
 /// Loads a graph file with the default options (one step, seed 0), panicking with the
 /// loader's report.
 pub fn load(path: &Path) -> Graph {
-    graph::load(path, registry(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
+    load_with_registry(path, registry())
+}
+
+/// Loads a graph file with the kinds of `reg` (the standard ones and test kinds beside
+/// them) and the default options, panicking with the loader's report.
+pub fn load_with_registry(path: &Path, reg: &Registry) -> Graph {
+    graph::load(path, reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Loads a graph file for a run of `steps` steps with this seed, panicking with the

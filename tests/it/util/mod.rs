@@ -9,8 +9,9 @@
 //!
 //! The helpers of one topic (several test files each) stay in their own module:
 //! `mobility` (FCM and PSE: f64 mobility references, one-step evaluation, noise
-//! statistics), `mpcd`, `spread`, `fft`, `probe` (test kinds: `countdown`, counting its
-//! launches, and `countdown_in_place`).
+//! statistics), `disks` (packings, headings, a disk graph's inputs, runs with their loops'
+//! iterations), `mpcd`, `spread`, `fft`, `probe` (test kinds: `countdown`, counting its
+//! launches, and `countdown_in_place`; graphs of them loaded).
 
 mod compare;
 mod data;

@@ -6,15 +6,19 @@
 //! (`PortSpec::in_place_of`): where the plan gives both one buffer it reads `x` from
 //! `out`, where not it reads `x`, so a wrong aliasing shows in its results.
 
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use mesoflow::gpu::{
     Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, GpuContext, KernelSpec, NodeIo,
 };
+use mesoflow::graph::Graph;
 use mesoflow::node::{
     GpuKernels, Lowering, Node, NodeKind, PortError, PortSpec, RefCtx, Registry, Signature,
 };
 use mesoflow::value::{PortType, RefArray, ValueType};
+
+use super::{load_with_registry, write_graph};
 
 /// The launch counters of the probes compiled since the last [`Launches::clear`].
 #[derive(Clone, Default)]
@@ -186,4 +190,11 @@ pub fn probe_registry(launches: &Launches) -> Registry {
 pub fn countdown_registry() -> (Registry, Launches) {
     let launches = Launches::default();
     (probe_registry(&launches), launches)
+}
+
+/// `json` written to `dir` as `name` and loaded with the probe kinds, for the tests that
+/// plan or run a probe graph without reading how often its probes launched.
+pub fn load_probe_graph(dir: &Path, name: &str, json: &str) -> Graph {
+    let reg = probe_registry(&Launches::default());
+    load_with_registry(&write_graph(dir, name, json), &reg)
 }
