@@ -152,18 +152,30 @@ static FUNCTIONS: &[HostFunction] = &[
         },
     },
     HostFunction {
-        name: "dpstokes_fused",
-        doc: "dpstokes_fused(slab, points): 1 where lib/dpstokes_mobility.json solves between its Chebyshev transforms with the fused slab_solve, 0 where with the chain of nodes: slab fused or chain as given, auto fused up to slab_solve's points",
+        name: "dpstokes_slab",
+        doc: "dpstokes_slab(slab, points, grid): how lib/dpstokes_mobility.json solves between its Chebyshev transforms, 'fused' (slab_solve's kernel of a thread per line, from the forcing's coefficients), 'staged' (slab_solve's staged kernel, from the forcing's values along z: no forward chebyshev dispatch) or 'chain' (the nodes one by one): slab as given, auto the staged kernel up to slab_solve's STAGED_UP_TO wave numbers (grid [nx, ny]: (nx / 2 + 1) ny of them), the fused one past them, the chain past slab_solve's points",
         call: |a| {
-            arity(a, 2)?;
+            arity(a, 3)?;
             let points = number(a, 1, "points")?;
-            let fused = match text(a, 0, "slab")? {
-                "fused" => true,
-                "chain" => false,
-                "auto" => points <= crate::nodes::slab_solve::MAX_POINTS as f64,
-                other => return Err(format!("slab must be auto, fused or chain, got `{other}`")),
+            let grid = numbers(a, 2, "grid")?;
+            if grid.len() < 2 || grid.iter().any(|g| !(g.is_finite() && *g >= 1.0)) {
+                return Err(format!(
+                    "argument 3 (grid) must hold 2 cell counts, got {grid:?}"
+                ));
+            }
+            let waves = (grid[0] as u64 / 2 + 1) * grid[1] as u64;
+            let path = match text(a, 0, "slab")? {
+                p @ ("fused" | "staged" | "chain") => p,
+                "auto" if points > crate::nodes::slab_solve::MAX_POINTS as f64 => "chain",
+                "auto" if waves <= crate::nodes::slab_solve::STAGED_UP_TO => "staged",
+                "auto" => "fused",
+                other => {
+                    return Err(format!(
+                        "slab must be auto, fused, staged or chain, got `{other}`"
+                    ));
+                }
             };
-            Ok(ParamValue::Number(if fused { 1.0 } else { 0.0 }))
+            Ok(ParamValue::Text(path.into()))
         },
     },
     HostFunction {

@@ -22,6 +22,17 @@
 //! pressure threads, from cache), 6 n words out, 5 n + 6 table words (72 more for the
 //! slit): 17 n + 6; the chain moves about 82 n + 36 words per k through memory (every
 //! intermediate written and read back, the tables read by both solves).
+//!
+//! `staged` (shaders/chebyshev/slab_staged.wgsl), for grids with few wave numbers (the
+//! bottom wall's 10^4 spheres: 1624, 102 workgroups of the kernel above on an H100's 132
+//! multiprocessors, each thread one serial chain of its line's loads, two solves and a
+//! 31 x 31 transform): 8 wave numbers a workgroup of 192 threads, their 48 lines and
+//! per-k tables read into workgroup memory once in coalesced runs, the dense transforms
+//! spread over 4 threads a line, the banded solves a thread per line from workgroup
+//! memory, the walls' constants once per (k, component), the output written in the order
+//! of its words. With `values` the input is the forcing's values along z (rfft's output)
+//! and the forward transform runs inside, so the product needs no `chebyshev` dispatch
+//! before it. Both kernels share the line steps (shaders/chebyshev/slab_lines.wgsl).
 
 use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
@@ -38,6 +49,13 @@ use super::{chebyshev, chebyshev_bvp, stokes_slab};
 /// `slab`, `dpstokes_slab`).
 pub const MAX_POINTS: u32 = 160;
 
+/// Wave numbers (half-spectrum columns) up to which lib/dpstokes_mobility.json's `slab`
+/// `auto` takes the staged kernel with the forward transform inside (`dpstokes_slab`):
+/// where the fused kernel's workgroups (16 wave numbers each) do not fill a large GPU's
+/// multiprocessors twice and each thread's serial chain sets its time (the bottom wall's
+/// 10^4 spheres: 56 x 56 cells, 1624 wave numbers; 10^5: 15400, left to `fused`).
+pub const STAGED_UP_TO: u64 = 4096;
+
 /// Workgroup words the kernel's shared lines may take (of the 16 KiB every adapter has).
 const SHARED_WORDS: u32 = 3400;
 
@@ -47,12 +65,74 @@ fn wave_numbers_per_group(n: u32) -> u32 {
     (SHARED_WORDS / (2 * n + 16)).clamp(1, 16)
 }
 
+/// Workgroup words the staged kernel's lines, tables and constants may take (of the 16 KiB
+/// every adapter has).
+const STAGED_WORDS: u32 = 4000;
+
+/// Wave numbers a staged workgroup takes at most: 8 (48 lines, 203 workgroups at 10^4
+/// spheres' 1624 wave numbers, more than an H100's 132 multiprocessors).
+const STAGED_KS: u32 = 8;
+
+/// Threads a staged workgroup has about (4 per line at 8 wave numbers).
+const STAGED_THREADS: u32 = 192;
+
+/// The staged kernel's shape for n points (shaders/chebyshev/slab_staged.wgsl's
+/// constants).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct StagedShape {
+    /// Wave numbers a workgroup.
+    ks: u32,
+    /// Threads a workgroup: a multiple of its 6 ks lines.
+    wg: u32,
+    /// Words between lines in workgroup memory: n rounded up to odd.
+    stride: u32,
+    /// Rows of chebyshev_bvp's tables read (all but the last, whether k is 0).
+    rows: u32,
+    /// Outputs of a dense transform per thread.
+    outs: u32,
+}
+
+#[cfg(test)]
+impl StagedShape {
+    /// Workgroup words the kernel declares.
+    fn words(&self) -> u32 {
+        // lines, tables, pressure, pressure ends, the walls' constants (vec4), slopes.
+        6 * self.ks * self.stride
+            + self.rows * self.ks
+            + 2 * self.ks * self.stride
+            + 4 * self.ks
+            + 12 * self.ks
+            + 6 * self.ks
+    }
+}
+
+fn staged_shape(n: u32) -> StagedShape {
+    let stride = n | 1;
+    let rows = chebyshev_bvp::table_rows(n as usize) as u32 - 1;
+    let per_k = 8 * stride + rows + 22;
+    let ks = (STAGED_WORDS / per_k).clamp(1, STAGED_KS);
+    let lines = 6 * ks;
+    let wg = lines * STAGED_THREADS.div_ceil(lines);
+    StagedShape {
+        ks,
+        wg,
+        stride,
+        rows,
+        outs: (lines * n).div_ceil(wg),
+    }
+}
+
 struct SlabSolve {
     lengths: [f64; 2],
     viscosity: f64,
     zmin: f64,
     zmax: f64,
     walls: u32,
+    /// The `staged` kernel (slab_staged.wgsl) in place of the one of a thread per line.
+    staged: bool,
+    /// The input holds the forcing's values along z (staged only): the forward transform
+    /// runs inside.
+    values: bool,
 }
 
 impl SlabSolve {
@@ -68,6 +148,15 @@ impl SlabSolve {
             zmin,
             zmax,
             walls: stokes_slab::walls_code(p),
+            staged: p.flag("staged"),
+            values: p.flag("values"),
+        })
+        .and_then(|s| {
+            if s.values && !s.staged {
+                Err("`values` (the forcing's values along z) needs `staged`".into())
+            } else {
+                Ok(s)
+            }
         })
     }
 }
@@ -101,6 +190,13 @@ impl Node for SlabSolve {
 
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let f = inputs[0].as_ref().expect("required");
+        let coefficients;
+        let f = if self.values {
+            coefficients = chebyshev::transform_reference(f, true);
+            &coefficients
+        } else {
+            f
+        };
         outputs[0] = stokes_slab::chain_reference(
             self.lengths,
             self.viscosity,
@@ -165,14 +261,37 @@ impl GpuKernels for SlabSolve {
             .map(|&v| v as f32)
             .collect();
         points.extend(wall_points);
-        let ks = wave_numbers_per_group(n as u32);
-        let wg = 6 * ks;
-        let source = format!(
-            "const WG: u32 = {wg}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}",
-            cx.shader("chebyshev/slab_solve.wgsl")?
-        );
+        let (ks, wg, source) = if self.staged {
+            let s = staged_shape(n as u32);
+            points.extend(chebyshev::matrix(n, true).iter().map(|&v| v as f32));
+            let source = format!(
+                "const WG: u32 = {}u;\nconst KS: u32 = {}u;\nconst POINTS: u32 = {n}u;\n\
+                 const LS: u32 = {}u;\nconst ROWS: u32 = {}u;\nconst OUTS: u32 = {}u;\n\
+                 const FORWARD: bool = {};\n{}",
+                s.wg,
+                s.ks,
+                s.stride,
+                s.rows,
+                s.outs,
+                self.values,
+                cx.shader("chebyshev/slab_staged.wgsl")?
+            );
+            (s.ks, s.wg, source)
+        } else {
+            let ks = wave_numbers_per_group(n as u32);
+            let source = format!(
+                "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}",
+                6 * ks,
+                cx.shader("chebyshev/slab_solve.wgsl")?
+            );
+            (ks, 6 * ks, source)
+        };
         let kernel = cx.kernel(&KernelSpec::new(
-            "slab solve",
+            if self.staged {
+                "slab solve staged"
+            } else {
+                "slab solve"
+            },
             source,
             &[
                 Binding::StorageRead,
@@ -205,7 +324,7 @@ pub fn register(r: &mut Registry) {
         .input(PortSpec::new(
             "f",
             PortType::HalfComplexGrid,
-            "the forcing's Chebyshev coefficients (3 components)",
+            "the forcing's Chebyshev coefficients (3 components), or its values along z with `values`",
         ))
         .output(PortSpec::new(
             "out",
@@ -217,6 +336,16 @@ pub fn register(r: &mut Registry) {
         .param(ParamSpec::number("zmin", Some(-1.0), -1e18, 1e18, "the bottom of the domain (the bottom wall)"))
         .param(ParamSpec::number("zmax", Some(1.0), -1e18, 1e18, "the top of the domain (the slit's top wall)"))
         .param(stokes_slab::walls_param())
+        .param(ParamSpec::flag(
+            "staged",
+            false,
+            "the staged kernel: 8 wave numbers a workgroup staged in workgroup memory with their tables, the dense transforms spread over 4 threads a line (for grids with few wave numbers, where the default kernel's serial chain per thread sets its time); else 6 threads a wave number, 16 a workgroup, each line in one thread's registers",
+        ))
+        .param(ParamSpec::flag(
+            "values",
+            false,
+            "f holds the forcing's values along z (rfft's output) instead of its coefficients: the forward Chebyshev transform runs inside (staged only)",
+        ))
         .build(|p| Ok(Box::new(SlabSolve::from_params(p)?))),
     );
 }
@@ -233,5 +362,23 @@ mod tests {
             assert!(ks >= 1 && ks * (2 * n + 16) <= SHARED_WORDS, "n {n}: {ks}");
         }
         assert_eq!(wave_numbers_per_group(31), 16);
+    }
+
+    /// The staged kernel's workgroup memory fits the 16 KiB every adapter has, its
+    /// threads are a multiple of its lines, its dense transforms' outputs all taken.
+    #[test]
+    fn the_staged_workgroup_fits() {
+        for n in 2..=MAX_POINTS {
+            let s = staged_shape(n);
+            assert!(s.words() <= STAGED_WORDS, "n {n}: {s:?}");
+            assert!(
+                s.ks >= 1 && s.wg.is_multiple_of(6 * s.ks) && s.wg <= 256,
+                "n {n}: {s:?}"
+            );
+            assert!(s.outs * s.wg >= 6 * s.ks * n, "n {n}: {s:?}");
+            assert_eq!(s.stride % 2, 1);
+        }
+        let s = staged_shape(31);
+        assert_eq!((s.ks, s.wg, s.outs), (8, 192, 8));
     }
 }

@@ -497,9 +497,11 @@ pub enum BenchCommand {
         /// dpstokes.json's windows: es or gaussian.
         #[arg(long, default_value = "es")]
         kernel: String,
-        /// The solve between the Chebyshev transforms, a row each: auto (fused up to
-        /// slab_solve's points), fused (slab_solve, one kernel) or chain (the nodes one by
-        /// one); e.g. `--slab fused,chain`.
+        /// The solve between the Chebyshev transforms, a row each: auto (staged up to 4096
+        /// wave numbers, fused past them up to slab_solve's points), fused (slab_solve, one
+        /// kernel, a thread per line), staged (slab_solve's staged kernel, the forward
+        /// transform along z inside) or chain (the nodes one by one); e.g.
+        /// `--slab fused,staged,chain`.
         #[arg(long, value_delimiter = ',', default_values_t = ["auto".to_string()])]
         slab: Vec<String>,
         /// dpstokes.json's spread_kernel, the kernels of spread_chebyshev and

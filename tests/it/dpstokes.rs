@@ -760,10 +760,11 @@ fn pair_mobilities_at_one_height_follow_rotne_prager_blake() {
     }
 }
 
-/// The fused solve between the Chebyshev transforms (slab fused, slab_solve) and the chain
-/// of nodes (slab chain) give the same velocities and angular velocities, every wall
-/// mode, torques included (their curl enters the forcing the fused node reads; the angular
-/// velocities take the curl of its output).
+/// The fused solve between the Chebyshev transforms (slab fused and staged, slab_solve's
+/// two kernels) and the chain of nodes (slab chain) give the same velocities and angular
+/// velocities, every wall mode, torques included (their curl enters the forcing the fused
+/// node reads; the angular velocities take the curl of its output) and not (staged then
+/// takes the forces' values along z, no forward transform before it).
 #[test]
 fn the_fused_slab_solve_gives_the_chains_mobility() {
     let Some(gpu) = gpu() else { return };
@@ -791,48 +792,71 @@ fn the_fused_slab_solve_gives_the_chains_mobility() {
     ]
     .into();
     for walls in ["none", "bottom", "slit"] {
-        let run = |slab: &str| {
+        let run = |slab: &str, rotation: bool| {
             let g = load(&[
                 ("box", "[20.0, 24.0]".into()),
                 ("zmin", "0.0".into()),
                 ("zmax", "6.5".into()),
                 ("walls", format!("\"{walls}\"")),
-                ("rotation", "true".into()),
+                ("rotation", rotation.to_string()),
                 ("slab", format!("\"{slab}\"")),
             ]);
-            let plan = plan_graph(
-                &gpu.caps,
-                &g,
-                types_of(&data),
-                Some(&["velocities", "angular_velocities"]),
-                true,
-            );
-            let ran_fused = !plan
-                .pruned
-                .iter()
-                .any(|&node| g.nodes[node].id == "mobility/fused_velocity_plane");
+            let mut data = data.clone();
+            if !rotation {
+                data.remove("torques");
+            }
+            let outputs: &[&str] = if rotation {
+                &["velocities", "angular_velocities"]
+            } else {
+                &["velocities"]
+            };
+            let plan = plan_graph(&gpu.caps, &g, types_of(&data), Some(outputs), true);
+            let ran = |id: &str| {
+                !plan
+                    .pruned
+                    .iter()
+                    .any(|&node| g.nodes[node].id == format!("mobility/{id}"))
+            };
             assert_eq!(
-                ran_fused,
-                slab == "fused",
+                ran("fused_velocity_plane"),
+                slab != "chain",
                 "{walls}: the plan runs slab {slab}"
+            );
+            // The staged kernel takes the forces' values along z itself, unless the torques'
+            // curl is added to their coefficients first.
+            assert_eq!(
+                ran("force_coefficients"),
+                slab != "staged" || rotation,
+                "{walls}: slab {slab}, rotation {rotation}: the forward transform"
             );
             let mut program = compile_cached(&gpu, &g, &plan);
             let out = run_program(&mut program, &data, 1);
-            (
-                out["velocities"].data.to_f64(),
-                out["angular_velocities"].data.to_f64(),
-            )
+            outputs
+                .iter()
+                .map(|o| out[*o].data.to_f64())
+                .collect::<Vec<_>>()
         };
-        let (u0, w0) = run("chain");
-        let (u1, w1) = run("fused");
-        for (what, a, b) in [("velocities", &u0, &u1), ("angular velocities", &w0, &w1)] {
-            let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            assert!(scale > 0.0);
-            for (i, (p, q)) in a.iter().zip(b).enumerate() {
-                assert!(
-                    (p - q).abs() <= 1e-5 * scale,
-                    "{walls} {what} entry {i}: chain {p}, fused {q} (scale {scale})"
-                );
+        for rotation in [true, false] {
+            let want = run("chain", rotation);
+            for slab in ["fused", "staged"] {
+                let got = run(slab, rotation);
+                for (what, a, b) in [
+                    ("velocities", &want[0], &got[0]),
+                    (
+                        "angular velocities",
+                        want.last().unwrap(),
+                        got.last().unwrap(),
+                    ),
+                ] {
+                    let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    assert!(scale > 0.0);
+                    for (i, (p, q)) in a.iter().zip(b).enumerate() {
+                        assert!(
+                            (p - q).abs() <= 1e-5 * scale,
+                            "{walls} rotation {rotation} {what} entry {i}: chain {p}, {slab} {q} (scale {scale})"
+                        );
+                    }
+                }
             }
         }
     }

@@ -105,8 +105,9 @@ fn slab_walls_leave_no_velocity_on_the_walls() {
 }
 
 /// The chain slab_solve fuses, as graphs/lib/dpstokes_mobility.json runs it (the
-/// forcing's coefficients `f` to the velocity's values with the walls), beside slab_solve:
-/// a graph with both outputs, box [7, 5.5], eta 0.7, the domain [zmin, zmax].
+/// forcing's coefficients `f` to the velocity's values with the walls), beside slab_solve's
+/// kernels: `fused`, `staged` from f, and `staged` from f's values along z (the inverse
+/// transform of f, output `forcing_values`); box [7, 5.5], eta 0.7, the domain [zmin, zmax].
 fn chain_and_fused_graph(f: &HostArray, zmin: f64, zmax: f64, walls: &str) -> String {
     let node = |id: &str, kind: &str, p: &str, inputs: &str| {
         format!(r#"{{"id": "{id}", "kind": "{kind}", "params": {{{p}}}, "inputs": {{{inputs}}}}}"#)
@@ -171,58 +172,91 @@ fn chain_and_fused_graph(f: &HostArray, zmin: f64, zmax: f64, walls: &str) -> St
             &format!("{b}, {eta}, {domain}, {walls}"),
             r#""f": "inputs.f""#,
         ),
+        node(
+            "staged",
+            "slab_solve",
+            &format!(r#"{b}, {eta}, {domain}, {walls}, "staged": true"#),
+            r#""f": "inputs.f""#,
+        ),
+        node(
+            "forcing_values",
+            "chebyshev",
+            r#""direction": "inverse""#,
+            r#""x": "inputs.f""#,
+        ),
+        node(
+            "staged_values",
+            "slab_solve",
+            &format!(r#"{b}, {eta}, {domain}, {walls}, "staged": true, "values": true"#),
+            r#""f": "forcing_values.out""#,
+        ),
     ];
     format!(
-        r#"{{"mesoflow": 1, "inputs": {{"f": {}}}, "nodes": [{}], "outputs": {{"chain": {{"from": "walls.out"}}, "fused": {{"from": "fused.out"}}}}}}"#,
+        r#"{{"mesoflow": 1, "inputs": {{"f": {}}}, "nodes": [{}], "outputs": {{"chain": {{"from": "walls.out"}}, "fused": {{"from": "fused.out"}}, "staged": {{"from": "staged.out"}}, "staged_values": {{"from": "staged_values.out"}}, "forcing_values": {{"from": "forcing_values.out"}}}}}}"#,
         input_decl(&f.ty),
         nodes.join(", ")
     )
 }
 
 /// slab_solve, the fused solve between the transforms, gives the chain of nodes' result
-/// (GPU against GPU) and its f64 reference (the chain's references) for every wall mode,
-/// on non-square grids of even sizes (unpaired Nyquist indices) and odd ones, random
-/// spectra (the k = 0 and Nyquist modes among them).
+/// (GPU against GPU) and its f64 reference (the chain's references) for every wall mode
+/// and both kernels (`staged` also from the forcing's values along z, its forward
+/// transform inside), on non-square grids of even sizes (unpaired Nyquist indices) and odd
+/// ones, random spectra (the k = 0 and Nyquist modes among them), wave numbers that leave
+/// the last workgroup part empty, an even number of points (the staged lines padded to odd
+/// strides) and one long enough that a staged workgroup takes fewer wave numbers (7).
 #[test]
 fn slab_solve_matches_the_chain_of_nodes() {
     let Some(gpu) = gpu() else { return };
     let mut rng = Rng::new(79);
     let dir = tmpdir("slab_solve_chain");
     let (zmin, zmax) = (-1.5, 2.0);
-    for dims in [[16u32, 12, 17], [9, 7, 12]] {
+    for dims in [[16u32, 12, 17], [9, 7, 12], [6, 5, 40]] {
         let f = spectrum(&mut rng, dims, 3);
         for walls in ["none", "bottom", "slit"] {
             let json = chain_and_fused_graph(&f, zmin, zmax, walls);
             let path = write_graph(&dir, &format!("{walls}-{}.json", dims[0]), &json);
             let g = load(&path);
             let out = run_graph(&gpu, &g, &named(&[("f", f.clone())]), None, 1, true);
-            let (chain, fused) = (out["chain"].data.to_f64(), out["fused"].data.to_f64());
+            let chain = out["chain"].data.to_f64();
             let scale = chain.iter().fold(0.0f64, |m, x| m.max(x.abs()));
             assert!(scale > 0.0);
-            let (mut worst, mut at) = (0.0f64, 0);
-            for (i, (a, b)) in chain.iter().zip(&fused).enumerate() {
-                let e = (a - b).abs() / scale;
-                if e > worst || e.is_nan() {
-                    (worst, at) = (e, i);
-                }
-            }
-            assert!(
-                worst <= 2e-5,
-                "slab_solve {walls} {dims:?} against the chain: {worst:e} at {at}"
+            let params = format!(
+                r#""box": [7.0, 5.5], "viscosity": 0.7, "zmin": {zmin}, "zmax": {zmax}, "walls": "{walls}""#
             );
-            // And against its f64 reference (the chain's references composed).
-            let want = reference(
+            let want = reference("slab_solve", &format!("{{{params}}}"), &[Some(&f)]).remove(0);
+            for kernel in ["fused", "staged", "staged_values"] {
+                let got = out[kernel].data.to_f64();
+                let (mut worst, mut at) = (0.0f64, 0);
+                for (i, (a, b)) in chain.iter().zip(&got).enumerate() {
+                    let e = (a - b).abs() / scale;
+                    if e > worst || e.is_nan() {
+                        (worst, at) = (e, i);
+                    }
+                }
+                assert!(
+                    worst <= 2e-5,
+                    "slab_solve {kernel} {walls} {dims:?} against the chain: {worst:e} at {at}"
+                );
+                // And against its f64 reference (the chain's references composed).
+                let (err, at) = rel_max_err(&out[kernel], &want);
+                assert!(
+                    err <= 2e-5,
+                    "slab_solve {kernel} {walls} {dims:?} against its reference: {err:e} at {at}"
+                );
+            }
+            // The reference of the values' path: the forward transform of its input first.
+            let values = &out["forcing_values"];
+            let want_values = reference(
                 "slab_solve",
-                &format!(
-                    r#"{{"box": [7.0, 5.5], "viscosity": 0.7, "zmin": {zmin}, "zmax": {zmax}, "walls": "{walls}"}}"#
-                ),
-                &[Some(&f)],
+                &format!(r#"{{{params}, "staged": true, "values": true}}"#),
+                &[Some(values)],
             )
             .remove(0);
-            let (err, at) = rel_max_err(&out["fused"], &want);
+            let (err, at) = rel_max_err(&out["staged_values"], &want_values);
             assert!(
                 err <= 2e-5,
-                "slab_solve {walls} {dims:?} against its reference: {err:e} at {at}"
+                "slab_solve staged from values {walls} {dims:?} against its reference: {err:e} at {at}"
             );
         }
     }
