@@ -15,7 +15,7 @@
 #               where 10^5 at 1e-3 spends its time
 #   dpstokes    doubly periodic Stokes per wall mode at 10^4, 10^5, 10^6, ES windows then
 #               Gaussian (errors, fcm.json on a grid of the same points beside it), where
-#               bottom spends its time with the fused or chained slab solve and the
+#               bottom spends its time with the fused, staged or chained slab solve and the
 #               workgroup or lane kernels
 #               and 10^4, 10^6 (the boundary-value solves' GB/s), torch's copy bandwidth
 #   stream      bd_fcm.json at 10^6 for 1000 steps, with and without a frame every 100
@@ -102,7 +102,7 @@ suite_dpstokes() {
   run $bin bench dpstokes --kernel gaussian --reps 10
   for k in workgroup lanes; do
     MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes --walls bottom --sizes 10000,100000,1000000 \
-      --reps 10 --slab fused,chain --spread-kernel $k
+      --reps 10 --slab fused,staged,chain --spread-kernel $k
   done
   run python3 benches/torch_reduce.py
 }

@@ -67,8 +67,10 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
     let gpu = open_gpu(bench.reps)?;
     let registry = mesoflow::nodes::registry();
     outln!(
-        "bd_delaunay.json, dt 0.01, D 0.01, sigma 1; step: median over {} steps end to end (host \
-         clock; {}); parts: medians of each launch timed \
+        "bd_delaunay.json, dt 0.01, D 0.01, sigma 1; step: median over {} steps, each timed \
+         alone end to end (host clock, from its recording to the end of its wait; {}); run/step: \
+         a run of as many steps, unprofiled, over its steps (host clock: the host records a \
+         step while the one before runs); parts: medians of each launch timed \
          alone (a loop with its body and round trips); iterations per step of the loops \
          (each counting its last, empty round); long range: pairs/s = N^2 / the all-pairs kernel time, \
          GFLOP/s at {LONG_FLOPS} flops per pair; the flip loops' meshes {}",
@@ -85,11 +87,12 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
         }
     );
     outln!(
-        "{:>6} {:>7} {:>8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>7} {:>7} {:>7} {:>11} {:>8}",
+        "{:>6} {:>7} {:>8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>7} {:>7} {:>7} {:>11} {:>8}",
         "config",
         "range",
         "N",
         "step ms",
+        "run/step",
         "forces ms",
         "move ms",
         "flips ms",
@@ -205,11 +208,12 @@ pub fn run(bench: &DisksBench) -> Result<(), BenchError> {
                     ("-".into(), "-".into())
                 };
                 outln!(
-                    "{:>6} {:>7} {:>8} {:>10.3} {:>10.3} {:>10.3} {:>10.3} {:>10.3} {:>7.2} {:>7.2} {:>7.2} {:>11} {:>8}",
+                    "{:>6} {:>7} {:>8} {:>10.3} {:>10.3} {:>10.3} {:>10.3} {:>10.3} {:>10.3} {:>7.2} {:>7.2} {:>7.2} {:>11} {:>8}",
                     config,
                     range,
                     n,
                     ms(run.end_to_end()),
+                    ms(run.run_step),
                     ms(forces),
                     ms(parts.get("move").copied().unwrap_or_default()),
                     ms(parts.get("flips").copied().unwrap_or_default()),

@@ -144,6 +144,10 @@ pub struct TimedRun {
     /// pass, or the host's time from submission to the end of the wait for a graph with
     /// loops or on a device without timestamp queries.
     pub steps: Vec<Duration>,
+    /// The mean step of a run of as many steps, unprofiled (host clock): what a
+    /// simulation's step costs, where the host records a step while the one before runs
+    /// (chained loops) or several steps go out together.
+    pub run_step: Duration,
     pub outputs: BTreeMap<String, HostArray>,
     /// The plan's GPU memory in bytes.
     pub memory: u64,
@@ -297,6 +301,11 @@ pub fn time_loaded_with(
     };
     let per_launch = timed(&mut program, Profile::Launches)?;
     let per_step = timed(&mut program, Profile::Steps)?;
+    let run = program.run_on(&RunOptions {
+        steps: reps,
+        profile: Profile::Off,
+        progress: false,
+    })?;
     let per_dispatch = if std::env::var_os("MESOFLOW_BENCH_DISPATCHES").is_some() {
         timed(&mut program, Profile::Dispatches)?.profile
     } else {
@@ -334,6 +343,7 @@ pub fn time_loaded_with(
         timings,
         loops: program.loop_iterations().to_vec(),
         steps: per_step.step_samples,
+        run_step: run.wall / reps as u32,
         outputs,
         memory: p.memory.total(),
     })

@@ -258,29 +258,58 @@ impl Program<'_> {
     /// One step whose loops all stop on the GPU as one submission (`StepChain`): the
     /// launches before the first loop, each loop's start, gate and batch, then its tail
     /// gate and, gated by it, its finish and everything up to the next loop's batch, the
-    /// clock tick last. The host then reads the loops' statuses in order; a loop its batch
-    /// did not finish goes on in batches of its own, and the step from its tail on goes
-    /// out again (the launches after it were gated off). Returns the last submission and
-    /// the loops' iterations.
+    /// clock tick last. Returns the last submission and the loops' iterations
+    /// (`judge_chained`).
     fn submit_step_chained(
         &self,
         chain: &StepChain,
         step: u64,
         last: bool,
     ) -> Result<(wgpu::SubmissionIndex, Vec<u32>), ExecError> {
-        let parity = (step % 2) as usize;
-        let loops: Vec<&CompiledLoop> = self.step[parity]
+        let (commands, batches) = self.encode_chained(chain, step, last, None);
+        let index = self.submit_chained(commands);
+        self.judge_chained(chain, step, last, index, batches)
+    }
+
+    /// A chained step recorded (`record_chained`, from its start or from loop `from`'s
+    /// tail), not yet submitted: its commands and each loop's batch.
+    fn encode_chained(
+        &self,
+        chain: &StepChain,
+        step: u64,
+        last: bool,
+        from: Option<usize>,
+    ) -> (wgpu::CommandBuffer, Vec<usize>) {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        let batches = self.record_chained(&mut enc, chain, (step % 2) as usize, step, last, from);
+        (enc.finish(), batches)
+    }
+
+    /// Submits a chained step's commands, the chain word set first.
+    fn submit_chained(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
+        self.open_chain();
+        self.gpu.queue.submit([commands])
+    }
+
+    /// After a chained step went out (submission `index`, the loops' `batches`): reads
+    /// its loops' statuses in order; a loop its batch did not finish goes on in batches of
+    /// its own, and the step from its tail on goes out again (the launches after it were
+    /// gated off). Returns the last submission and the loops' iterations.
+    fn judge_chained(
+        &self,
+        chain: &StepChain,
+        step: u64,
+        last: bool,
+        mut index: wgpu::SubmissionIndex,
+        mut batches: Vec<usize>,
+    ) -> Result<(wgpu::SubmissionIndex, Vec<u32>), ExecError> {
+        let loops: Vec<&CompiledLoop> = self.step[(step % 2) as usize]
             .iter()
             .filter_map(|c| c.looped.as_deref())
             .collect();
         let mut counts = vec![0u32; loops.len()];
-        let mut from = None;
+        let mut first = 0;
         loop {
-            self.open_chain();
-            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-            let batches = self.record_chained(&mut enc, chain, parity, step, last, from);
-            let first = from.map_or(0, |f| f + 1);
-            let index = self.gpu.queue.submit([enc.finish()]);
             let mut goes_on = None;
             for (k, lp) in loops.iter().enumerate().skip(first) {
                 let (Some(gate), Some(stop)) = (&lp.gate, lp.kernels.gpu_stop) else {
@@ -307,11 +336,65 @@ impl Program<'_> {
                     }
                 }
             }
-            match goes_on {
-                None => return Ok((index, counts)),
-                Some(k) => from = Some(k),
-            }
+            let Some(k) = goes_on else {
+                return Ok((index, counts));
+            };
+            let (commands, rest) = self.encode_chained(chain, step, last, Some(k));
+            index = self.submit_chained(commands);
+            batches = rest;
+            first = k + 1;
         }
+    }
+
+    /// Runs `steps` chained steps from step `from`, each recorded while the one before
+    /// it runs on the GPU (its batches sized by the loops' runs before that one, a guess
+    /// that `judge_chained` corrects), so the host's recording leaves the GPU busy: one
+    /// host round trip a step, the GPU idle only through it. Returns the steps done and
+    /// the first error.
+    fn run_chained_steps(
+        &mut self,
+        from: u64,
+        steps: u64,
+        bar: Option<&indicatif::ProgressBar>,
+    ) -> (u64, Result<(), ExecError>) {
+        let chained = |step: u64| {
+            self.chains[(step % 2) as usize]
+                .as_ref()
+                .expect("every parity chained")
+        };
+        let mut ahead = None;
+        let mut counts_per_step = Vec::new();
+        let mut done = 0;
+        let result = loop {
+            if done == steps {
+                break Ok(());
+            }
+            let step = from + done;
+            let last = done + 1 == steps;
+            let (commands, batches) = ahead
+                .take()
+                .unwrap_or_else(|| self.encode_chained(chained(step), step, last, None));
+            let index = self.submit_chained(commands);
+            if !last {
+                let next = step + 1;
+                ahead = Some(self.encode_chained(chained(next), next, done + 2 == steps, None));
+            }
+            match self
+                .judge_chained(chained(step), step, last, index, batches)
+                .and_then(|(index, counts)| Ok((self.gpu.wait(index)?, counts)))
+            {
+                Ok((_, counts)) => counts_per_step.push(counts),
+                Err(e) => break Err(e),
+            }
+            done += 1;
+            if let Some(b) = bar {
+                b.inc(1);
+            }
+        };
+        for counts in counts_per_step {
+            self.note_iterations(counts);
+        }
+        (done, result)
     }
 
     /// Records a chained step from its start (`from` None) or from loop `from`'s tail
@@ -626,6 +709,25 @@ impl Program<'_> {
         let mut in_flight: Option<(wgpu::SubmissionIndex, u64)> = None;
         let mut mapped = None;
         let mut done = 0;
+        if self.has_loops() && self.chain_loops && self.chains.iter().all(Option::is_some) {
+            let (ran, result) = self.run_chained_steps(self.steps_done, opts.steps, bar.as_ref());
+            // The steps before a failed one ran and are kept (see below).
+            self.steps_done += ran;
+            if let Some(b) = &bar {
+                b.finish_and_clear();
+            }
+            result?;
+            return Ok((
+                RunStats {
+                    steps: opts.steps,
+                    wall: Duration::ZERO,
+                    profile: Vec::new(),
+                    timed_by_gpu: false,
+                    step_samples: Vec::new(),
+                },
+                None,
+            ));
+        }
         if self.has_loops() {
             // Loops decide on the host, so steps go out one at a time.
             while done < opts.steps {
