@@ -308,27 +308,43 @@ impl<'a> Program<'a> {
         })
     }
 
-    /// The gate kernel (shaders/engine/gate.wgsl) at `entry`: `main` for a loop's gate,
-    /// `tail` for a chained step's tail gates.
-    fn gate_kernel(
+    /// A dispatch of the gate kernel (shaders/engine/gate.wgsl) at `entry` (`main` for a
+    /// loop's gate, `tail` for a chained step's tail gates) over `groups`: the static
+    /// `counts`, the loop's `status`, the `args` it writes, its `params` (words, stopped
+    /// word, first word, done word) and the chain word.
+    #[allow(clippy::too_many_arguments)]
+    fn gate_dispatch(
+        &self,
         cx: &mut CompileCtx,
         entry: &str,
-    ) -> Result<std::sync::Arc<crate::gpu::Kernel>, ExecError> {
-        cx.kernel(
-            &KernelSpec::new(
-                format!("loop gate {entry}"),
-                cx.shader("engine/gate.wgsl").map_err(engine_err)?,
-                &[
-                    Binding::StorageRead,
-                    Binding::StorageRead,
-                    Binding::StorageReadWrite,
-                    Binding::Uniform,
-                    Binding::StorageReadWrite,
-                ],
+        counts: &wgpu::Buffer,
+        status: &wgpu::Buffer,
+        args: &wgpu::Buffer,
+        params: [u32; 4],
+        groups: [u32; 3],
+    ) -> Result<crate::gpu::Dispatch, ExecError> {
+        let kernel = cx
+            .kernel(
+                &KernelSpec::new(
+                    format!("loop gate {entry}"),
+                    cx.shader("engine/gate.wgsl").map_err(engine_err)?,
+                    &[
+                        Binding::StorageRead,
+                        Binding::StorageRead,
+                        Binding::StorageReadWrite,
+                        Binding::Uniform,
+                        Binding::StorageReadWrite,
+                    ],
+                )
+                .entry(entry),
             )
-            .entry(entry),
-        )
-        .map_err(engine_err)
+            .map_err(engine_err)?;
+        let params = cx.uniform("loop gate params", bytemuck::cast_slice(&params));
+        Ok(cx.dispatch(
+            &kernel,
+            &[counts, status, args, &params, &self.loop_chain],
+            groups,
+        ))
     }
 
     /// The gate of a loop whose node sets status word `stopped_word` at the stop: the
@@ -343,22 +359,15 @@ impl<'a> Program<'a> {
         let counts: Vec<u32> = lp.iteration().flat_map(|d| d.workgroups).collect();
         let static_counts = cx.table("loop gate counts", bytemuck::cast_slice(&counts));
         let args = indirect_args(self.gpu, "loop gate args", counts.len());
-        let kernel = Self::gate_kernel(cx, "main")?;
-        let params = cx.uniform(
-            "loop gate params",
-            bytemuck::cast_slice(&[counts.len() as u32, stopped_word, 0, 0]),
-        );
-        let dispatch = cx.dispatch(
-            &kernel,
-            &[
-                &static_counts,
-                &lp.kernels.status,
-                &args,
-                &params,
-                &self.loop_chain,
-            ],
+        let dispatch = self.gate_dispatch(
+            cx,
+            "main",
+            &static_counts,
+            &lp.kernels.status,
+            &args,
+            [counts.len() as u32, stopped_word, 0, 0],
             cx.grid_1d(counts.len() as u64, WG_1D),
-        );
+        )?;
         Ok(LoopGate { args, dispatch })
     }
 
@@ -402,7 +411,6 @@ impl<'a> Program<'a> {
         let slots = counts.len() / 3;
         let static_counts = cx.table("step chain counts", bytemuck::cast_slice(&counts));
         let args = indirect_args(self.gpu, "step chain args", counts.len());
-        let kernel = Self::gate_kernel(cx, "tail")?;
         let tails = loops
             .iter()
             .enumerate()
@@ -410,28 +418,22 @@ impl<'a> Program<'a> {
                 let end = tail_first.get(k + 1).copied().unwrap_or(slots);
                 let first = tail_first[k];
                 let stop = lp.kernels.gpu_stop.expect("chainable");
-                let params = cx.uniform(
-                    "step chain tail params",
-                    bytemuck::cast_slice(&[
+                self.gate_dispatch(
+                    cx,
+                    "tail",
+                    &static_counts,
+                    &lp.kernels.status,
+                    &args,
+                    [
                         3 * (end - first) as u32,
                         stop.stopped_word,
                         3 * first as u32,
                         stop.done_word,
-                    ]),
-                );
-                cx.dispatch(
-                    &kernel,
-                    &[
-                        &static_counts,
-                        &lp.kernels.status,
-                        &args,
-                        &params,
-                        &self.loop_chain,
                     ],
                     [1, 1, 1],
                 )
             })
-            .collect();
+            .collect::<Result<_, _>>()?;
         Ok(Some(StepChain {
             args,
             tails,
