@@ -757,7 +757,11 @@ impl<'a> Program<'a> {
     }
 
     /// Reads back the requested outputs (their values after the last step run): one
-    /// submission copies them all into the readback buffers, one wait.
+    /// submission copies them all into the readback buffers, one wait. After a run that
+    /// failed at a step, an output that is a state holds the last kept step's value; any
+    /// other may hold the failed step's partial work or an earlier run's value (the
+    /// launches only outputs read run on a run's last step), so read those only after a
+    /// run that succeeded (the CLI and the Python package give no outputs of a failed run).
     pub fn read_outputs(&self) -> Result<Vec<(String, HostArray)>, ExecError> {
         if self.steps_done == 0 {
             return Err(ExecError::Run("outputs are read after a run".into()));
