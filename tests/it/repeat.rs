@@ -10,15 +10,15 @@
 use std::collections::BTreeMap;
 
 use mesoflow::exec::{Profile, Program, RunOptions};
-use mesoflow::graph::{self, LoadOptions};
+use mesoflow::graph;
 use mesoflow::plan::{Plan, Via};
 use mesoflow::value::{HostArray, ValueType};
 
 use crate::util::disks::run_with_loops_profiled;
 use crate::util::probe::{Launches, probe_registry};
 use crate::util::{
-    compile_cached, f32s, gpu, load_or_plan_error, particles, plan_graph, run_graph, tmpdir,
-    types_of, u32s, write_graph,
+    compile_cached, f32s, gpu, load_or_plan_error, load_with_registry, particles, plan_graph,
+    run_graph, tmpdir, types_of, u32s, write_graph,
 };
 
 /// x_(k+1) = alpha x_k + b, `count` times a step, the result kept as state; the body
@@ -185,7 +185,7 @@ fn repeat_runs_its_body_only_for_the_iterations_it_reports() {
  "outputs": {"out": "loop.out", "iterations": "loop.iterations", "total": "loop.total"}}"#
             .replace("KIND", kind);
         let path = write_graph(&dir, &format!("{kind}.json"), &json);
-        let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+        let g = load_with_registry(&path, &reg);
         let types = [("x".to_string(), ValueType::Particles { n: 1, k: 1 })].into();
         let p = plan_graph(&gpu.caps, &g, types, None, true);
         // The loop ends where its value lies (the requested output's buffer).
@@ -285,7 +285,7 @@ fn repeat_bodies_write_in_place_only_where_nothing_reads_after() {
         ),
     ] {
         let path = write_graph(&dir, &format!("{name}.json"), json);
-        let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+        let g = load_with_registry(&path, &reg);
         let p = plan_graph(&gpu.caps, &g, types.clone(), None, true);
         let want_in_place: Vec<_> = want_in_place
             .iter()
@@ -357,8 +357,7 @@ fn a_halted_step_keeps_nothing_in_place_or_not() {
                 .replace("KIND", kind)
                 .replace("INITIAL", if pre { "pre.out" } else { "state.s" });
             let path = write_graph(&dir, &format!("{kind}_{pre}.json"), &json);
-            let g =
-                graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+            let g = load_with_registry(&path, &reg);
             let mut inputs = halt(0);
             inputs.insert("x".into(), particles(&[[3.0]]));
             let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
@@ -427,7 +426,7 @@ fn a_run_halted_after_good_steps_keeps_them() {
  ],
  "outputs": {"s": "state.s", "left": "loop.out"}}"#;
     let path = write_graph(&dir, "halt_later.json", json);
-    let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let g = load_with_registry(&path, &reg);
     let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&[[-1.0]]))].into();
     let p = plan_graph(&gpu.caps, &g, types_of(&inputs), None, true);
     for profile in [Profile::Off, Profile::Launches, Profile::Steps] {
@@ -475,7 +474,7 @@ fn chained_loops_run_as_the_host_decided_ones() {
  ],
  "outputs": {"s": "state.s", "a_left": "a.out", "b_left": "b.out", "b_iterations": "b.iterations", "b_total": "b.total"}}"#;
     let path = write_graph(&dir, "two_loops.json", json);
-    let g = graph::load(&path, &reg, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let g = load_with_registry(&path, &reg);
     let x0 = 4u32;
     let steps = 4u64;
     let inputs: BTreeMap<_, _> = [("x".to_string(), particles(&[[x0 as f64]]))].into();
