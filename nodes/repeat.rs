@@ -36,7 +36,7 @@ use crate::value::{PortType, RefArray, ValueType};
 fn repeat_kind() -> NodeKind {
     NodeKind::declare(
         "repeat",
-        "carries a value through its loop body (current -> nodes -> next) until the body's u32 count is 0, or for `fixed` iterations (recorded one after the other, no host round trip; count optional); out is the last value, iterations the body runs (the last one counting 0), total the sum of the counts. The body sees the same step counter in every iteration (random draws keyed on the step repeat)",
+        "carries a value through its loop body (current -> nodes -> next) until the body's u32 count is 0, or for `fixed` iterations (recorded one after the other, no host round trip; count optional); out is the last value, iterations the body runs (the last one counting 0), total the sum of the counts, first the count of the first iteration. The body sees the same step counter in every iteration (random draws keyed on the step repeat)",
     )
     .input(PortSpec::new(
         "initial",
@@ -99,6 +99,11 @@ fn repeat_kind() -> NodeKind {
         "total",
         PortType::Indices,
         "the sum of the counts over the iterations (1 word)",
+    ))
+    .output(PortSpec::new(
+        "first",
+        PortType::Indices,
+        "the body's count after its first iteration, every word (1 word, 0, without a count): what the loop started from (bd_delaunay.json: the overlaps the move left, before any correction)",
     ))
     .param(ParamSpec::integer(
         "fixed",
@@ -189,7 +194,12 @@ impl Node for Repeat {
             ));
         }
         let one = ValueType::Indices { n: 1 };
-        Ok(Signature::outputs(vec![initial, initial, one, one])
+        // (Typed first without the loop inputs: one word until the count is known.)
+        let first = match inputs[2] {
+            Some(count @ ValueType::Indices { .. }) => count,
+            _ => one,
+        };
+        Ok(Signature::outputs(vec![initial, initial, one, one, first])
             .with_scratch(vec![4 * STATUS_WORDS]))
     }
 
@@ -252,6 +262,7 @@ impl GpuIterative for Repeat {
             Some(c) => (c.buffer, 1u32),
             None => (&stand_in, 0),
         };
+        let first_words = io.outputs[4].ty.words() as u32;
         let (halt, halts) = match io.inputs[3] {
             Some(h) => (h.buffer, 1u32),
             None => (&stand_in, 0),
@@ -268,6 +279,7 @@ impl GpuIterative for Repeat {
                 self.stop_word,
                 u32::from(!start_in_place),
                 u32::from(!finish_in_place),
+                first_words,
             ]),
         );
         let status = io.scratch[0];
@@ -286,11 +298,13 @@ impl GpuIterative for Repeat {
             status,
             &params,
             halt,
+            io.outputs[4].buffer,
         ];
         let mut bindings = vec![Binding::StorageRead; 3];
         bindings.extend([Binding::StorageReadWrite; 5]);
         bindings.push(Binding::Uniform);
         bindings.push(Binding::StorageRead);
+        bindings.push(Binding::StorageReadWrite);
         let source = cx.shader("repeat/repeat.wgsl")?;
         let groups = cx.grid_1d(words.max(STATUS_WORDS), WG_1D);
         // `start` and `finish` copy nothing where in place: their status and count words

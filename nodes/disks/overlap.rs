@@ -9,7 +9,8 @@
 //! No float atomics: each particle gathers over its own edges, in the order of the fan of
 //! triangles around it walked by twins from its lowest corner, so the sums run in a fixed
 //! order. The count output is the number of overlapping pairs (along edges) in the
-//! positions read: a round that counts 0 moved nothing, which is when a loop stops.
+//! positions read (a round that counts 0 moved nothing, which is when a loop stops), then
+//! the number of disks in at least one such pair (S1's overlapping fraction, times N).
 //!
 //! **Fans once per mesh.** The mesh stays fixed while the rounds repeat (S1 section 4.4),
 //! so what depends on it alone is the node `vertex_fans` (`shaders/disks/fans.wgsl`),
@@ -240,7 +241,7 @@ fn overlap_correction_round_kind() -> NodeKind {
     .output(PortSpec::new(
         "overlaps",
         PortType::Indices,
-        "the number of overlapping pairs along edges before the round (1 word)",
+        "before the round: the number of overlapping pairs along edges, then the number of disks in at least one (2 words; the overlapping fraction is the second over N)",
     ))
     .param(ParamSpec::f32_positive("sigma", Some(1.0), "disk diameter sigma"))
     .param(ParamSpec::number(
@@ -282,21 +283,23 @@ pub fn overlap_tolerance(sigma: f64, l: [f64; 2]) -> f64 {
     (8.0 * f32::EPSILON as f64 * 0.5 * l[0].max(l[1])).max(1e-6 * sigma)
 }
 
-/// One round in f64, the twin of `shaders/disks/overlap.wgsl`: the corrected positions
-/// and the number of overlapping pairs along edges.
+/// One round in f64, the twin of `shaders/disks/overlap.wgsl`: the corrected positions,
+/// the number of overlapping pairs along edges and the number of disks in at least one.
 pub fn overlap_round(
     mesh: &[u32],
     x: &[f64],
     l: [f64; 2],
     sigma: f64,
     delta: f64,
-) -> (Vec<f64>, u32) {
+) -> (Vec<f64>, u32, u32) {
     let n = x.len() / 2;
     let mut out = vec![0.0; 2 * n];
     let mut count = 0;
+    let mut disks = 0;
     let limit = (sigma - overlap_tolerance(sigma, l)) as f32 as f64;
     for (v, first) in first_corners(mesh, n).into_iter().enumerate() {
         let mut shift = [0.0f64; 2];
+        let mut overlapping = false;
         for w in fan(mesh, first) {
             let r = [0, 1].map(|a| minimum_image(x[2 * w + a] - x[2 * v + a], l[a]));
             let len = r[0].hypot(r[1]);
@@ -305,8 +308,10 @@ pub fn overlap_round(
                     shift[a] -= delta * (sigma - len) / len * r[a];
                 }
                 count += (w > v) as u32;
+                overlapping = true;
             }
         }
+        disks += overlapping as u32;
         let s = shift[0].hypot(shift[1]);
         let max_step = 0.25 * sigma;
         if s > max_step {
@@ -316,7 +321,7 @@ pub fn overlap_round(
             out[2 * v + a] = wrap(x[2 * v + a] + shift[a], l[a]);
         }
     }
-    (out, count)
+    (out, count, disks)
 }
 
 impl Node for OverlapCorrectionRound {
@@ -347,7 +352,7 @@ impl Node for OverlapCorrectionRound {
                 ),
             ));
         }
-        Ok(Signature::outputs(vec![x, ValueType::Indices { n: 1 }]))
+        Ok(Signature::outputs(vec![x, ValueType::Indices { n: 2 }]))
     }
 
     fn lowering(&self) -> Lowering<'_> {
@@ -369,9 +374,9 @@ impl Node for OverlapCorrectionRound {
     fn cpu_reference(&self, inputs: &[Option<RefArray>], outputs: &mut [RefArray], _: RefCtx) {
         let x = &inputs[0].as_ref().expect("required").data;
         let mesh = reference_mesh(&inputs[1]);
-        let (out, count) = overlap_round(&mesh, x, self.box_lengths, self.sigma, self.delta);
+        let (out, count, disks) = overlap_round(&mesh, x, self.box_lengths, self.sigma, self.delta);
         outputs[0].data = out;
-        outputs[1].data = vec![count as f64];
+        outputs[1].data = vec![count as f64, disks as f64];
     }
 }
 
@@ -421,7 +426,7 @@ impl GpuKernels for OverlapCorrectionRound {
         let params = cx.uniform("overlap correction round", bytemuck::cast_slice(&words));
         let count = io.outputs[1].buffer;
         Ok(vec![
-            cx.fill(count, 1, 0)?,
+            cx.fill(count, 2, 0)?,
             cx.dispatch(
                 &kernel,
                 &[

@@ -8,8 +8,8 @@
 // - `correct`: one thread per particle, reading its edges' far ends from the fan table
 //   (column-major: contiguous across the threads), the edges past the table's width by
 //   walking the mesh from the first corner; counts each overlapping pair once (by its
-//   lower id) in `count` (zeroed by a fill before it): the overlaps of the positions
-//   read, so a round that counts 0 moved nothing.
+//   lower id) in `count[0]` (zeroed by a fill before it): the overlaps of the positions
+//   read, so a round that counts 0 moved nothing; `count[1]` the disks in any of them.
 #import common/index.wgsl
 
 // The longest fan `vertex_fans` walks: a vertex with more edges (none in a Delaunay mesh
@@ -43,8 +43,9 @@ fn wrap(p: vec2<f32>) -> vec2<f32> {
     return p - params.box_len * floor((p + 0.5 * params.box_len) / params.box_len);
 }
 
-// The sum over v's edges so far: its displacement and the overlapping pairs it counts.
-struct Sum { shift: vec2<f32>, overlaps: u32 }
+// The sum over v's edges so far: its displacement, the overlapping pairs it counts (by
+// their lower id) and whether v is in any.
+struct Sum { shift: vec2<f32>, overlaps: u32, any: u32 }
 
 // The sum with the push on v (at xv) from its neighbour w added, when they overlap.
 fn push(sum: Sum, v: u32, xv: vec2<f32>, w: u32) -> Sum {
@@ -52,7 +53,7 @@ fn push(sum: Sum, v: u32, xv: vec2<f32>, w: u32) -> Sum {
     let len = length(r);
     if (len < params.limit && len > 0.0) {
         return Sum(sum.shift - (params.delta * (params.sigma - len) / len) * r,
-            sum.overlaps + select(0u, 1u, w > v));
+            sum.overlaps + select(0u, 1u, w > v), 1u);
     }
     return sum;
 }
@@ -67,7 +68,7 @@ fn correct(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     let n = params.n;
     let xv = x[v];
     let edges = min(fans[v], MAX_FAN);
-    var sum = Sum(vec2<f32>(0.0), 0u);
+    var sum = Sum(vec2<f32>(0.0), 0u, 0u);
     for (var j = 0u; j < min(edges, params.width); j = j + 1u) {
         sum = push(sum, v, xv, fans[(2u + j) * n + v]);
     }
@@ -93,5 +94,8 @@ fn correct(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     out[v] = wrap(xv + shift);
     if (sum.overlaps > 0u) {
         atomicAdd(&count[0], sum.overlaps);
+    }
+    if (sum.any != 0u) {
+        atomicAdd(&count[1], 1u);
     }
 }

@@ -15,7 +15,8 @@
 //   either way;
 // - `tally` (one thread, after `advance`): unless stopped, count the iteration, add the
 //   body's count (word 0) to the total, and stop when its word stop_word is 0, at
-//   max_iterations (the host then reports the loop unconverged) or at the fixed count. An
+//   max_iterations (the host then reports the loop unconverged) or at the fixed count; on
+//   the first iteration, copy every word of the count to `first` (0 without one). An
 //   iteration the executor runs past the stop (speculatively, while the host reads the
 //   status) therefore changes nothing;
 // - `finish`: out = current (unless copy_finish is 0: the plan gave both one buffer,
@@ -27,9 +28,10 @@
 // halts: 1 where a halt check is bound (binding 9; else a stand-in, unread).
 // max_iterations: the stop when the count never reaches 0 (the host reports it);
 // stop_word: the word of `count` whose 0 stops the loop (the total sums word 0);
-// copy_start, copy_finish: 0 where `start` and `finish` copy nothing (nodes/repeat.rs).
+// copy_start, copy_finish: 0 where `start` and `finish` copy nothing (nodes/repeat.rs);
+// first_words: the words of `first` (those of the count, or 1).
 struct Params { words: u32, fixed: u32, counted: u32, halts: u32, max_iterations: u32,
-                stop_word: u32, copy_start: u32, copy_finish: u32 }
+                stop_word: u32, copy_start: u32, copy_finish: u32, first_words: u32 }
 
 @group(0) @binding(0) var<storage, read> initial: array<u32>;
 @group(0) @binding(1) var<storage, read> next: array<u32>;
@@ -41,6 +43,7 @@ struct Params { words: u32, fixed: u32, counted: u32, halts: u32, max_iterations
 @group(0) @binding(7) var<storage, read_write> status: array<u32>;
 @group(0) @binding(8) var<uniform> params: Params;
 @group(0) @binding(9) var<storage, read> halt: array<u32>;
+@group(0) @binding(10) var<storage, read_write> first: array<u32>;
 
 @compute @workgroup_size(256)
 fn start(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -87,6 +90,11 @@ fn tally() {
     }
     let k = status[0] + 1u;
     status[0] = k;
+    if (k == 1u) {
+        for (var j = 0u; j < params.first_words; j = j + 1u) {
+            first[j] = select(0u, count[j], params.counted == 1u);
+        }
+    }
     status[2] = c;
     status[3] = status[3] + tallied;
     if ((params.fixed == 0u && (c == 0u || k >= params.max_iterations)) || k == params.fixed) {

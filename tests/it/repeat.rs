@@ -182,7 +182,7 @@ fn repeat_runs_its_body_only_for_the_iterations_it_reports() {
    {"id": "loop", "kind": "repeat", "inputs": {"initial": "inputs.x", "next": "tick.out", "count": "tick.count"}},
    {"id": "tick", "kind": "KIND", "inputs": {"x": "loop.current"}}
  ],
- "outputs": {"out": "loop.out", "iterations": "loop.iterations", "total": "loop.total"}}"#
+ "outputs": {"out": "loop.out", "iterations": "loop.iterations", "total": "loop.total", "first": "loop.first"}}"#
             .replace("KIND", kind);
         let path = write_graph(&dir, &format!("{kind}.json"), &json);
         let g = load_with_registry(&path, &reg);
@@ -216,6 +216,8 @@ fn repeat_runs_its_body_only_for_the_iterations_it_reports() {
                 assert_eq!(f32s(&out["out"]), [0.0], "{case}");
                 assert_eq!(u32s(&out["iterations"]), [k], "{case}");
                 assert_eq!(u32s(&out["total"]), [k - 1], "{case}");
+                // The first iteration's count: 0 only where it was also the last.
+                assert_eq!(u32s(&out["first"]), [u32::from(k > 1)], "{case}");
                 assert_eq!(
                     iterations,
                     [("loop".to_string(), vec![k; steps as usize])],

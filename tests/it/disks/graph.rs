@@ -88,6 +88,24 @@ fn bd_delaunay_keeps_a_delaunay_mesh_and_no_overlaps_every_step() {
         );
         let closest = closest_pair(&x, l);
         assert!(closest >= 1.0 - 1e-5, "step {step}: closest pair {closest}");
+        // The move's overlaps (the correction's first round, counted again for the
+        // outputs): among the pairs all rounds counted, none where one round sufficed,
+        // and two to twice as many disks as pairs.
+        let [pairs, disks] = u32s(&out["overlapping_disks"])[..] else {
+            panic!("step {step}: overlapping_disks holds two words")
+        };
+        let total = u32s(&out["overlapping_pairs"])[0];
+        let rounds = u32s(&out["overlap_rounds"])[0];
+        assert!(pairs <= total, "step {step}: {pairs} of {total}");
+        assert_eq!(
+            rounds == 1,
+            pairs == 0,
+            "step {step}: {rounds} rounds, {pairs} pairs"
+        );
+        assert!(
+            (pairs == 0 && disks == 0) || (2..=2 * pairs).contains(&disks),
+            "step {step}: {disks} disks in {pairs} pairs"
+        );
         let moved = (0..n)
             .map(|i| {
                 let d = [0, 1].map(|a| minimum_image(x[2 * i + a] - previous[2 * i + a], l));

@@ -90,6 +90,20 @@ fn overlap_rounds_remove_every_overlap() {
             "round {}: overlaps",
             counts.len()
         );
+        // The disks in at least one overlapping pair: two per pair at most, and at least
+        // two where any pair overlaps.
+        let disks = u32s(&out["overlaps"])[1];
+        assert_eq!(u32s(&narrow["overlaps"])[1], disks, "the narrow table");
+        assert_eq!(
+            disks as f64,
+            refs[1].data[1],
+            "round {}: overlapping disks",
+            counts.len()
+        );
+        assert!(
+            (count == 0 && disks == 0) || (2..=2 * count).contains(&disks),
+            "{disks} disks in {count} overlapping pairs"
+        );
         let mut worst = 0.0f64;
         let mut largest_step = 0.0f64;
         for i in 0..y.len() {
