@@ -8,12 +8,13 @@
 //   `finish` to the next loop's `start` (or the step's end) get their static counts where
 //   the loop is done (its node's `done` word) and the chain unbroken, zeros otherwise; the
 //   chain word keeps the verdict for the gates after it. The host sets the chain word to 1
-//   before each submission that runs loops.
+//   before a submission that runs loops where a tail gate may have cleared it.
 // `counts` holds the static counts as (x, y, z) per dispatch, written at compile time.
 #import common/index.wgsl
 
 // main: `words` of args from 0, stopped when status[stopped_word] != 0;
-// tail: `words` of args from word `first`, run when status[done_word] != 0.
+// tail: `words` of args from word `first`, run when status[done_word] != 0 (its
+// stopped_word unread).
 struct Gate { words: u32, stopped_word: u32, first: u32, done_word: u32 }
 
 @group(0) @binding(0) var<storage, read> counts: array<u32>;

@@ -426,7 +426,8 @@ impl<'a> Program<'a> {
                     &args,
                     [
                         3 * (end - first) as u32,
-                        stop.stopped_word,
+                        // (stopped_word: the loop gate's, unread by the tail)
+                        0,
                         3 * first as u32,
                         stop.done_word,
                     ],

@@ -285,6 +285,9 @@ pub struct Program<'a> {
     /// The chain word the loop gates and tail gates share (gate.wgsl): 1 while every
     /// loop of the step so far is done.
     loop_chain: wgpu::Buffer,
+    /// Whether `loop_chain` may hold 0 (its start, or a tail gate that found its loop
+    /// unfinished or failed): the next submission that needs it sets it first.
+    chain_cleared: std::sync::atomic::AtomicBool,
     /// Pipelines built for this program (cache misses).
     pub kernels_built: usize,
     /// Bytes nodes allocated for uniforms and tables.
@@ -394,6 +397,7 @@ impl<'a> Program<'a> {
             chains: [None, None],
             chain_loops: true,
             loop_chain: storage_buffer(gpu, "loop chain", 4),
+            chain_cleared: true.into(),
             kernels_built: 0,
             table_bytes: 0,
             steps_done: 0,

@@ -144,13 +144,16 @@ impl Program<'_> {
         Ok(iterations as u32)
     }
 
-    /// Sets the chain word (shaders/engine/gate.wgsl) to 1 for the next submission: the
-    /// loop gates run their loops only while it is set, and a chained step's tail gates
-    /// clear it where a loop did not finish.
+    /// Sets the chain word (shaders/engine/gate.wgsl) to 1 for the next submission where
+    /// it may be 0: the loop gates run their loops only while it is set, and a chained
+    /// step's tail gates clear it where a loop did not finish (`judge_chained` then marks
+    /// it cleared). A step whose loops all finish leaves it set: nothing to write.
     fn open_chain(&self) {
-        self.gpu
-            .queue
-            .write_buffer(&self.loop_chain, 0, bytemuck::bytes_of(&1u32));
+        if self.chain_cleared.swap(false, Ordering::Relaxed) {
+            self.gpu
+                .queue
+                .write_buffer(&self.loop_chain, 0, bytemuck::bytes_of(&1u32));
+        }
     }
 
     /// Batches of a gated loop's iterations (`pending`, recorded before them, goes out
@@ -168,7 +171,7 @@ impl Program<'_> {
         let batch = lp.next_batch();
         loop {
             // Where a chained step's tail gate found this loop unfinished, it cleared the
-            // chain word.
+            // chain word (`judge_chained` marked it).
             self.open_chain();
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
             {
@@ -315,8 +318,14 @@ impl Program<'_> {
                 let (Some(gate), Some(stop)) = (&lp.gate, lp.kernels.gpu_stop) else {
                     unreachable!("a chained step's loops are gated")
                 };
-                let status = self.read_status(lp, &lp.staging[0], index.clone())?;
-                match self.judge(lp, stop, &status, batches[k], step)? {
+                let verdict = self
+                    .read_status(lp, &lp.staging[0], index.clone())
+                    .and_then(|status| self.judge(lp, stop, &status, batches[k], step));
+                if !matches!(verdict, Ok(Some(_))) {
+                    // Its tail gate cleared the chain word.
+                    self.chain_cleared.store(true, Ordering::Relaxed);
+                }
+                match verdict? {
                     Some((iterations, _)) => {
                         lp.last_iterations.store(iterations, Ordering::Relaxed);
                         counts[k] = iterations as u32;
