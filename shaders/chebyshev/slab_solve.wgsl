@@ -136,13 +136,21 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             }
         }
         solve(k, alpha, beta);
-        // Values at the points (j = 0 the top): the inverse transform.
-        for (var j = 0u; j < n; j++) {
-            var acc = 0.0;
-            for (var m = 0u; m < n; m++) {
-                acc += points[j * n + m] * coef[m];
+        // Values at the points (j = 0 the top): the inverse transform, by parity. The
+        // points are symmetric (z_(n-1-j) = -z_j) and T_m(-z) = (-1)^m T_m(z), so the sums
+        // of the even and the odd terms at the upper half's points give both halves: half
+        // the dense matrix's products and loads, in two independent chains.
+        for (var j = 0u; j < (n + 1u) / 2u; j++) {
+            var even = 0.0;
+            var odd = 0.0;
+            for (var m = 0u; m < n; m += 2u) {
+                even += points[j * n + m] * coef[m];
             }
-            line[j] = acc;
+            for (var m = 1u; m < n; m += 2u) {
+                odd += points[j * n + m] * coef[m];
+            }
+            line[j] = even + odd;
+            line[n - 1u - j] = even - odd;
         }
         let e = (slot * 6u + c * 2u + part) * 2u;
         velocity_ends[e] = line[0];
