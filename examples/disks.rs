@@ -132,6 +132,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "loop {label}: {mean:.2} iterations per step (the last of each finding nothing), at most {max}"
         );
     }
+    // The last step's move left these overlaps before its correction (S1's overlapping
+    // fraction: the disks in at least one overlapping pair, over n).
+    let overlapping = outputs["overlapping_disks"].to_ref().data;
+    println!(
+        "last step: {} overlapping pairs after the move, overlapping fraction {:.4}",
+        overlapping[0],
+        overlapping[1] / n as f64
+    );
     println!(
         "largest cluster (contact {CONTACT} sigma): {:.3} of the disks at the start, {:.3} at the end",
         largest_cluster_fraction(&mesh0, &x, [l, l], sigma),
