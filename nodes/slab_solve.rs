@@ -9,21 +9,18 @@
 //! other ports graphs need). Same conventions: wave numbers paired (i k zero on an
 //! unpaired Nyquist index) in the sources, |k| unpaired; the k = 0 rules of each wall mode.
 //!
-//! Per k, 6 threads (component, real or imaginary part), KS wave numbers a workgroup. All
-//! of a workgroup's threads first stage its lines of f and its per-k tables in workgroup
-//! memory (coalesced, every read issued at once: read as the pressure's third of the
-//! threads went, the tables' first touch left the solve waiting on memory); each thread
-//! then keeps its z line in registers. The pressure is solved by component 0's
+//! Per k, 6 threads (component, real or imaginary part), KS wave numbers a workgroup;
+//! each thread keeps its z line in registers. The pressure is solved by component 0's
 //! two threads and handed to the others through workgroup memory with its end values;
 //! every thread then forms its velocity source and boundary values, solves, takes its
-//! values along z by the dense inverse transform (by parity: the even and odd terms' sums
-//! at the upper half's points give both halves), and adds the walls' flow from the
+//! values along z by the dense inverse transform, and adds the walls' flow from the
 //! velocity's end values (workgroup memory again). The per-k tables (chebyshev_bvp's, the
 //! slit's 6 x 6 inverse) are built in f64 on the host, as the chain's nodes build them;
 //! the pressure and velocity solves share one table (the same k and domain).
 //!
-//! What it reads and writes per k: 6 n words of f, 6 n words out, 5 n + 5 table words (72
-//! more for the slit): 17 n + 5; the chain moves about 82 n + 36 words per k through memory (every
+//! What it reads and writes per k: 6 n words of f (plus re-reads of f_x, f_y, f_z by the
+//! pressure threads, from cache), 6 n words out, 5 n + 6 table words (72 more for the
+//! slit): 17 n + 6; the chain moves about 82 n + 36 words per k through memory (every
 //! intermediate written and read back, the tables read by both solves).
 //!
 //! `staged` (shaders/chebyshev/slab_staged.wgsl), for grids with few wave numbers (the
@@ -59,22 +56,13 @@ pub const MAX_POINTS: u32 = 160;
 /// 10^4 spheres: 56 x 56 cells, 1624 wave numbers; 10^5: 15400, left to `fused`).
 pub const STAGED_UP_TO: u64 = 4096;
 
-/// The fused kernel's workgroup words per wave number for n points: its 6 staged lines
-/// (`stride` words apart), its table rows, the pressure's 2 lines and the end values.
-fn fused_words_per_k(n: u32) -> u32 {
-    6 * (n | 1) + table_rows(n) + 2 * n + 16
-}
+/// Workgroup words the kernel's shared lines may take (of the 16 KiB every adapter has).
+const SHARED_WORDS: u32 = 3400;
 
-/// Rows of chebyshev_bvp's tables the kernels read (all but the last, whether k is 0).
-fn table_rows(n: u32) -> u32 {
-    chebyshev_bvp::table_rows(n as usize) as u32 - 1
-}
-
-/// Wave numbers per workgroup of the fused kernel: 16 (96 threads) where their staged
-/// lines and tables fit the adapter's workgroup memory (`bytes`), fewer for long lines
-/// (31 points: 27 KiB; an adapter with only the 16 KiB every one has takes 9).
-fn wave_numbers_per_group(n: u32, bytes: u32) -> u32 {
-    (bytes / 4 / fused_words_per_k(n)).clamp(1, 16)
+/// Wave numbers per workgroup: 16 (96 threads) where their pressure lines fit, fewer for
+/// long lines.
+fn wave_numbers_per_group(n: u32) -> u32 {
+    (SHARED_WORDS / (2 * n + 16)).clamp(1, 16)
 }
 
 /// Workgroup words the staged kernel's lines, tables and constants may take (of the 16 KiB
@@ -120,7 +108,7 @@ impl StagedShape {
 
 fn staged_shape(n: u32) -> StagedShape {
     let stride = n | 1;
-    let rows = table_rows(n);
+    let rows = chebyshev_bvp::table_rows(n as usize) as u32 - 1;
     let per_k = 8 * stride + rows + 22;
     let ks = (STAGED_WORDS / per_k).clamp(1, STAGED_KS);
     let lines = 6 * ks;
@@ -290,13 +278,10 @@ impl GpuKernels for SlabSolve {
             );
             (s.ks, s.wg, source)
         } else {
-            let ks = wave_numbers_per_group(n as u32, cx.caps().max_workgroup_storage);
+            let ks = wave_numbers_per_group(n as u32);
             let source = format!(
-                "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n\
-                 const LS: u32 = {}u;\nconst ROWS: u32 = {}u;\n{}",
+                "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}",
                 6 * ks,
-                n | 1,
-                table_rows(n as u32),
                 cx.shader("chebyshev/slab_solve.wgsl")?
             );
             (ks, 6 * ks, source)
@@ -369,22 +354,14 @@ pub fn register(r: &mut Registry) {
 mod tests {
     use super::*;
 
-    /// The fused kernel's staged lines and tables fit the workgroup memory every adapter
-    /// has, at every length taken, and take 16 wave numbers at 31 points where there is
-    /// room (an H100's 48 KiB, lavapipe's 32).
+    /// The shared lines fit the workgroup memory every adapter has, at every length taken.
     #[test]
     fn the_shared_lines_fit() {
         for n in 2..=MAX_POINTS {
-            for bytes in [16 << 10, 32 << 10, 48 << 10] {
-                let ks = wave_numbers_per_group(n, bytes);
-                assert!(
-                    ks >= 1 && 4 * ks * fused_words_per_k(n) <= bytes,
-                    "n {n}, {bytes} bytes: {ks}"
-                );
-            }
+            let ks = wave_numbers_per_group(n);
+            assert!(ks >= 1 && ks * (2 * n + 16) <= SHARED_WORDS, "n {n}: {ks}");
         }
-        assert_eq!(wave_numbers_per_group(31, 32 << 10), 16);
-        assert_eq!(wave_numbers_per_group(31, 16 << 10), 9);
+        assert_eq!(wave_numbers_per_group(31), 16);
     }
 
     /// The staged kernel's workgroup memory fits the 16 KiB every adapter has, its

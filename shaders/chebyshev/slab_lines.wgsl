@@ -1,35 +1,8 @@
 // template: the line steps of the slab solve kernels (slab_solve.wgsl, slab_staged.wgsl),
-// imported by them: the staging of a workgroup's lines and tables, each thread's z line
-// and its solve's coefficients in private arrays, the Chebyshev derivative in place and
-// chebyshev_bvp's banded solve. The importer defines WG, KS, POINTS, LS, ROWS, the
-// bindings `f` and `bvp`, the workgroup arrays `lines` (6 KS lines, LS words apart) and
-// `tables` (ROWS KS words), the uniform `u` (its dz_scale: 2 / H) and `entry(row, slot)`,
-// row `row` of the staged table of wave number `slot`.
-
-// The workgroup's KS wave numbers from k0 staged, every thread taking part, in coalesced
-// runs: their 6 KS lines of f (component c, level z: the KS wave numbers' 2 KS words are
-// contiguous in f; line (c KS + slot) 2 + part) and their tables (row r: KS contiguous
-// words); zeros past the last wave number. The caller ends it with a barrier.
-fn stage(lid: u32, k0: u32) {
-    let nk = u.slab.nk;
-    for (var i = lid; i < 3u * POINTS * 2u * KS; i += WG) {
-        let r = i % (2u * KS);
-        let cz = i / (2u * KS);
-        var v = 0.0;
-        if (k0 + r / 2u < nk) {
-            v = f[2u * (cz * nk + k0) + r];
-        }
-        lines[((cz / POINTS) * 2u * KS + r) * LS + cz % POINTS] = v;
-    }
-    for (var i = lid; i < ROWS * KS; i += WG) {
-        let s = i % KS;
-        var v = 0.0;
-        if (k0 + s < nk) {
-            v = bvp[(i / KS) * nk + k0 + s];
-        }
-        tables[i] = v;
-    }
-}
+// imported by them: each thread's z line and its solve's coefficients in private arrays,
+// the Chebyshev derivative in place and chebyshev_bvp's banded solve. The importer defines
+// POINTS, the uniform `u` (its dz_scale: 2 / H) and `entry(row, k)`, row `row` of
+// column k of chebyshev_bvp's per-k tables.
 
 // This thread's line, and the solve's coefficients of y.
 var<private> line: array<f32, POINTS>;
@@ -51,8 +24,8 @@ fn differentiate_line() {
     line[0] = u.dz_scale * 0.5 * here;
 }
 
-// chebyshev_bvp's solve of the wave number in slot k (shaders/chebyshev/bvp.wgsl): the line
-// holds f (scaled by (H/2)^2), alpha and beta are scaled; leaves y's coefficients in coef.
+// chebyshev_bvp's solve of k (shaders/chebyshev/bvp.wgsl): the line holds f (scaled by
+// (H/2)^2), alpha and beta are scaled; leaves y's coefficients in coef.
 fn solve(k: u32, alpha: f32, beta: f32) {
     let n = POINTS;
     var r0 = -alpha;

@@ -1,21 +1,18 @@
-// template: nodes/slab_solve.rs prepends the constants WG, KS, POINTS, LS and ROWS.
+// template: nodes/slab_solve.rs prepends the constants WG, KS and POINTS.
 //
 // slab_solve (nodes/slab_solve.rs): the doubly periodic Stokes solve of one wave number k
 // from the forcing's Chebyshev coefficients to the velocity's values along z with the
 // walls, the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp,
 // chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse),
 // slab_walls in one kernel. A workgroup takes KS wave numbers with 6 threads each, one per
-// (component c, real or imaginary part), laid out c first, then k, then the part. All its
-// threads first stage the KS wave numbers' lines of f and per-k tables in workgroup
-// memory (`stage`: every global read in coalesced runs, issued by all threads at once,
-// not by the pressure's third of them as their solve goes). Each thread then keeps its
-// line (POINTS words, fixed when the kernel is built, so the loops unroll) in registers;
-// the pressure (the threads of component 0 solve it, one per part) and the end values of
-// the velocity cross between a k's threads through workgroup memory.
-// f, out: word 2 ((c n + z) nk + k) + part. bvp: chebyshev_bvp's strided per-k tables
-// (ROWS rows read). points: the inverse transform's matrix (n x n), zeta_j, the weights
-// of dv/dz at the top. minv: the slit's 6 x 6 complex inverse per k, word
-// ((r 6 + c) 2 + part) nk + k.
+// (component c, real or imaginary part), laid out c first, then k, then the part, so a
+// component's words of KS neighbouring k are read by neighbouring threads. Each thread
+// keeps its line (POINTS words, fixed when the kernel is built, so the loops unroll) in
+// registers; the pressure (the threads of component 0 solve it, one per part) and the end
+// values of the velocity cross between a k's threads through workgroup memory.
+// f, out: word 2 ((c n + z) nk + k) + part. bvp: chebyshev_bvp's strided per-k tables.
+// points: the inverse transform's matrix (n x n), zeta_j, the weights of dv/dz at the top.
+// minv: the slit's 6 x 6 complex inverse per k, word ((r 6 + c) 2 + part) nk + k.
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
 #import chebyshev/slab_lines.wgsl
@@ -36,28 +33,18 @@ struct Solve {
 @group(0) @binding(4) var<storage, read> minv_table: array<f32>;
 @group(0) @binding(5) var<uniform> u: Solve;
 
-// The forcing's lines: line (c KS + slot) 2 + part, words LS apart (LS = POINTS rounded
-// up to odd: neighbouring lines in different banks).
-var<workgroup> lines: array<f32, 6u * KS * LS>;
-// Row r of slot s's table at r KS + s.
-var<workgroup> tables: array<f32, ROWS * KS>;
 // The pressure's coefficients per (k slot, part), then its values at the ends per (slot,
 // part): top, bottom; the velocity's values at the ends per (slot, component, part).
 var<workgroup> pressure: array<f32, KS * 2u * POINTS>;
 var<workgroup> pressure_ends: array<f32, KS * 4u>;
 var<workgroup> velocity_ends: array<f32, KS * 12u>;
 
-fn entry(row: u32, slot: u32) -> f32 {
-    return tables[row * KS + slot];
+fn entry(row: u32, k: u32) -> f32 {
+    return bvp[row * u.slab.nk + k];
 }
 
 fn word(c: u32, z: u32, k: u32) -> u32 {
     return slab_word(c, z, k, POINTS, u.slab.nk);
-}
-
-// The first word of the staged line of component c, slot `slot`, part `part`.
-fn line_at(c: u32, slot: u32, part: u32) -> u32 {
-    return ((c * KS + slot) * 2u + part) * LS;
 }
 
 fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
@@ -79,8 +66,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let part = lid % 2u;
     let slot = (lid / 2u) % KS;
     let c = lid / (2u * KS);
-    let k0 = (wid.y * nwg.x + wid.x) * KS;
-    let k = k0 + slot;
+    let k = (wid.y * nwg.x + wid.x) * KS + slot;
     // Threads past the last k skip the work but meet every barrier.
     let valid = k < nk;
     let other = 1u - part;
@@ -90,24 +76,18 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let kk = slab_wave(u.slab, k, false);
     let kabs = length(kk);
 
-    stage(lid, k0);
-    workgroupBarrier();
-
     // The pressure: p'' - k^2 p = i k.f + df_z/dz, decaying conditions (component 0's
     // threads, one per part).
     if (c == 0u && valid) {
-        let fz = line_at(2u, slot, part);
-        let fx = line_at(0u, slot, other);
-        let fy = line_at(1u, slot, other);
         for (var z = 0u; z < n; z++) {
-            line[z] = lines[fz + z];
+            line[z] = f[word(2u, z, k) + part];
         }
         differentiate_line();
         for (var z = 0u; z < n; z++) {
-            let ikf = sign * (q.x * lines[fx + z] + q.y * lines[fy + z]);
+            let ikf = sign * (q.x * f[word(0u, z, k) + other] + q.y * f[word(1u, z, k) + other]);
             line[z] = u.f_scale * (ikf + line[z]);
         }
-        solve(slot, 0.0, 0.0);
+        solve(k, 0.0, 0.0);
         var top = 0.0;
         var bottom = 0.0;
         let base = (slot * 2u + part) * n;
@@ -132,16 +112,14 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                 line[z] = pressure[base + z];
             }
             differentiate_line();
-            let fz = line_at(2u, slot, part);
             for (var z = 0u; z < n; z++) {
-                line[z] = scale * (line[z] - lines[fz + z]);
+                line[z] = scale * (line[z] - f[word(2u, z, k) + part]);
             }
         } else {
             let base = (slot * 2u + other) * n;
             let qc = q[c];
-            let fc = line_at(c, slot, part);
             for (var z = 0u; z < n; z++) {
-                line[z] = scale * (sign * qc * pressure[base + z] - lines[fc + z]);
+                line[z] = scale * (sign * qc * pressure[base + z] - f[word(c, z, k) + part]);
             }
         }
         var alpha = 0.0;
@@ -157,7 +135,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                 beta = g * pressure_ends[(slot * 2u + other) * 2u + 1u];
             }
         }
-        solve(slot, alpha, beta);
+        solve(k, alpha, beta);
         // Values at the points (j = 0 the top): the inverse transform, by parity. The
         // points are symmetric (z_(n-1-j) = -z_j) and T_m(-z) = (-1)^m T_m(z), so the sums
         // of the even and the odd terms at the upper half's points give both halves: half

@@ -107,7 +107,25 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let nk = u.slab.nk;
     let k0 = (wid.y * nwg.x + wid.x) * KS;
 
-    stage(lid, k0);
+    // Stage the lines (component c, level z: the KS wave numbers' 2 KS words are
+    // contiguous in f) and the tables (row r: KS contiguous words).
+    for (var i = lid; i < 3u * n * 2u * KS; i += WG) {
+        let r = i % (2u * KS);
+        let cz = i / (2u * KS);
+        var v = 0.0;
+        if (k0 + r / 2u < nk) {
+            v = f[2u * (cz * nk + k0) + r];
+        }
+        lines[((cz / n) * 2u * KS + r) * LS + cz % n] = v;
+    }
+    for (var i = lid; i < ROWS * KS; i += WG) {
+        let s = i % KS;
+        var v = 0.0;
+        if (k0 + s < nk) {
+            v = bvp[(i / KS) * nk + k0 + s];
+        }
+        tables[i] = v;
+    }
     workgroupBarrier();
     if (FORWARD) {
         dense(lid, n * n + 2u * n);
