@@ -13,7 +13,8 @@
 //! each thread keeps its z line in registers. The pressure is solved by component 0's
 //! two threads and handed to the others through workgroup memory with its end values;
 //! every thread then forms its velocity source and boundary values, solves, takes its
-//! values along z by the dense inverse transform, and adds the walls' flow from the
+//! values along z by the dense inverse transform (by parity: the even and odd terms' sums
+//! at the upper half's points give both halves), and adds the walls' flow from the
 //! velocity's end values (workgroup memory again). The per-k tables (chebyshev_bvp's, the
 //! slit's 6 x 6 inverse) are built in f64 on the host, as the chain's nodes build them;
 //! the pressure and velocity solves share one table (the same k and domain).
