@@ -81,25 +81,20 @@ fn overlap_rounds_remove_every_overlap() {
         let (out, refs) = round(&fans[0]);
         let (narrow, _) = round(&fans[1]);
         let y = out["positions"].data.to_f64();
-        let count = u32s(&out["overlaps"])[0];
+        // Both count words: the overlapping pairs, then the disks in at least one.
+        let words = u32s(&out["overlaps"]);
         assert_eq!(narrow["positions"].data.to_f64(), y, "the narrow table");
-        assert_eq!(u32s(&narrow["overlaps"])[0], count, "the narrow table");
+        assert_eq!(u32s(&narrow["overlaps"]), words, "the narrow table");
         assert_eq!(
-            count as f64,
-            refs[1].data[0],
-            "round {}: overlaps",
+            words.iter().map(|&w| w as f64).collect::<Vec<_>>(),
+            refs[1].data,
+            "round {}: overlapping pairs and disks",
             counts.len()
         );
-        // The disks in at least one overlapping pair: two per pair at most, and at least
-        // two where any pair overlaps.
-        let disks = u32s(&out["overlaps"])[1];
-        assert_eq!(u32s(&narrow["overlaps"])[1], disks, "the narrow table");
-        assert_eq!(
-            disks as f64,
-            refs[1].data[1],
-            "round {}: overlapping disks",
-            counts.len()
-        );
+        let [count, disks] = words[..] else {
+            panic!("the count holds two words, got {words:?}")
+        };
+        // Two disks per pair at most, and at least two where any pair overlaps.
         assert!(
             (count == 0 && disks == 0) || (2..=2 * count).contains(&disks),
             "{disks} disks in {count} overlapping pairs"
