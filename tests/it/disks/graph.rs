@@ -88,9 +88,9 @@ fn bd_delaunay_keeps_a_delaunay_mesh_and_no_overlaps_every_step() {
         );
         let closest = closest_pair(&x, l);
         assert!(closest >= 1.0 - 1e-5, "step {step}: closest pair {closest}");
-        // The move's overlaps (the correction's first round, counted again for the
-        // outputs): among the pairs all rounds counted, none where one round sufficed,
-        // and two to twice as many disks as pairs.
+        // The move's overlaps (the correction loop's count after its first round,
+        // `repeat`'s `first`): among the pairs all rounds counted, none where one round
+        // sufficed, and two to twice as many disks as pairs.
         let [pairs, disks] = u32s(&out["overlapping_disks"])[..] else {
             panic!("step {step}: overlapping_disks holds two words")
         };
