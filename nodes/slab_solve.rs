@@ -50,6 +50,44 @@ use super::{chebyshev, chebyshev_bvp, stokes_slab};
 /// `slab`, `dpstokes_slab`).
 pub const MAX_POINTS: u32 = 160;
 
+/// Chebyshev points up to which the fused kernel's inverse transform is written out with
+/// the matrix's entries as literals (`values_written_out`): no matrix loads, constant
+/// indices. On an H100 (2026-12-06 23:38Z, against the loop in the same call): 0.0722 ->
+/// 0.0640 ms at 10^5 spheres (30 points), 0.558 -> 0.529 ms at 10^6 (31). Its text grows
+/// as n^2 / 2 products.
+pub const WRITTEN_OUT_UP_TO: usize = 64;
+
+/// WGSL `fn values_written_out()`: the fused kernel's inverse transform by parity for n
+/// points (slab_solve.wgsl's loop over `points`) with the entries of
+/// `chebyshev::matrix(n, false)` as f32 literals and every index a constant; n = 0 gives
+/// the empty function.
+fn values_written_out(n: usize) -> String {
+    let mut s = String::from("fn values_written_out() {\n");
+    if n > 0 {
+        let t = chebyshev::matrix(n, false);
+        let sum = |j: usize, first: usize| -> String {
+            let terms: Vec<String> = (first..n)
+                .step_by(2)
+                .map(|m| format!("{:?} * coef[{m}u]", t[j * n + m] as f32))
+                .collect();
+            if terms.is_empty() {
+                "0.0".into()
+            } else {
+                terms.join(" + ")
+            }
+        };
+        for j in 0..n.div_ceil(2) {
+            s += &format!("    let even{j} = {};\n", sum(j, 0));
+            s += &format!("    let odd{j} = {};\n", sum(j, 1));
+            s += &format!("    line[{j}u] = even{j} + odd{j};\n");
+            if n - 1 - j != j {
+                s += &format!("    line[{}u] = even{j} - odd{j};\n", n - 1 - j);
+            }
+        }
+    }
+    s + "}\n"
+}
+
 /// Wave numbers (half-spectrum columns) up to which lib/dpstokes_mobility.json's `slab`
 /// `auto` takes the staged kernel with the forward transform inside (`dpstokes_slab`):
 /// where the fused kernel's workgroups (16 wave numbers each) do not fill a large GPU's
@@ -280,9 +318,12 @@ impl GpuKernels for SlabSolve {
             (s.ks, s.wg, source)
         } else {
             let ks = wave_numbers_per_group(n as u32);
+            let written_out = n <= WRITTEN_OUT_UP_TO;
             let source = format!(
-                "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}",
+                "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n\
+                 const WRITTEN_OUT: bool = {written_out};\n{}{}",
                 6 * ks,
+                values_written_out(if written_out { n } else { 0 }),
                 cx.shader("chebyshev/slab_solve.wgsl")?
             );
             (ks, 6 * ks, source)

@@ -1,4 +1,5 @@
-// template: nodes/slab_solve.rs prepends the constants WG, KS and POINTS.
+// template: nodes/slab_solve.rs prepends the constants WG, KS, POINTS and WRITTEN_OUT and
+// the function values_written_out (empty where WRITTEN_OUT is false).
 //
 // slab_solve (nodes/slab_solve.rs): the doubly periodic Stokes solve of one wave number k
 // from the forcing's Chebyshev coefficients to the velocity's values along z with the
@@ -139,18 +140,24 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         // Values at the points (j = 0 the top): the inverse transform, by parity. The
         // points are symmetric (z_(n-1-j) = -z_j) and T_m(-z) = (-1)^m T_m(z), so the sums
         // of the even and the odd terms at the upper half's points give both halves: half
-        // the dense matrix's products and loads, in two independent chains.
-        for (var j = 0u; j < (n + 1u) / 2u; j++) {
-            var even = 0.0;
-            var odd = 0.0;
-            for (var m = 0u; m < n; m += 2u) {
-                even += points[j * n + m] * coef[m];
+        // the dense matrix's products and loads, in two independent chains. Up to 64
+        // points the host writes the sums out with the matrix's entries as literals
+        // (`values_written_out`): no matrix loads, constant indices.
+        if (WRITTEN_OUT) {
+            values_written_out();
+        } else {
+            for (var j = 0u; j < (n + 1u) / 2u; j++) {
+                var even = 0.0;
+                var odd = 0.0;
+                for (var m = 0u; m < n; m += 2u) {
+                    even += points[j * n + m] * coef[m];
+                }
+                for (var m = 1u; m < n; m += 2u) {
+                    odd += points[j * n + m] * coef[m];
+                }
+                line[j] = even + odd;
+                line[n - 1u - j] = even - odd;
             }
-            for (var m = 1u; m < n; m += 2u) {
-                odd += points[j * n + m] * coef[m];
-            }
-            line[j] = even + odd;
-            line[n - 1u - j] = even - odd;
         }
         let e = (slot * 6u + c * 2u + part) * 2u;
         velocity_ends[e] = line[0];

@@ -211,7 +211,11 @@ fn slab_solve_matches_the_chain_of_nodes() {
     let mut rng = Rng::new(79);
     let dir = tmpdir("slab_solve_chain");
     let (zmin, zmax) = (-1.5, 2.0);
-    for dims in [[16u32, 12, 17], [9, 7, 12], [6, 5, 40]] {
+    // 70 points: the fused kernel's transform as a loop over the matrix (past
+    // WRITTEN_OUT_UP_TO). f32 rounding grows with n^2 past 40 points (the Chebyshev
+    // derivative of the pressure scales as n^2): the tolerance with it.
+    for dims in [[16u32, 12, 17], [9, 7, 12], [6, 5, 40], [4, 3, 70]] {
+        let tol = 2e-5 * (dims[2] as f64 / 40.0).powi(2).max(1.0);
         let f = spectrum(&mut rng, dims, 3);
         for walls in ["none", "bottom", "slit"] {
             let json = chain_and_fused_graph(&f, zmin, zmax, walls);
@@ -235,13 +239,13 @@ fn slab_solve_matches_the_chain_of_nodes() {
                     }
                 }
                 assert!(
-                    worst <= 2e-5,
+                    worst <= tol,
                     "slab_solve {kernel} {walls} {dims:?} against the chain: {worst:e} at {at}"
                 );
                 // And against its f64 reference (the chain's references composed).
                 let (err, at) = rel_max_err(&out[kernel], &want);
                 assert!(
-                    err <= 2e-5,
+                    err <= tol,
                     "slab_solve {kernel} {walls} {dims:?} against its reference: {err:e} at {at}"
                 );
             }
@@ -255,7 +259,7 @@ fn slab_solve_matches_the_chain_of_nodes() {
             .remove(0);
             let (err, at) = rel_max_err(&out["staged_values"], &want_values);
             assert!(
-                err <= 2e-5,
+                err <= tol,
                 "slab_solve staged from values {walls} {dims:?} against its reference: {err:e} at {at}"
             );
         }
