@@ -51,19 +51,21 @@ use super::{chebyshev, chebyshev_bvp, stokes_slab};
 pub const MAX_POINTS: u32 = 160;
 
 /// Chebyshev points up to which the fused kernel's inverse transform is written out with
-/// the matrix's entries as literals (`values_written_out`): no matrix loads, constant
+/// the matrix's entries as literals (`written_out_transform`): no matrix loads, constant
 /// indices. On an H100 (2026-12-06 23:38Z, against the loop in the same call): 0.0722 ->
 /// 0.0640 ms at 10^5 spheres (30 points), 0.558 -> 0.529 ms at 10^6 (31). Its text grows
 /// as n^2 / 2 products.
 pub const WRITTEN_OUT_UP_TO: usize = 64;
 
-/// WGSL `fn values_written_out()`: the fused kernel's inverse transform by parity for n
-/// points (slab_solve.wgsl's loop over `points`) with the entries of
-/// `chebyshev::matrix(n, false)` as f32 literals and every index a constant; n = 0 gives
-/// the empty function.
-fn values_written_out(n: usize) -> String {
-    let mut s = String::from("fn values_written_out() {\n");
-    if n > 0 {
+/// What slab_solve.wgsl expects before it for n points: `const WRITTEN_OUT` and `fn
+/// values_written_out()`, the inverse transform by parity (the template's loop over
+/// `points`, the same writes in the same order) with the entries of
+/// `chebyshev::matrix(n, false)` as f32 literals and every index a constant, up to
+/// `WRITTEN_OUT_UP_TO` points; past it WRITTEN_OUT is false and the function empty.
+fn written_out_transform(n: usize) -> String {
+    let written_out = n <= WRITTEN_OUT_UP_TO;
+    let mut s = format!("const WRITTEN_OUT: bool = {written_out};\nfn values_written_out() {{\n");
+    if written_out {
         let t = chebyshev::matrix(n, false);
         let sum = |j: usize, first: usize| -> String {
             let terms: Vec<String> = (first..n)
@@ -80,9 +82,7 @@ fn values_written_out(n: usize) -> String {
             s += &format!("    let even{j} = {};\n", sum(j, 0));
             s += &format!("    let odd{j} = {};\n", sum(j, 1));
             s += &format!("    line[{j}u] = even{j} + odd{j};\n");
-            if n - 1 - j != j {
-                s += &format!("    line[{}u] = even{j} - odd{j};\n", n - 1 - j);
-            }
+            s += &format!("    line[{}u] = even{j} - odd{j};\n", n - 1 - j);
         }
     }
     s + "}\n"
@@ -318,12 +318,10 @@ impl GpuKernels for SlabSolve {
             (s.ks, s.wg, source)
         } else {
             let ks = wave_numbers_per_group(n as u32);
-            let written_out = n <= WRITTEN_OUT_UP_TO;
             let source = format!(
-                "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n\
-                 const WRITTEN_OUT: bool = {written_out};\n{}{}",
+                "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}{}",
                 6 * ks,
-                values_written_out(if written_out { n } else { 0 }),
+                written_out_transform(n),
                 cx.shader("chebyshev/slab_solve.wgsl")?
             );
             (ks, 6 * ks, source)

@@ -1,5 +1,6 @@
-// template: nodes/slab_solve.rs prepends the constants WG, KS, POINTS and WRITTEN_OUT and
-// the function values_written_out (empty where WRITTEN_OUT is false).
+// template: nodes/slab_solve.rs prepends the constants WG, KS and POINTS, and WRITTEN_OUT
+// with the function values_written_out (`written_out_transform`; empty where WRITTEN_OUT
+// is false).
 //
 // slab_solve (nodes/slab_solve.rs): the doubly periodic Stokes solve of one wave number k
 // from the forcing's Chebyshev coefficients to the velocity's values along z with the
