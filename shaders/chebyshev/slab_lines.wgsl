@@ -3,6 +3,12 @@
 // the Chebyshev derivative in place and chebyshev_bvp's banded solve. The importer defines
 // POINTS, the uniform `u` (its dz_scale: 2 / H) and `entry(row, k)`, row `row` of
 // column k of chebyshev_bvp's per-k tables.
+//
+// Every loop over a line is bounded by the constant POINTS itself, `i < POINTS` (not by a
+// `let n = POINTS` copy, not `i + 1u < POINTS`), here and in slab_solve.wgsl: the NVIDIA
+// driver compiles them much better so (how, wgpu does not show). The fused kernel,
+// otherwise the same, took 0.496 ms at 10^6 spheres with `n` bounds and 0.330 ms with
+// POINTS on an H100 (BENCHMARKS.md).
 
 // This thread's line, and the solve's coefficients of y.
 var<private> line: array<f32, POINTS>;
@@ -13,7 +19,7 @@ var<private> coef: array<f32, POINTS>;
 fn differentiate_line() {
     var next = 0.0;
     var here = 0.0;
-    for (var i = 0u; i + 1u < POINTS; i++) {
+    for (var i = 0u; i < POINTS - 1u; i++) {
         let m = POINTS - 1u - i;
         let cm = line[m];
         line[m] = u.dz_scale * here;
@@ -30,7 +36,7 @@ fn solve(k: u32, alpha: f32, beta: f32) {
     let n = POINTS;
     var r0 = -alpha;
     var r1 = -beta;
-    for (var z = 0u; z < n; z++) {
+    for (var z = 0u; z < POINTS; z++) {
         r0 += entry(3u * n + z, k) * line[z];
         r1 += entry(4u * n + z, k) * line[z];
     }
@@ -41,10 +47,10 @@ fn solve(k: u32, alpha: f32, beta: f32) {
     if (n > 1u) {
         line[1] += kappa2 * p0;
     }
-    for (var z = 2u; z < n; z++) {
+    for (var z = 2u; z < POINTS; z++) {
         line[z] -= entry(z, k) * line[z - 2u];
     }
-    for (var i = 0u; i < n; i++) {
+    for (var i = 0u; i < POINTS; i++) {
         let z = n - 1u - i;
         var up = 0.0;
         if (z + 2u < n) {
@@ -52,7 +58,7 @@ fn solve(k: u32, alpha: f32, beta: f32) {
         }
         line[z] = (line[z] - up) * entry(n + z, k);
     }
-    for (var m = 0u; m < n; m++) {
+    for (var m = 0u; m < POINTS; m++) {
         var v: f32;
         if (m == 0u) {
             v = y0;

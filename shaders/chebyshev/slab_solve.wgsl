@@ -109,11 +109,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     // The pressure: p'' - k^2 p = i k.f + df_z/dz, decaying conditions (component 0's
     // threads, one per part).
     if (c == 0u && valid) {
-        for (var z = 0u; z < n; z++) {
+        for (var z = 0u; z < POINTS; z++) {
             line[z] = f[word(2u, z, k) + part];
         }
         differentiate_line();
-        for (var z = 0u; z < n; z++) {
+        for (var z = 0u; z < POINTS; z++) {
             let ikf = sign * (q.x * f[word(0u, z, k) + other] + q.y * f[word(1u, z, k) + other]);
             line[z] = u.f_scale * (ikf + line[z]);
         }
@@ -121,7 +121,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         var top = 0.0;
         var bottom = 0.0;
         let base = (slot * 2u + part) * n;
-        for (var z = 0u; z < n; z++) {
+        for (var z = 0u; z < POINTS; z++) {
             let p = coef[z];
             pressure[base + z] = p;
             top += p;
@@ -138,17 +138,17 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         let scale = u.f_scale * u.slab.inv_eta;
         if (c == 2u) {
             let base = (slot * 2u + part) * n;
-            for (var z = 0u; z < n; z++) {
+            for (var z = 0u; z < POINTS; z++) {
                 line[z] = pressure[base + z];
             }
             differentiate_line();
-            for (var z = 0u; z < n; z++) {
+            for (var z = 0u; z < POINTS; z++) {
                 line[z] = scale * (line[z] - f[word(2u, z, k) + part]);
             }
         } else {
             let base = (slot * 2u + other) * n;
             let qc = q[c];
-            for (var z = 0u; z < n; z++) {
+            for (var z = 0u; z < POINTS; z++) {
                 line[z] = scale * (sign * qc * pressure[base + z] - f[word(c, z, k) + part]);
             }
         }
@@ -170,10 +170,10 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         // inverse transform's first row (entries 1) sums them: even terms, odd terms.
         var even = 0.0;
         var odd = 0.0;
-        for (var m = 0u; m < n; m += 2u) {
+        for (var m = 0u; m < POINTS; m += 2u) {
             even += coef[m];
         }
-        for (var m = 1u; m < n; m += 2u) {
+        for (var m = 1u; m < POINTS; m += 2u) {
             odd += coef[m];
         }
         let e = (slot * 6u + c * 2u + part) * 2u;
@@ -204,7 +204,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             if (walls == 1u) {
                 // dv/dz at the top from the coefficients: (2 / H) sum m^2 c_m.
                 var slope = 0.0;
-                for (var m = 1u; m < n; m++) {
+                for (var m = 1u; m < POINTS; m++) {
                     slope -= f32(m * m) * coef[m];
                 }
                 out_a1 = u.dz_scale * slope;
