@@ -5,10 +5,10 @@
 // column k of chebyshev_bvp's per-k tables.
 //
 // Every loop over a line is bounded by the constant POINTS itself, `i < POINTS` (not by a
-// `let n = POINTS` copy, not `i + 1u < POINTS`), here and in slab_solve.wgsl: the NVIDIA
-// driver compiles them much better so (how, wgpu does not show). The fused kernel,
-// otherwise the same, took 0.496 ms at 10^6 spheres with `n` bounds and 0.330 ms with
-// POINTS on an H100 (BENCHMARKS.md).
+// `let n = POINTS` copy, not `i + 1u < POINTS`), here and in slab_solve.wgsl (its
+// transform's loop past 64 points aside): the NVIDIA driver compiles them much better so
+// (how, wgpu does not show). The fused kernel, otherwise the same, took 0.496 ms at 10^6
+// spheres with `n` bounds and 0.330 ms with POINTS on an H100 (BENCHMARKS.md).
 
 // This thread's line, and the solve's coefficients of y.
 var<private> line: array<f32, POINTS>;
