@@ -22,6 +22,7 @@
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
 #import chebyshev/slab_lines.wgsl
+#import stokes_slab/slit.wgsl
 
 struct Solve {
     slab: Slab,
@@ -226,15 +227,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                 w[i] = big_c[i];
                 w[3u + i] = -velocity_end(slot, i, 0u);
             }
-            for (var r = 0u; r < 3u; r++) {
-                var x = vec2<f32>(0.0);
-                var y = vec2<f32>(0.0);
-                for (var i = 0u; i < 6u; i++) {
-                    x += cmul(minv(r, i, k), w[i]);
-                    y += cmul(minv(3u + r, i, k), w[i]);
-                }
-                big_c[r] = x;
-                big_d[r] = y;
+            for (var i = 0u; i < 3u; i++) {
+                big_c[i] = slit_row(i, w, k);
+                big_d[i] = slit_row(3u + i, w, k);
             }
         }
         let a = big_c[2] - times_i(kk.x * big_c[0] + kk.y * big_c[1]) / kabs;

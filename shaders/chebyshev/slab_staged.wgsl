@@ -22,6 +22,7 @@
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
 #import chebyshev/slab_lines.wgsl
+#import stokes_slab/slit.wgsl
 
 struct Solve {
     slab: Slab,
@@ -249,11 +250,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                         w[i] = -velocity_end(slot, i, 1u);
                         w[3u + i] = -velocity_end(slot, i, 0u);
                     }
-                    cc = vec2<f32>(0.0);
-                    for (var i = 0u; i < 6u; i++) {
-                        cc += cmul(minv(c, i, k), w[i]);
-                        dd += cmul(minv(3u + c, i, k), w[i]);
-                    }
+                    cc = slit_row(c, w, k);
+                    dd = slit_row(3u + c, w, k);
                 }
                 walls_cd[slot * 3u + c] = vec4<f32>(cc, dd);
             }

@@ -15,6 +15,7 @@
 // slit Minv: word ((r 6 + c) 2 + part) nk + k.
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
+#import stokes_slab/slit.wgsl
 
 @group(0) @binding(0) var<storage, read> v: array<f32>;
 @group(0) @binding(1) var<storage, read_write> out: array<f32>;
@@ -95,15 +96,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             u[c] = big_c[c];
             u[3u + c] = -load(c, 0u, k);
         }
-        for (var r = 0u; r < 3u; r++) {
-            var x = vec2<f32>(0.0);
-            var y = vec2<f32>(0.0);
-            for (var c = 0u; c < 6u; c++) {
-                x += cmul(minv(r, c, k), u[c]);
-                y += cmul(minv(3u + r, c, k), u[c]);
-            }
-            big_c[r] = x;
-            big_d[r] = y;
+        for (var c = 0u; c < 3u; c++) {
+            big_c[c] = slit_row(c, u, k);
+            big_d[c] = slit_row(3u + c, u, k);
         }
     }
     let a = big_c[2] - times_i(q.x * big_c[0] + q.y * big_c[1]) / kabs;
