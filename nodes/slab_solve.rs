@@ -20,10 +20,12 @@
 //! held across a barrier: on an H100 (2026-12-07 02:36Z) that took the kernel from 0.531
 //! to 0.330 ms at 10^6 spheres and 0.0635 to 0.0559 ms at 10^5, where the values' line
 //! kept for the walls after the barrier had cost registers and so resident threads (with
-//! the line loops bounded by the constant POINTS: slab_lines.wgsl says why).
-//! The per-k tables (chebyshev_bvp's, the
-//! slit's 6 x 6 inverse) are built in f64 on the host, as the chain's nodes build them;
-//! the pressure and velocity solves share one table (the same k and domain).
+//! the line loops bounded by the constant POINTS: slab_lines.wgsl says why). The per-k
+//! tables (chebyshev_bvp's, the slit's 6 x 6 inverse) are built in f64 on the host, as
+//! the chain's nodes build them; the pressure and velocity solves share one table (the
+//! same k and domain). The point tables (zeta_j and the weights of dv/dz at the top from
+//! the values) are shared with the staged kernel; this one takes the slope from the
+//! coefficients and leaves those n weights unread.
 //!
 //! What it reads and writes per k: 6 n words of f (plus re-reads of f_x, f_y, f_z by the
 //! pressure threads, from cache), 6 n words out, 5 n + 6 table words (72 more for the
