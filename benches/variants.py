@@ -7,10 +7,8 @@ follow them:
   interp_unroll8  the column sums' z loop written out for support 8 in 3D
 (BENCHMARKS.md, issue 5, fifth version: what they showed). DP Stokes variants
 (VARIANT_BENCH=dpstokes in benches/gpu_variants.sh) go under shaders/chebyshev/ the
-same way: cheb_prefetch and cheb_prefetch_idle load each thread's forcing line for the
-velocity's source before the pressure's barriers (every thread; the threads that do not
-solve the pressure). (cheb_interp_pairs, threads over (column, z point) pairs, timed
-2026-12-06 on an H100: 0.24 -> 0.47 ms at 10^5, slower; removed.)
+same way; none is kept now (cheb_interp_pairs, threads over (column, z point) pairs,
+timed 2026-12-06 on an H100: 0.24 -> 0.47 ms at 10^5, slower; removed).
 Usage:
   python3 benches/variants.py OUT_DIR"""
 import pathlib
@@ -58,43 +56,6 @@ fn column_sums(lid: u32, seg: u32, ppw: u32) -> vec4<f32> {{
     return src[:start] + body + src[end:]
 
 
-ZERO = """    for (var i = 0u; i < HALF; i++) {
-        line[i] = 0.0;
-    }
-"""
-FZ = "line[i] = scale * (line[i] - f[word(2u, z, k) + part]);"
-FC = "line[i] = scale * (sign * qc * p - f[word(c, z, k) + part]);"
-
-
-def prefetch(src, everyone):
-    """slab_solve.wgsl with each thread's forcing line of its velocity source loaded
-    before the pressure's barriers (by every thread, or by the threads that do not solve
-    the pressure only), so its loads wait while the pressure is solved."""
-    for text in (ZERO, FZ, FC):
-        assert text in src, "slab_solve.wgsl changed: update benches/variants.py"
-    cond = "valid" if everyone else "valid && c != 0u"
-    load = f"""    var mine: array<f32, HALF>;
-    if ({cond}) {{
-        for (var i = 0u; i < HALF; i++) {{
-            let z = 2u * i + parity;
-            if (z < POINTS) {{
-                mine[i] = f[word(c, z, k) + part];
-            }}
-        }}
-    }}
-"""
-    mine_c = "mine[i]" if everyone else "select(mine[i], f[word(c, z, k) + part], c == 0u)"
-    if not everyone:
-        # A load only where c is 0 (select would load in every thread).
-        fc = FC.replace("f[word(c, z, k) + part]", "fv")
-        fc = f"var fv = mine[i];\n                    if (c == 0u) {{ fv = f[word(c, z, k) + part]; }}\n                    {fc}"
-    else:
-        fc = FC.replace("f[word(c, z, k) + part]", mine_c)
-    return (src.replace(ZERO, ZERO + load)
-            .replace(FZ, FZ.replace("f[word(2u, z, k) + part]", "mine[i]"))
-            .replace(FC, fc))
-
-
 def main():
     out = pathlib.Path(sys.argv[1])
     common = pathlib.Path("shaders/spread/interpolate_common.wgsl").read_text()
@@ -108,9 +69,6 @@ def main():
         "interp_unroll8": ("interpolate_common.wgsl", unroll8(common)),
     }
     variants = {name: ("spread/" + file, text) for name, (file, text) in variants.items()}
-    slab = pathlib.Path("shaders/chebyshev/slab_solve.wgsl").read_text()
-    variants["cheb_prefetch"] = ("chebyshev/slab_solve.wgsl", prefetch(slab, everyone=True))
-    variants["cheb_prefetch_idle"] = ("chebyshev/slab_solve.wgsl", prefetch(slab, everyone=False))
     for name, (file, text) in variants.items():
         f = out / name / file
         f.parent.mkdir(parents=True, exist_ok=True)

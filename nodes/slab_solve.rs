@@ -9,24 +9,22 @@
 //! other ports graphs need). Same conventions: wave numbers paired (i k zero on an
 //! unpaired Nyquist index) in the sources, |k| unpaired; the k = 0 rules of each wall mode.
 //!
-//! Per k, 12 threads: one line (component, real or imaginary part) to each pair, one
-//! thread of the pair holding its even z (or Chebyshev index m), the other its odd ones,
-//! in registers (shaders/chebyshev/slab_solve.wgsl says why the parities stay apart);
-//! 16 wave numbers a workgroup where they fit, so a warp of 32 is one parity of one
-//! component. The pressure is solved by component 0's pairs and handed to the others
-//! through workgroup memory with its end values; every pair then forms its velocity
-//! source and boundary values, solves, sums its coefficients into end values (workgroup
-//! memory again), and after the barrier takes the walls' flow from the three components'
-//! end values. The inverse transform runs by parity: each thread sums its parity's terms
-//! at the upper half's points, and the even thread writes the upper half (even + odd),
-//! the odd one the lower half (even - odd), each value with the walls' flow (`put`). A
-//! thread per whole line (this kernel until 2026-12-07) kept 31 words of line and
-//! coefficients in registers and ran the whole serial chain; it took 0.330 ms at 10^6
-//! spheres on an H100 (BENCHMARKS.md has the pairs' figures). The per-k tables
-//! (chebyshev_bvp's, the slit's 6 x 6 inverse) are built in f64 on the host, as the
-//! chain's nodes build them; the pressure and velocity solves share one table (the same
-//! k and domain). The point tables (zeta_j and the weights of dv/dz at the top from the
-//! values) are shared with the staged kernel; this one takes the slope from the
+//! Per k, 6 threads (component, real or imaginary part), KS wave numbers a workgroup;
+//! each thread keeps its z line in registers. The pressure is solved by component 0's
+//! two threads and handed to the others through workgroup memory with its end values;
+//! every thread then forms its velocity source and boundary values, solves, sums its
+//! coefficients into its end values (workgroup memory again), and after the barrier
+//! takes the walls' flow from the three components' end values and writes each value
+//! along z, with that flow, as the dense inverse transform makes it (by parity: the even
+//! and odd terms' sums at the upper half's points give both halves). No line of values is
+//! held across a barrier: on an H100 (2026-12-07 02:36Z) that took the kernel from 0.531
+//! to 0.330 ms at 10^6 spheres and 0.0635 to 0.0559 ms at 10^5, where the values' line
+//! kept for the walls after the barrier had cost registers and so resident threads (with
+//! the line loops bounded by the constant POINTS: slab_lines.wgsl says why). The per-k
+//! tables (chebyshev_bvp's, the slit's 6 x 6 inverse) are built in f64 on the host, as
+//! the chain's nodes build them; the pressure and velocity solves share one table (the
+//! same k and domain). The point tables (zeta_j and the weights of dv/dz at the top from
+//! the values) are shared with the staged kernel; this one takes the slope from the
 //! coefficients and leaves those n weights unread.
 //!
 //! What it reads and writes per k: 6 n words of f (plus re-reads of f_x, f_y, f_z by the
@@ -43,7 +41,7 @@
 //! memory, the walls' constants once per (k, component), the output written in the order
 //! of its words. With `values` the input is the forcing's values along z (rfft's output)
 //! and the forward transform runs inside, so the product needs no `chebyshev` dispatch
-//! before it. Its line steps are shaders/chebyshev/slab_lines.wgsl.
+//! before it. Both kernels share the line steps (shaders/chebyshev/slab_lines.wgsl).
 
 use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
@@ -61,41 +59,41 @@ use super::{chebyshev, chebyshev_bvp, stokes_slab};
 pub const MAX_POINTS: u32 = 160;
 
 /// Chebyshev points up to which the fused kernel's inverse transform is written out with
-/// the matrix's entries as literals (`written_out_sums`): no matrix loads, constant
+/// the matrix's entries as literals (`written_out_transform`): no matrix loads, constant
 /// indices. On an H100 (2026-12-06 23:38Z, against the loop in the same call): 0.0722 ->
 /// 0.0640 ms at 10^5 spheres (30 points), 0.558 -> 0.529 ms at 10^6 (31). Its text grows
 /// as n^2 / 2 products.
 pub const WRITTEN_OUT_UP_TO: usize = 64;
 
 /// What slab_solve.wgsl expects before it for n points: `const WRITTEN_OUT` and `fn
-/// sums_written_out(parity, lid)`, each thread's share of the inverse transform by parity
-/// (the sums of its parity's terms at the upper half's points, to the pool, as the
-/// template's loop over `points` makes them, in the same order) with the entries of
+/// values_written_out()`, the inverse transform by parity handing each value to the
+/// template's `put` (as its loop over `points` does, in the same order) with the entries of
 /// `chebyshev::matrix(n, false)` as f32 literals and every index a constant, up to
 /// `WRITTEN_OUT_UP_TO` points; past it WRITTEN_OUT is false and the function empty.
-fn written_out_sums(n: usize) -> String {
+fn written_out_transform(n: usize) -> String {
     let written_out = n <= WRITTEN_OUT_UP_TO;
-    let mut s = format!(
-        "const WRITTEN_OUT: bool = {written_out};\nfn sums_written_out(parity: u32, lid: u32) {{\n"
-    );
+    let mut s = format!("const WRITTEN_OUT: bool = {written_out};\nfn values_written_out() {{\n");
     if written_out {
         let t = chebyshev::matrix(n, false);
-        let sums = |parity: usize| -> String {
-            let mut body = String::new();
-            for j in 0..n.div_ceil(2) {
-                let terms: Vec<String> = (parity..n)
-                    .step_by(2)
-                    .map(|m| format!("{:?} * line[{}u]", t[j * n + m] as f32, m / 2))
-                    .collect();
-                body += &format!("        pool[{j}u * WG + lid] = {};\n", terms.join(" + "));
+        let sum = |j: usize, first: usize| -> String {
+            let terms: Vec<String> = (first..n)
+                .step_by(2)
+                .map(|m| format!("{:?} * coef[{m}u]", t[j * n + m] as f32))
+                .collect();
+            if terms.is_empty() {
+                "0.0".into()
+            } else {
+                terms.join(" + ")
             }
-            body
         };
-        s += &format!(
-            "    if (parity == 0u) {{\n{}    }} else {{\n{}    }}\n",
-            sums(0),
-            sums(1)
-        );
+        for j in 0..n.div_ceil(2) {
+            s += &format!("    let even{j} = {};\n", sum(j, 0));
+            s += &format!("    let odd{j} = {};\n", sum(j, 1));
+            s += &format!("    put({j}u, even{j} + odd{j});\n");
+            if n - 1 - j != j {
+                s += &format!("    put({}u, even{j} - odd{j});\n", n - 1 - j);
+            }
+        }
     }
     s + "}\n"
 }
@@ -107,47 +105,13 @@ fn written_out_sums(n: usize) -> String {
 /// 10^4 spheres: 56 x 56 cells, 1624 wave numbers; 10^5: 15400, left to `fused`).
 pub const STAGED_UP_TO: u64 = 4096;
 
-/// Workgroup words the kernel's pool and end sums may take (of the 16 KiB every adapter
-/// has).
-const SHARED_WORDS: u32 = 4000;
+/// Workgroup words the kernel's shared lines may take (of the 16 KiB every adapter has).
+const SHARED_WORDS: u32 = 3400;
 
-/// The fused kernel's shape for n points (slab_solve.wgsl's constants): wave numbers a
-/// workgroup (16 where they fit: a warp of 32 threads is then one parity of one
-/// component), its threads (12 a wave number: 6 lines, 2 threads each), the words of a
-/// thread's half line and of the pool (the pressure's lines and the boundary sums, later
-/// the inverse transform's sums).
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct FusedShape {
-    ks: u32,
-    wg: u32,
-    half: u32,
-    pool: u32,
-}
-
-impl FusedShape {
-    fn new(n: u32) -> FusedShape {
-        let half = n.div_ceil(2);
-        let pool = |ks: u32| (half * 12 * ks).max(2 * n * ks + 2 * 12 * ks);
-        let words = |ks: u32| pool(ks) + 2 * 12 * ks;
-        let ks = (1..=16)
-            .rev()
-            .find(|&ks| words(ks) <= SHARED_WORDS)
-            .unwrap_or(1);
-        FusedShape {
-            ks,
-            wg: 12 * ks,
-            half,
-            pool: pool(ks),
-        }
-    }
-}
-
-#[cfg(test)]
-impl FusedShape {
-    /// Workgroup words the kernel declares.
-    fn words(&self) -> u32 {
-        self.pool + 2 * self.wg
-    }
+/// Wave numbers per workgroup: 16 (96 threads) where their pressure lines fit, fewer for
+/// long lines.
+fn wave_numbers_per_group(n: u32) -> u32 {
+    (SHARED_WORDS / (2 * n + 16)).clamp(1, 16)
 }
 
 /// Workgroup words the staged kernel's lines, tables and constants may take (of the 16 KiB
@@ -363,18 +327,14 @@ impl GpuKernels for SlabSolve {
             );
             (s.ks, s.wg, source)
         } else {
-            let s = FusedShape::new(n as u32);
+            let ks = wave_numbers_per_group(n as u32);
             let source = format!(
-                "const WG: u32 = {}u;\nconst KS: u32 = {}u;\nconst POINTS: u32 = {n}u;\n\
-                 const HALF: u32 = {}u;\nconst POOL: u32 = {}u;\n{}{}",
-                s.wg,
-                s.ks,
-                s.half,
-                s.pool,
-                written_out_sums(n),
+                "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}{}",
+                6 * ks,
+                written_out_transform(n),
                 cx.shader("chebyshev/slab_solve.wgsl")?
             );
-            (s.ks, s.wg, source)
+            (ks, 6 * ks, source)
         };
         let kernel = cx.kernel(&KernelSpec::new(
             if self.staged {
@@ -409,7 +369,7 @@ pub fn register(r: &mut Registry) {
     r.add(
         NodeKind::declare(
             "slab_solve",
-            "the doubly periodic Stokes solve between the Chebyshev transforms in one kernel: from the forcing's Chebyshev coefficients along z (half spectrum in x, y) to the velocity's values at the Chebyshev points with the walls, as the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse), slab_walls computes it (12 threads a wave number, a line's even and odd halves in two threads' registers, the pressure, the boundary sums and the end values through workgroup memory; per-k tables in f64 on the host); 2 to 160 points along z",
+            "the doubly periodic Stokes solve between the Chebyshev transforms in one kernel: from the forcing's Chebyshev coefficients along z (half spectrum in x, y) to the velocity's values at the Chebyshev points with the walls, as the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse), slab_walls computes it (6 threads a wave number, lines in registers, the pressure and the end values through workgroup memory; per-k tables in f64 on the host); 2 to 160 points along z",
         )
         .input(PortSpec::new(
             "f",
@@ -429,7 +389,7 @@ pub fn register(r: &mut Registry) {
         .param(ParamSpec::flag(
             "staged",
             false,
-            "the staged kernel: 8 wave numbers a workgroup staged in workgroup memory with their tables, the dense transforms spread over 4 threads a line (for grids with few wave numbers, where the default kernel's serial chain per thread sets its time); else 12 threads a wave number, 16 a workgroup, each line's even and odd halves in two threads' registers",
+            "the staged kernel: 8 wave numbers a workgroup staged in workgroup memory with their tables, the dense transforms spread over 4 threads a line (for grids with few wave numbers, where the default kernel's serial chain per thread sets its time); else 6 threads a wave number, 16 a workgroup, each line in one thread's registers",
         ))
         .param(ParamSpec::flag(
             "values",
@@ -444,22 +404,14 @@ pub fn register(r: &mut Registry) {
 mod tests {
     use super::*;
 
-    /// The fused kernel's workgroup memory fits the 16 KiB every adapter has at every
-    /// length taken, its pool holds both lives (the pressure's lines and each thread's
-    /// boundary sums; each thread's HALF inverse-transform sums), and the bench's lengths
-    /// (30, 31 points) take 16 wave numbers a workgroup.
+    /// The shared lines fit the workgroup memory every adapter has, at every length taken.
     #[test]
-    fn the_fused_workgroup_fits() {
+    fn the_shared_lines_fit() {
         for n in 2..=MAX_POINTS {
-            let s = FusedShape::new(n);
-            assert!(s.ks >= 1 && s.words() <= SHARED_WORDS, "n {n}: {s:?}");
-            assert_eq!(s.wg, 12 * s.ks);
-            assert!(s.pool >= s.half * s.wg, "n {n}: {s:?}");
-            assert!(s.pool >= 2 * n * s.ks + 2 * s.wg, "n {n}: {s:?}");
-            assert_eq!(s.half, n.div_ceil(2));
+            let ks = wave_numbers_per_group(n);
+            assert!(ks >= 1 && ks * (2 * n + 16) <= SHARED_WORDS, "n {n}: {ks}");
         }
-        assert_eq!(FusedShape::new(31).ks, 16);
-        assert_eq!(FusedShape::new(30).ks, 16);
+        assert_eq!(wave_numbers_per_group(31), 16);
     }
 
     /// The staged kernel's workgroup memory fits the 16 KiB every adapter has, its

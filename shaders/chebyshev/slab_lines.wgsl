@@ -1,14 +1,14 @@
-// template: the line steps of the staged slab solve kernel (slab_staged.wgsl), imported by
-// it: a thread's z line and its solve's coefficients in private arrays, the Chebyshev
-// derivative in place and chebyshev_bvp's banded solve. The importer defines POINTS, the
-// uniform `u` (its dz_scale: 2 / H) and `entry(row, k)`, row `row` of column k of
-// chebyshev_bvp's per-k tables.
+// template: the line steps of the slab solve kernels (slab_solve.wgsl, slab_staged.wgsl),
+// imported by them: each thread's z line and its solve's coefficients in private arrays,
+// the Chebyshev derivative in place and chebyshev_bvp's banded solve. The importer defines
+// POINTS, the uniform `u` (its dz_scale: 2 / H) and `entry(row, k)`, row `row` of
+// column k of chebyshev_bvp's per-k tables.
 //
 // Every loop over a line is bounded by the constant POINTS itself, `i < POINTS` (not by a
-// `let n = POINTS` copy, not `i + 1u < POINTS`), as slab_solve.wgsl's loops are by HALF:
-// the NVIDIA driver compiles them much better so (how, wgpu does not show). The fused
-// kernel with a thread per line, otherwise the same, took 0.496 ms at 10^6 spheres with
-// `n` bounds and 0.330 ms with POINTS on an H100 (2026-12-07).
+// `let n = POINTS` copy, not `i + 1u < POINTS`), here and in slab_solve.wgsl (its
+// transform's loop past 64 points aside): the NVIDIA driver compiles them much better so
+// (how, wgpu does not show). The fused kernel, otherwise the same, took 0.496 ms at 10^6
+// spheres with `n` bounds and 0.330 ms with POINTS on an H100 (BENCHMARKS.md).
 
 // This thread's line, and the solve's coefficients of y.
 var<private> line: array<f32, POINTS>;
