@@ -22,7 +22,7 @@
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
 #import chebyshev/slab_lines.wgsl
-#import stokes_slab/slit.wgsl
+#import stokes_slab/wall_flow.wgsl
 
 struct Solve {
     slab: Slab,
@@ -215,27 +215,21 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         }
     } else if (walls != 0u) {
         out_walls = true;
-        var big_c: array<vec2<f32>, 3>;
-        var big_d: array<vec2<f32>, 3>;
+        // The walls' velocities (the top's for the slit only).
+        var w: array<vec2<f32>, 6>;
         for (var i = 0u; i < 3u; i++) {
-            big_c[i] = -velocity_end(slot, i, 1u);
-            big_d[i] = vec2<f32>(0.0);
-        }
-        if (walls == 2u) {
-            var w: array<vec2<f32>, 6>;
-            for (var i = 0u; i < 3u; i++) {
-                w[i] = big_c[i];
+            w[i] = -velocity_end(slot, i, 1u);
+            w[3u + i] = vec2<f32>(0.0);
+            if (walls == 2u) {
                 w[3u + i] = -velocity_end(slot, i, 0u);
             }
-            for (var i = 0u; i < 3u; i++) {
-                big_c[i] = slit_row(i, w, k);
-                big_d[i] = slit_row(3u + i, w, k);
-            }
         }
-        let a = big_c[2] - times_i(kk.x * big_c[0] + kk.y * big_c[1]) / kabs;
-        let b = -big_d[2] - times_i(kk.x * big_d[0] + kk.y * big_d[1]) / kabs;
-        out_b1 = big_c[c][part];
-        out_b2 = big_d[c][part];
+        var cd = wall_constants(walls, w, k);
+        let ab = wall_factors(cd, kk, kabs);
+        let a = ab[0];
+        let b = ab[1];
+        out_b1 = cd[c][part];
+        out_b2 = cd[3u + c][part];
         if (c == 2u) {
             out_a1 = kabs * a[part];
             out_a2 = kabs * b[part];

@@ -22,7 +22,7 @@
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
 #import chebyshev/slab_lines.wgsl
-#import stokes_slab/slit.wgsl
+#import stokes_slab/wall_flow.wgsl
 
 struct Solve {
     slab: Slab,
@@ -294,8 +294,10 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             let w0 = walls_cd[slot * 3u];
             let w1 = walls_cd[slot * 3u + 1u];
             let w2 = walls_cd[slot * 3u + 2u];
-            let a = w2.xy - times_i(kk.x * w0.xy + kk.y * w1.xy) / kabs;
-            let b = -w2.zw - times_i(kk.x * w0.zw + kk.y * w1.zw) / kabs;
+            let cd = array<vec2<f32>, 6>(w0.xy, w1.xy, w2.xy, w0.zw, w1.zw, w2.zw);
+            let ab = wall_factors(cd, kk, kabs);
+            let a = ab[0];
+            let b = ab[1];
             let wc = walls_cd[slot * 3u + c];
             let decay = exp(-kabs * zeta);
             let grow = exp(kabs * (zeta - u.slab.height));

@@ -15,7 +15,7 @@
 // slit Minv: word ((r 6 + c) 2 + part) nk + k.
 #import common/index.wgsl
 #import stokes_slab/slab.wgsl
-#import stokes_slab/slit.wgsl
+#import stokes_slab/wall_flow.wgsl
 
 @group(0) @binding(0) var<storage, read> v: array<f32>;
 @group(0) @binding(1) var<storage, read_write> out: array<f32>;
@@ -84,33 +84,27 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         }
         return;
     }
-    var big_c: array<vec2<f32>, 3>;
-    var big_d: array<vec2<f32>, 3>;
+    // The walls' velocities (the top's for the slit only).
+    var w: array<vec2<f32>, 6>;
     for (var c = 0u; c < 3u; c++) {
-        big_c[c] = -load(c, n - 1u, k);
-        big_d[c] = vec2<f32>(0.0);
-    }
-    if (s.walls == 2u) {
-        var u: array<vec2<f32>, 6>;
-        for (var c = 0u; c < 3u; c++) {
-            u[c] = big_c[c];
-            u[3u + c] = -load(c, 0u, k);
-        }
-        for (var c = 0u; c < 3u; c++) {
-            big_c[c] = slit_row(c, u, k);
-            big_d[c] = slit_row(3u + c, u, k);
+        w[c] = -load(c, n - 1u, k);
+        w[3u + c] = vec2<f32>(0.0);
+        if (s.walls == 2u) {
+            w[3u + c] = -load(c, 0u, k);
         }
     }
-    let a = big_c[2] - times_i(q.x * big_c[0] + q.y * big_c[1]) / kabs;
-    let b = -big_d[2] - times_i(q.x * big_d[0] + q.y * big_d[1]) / kabs;
+    let cd = wall_constants(s.walls, w, k);
+    let ab = wall_factors(cd, q, kabs);
+    let a = ab[0];
+    let b = ab[1];
     let decay = exp(-kabs * zeta);
     let grow = exp(kabs * (zeta - s.height));
     let az = a * zeta;
     let bz = b * zeta;
     let corr = array<vec2<f32>, 3>(
-        (times_i(-q.x * az) + big_c[0]) * decay + (times_i(q.x * bz) + big_d[0]) * grow,
-        (times_i(-q.y * az) + big_c[1]) * decay + (times_i(q.y * bz) + big_d[1]) * grow,
-        (kabs * az + big_c[2]) * decay + (kabs * bz + big_d[2]) * grow,
+        (times_i(-q.x * az) + cd[0]) * decay + (times_i(q.x * bz) + cd[3]) * grow,
+        (times_i(-q.y * az) + cd[1]) * decay + (times_i(q.y * bz) + cd[4]) * grow,
+        (kabs * az + cd[2]) * decay + (kabs * bz + cd[5]) * grow,
     );
     for (var c = 0u; c < 3u; c++) {
         store(c, j, k, load(c, j, k) + corr[c]);
