@@ -327,14 +327,14 @@ impl GpuKernels for SlabSolve {
             );
             (s.ks, s.wg, source)
         } else {
-            let ks = wave_numbers_per_group(n as u32);
+            let ks = std::env::var("MESOFLOW_SLAB_KS").ok().and_then(|v| v.parse().ok()).unwrap_or(32);
             let source = format!(
                 "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}{}",
-                6 * ks,
+                2 * ks,
                 written_out_transform(n),
                 cx.shader("chebyshev/slab_solve.wgsl")?
             );
-            (ks, 6 * ks, source)
+            (ks, 2 * ks, source)
         };
         let kernel = cx.kernel(&KernelSpec::new(
             if self.staged {

@@ -1,8 +1,9 @@
 // template: the line steps of the slab solve kernels (slab_solve.wgsl, slab_staged.wgsl),
 // imported by them: each thread's z line and its solve's coefficients in private arrays,
 // the Chebyshev derivative in place and chebyshev_bvp's banded solve. The importer defines
-// POINTS, the uniform `u` (its dz_scale: 2 / H) and `entry(row, k)`, row `row` of
-// column k of chebyshev_bvp's per-k tables.
+// POINTS, `alias Lane` (f32: a line a thread; vec3<f32>: three lines a thread, solved
+// side by side with the same per-k tables), the uniform `u` (its dz_scale: 2 / H) and
+// `entry(row, k)`, row `row` of column k of chebyshev_bvp's per-k tables.
 //
 // Every loop over a line is bounded by the constant POINTS itself, `i < POINTS` (not by a
 // `let n = POINTS` copy, not `i + 1u < POINTS`), here and in slab_solve.wgsl (its
@@ -11,14 +12,14 @@
 // spheres with `n` bounds and 0.330 ms with POINTS on an H100 (BENCHMARKS.md).
 
 // This thread's line, and the solve's coefficients of y.
-var<private> line: array<f32, POINTS>;
-var<private> coef: array<f32, POINTS>;
+var<private> line: array<Lane, POINTS>;
+var<private> coef: array<Lane, POINTS>;
 
 // The line's derivative coefficients in place, times 2 / H (chebyshev_derivative's
 // recurrence d_{m-1} = d_{m+1} + 2 m c_m from d_{n-1} = 0, d_0 halved).
 fn differentiate_line() {
-    var next = 0.0;
-    var here = 0.0;
+    var next = Lane(0.0);
+    var here = Lane(0.0);
     for (var i = 0u; i < POINTS - 1u; i++) {
         let m = POINTS - 1u - i;
         let cm = line[m];
@@ -32,7 +33,7 @@ fn differentiate_line() {
 
 // chebyshev_bvp's solve of k (shaders/chebyshev/bvp.wgsl): the line holds f (scaled by
 // (H/2)^2), alpha and beta are scaled; leaves y's coefficients in coef.
-fn solve(k: u32, alpha: f32, beta: f32) {
+fn solve(k: u32, alpha: Lane, beta: Lane) {
     let n = POINTS;
     var r0 = -alpha;
     var r1 = -beta;
@@ -52,14 +53,14 @@ fn solve(k: u32, alpha: f32, beta: f32) {
     }
     for (var i = 0u; i < POINTS; i++) {
         let z = n - 1u - i;
-        var up = 0.0;
+        var up = Lane(0.0);
         if (z + 2u < n) {
             up = entry(2u * n + z, k) * line[z + 2u];
         }
         line[z] = (line[z] - up) * entry(n + z, k);
     }
     for (var m = 0u; m < POINTS; m++) {
-        var v: f32;
+        var v: Lane;
         if (m == 0u) {
             v = y0;
         } else if (m == 1u) {
@@ -72,17 +73,17 @@ fn solve(k: u32, alpha: f32, beta: f32) {
 }
 
 // a_j of the line (0 past the end).
-fn a_at(j: u32) -> f32 {
+fn a_at(j: u32) -> Lane {
     if (j >= POINTS) {
-        return 0.0;
+        return Lane(0.0);
     }
     return line[j];
 }
 
 // y'_m from the a's (0 for m >= n).
-fn derivative(m: u32, p0: f32) -> f32 {
+fn derivative(m: u32, p0: Lane) -> Lane {
     if (m >= POINTS) {
-        return 0.0;
+        return Lane(0.0);
     }
     if (m == 0u) {
         return p0;

@@ -6,15 +6,17 @@
 // from the forcing's Chebyshev coefficients to the velocity's values along z with the
 // walls, the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp,
 // chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse),
-// slab_walls in one kernel. A workgroup takes KS wave numbers with 6 threads each, one per
-// (component c, real or imaginary part), laid out c first, then k, then the part, so a
-// component's words of KS neighbouring k are read by neighbouring threads. Each thread
-// keeps its line (POINTS words, fixed when the kernel is built, so the loops unroll) in
-// registers; the pressure (the threads of component 0 solve it, one per part) and the end
-// values of the velocity cross between a k's threads through workgroup memory. The end
-// values are taken from the coefficients before the inverse transform, so each value
-// along z is written, with the walls' flow, as the transform makes it: no line of values
-// is held across the barrier (on an H100: 0.531 -> 0.330 ms at 10^6 spheres).
+// slab_walls in one kernel. A workgroup takes KS wave numbers with 2 threads each, one per
+// part (real or imaginary) of the velocity: thread 2 slot + part, so a component's words
+// of neighbouring k are read by neighbouring threads. A thread holds its part's three
+// velocity lines side by side in registers (Lane = vec3: x, y, z; the loops over a line,
+// bounded by the constant POINTS, unroll), so each step runs on three lines at once and
+// reads a per-k table entry once for them. The pressure couples the parts (i k p), so
+// both threads of a k solve it whole, in lanes x (real) and y (imaginary): no pressure
+// crosses between threads. Only the velocity's end values do, for the walls (one
+// barrier). The end values are taken from the coefficients, so each value along z is
+// written, with the walls' flow, as the inverse transform makes it: no line of values is
+// held across the barrier.
 // f, out: word 2 ((c n + z) nk + k) + part. bvp: chebyshev_bvp's strided per-k tables.
 // points: the inverse transform's matrix (n x n), zeta_j, the weights of dv/dz at the top
 // from the values (slab_staged.wgsl's; this kernel takes the slope from the coefficients).
@@ -23,6 +25,9 @@
 #import stokes_slab/slab.wgsl
 #import chebyshev/slab_lines.wgsl
 #import stokes_slab/wall_flow.wgsl
+
+// Three lines a thread (chebyshev/slab_lines.wgsl).
+alias Lane = vec3<f32>;
 
 struct Solve {
     slab: Slab,
@@ -40,10 +45,7 @@ struct Solve {
 @group(0) @binding(4) var<storage, read> minv_table: array<f32>;
 @group(0) @binding(5) var<uniform> u: Solve;
 
-// The pressure's coefficients per (k slot, part), then its values at the ends per (slot,
-// part): top, bottom; the velocity's values at the ends per (slot, component, part).
-var<workgroup> pressure: array<f32, KS * 2u * POINTS>;
-var<workgroup> pressure_ends: array<f32, KS * 4u>;
+// The velocity's values at the ends per (slot, part, component): top, bottom.
 var<workgroup> velocity_ends: array<f32, KS * 12u>;
 
 fn entry(row: u32, k: u32) -> f32 {
@@ -54,6 +56,12 @@ fn word(c: u32, z: u32, k: u32) -> u32 {
     return slab_word(c, z, k, POINTS, u.slab.nk);
 }
 
+// Component c's coefficient z of k, complex.
+fn forcing(c: u32, z: u32, k: u32) -> vec2<f32> {
+    let w = word(c, z, k);
+    return vec2<f32>(f[w], f[w + 1u]);
+}
+
 fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
     let w = ((r * 6u + c) * 2u) * u.slab.nk + k;
     return vec2<f32>(minv_table[w], minv_table[w + u.slab.nk]);
@@ -61,24 +69,26 @@ fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
 
 // The velocity's value at end e (0 top, 1 bottom) of component c of slot `slot`.
 fn velocity_end(slot: u32, c: u32, e: u32) -> vec2<f32> {
-    let b = slot * 6u + c * 2u;
-    return vec2<f32>(velocity_ends[b * 2u + e], velocity_ends[(b + 1u) * 2u + e]);
+    return vec2<f32>(velocity_ends[((slot * 2u) * 3u + c) * 2u + e],
+                     velocity_ends[((slot * 2u + 1u) * 3u + c) * 2u + e]);
 }
 
-// This thread's output: its first word, the factor on the transform's value (0 where
-// the k = 0 mode is zero) and the walls' flow (a1 zeta + b1) exp(-|k| zeta) + (a2 zeta +
-// b2) exp(|k| (zeta - H)) for its part, where `out_walls`.
+// This thread's output: its first word (component x), the factor on the transform's
+// values (0 where the k = 0 mode is zero) and the walls' flow (a1 zeta + b1) exp(-|k|
+// zeta) + (a2 zeta + b2) exp(|k| (zeta - H)) for its part, per component, where
+// `out_walls`.
 var<private> out_word: u32;
-var<private> out_keep: f32 = 1.0;
+var<private> out_keep: Lane = Lane(1.0);
 var<private> out_walls: bool = false;
 var<private> out_kabs: f32;
-var<private> out_a1: f32;
-var<private> out_b1: f32;
-var<private> out_a2: f32;
-var<private> out_b2: f32;
+var<private> out_a1: Lane;
+var<private> out_b1: Lane;
+var<private> out_a2: Lane;
+var<private> out_b2: Lane;
 
-// The velocity's value v at point j, with the walls' flow there, to `out`.
-fn put(j: u32, v: f32) {
+// The velocity's value v (three components) at point j, with the walls' flow there, to
+// `out`.
+fn put(j: u32, v: Lane) {
     var x = v;
     if (out_walls) {
         let zeta = points[POINTS * POINTS + j];
@@ -86,7 +96,11 @@ fn put(j: u32, v: f32) {
         let grow = exp(out_kabs * (zeta - u.slab.height));
         x = out_keep * v + (out_a1 * zeta + out_b1) * decay + (out_a2 * zeta + out_b2) * grow;
     }
-    out[out_word + 2u * j * u.slab.nk] = x;
+    let w = out_word + 2u * j * u.slab.nk;
+    let component = 2u * POINTS * u.slab.nk;
+    out[w] = x.x;
+    out[w + component] = x.y;
+    out[w + 2u * component] = x.z;
 }
 
 @compute @workgroup_size(WG)
@@ -95,91 +109,93 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let n = POINTS;
     let nk = u.slab.nk;
     let part = lid % 2u;
-    let slot = (lid / 2u) % KS;
-    let c = lid / (2u * KS);
+    let slot = lid / 2u;
     let k = (wid.y * nwg.x + wid.x) * KS + slot;
-    // Threads past the last k skip the work but meet every barrier.
+    // Threads past the last k skip the work but meet the barrier.
     let valid = k < nk;
-    let other = 1u - part;
     // (i z) of part `part` is sign z of the other part.
     let sign = select(-1.0, 1.0, part == 1u);
     let q = slab_wave(u.slab, k, true);
     let kk = slab_wave(u.slab, k, false);
     let kabs = length(kk);
+    var top = Lane(0.0);
+    var bottom = Lane(0.0);
 
-    // The pressure: p'' - k^2 p = i k.f + df_z/dz, decaying conditions (component 0's
-    // threads, one per part).
-    if (c == 0u && valid) {
+    if (valid) {
+        // The pressure, both parts (lanes x, y): p'' - k^2 p = i k.f + df_z/dz, decaying
+        // conditions.
         for (var z = 0u; z < POINTS; z++) {
-            line[z] = f[word(2u, z, k) + part];
+            line[z] = Lane(forcing(2u, z, k), 0.0);
         }
         differentiate_line();
         for (var z = 0u; z < POINTS; z++) {
-            let ikf = sign * (q.x * f[word(0u, z, k) + other] + q.y * f[word(1u, z, k) + other]);
-            line[z] = u.f_scale * (ikf + line[z]);
+            let ikf = times_i(q.x * forcing(0u, z, k) + q.y * forcing(1u, z, k));
+            line[z] = u.f_scale * (Lane(ikf, 0.0) + line[z]);
         }
-        solve(k, 0.0, 0.0);
-        var top = 0.0;
-        var bottom = 0.0;
-        let base = (slot * 2u + part) * n;
+        solve(k, Lane(0.0), Lane(0.0));
+        var p_top = Lane(0.0);
+        var p_bottom = Lane(0.0);
         for (var z = 0u; z < POINTS; z++) {
-            let p = coef[z];
-            pressure[base + z] = p;
-            top += p;
-            bottom += select(p, -p, z % 2u == 1u);
+            p_top += coef[z];
+            p_bottom += select(coef[z], -coef[z], z % 2u == 1u);
         }
-        pressure_ends[(slot * 2u + part) * 2u] = top;
-        pressure_ends[(slot * 2u + part) * 2u + 1u] = bottom;
-    }
-    workgroupBarrier();
 
-    // The velocity: eta (v'' - k^2 v) = (i k p, dp/dz) - f with the force-free
-    // exterior's boundary values, then its values along z.
-    if (valid) {
+        // The velocity: eta (v'' - k^2 v) = (i k p, dp/dz) - f with the force-free
+        // exterior's boundary values. Its sources from the pressure's coefficients, from
+        // the top down: x, y take i k_c p (sign times the other part), z this part's
+        // dp/dz, by chebyshev_derivative's recurrence d_(m-1) = d_(m+1) + 2 m p_m (d_0
+        // halved).
         let scale = u.f_scale * u.slab.inv_eta;
-        if (c == 2u) {
-            let base = (slot * 2u + part) * n;
-            for (var z = 0u; z < POINTS; z++) {
-                line[z] = pressure[base + z];
+        var next = 0.0;
+        var here = 0.0;
+        for (var i = 0u; i < POINTS; i++) {
+            let m = POINTS - 1u - i;
+            let p = coef[m];
+            let own = select(p.x, p.y, part == 1u);
+            let other = select(p.y, p.x, part == 1u);
+            var dp = u.dz_scale * here;
+            if (m == 0u) {
+                dp = 0.5 * dp;
+            } else {
+                let prev = next + 2.0 * f32(m) * own;
+                next = here;
+                here = prev;
             }
-            differentiate_line();
-            for (var z = 0u; z < POINTS; z++) {
-                line[z] = scale * (line[z] - f[word(2u, z, k) + part]);
-            }
-        } else {
-            let base = (slot * 2u + other) * n;
-            let qc = q[c];
-            for (var z = 0u; z < POINTS; z++) {
-                line[z] = scale * (sign * qc * pressure[base + z] - f[word(c, z, k) + part]);
-            }
+            let fx = forcing(0u, m, k)[part];
+            let fy = forcing(1u, m, k)[part];
+            let fz = forcing(2u, m, k)[part];
+            line[m] = scale * Lane(sign * q.x * other - fx, sign * q.y * other - fy, dp - fz);
         }
-        var alpha = 0.0;
-        var beta = 0.0;
+        var alpha = Lane(0.0);
+        var beta = Lane(0.0);
         if (kabs != 0.0) {
             let h = 0.5 * u.slab.inv_eta * u.bc_scale;
-            if (c == 2u) {
-                alpha = h * pressure_ends[(slot * 2u + part) * 2u];
-                beta = h * pressure_ends[(slot * 2u + part) * 2u + 1u];
-            } else {
-                let g = sign * q[c] * h / kabs;
-                alpha = -g * pressure_ends[(slot * 2u + other) * 2u];
-                beta = g * pressure_ends[(slot * 2u + other) * 2u + 1u];
-            }
+            let own_top = select(p_top.x, p_top.y, part == 1u);
+            let own_bottom = select(p_bottom.x, p_bottom.y, part == 1u);
+            let other_top = select(p_top.y, p_top.x, part == 1u);
+            let other_bottom = select(p_bottom.y, p_bottom.x, part == 1u);
+            let g = sign * q * h / kabs;
+            alpha = Lane(-g * other_top, h * own_top);
+            beta = Lane(g * other_bottom, h * own_bottom);
         }
         solve(k, alpha, beta);
         // The values at the ends, top = sum c_m and bottom = sum (-1)^m c_m, as the
         // inverse transform's first row (entries 1) sums them: even terms, odd terms.
-        var even = 0.0;
-        var odd = 0.0;
+        var even = Lane(0.0);
+        var odd = Lane(0.0);
         for (var m = 0u; m < POINTS; m += 2u) {
             even += coef[m];
         }
         for (var m = 1u; m < POINTS; m += 2u) {
             odd += coef[m];
         }
-        let e = (slot * 6u + c * 2u + part) * 2u;
-        velocity_ends[e] = even + odd;
-        velocity_ends[e + 1u] = even - odd;
+        top = even + odd;
+        bottom = even - odd;
+        for (var c = 0u; c < 3u; c++) {
+            let e = ((slot * 2u + part) * 3u + c) * 2u;
+            velocity_ends[e] = top[c];
+            velocity_ends[e + 1u] = bottom[c];
+        }
     }
     workgroupBarrier();
     if (!valid) {
@@ -188,55 +204,60 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
 
     // The walls (slab_walls) as this thread's value at zeta, v + (a1 zeta + b1)
     // exp(-|k| zeta) + (a2 zeta + b2) exp(|k| (zeta - H)) (`put`), from the end values of
-    // the velocity's three components: its values along z are then written as the inverse
-    // transform makes them, no line of them kept.
-    out_word = word(c, 0u, k) + part;
+    // the velocity's three components, both parts: its values along z are then written
+    // as the inverse transform makes them, no line of them kept.
+    out_word = word(0u, 0u, k) + part;
     out_kabs = kabs;
     let walls = u.slab.walls;
     if (kabs == 0.0) {
-        // The k = 0 mode: zero but for the bottom wall's and the slit's shear flows.
-        out_keep = 0.0;
+        // The k = 0 mode: zero but for the bottom wall's and the slit's shear flows (x,
+        // y).
+        out_keep = Lane(0.0);
         out_walls = true;
-        let top = velocity_end(slot, c, 0u)[part];
-        let bottom = velocity_end(slot, c, 1u)[part];
-        if (c < 2u && walls != 0u) {
-            out_keep = 1.0;
-            out_b1 = -bottom;
+        if (walls != 0u) {
+            out_keep = Lane(1.0, 1.0, 0.0);
+            out_b1 = Lane(-bottom.xy, 0.0);
             if (walls == 1u) {
                 // dv/dz at the top from the coefficients: (2 / H) sum m^2 c_m.
-                var slope = 0.0;
+                var slope = Lane(0.0);
                 for (var m = 1u; m < POINTS; m++) {
                     slope -= f32(m * m) * coef[m];
                 }
-                out_a1 = u.dz_scale * slope;
+                out_a1 = Lane(u.dz_scale * slope.xy, 0.0);
             } else {
-                out_a1 = (bottom - top) / u.slab.height;
+                out_a1 = Lane((bottom.xy - top.xy) / u.slab.height, 0.0);
             }
         }
     } else if (walls != 0u) {
         out_walls = true;
-        // The walls' velocities (the top's for the slit only).
-        var w: array<vec2<f32>, 6>;
+        // The walls' constants C, D: the bottom wall's C = -v(bottom), D = 0; the slit's
+        // Minv w for its walls' velocities w = (-v(bottom), -v(top)). Written out here, not
+        // through wall_flow.wgsl's wall_constants and wall_factors (array arguments): those
+        // calls took the thread-per-line kernel from 0.33 to 0.63 ms at 10^6 spheres on an
+        // H100 (2026-12-07 08:21Z).
+        var big_c: array<vec2<f32>, 3>;
+        var big_d: array<vec2<f32>, 3>;
         for (var i = 0u; i < 3u; i++) {
-            w[i] = -velocity_end(slot, i, 1u);
-            w[3u + i] = vec2<f32>(0.0);
-            if (walls == 2u) {
+            big_c[i] = -velocity_end(slot, i, 1u);
+            big_d[i] = vec2<f32>(0.0);
+        }
+        if (walls == 2u) {
+            var w: array<vec2<f32>, 6>;
+            for (var i = 0u; i < 3u; i++) {
+                w[i] = big_c[i];
                 w[3u + i] = -velocity_end(slot, i, 0u);
             }
+            for (var i = 0u; i < 3u; i++) {
+                big_c[i] = slit_row(i, w, k);
+                big_d[i] = slit_row(3u + i, w, k);
+            }
         }
-        var cd = wall_constants(walls, w, k);
-        let ab = wall_factors(cd, kk, kabs);
-        let a = ab[0];
-        let b = ab[1];
-        out_b1 = cd[c][part];
-        out_b2 = cd[3u + c][part];
-        if (c == 2u) {
-            out_a1 = kabs * a[part];
-            out_a2 = kabs * b[part];
-        } else {
-            out_a1 = times_i(-kk[c] * a)[part];
-            out_a2 = times_i(kk[c] * b)[part];
-        }
+        let a = big_c[2] - times_i(kk.x * big_c[0] + kk.y * big_c[1]) / kabs;
+        let b = -big_d[2] - times_i(kk.x * big_d[0] + kk.y * big_d[1]) / kabs;
+        out_b1 = Lane(big_c[0][part], big_c[1][part], big_c[2][part]);
+        out_b2 = Lane(big_d[0][part], big_d[1][part], big_d[2][part]);
+        out_a1 = Lane(times_i(-kk.x * a)[part], times_i(-kk.y * a)[part], kabs * a[part]);
+        out_a2 = Lane(times_i(kk.x * b)[part], times_i(kk.y * b)[part], kabs * b[part]);
     }
     // Values at the points (j = 0 the top): the inverse transform, by parity. The
     // points are symmetric (z_(n-1-j) = -z_j) and T_m(-z) = (-1)^m T_m(z), so the sums
@@ -248,8 +269,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         values_written_out();
     } else {
         for (var j = 0u; j < (n + 1u) / 2u; j++) {
-            var even = 0.0;
-            var odd = 0.0;
+            var even = Lane(0.0);
+            var odd = Lane(0.0);
             for (var m = 0u; m < n; m += 2u) {
                 even += points[j * n + m] * coef[m];
             }

@@ -42,6 +42,9 @@ struct Solve {
 
 const LINES: u32 = 6u * KS;
 
+// A line a thread (chebyshev/slab_lines.wgsl).
+alias Lane = f32;
+
 // The lines: the forcing's values or coefficients, then the velocity's coefficients, then
 // its values along z.
 var<workgroup> lines: array<f32, LINES * LS>;
