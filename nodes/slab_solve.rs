@@ -9,26 +9,41 @@
 //! other ports graphs need). Same conventions: wave numbers paired (i k zero on an
 //! unpaired Nyquist index) in the sources, |k| unpaired; the k = 0 rules of each wall mode.
 //!
-//! Per k, 6 threads (component, real or imaginary part), KS wave numbers a workgroup;
-//! each thread keeps its z line in registers. The pressure is solved by component 0's
-//! two threads and handed to the others through workgroup memory with its end values;
-//! every thread then forms its velocity source and boundary values, solves, sums its
-//! coefficients into its end values (workgroup memory again), and after the barrier
-//! takes the walls' flow from the three components' end values and writes each value
-//! along z, with that flow, as the dense inverse transform makes it (by parity: the even
-//! and odd terms' sums at the upper half's points give both halves). No line of values is
-//! held across a barrier: on an H100 (2026-12-07 02:36Z) that took the kernel from 0.531
+//! Up to `THREE_LINES_UP_TO` points (shaders/chebyshev/slab_solve.wgsl): per k, 2 threads,
+//! one per part (real or imaginary), 32 wave numbers a workgroup. Each thread holds its
+//! part's x, y and z velocity lines side by side as the lanes of a vec3 line in registers,
+//! so every step runs three independent chains and reads each per-k table entry once for
+//! three lines; the pressure, which couples the parts, both threads solve whole (its real
+//! and imaginary parts in two lanes), so no pressure crosses between threads. Each thread
+//! then forms its three velocity sources and boundary values, solves, sums its
+//! coefficients into its end values (workgroup memory), and after the one barrier takes
+//! the walls' flow from both parts' end values and writes each value along z, with that
+//! flow, as the dense inverse transform makes it (by parity: the even and odd terms' sums
+//! at the upper half's points give both halves). On an H100 (2026-12-07 08:40Z, 10^6
+//! spheres, 31 points) 0.231 ms, where the thread-per-line kernel below took 0.330.
+//!
+//! Past 32 points, where three lines no longer fit in registers (35 points: 0.42 ms against
+//! 0.27 for a thread per line), shaders/chebyshev/slab_solve_line.wgsl: per k, 6 threads
+//! (component, part), KS wave numbers a workgroup; each thread keeps its z line in
+//! registers. The pressure is solved by component 0's two threads and handed to the others
+//! through workgroup memory with its end values; the rest as above. No line of values is
+//! held across a barrier: on an H100 (2026-12-07 02:36Z) that took this kernel from 0.531
 //! to 0.330 ms at 10^6 spheres and 0.0635 to 0.0559 ms at 10^5, where the values' line
 //! kept for the walls after the barrier had cost registers and so resident threads (with
-//! the line loops bounded by the constant POINTS: slab_lines.wgsl says why). The per-k
+//! the line loops bounded by the constant POINTS: slab_lines.wgsl says why).
+//!
+//! Both write the walls' constants out in the kernel rather than through
+//! stokes_slab/wall_flow.wgsl's `wall_constants` and `wall_factors` (arrays as arguments
+//! and results): through those the thread-per-line kernel took 0.63 ms at 10^6 instead of
+//! 0.33 and the three-lines kernel 1.02 instead of 0.25 (H100, 2026-12-07). The per-k
 //! tables (chebyshev_bvp's, the slit's 6 x 6 inverse) are built in f64 on the host, as
 //! the chain's nodes build them; the pressure and velocity solves share one table (the
 //! same k and domain). The point tables (zeta_j and the weights of dv/dz at the top from
-//! the values) are shared with the staged kernel; this one takes the slope from the
-//! coefficients and leaves those n weights unread.
+//! the values) are shared with the staged kernel; these take the slope from the
+//! coefficients and leave those n weights unread.
 //!
-//! What it reads and writes per k: 6 n words of f (plus re-reads of f_x, f_y, f_z by the
-//! pressure threads, from cache), 6 n words out, 5 n + 6 table words (72 more for the
+//! What it reads and writes per k: 6 n words of f (plus re-reads from cache: both threads
+//! of a k read all six lines for the pressure, then their own three), 6 n words out, 5 n + 6 table words (72 more for the
 //! slit): 17 n + 6; the chain moves about 82 n + 36 words per k through memory (every
 //! intermediate written and read back, the tables read by both solves).
 //!
@@ -41,7 +56,7 @@
 //! memory, the walls' constants once per (k, component), the output written in the order
 //! of its words. With `values` the input is the forcing's values along z (rfft's output)
 //! and the forward transform runs inside, so the product needs no `chebyshev` dispatch
-//! before it. Both kernels share the line steps (shaders/chebyshev/slab_lines.wgsl).
+//! before it. The kernels share the line steps (shaders/chebyshev/slab_lines.wgsl).
 
 use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
@@ -105,11 +120,23 @@ fn written_out_transform(n: usize) -> String {
 /// 10^4 spheres: 56 x 56 cells, 1624 wave numbers; 10^5: 15400, left to `fused`).
 pub const STAGED_UP_TO: u64 = 4096;
 
-/// Workgroup words the kernel's shared lines may take (of the 16 KiB every adapter has).
+/// Chebyshev points up to which the fused solve runs three lines a thread
+/// (shaders/chebyshev/slab_solve.wgsl: a thread per (k, part), its x, y, z velocity lines
+/// side by side); past them a thread per line (slab_solve_line.wgsl). On an H100
+/// (2026-12-07): 0.231 ms against 0.330 at 31 points (10^6 spheres, bottom wall), 0.42
+/// against 0.27 ms at 35 (no walls), where the three lines no longer fit in registers.
+pub const THREE_LINES_UP_TO: u32 = 32;
+
+/// Wave numbers per workgroup of the three-lines kernel (64 threads; 16, 64 and 128 timed
+/// the same on an H100).
+const THREE_LINES_KS: u32 = 32;
+
+/// Workgroup words the thread-per-line kernel's shared lines may take (of the 16 KiB every
+/// adapter has).
 const SHARED_WORDS: u32 = 3400;
 
-/// Wave numbers per workgroup: 16 (96 threads) where their pressure lines fit, fewer for
-/// long lines.
+/// Wave numbers per workgroup of the thread-per-line kernel: 16 (96 threads) where their
+/// pressure lines fit, fewer for long lines.
 fn wave_numbers_per_group(n: u32) -> u32 {
     (SHARED_WORDS / (2 * n + 16)).clamp(1, 16)
 }
@@ -327,14 +354,22 @@ impl GpuKernels for SlabSolve {
             );
             (s.ks, s.wg, source)
         } else {
-            let ks = std::env::var("MESOFLOW_SLAB_KS").ok().and_then(|v| v.parse().ok()).unwrap_or(32);
+            let (ks, wg, file) = if n as u32 <= THREE_LINES_UP_TO {
+                (
+                    THREE_LINES_KS,
+                    2 * THREE_LINES_KS,
+                    "chebyshev/slab_solve.wgsl",
+                )
+            } else {
+                let ks = wave_numbers_per_group(n as u32);
+                (ks, 6 * ks, "chebyshev/slab_solve_line.wgsl")
+            };
             let source = format!(
-                "const WG: u32 = {}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}{}",
-                2 * ks,
+                "const WG: u32 = {wg}u;\nconst KS: u32 = {ks}u;\nconst POINTS: u32 = {n}u;\n{}{}",
                 written_out_transform(n),
-                cx.shader("chebyshev/slab_solve.wgsl")?
+                cx.shader(file)?
             );
-            (ks, 2 * ks, source)
+            (ks, wg, source)
         };
         let kernel = cx.kernel(&KernelSpec::new(
             if self.staged {
@@ -369,7 +404,7 @@ pub fn register(r: &mut Registry) {
     r.add(
         NodeKind::declare(
             "slab_solve",
-            "the doubly periodic Stokes solve between the Chebyshev transforms in one kernel: from the forcing's Chebyshev coefficients along z (half spectrum in x, y) to the velocity's values at the Chebyshev points with the walls, as the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse), slab_walls computes it (6 threads a wave number, lines in registers, the pressure and the end values through workgroup memory; per-k tables in f64 on the host); 2 to 160 points along z",
+            "the doubly periodic Stokes solve between the Chebyshev transforms in one kernel: from the forcing's Chebyshev coefficients along z (half spectrum in x, y) to the velocity's values at the Chebyshev points with the walls, as the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp, chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse), slab_walls computes it (up to 32 points: 2 threads a wave number, one per part, each with its part's three velocity lines side by side in registers and the whole pressure; past 32: 6 threads a wave number, a line each, the pressure through workgroup memory; the end values through workgroup memory; per-k tables in f64 on the host); 2 to 160 points along z",
         )
         .input(PortSpec::new(
             "f",
@@ -389,7 +424,7 @@ pub fn register(r: &mut Registry) {
         .param(ParamSpec::flag(
             "staged",
             false,
-            "the staged kernel: 8 wave numbers a workgroup staged in workgroup memory with their tables, the dense transforms spread over 4 threads a line (for grids with few wave numbers, where the default kernel's serial chain per thread sets its time); else 6 threads a wave number, 16 a workgroup, each line in one thread's registers",
+            "the staged kernel: 8 wave numbers a workgroup staged in workgroup memory with their tables, the dense transforms spread over 4 threads a line (for grids with few wave numbers, where the default kernel's serial chain per thread sets its time); else the kernel of 2 threads a wave number (three lines a thread) up to 32 points, of 6 (a line a thread) past them",
         ))
         .param(ParamSpec::flag(
             "values",

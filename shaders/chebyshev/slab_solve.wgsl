@@ -6,9 +6,12 @@
 // from the forcing's Chebyshev coefficients to the velocity's values along z with the
 // walls, the chain chebyshev_derivative, slab_pressure_source, chebyshev_bvp,
 // chebyshev_derivative, slab_velocity_source, chebyshev_bvp, chebyshev (inverse),
-// slab_walls in one kernel. A workgroup takes KS wave numbers with 2 threads each, one per
-// part (real or imaginary) of the velocity: thread 2 slot + part, so a component's words
-// of neighbouring k are read by neighbouring threads. A thread holds its part's three
+// slab_walls in one kernel, up to `THREE_LINES_UP_TO` points (past them,
+// slab_solve_line.wgsl: a thread per line). A workgroup takes KS wave numbers with 2
+// threads each, one per part (real or imaginary) of the velocity: thread 2 slot + part,
+// so a component's words of neighbouring k are read by neighbouring threads, the
+// forcing's (re, im) pairs as one vec2 load (0.249 -> 0.231 ms at 10^6 spheres against
+// two f32 loads, H100 2026-12-07 08:40Z). A thread holds its part's three
 // velocity lines side by side in registers (Lane = vec3: x, y, z; the loops over a line,
 // bounded by the constant POINTS, unroll), so each step runs on three lines at once and
 // reads a per-k table entry once for them. The pressure couples the parts (i k p), so
@@ -17,7 +20,11 @@
 // barrier). The end values are taken from the coefficients, so each value along z is
 // written, with the walls' flow, as the inverse transform makes it: no line of values is
 // held across the barrier.
-// f, out: word 2 ((c n + z) nk + k) + part. bvp: chebyshev_bvp's strided per-k tables.
+// On an H100 (2026-12-07 08:36Z) this took 0.249 ms at 10^6 spheres (31 points) where the
+// thread-per-line kernel took 0.330: a third of the threads, each with three independent
+// chains, and each table entry read once for three lines; past about 32 points the three
+// lines no longer fit in registers (35 points: 0.42 ms against 0.27).
+// f: (re, im) word pairs (c n + z) nk + k. out: word 2 ((c n + z) nk + k) + part. bvp: chebyshev_bvp's strided per-k tables.
 // points: the inverse transform's matrix (n x n), zeta_j, the weights of dv/dz at the top
 // from the values (slab_staged.wgsl's; this kernel takes the slope from the coefficients).
 // minv: the slit's 6 x 6 complex inverse per k, word ((r 6 + c) 2 + part) nk + k.
@@ -38,7 +45,7 @@ struct Solve {
     pad: u32,
 }
 
-@group(0) @binding(0) var<storage, read> f: array<f32>;
+@group(0) @binding(0) var<storage, read> f: array<vec2<f32>>;
 @group(0) @binding(1) var<storage, read_write> out: array<f32>;
 @group(0) @binding(2) var<storage, read> bvp: array<f32>;
 @group(0) @binding(3) var<storage, read> points: array<f32>;
@@ -58,8 +65,7 @@ fn word(c: u32, z: u32, k: u32) -> u32 {
 
 // Component c's coefficient z of k, complex.
 fn forcing(c: u32, z: u32, k: u32) -> vec2<f32> {
-    let w = word(c, z, k);
-    return vec2<f32>(f[w], f[w + 1u]);
+    return f[(c * POINTS + z) * u.slab.nk + k];
 }
 
 fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
@@ -232,9 +238,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         out_walls = true;
         // The walls' constants C, D: the bottom wall's C = -v(bottom), D = 0; the slit's
         // Minv w for its walls' velocities w = (-v(bottom), -v(top)). Written out here, not
-        // through wall_flow.wgsl's wall_constants and wall_factors (array arguments): those
-        // calls took the thread-per-line kernel from 0.33 to 0.63 ms at 10^6 spheres on an
-        // H100 (2026-12-07 08:21Z).
+        // through wall_flow.wgsl's wall_constants and wall_factors (arrays as arguments):
+        // through them this kernel took 1.02 ms at 10^6 spheres instead of 0.25 (H100,
+        // 2026-12-07 08:21Z and 08:31Z).
         var big_c: array<vec2<f32>, 3>;
         var big_d: array<vec2<f32>, 3>;
         for (var i = 0u; i < 3u; i++) {

@@ -1,6 +1,8 @@
 // template: the walls' homogeneous flow of one wave number k != 0 (slab_walls' correction,
 // nodes/stokes_slab.rs), imported by slab_walls (stokes_slab/walls.wgsl) and the slab
-// solve kernels (chebyshev/slab_solve.wgsl, slab_staged.wgsl). At height zeta its x, y
+// solve kernels (chebyshev/slab_solve.wgsl and slab_solve_line.wgsl take slit_row only and
+// write the constants and factors out: through these array-valued calls they ran 2x to
+// 4x slower on NVIDIA; slab_staged.wgsl takes wall_factors). At height zeta its x, y
 // components are (C_c - i k_c a zeta) exp(-|k| zeta) + (D_c + i k_c b zeta) exp(|k| (zeta
 // - H)), its z component (C_z + |k| a zeta) exp(-|k| zeta) + (D_z + |k| b zeta) exp(|k|
 // (zeta - H)). The importer defines `minv(r, c, k)`, entry (r, c) of k's 6 x 6 complex
