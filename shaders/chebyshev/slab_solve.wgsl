@@ -32,45 +32,19 @@
 #import stokes_slab/slab.wgsl
 #import chebyshev/slab_lines.wgsl
 #import stokes_slab/wall_flow.wgsl
+#import chebyshev/slab_fused.wgsl
 
 // Three lines a thread (chebyshev/slab_lines.wgsl).
 alias Lane = vec3<f32>;
 
-struct Solve {
-    slab: Slab,
-    // (H/2)^2 on the sources, H/2 on the boundary values, 2 / H on a derivative.
-    f_scale: f32,
-    bc_scale: f32,
-    dz_scale: f32,
-    pad: u32,
-}
-
 @group(0) @binding(0) var<storage, read> f: array<vec2<f32>>;
-@group(0) @binding(1) var<storage, read_write> out: array<f32>;
-@group(0) @binding(2) var<storage, read> bvp: array<f32>;
-@group(0) @binding(3) var<storage, read> points: array<f32>;
-@group(0) @binding(4) var<storage, read> minv_table: array<f32>;
-@group(0) @binding(5) var<uniform> u: Solve;
 
 // The velocity's values at the ends per (slot, part, component): top, bottom.
 var<workgroup> velocity_ends: array<f32, KS * 12u>;
 
-fn entry(row: u32, k: u32) -> f32 {
-    return bvp[row * u.slab.nk + k];
-}
-
-fn word(c: u32, z: u32, k: u32) -> u32 {
-    return slab_word(c, z, k, POINTS, u.slab.nk);
-}
-
 // Component c's coefficient z of k, complex.
 fn forcing(c: u32, z: u32, k: u32) -> vec2<f32> {
     return f[(c * POINTS + z) * u.slab.nk + k];
-}
-
-fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
-    let w = ((r * 6u + c) * 2u) * u.slab.nk + k;
-    return vec2<f32>(minv_table[w], minv_table[w + u.slab.nk]);
 }
 
 // The velocity's value at end e (0 top, 1 bottom) of component c of slot `slot`.
@@ -79,29 +53,10 @@ fn velocity_end(slot: u32, c: u32, e: u32) -> vec2<f32> {
                      velocity_ends[((slot * 2u + 1u) * 3u + c) * 2u + e]);
 }
 
-// This thread's output: its first word (component x), the factor on the transform's
-// values (0 where the k = 0 mode is zero) and the walls' flow (a1 zeta + b1) exp(-|k|
-// zeta) + (a2 zeta + b2) exp(|k| (zeta - H)) for its part, per component, where
-// `out_walls`.
-var<private> out_word: u32;
-var<private> out_keep: Lane = Lane(1.0);
-var<private> out_walls: bool = false;
-var<private> out_kabs: f32;
-var<private> out_a1: Lane;
-var<private> out_b1: Lane;
-var<private> out_a2: Lane;
-var<private> out_b2: Lane;
-
-// The velocity's value v (three components) at point j, with the walls' flow there, to
-// `out`.
+// The velocity's values v (three components) at point j, with the walls' flow there, to
+// `out` (out_word: component x's word).
 fn put(j: u32, v: Lane) {
-    var x = v;
-    if (out_walls) {
-        let zeta = points[POINTS * POINTS + j];
-        let decay = exp(-out_kabs * zeta);
-        let grow = exp(out_kabs * (zeta - u.slab.height));
-        x = out_keep * v + (out_a1 * zeta + out_b1) * decay + (out_a2 * zeta + out_b2) * grow;
-    }
+    let x = with_walls(j, v);
     let w = out_word + 2u * j * u.slab.nk;
     let component = 2u * POINTS * u.slab.nk;
     out[w] = x.x;
@@ -265,28 +220,10 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         out_a1 = Lane(times_i(-kk.x * a)[part], times_i(-kk.y * a)[part], kabs * a[part]);
         out_a2 = Lane(times_i(kk.x * b)[part], times_i(kk.y * b)[part], kabs * b[part]);
     }
-    // Values at the points (j = 0 the top): the inverse transform, by parity. The
-    // points are symmetric (z_(n-1-j) = -z_j) and T_m(-z) = (-1)^m T_m(z), so the sums
-    // of the even and the odd terms at the upper half's points give both halves: half
-    // the dense matrix's products and loads, in two independent chains. Up to 64
-    // points the host writes the sums out with the matrix's entries as literals
-    // (`values_written_out`): no matrix loads, constant indices.
+    // Values at the points, with the walls' flow (slab_fused.wgsl).
     if (WRITTEN_OUT) {
         values_written_out();
     } else {
-        for (var j = 0u; j < (n + 1u) / 2u; j++) {
-            var even = Lane(0.0);
-            var odd = Lane(0.0);
-            for (var m = 0u; m < n; m += 2u) {
-                even += points[j * n + m] * coef[m];
-            }
-            for (var m = 1u; m < n; m += 2u) {
-                odd += points[j * n + m] * coef[m];
-            }
-            put(j, even + odd);
-            if (n - 1u - j != j) {
-                put(n - 1u - j, even - odd);
-            }
-        }
+        values_by_loop();
     }
 }

@@ -21,25 +21,12 @@
 #import stokes_slab/slab.wgsl
 #import chebyshev/slab_lines.wgsl
 #import stokes_slab/wall_flow.wgsl
+#import chebyshev/slab_fused.wgsl
 
 // A line a thread (chebyshev/slab_lines.wgsl).
 alias Lane = f32;
 
-struct Solve {
-    slab: Slab,
-    // (H/2)^2 on the sources, H/2 on the boundary values, 2 / H on a derivative.
-    f_scale: f32,
-    bc_scale: f32,
-    dz_scale: f32,
-    pad: u32,
-}
-
 @group(0) @binding(0) var<storage, read> f: array<f32>;
-@group(0) @binding(1) var<storage, read_write> out: array<f32>;
-@group(0) @binding(2) var<storage, read> bvp: array<f32>;
-@group(0) @binding(3) var<storage, read> points: array<f32>;
-@group(0) @binding(4) var<storage, read> minv_table: array<f32>;
-@group(0) @binding(5) var<uniform> u: Solve;
 
 // The pressure's coefficients per (k slot, part), then its values at the ends per (slot,
 // part): top, bottom; the velocity's values at the ends per (slot, component, part).
@@ -47,47 +34,15 @@ var<workgroup> pressure: array<f32, KS * 2u * POINTS>;
 var<workgroup> pressure_ends: array<f32, KS * 4u>;
 var<workgroup> velocity_ends: array<f32, KS * 12u>;
 
-fn entry(row: u32, k: u32) -> f32 {
-    return bvp[row * u.slab.nk + k];
-}
-
-fn word(c: u32, z: u32, k: u32) -> u32 {
-    return slab_word(c, z, k, POINTS, u.slab.nk);
-}
-
-fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
-    let w = ((r * 6u + c) * 2u) * u.slab.nk + k;
-    return vec2<f32>(minv_table[w], minv_table[w + u.slab.nk]);
-}
-
 // The velocity's value at end e (0 top, 1 bottom) of component c of slot `slot`.
 fn velocity_end(slot: u32, c: u32, e: u32) -> vec2<f32> {
     let b = slot * 6u + c * 2u;
     return vec2<f32>(velocity_ends[b * 2u + e], velocity_ends[(b + 1u) * 2u + e]);
 }
 
-// This thread's output: its first word, the factor on the transform's value (0 where
-// the k = 0 mode is zero) and the walls' flow (a1 zeta + b1) exp(-|k| zeta) + (a2 zeta +
-// b2) exp(|k| (zeta - H)) for its part, where `out_walls`.
-var<private> out_word: u32;
-var<private> out_keep: f32 = 1.0;
-var<private> out_walls: bool = false;
-var<private> out_kabs: f32;
-var<private> out_a1: f32;
-var<private> out_b1: f32;
-var<private> out_a2: f32;
-var<private> out_b2: f32;
-
 // The velocity's value v at point j, with the walls' flow there, to `out`.
-fn put(j: u32, v: f32) {
-    var x = v;
-    if (out_walls) {
-        let zeta = points[POINTS * POINTS + j];
-        let decay = exp(-out_kabs * zeta);
-        let grow = exp(out_kabs * (zeta - u.slab.height));
-        x = out_keep * v + (out_a1 * zeta + out_b1) * decay + (out_a2 * zeta + out_b2) * grow;
-    }
-    out[out_word + 2u * j * u.slab.nk] = x;
+fn put(j: u32, v: Lane) {
+    out[out_word + 2u * j * u.slab.nk] = with_walls(j, v);
 }
 
 @compute @workgroup_size(WG)
@@ -250,28 +205,10 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             out_a2 = times_i(kk[c] * b)[part];
         }
     }
-    // Values at the points (j = 0 the top): the inverse transform, by parity. The
-    // points are symmetric (z_(n-1-j) = -z_j) and T_m(-z) = (-1)^m T_m(z), so the sums
-    // of the even and the odd terms at the upper half's points give both halves: half
-    // the dense matrix's products and loads, in two independent chains. Up to 64
-    // points the host writes the sums out with the matrix's entries as literals
-    // (`values_written_out`): no matrix loads, constant indices.
+    // Values at the points, with the walls' flow (slab_fused.wgsl).
     if (WRITTEN_OUT) {
         values_written_out();
     } else {
-        for (var j = 0u; j < (n + 1u) / 2u; j++) {
-            var even = 0.0;
-            var odd = 0.0;
-            for (var m = 0u; m < n; m += 2u) {
-                even += points[j * n + m] * coef[m];
-            }
-            for (var m = 1u; m < n; m += 2u) {
-                odd += points[j * n + m] * coef[m];
-            }
-            put(j, even + odd);
-            if (n - 1u - j != j) {
-                put(n - 1u - j, even - odd);
-            }
-        }
+        values_by_loop();
     }
 }
