@@ -11,8 +11,8 @@
 // threads each, one per part (real or imaginary) of the velocity: thread 2 slot + part,
 // so a component's words of neighbouring k are read by neighbouring threads, the
 // forcing's (re, im) pairs as one vec2 load (0.249 -> 0.231 ms at 10^6 spheres against
-// two f32 loads, H100 2026-12-07 08:40Z). A thread holds its part's three
-// velocity lines side by side in registers (Lane = vec3: x, y, z; the loops over a line,
+// two f32 loads, H100 2026-12-07 08:40Z). A thread holds its part's three velocity lines
+// side by side in registers (Lane = vec3: x, y, z; the loops over a line,
 // bounded by the constant POINTS, unroll), so each step runs on three lines at once and
 // reads a per-k table entry once for them. The pressure couples the parts (i k p), so
 // both threads of a k solve it whole, in lanes x (real) and y (imaginary): no pressure
@@ -20,11 +20,12 @@
 // barrier). The end values are taken from the coefficients, so each value along z is
 // written, with the walls' flow, as the inverse transform makes it: no line of values is
 // held across the barrier.
-// On an H100 (2026-12-07 08:36Z) this took 0.249 ms at 10^6 spheres (31 points) where the
+// On an H100 (2026-12-07) this takes 0.231 ms at 10^6 spheres (31 points) where the
 // thread-per-line kernel took 0.330: a third of the threads, each with three independent
 // chains, and each table entry read once for three lines; past about 32 points the three
 // lines no longer fit in registers (35 points: 0.42 ms against 0.27).
-// f: (re, im) word pairs (c n + z) nk + k. out: word 2 ((c n + z) nk + k) + part. bvp: chebyshev_bvp's strided per-k tables.
+// f: (re, im) word pairs (c n + z) nk + k. out: word 2 ((c n + z) nk + k) + part.
+// bvp: chebyshev_bvp's strided per-k tables.
 // points: the inverse transform's matrix (n x n), zeta_j, the weights of dv/dz at the top
 // from the values (slab_staged.wgsl's; this kernel takes the slope from the coefficients).
 // minv: the slit's 6 x 6 complex inverse per k, word ((r 6 + c) 2 + part) nk + k.
