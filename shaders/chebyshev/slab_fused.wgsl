@@ -1,25 +1,10 @@
 // template: what the fused slab solve kernels share (slab_solve.wgsl, three lines a
-// thread; slab_solve_line.wgsl, a line a thread), imported by them: the uniform and every
-// binding but the forcing's (binding 0, which each reads its own way), the readers of the
-// per-k tables, the output's walls' flow and the inverse transform as a loop over the
-// matrix (past WRITTEN_OUT_UP_TO points, nodes/slab_solve.rs). The importer defines
-// POINTS, `alias Lane` (a thread's lines: f32 or vec3<f32>) and `put(j, v: Lane)`, which
-// writes the values v at point j.
-
-struct Solve {
-    slab: Slab,
-    // (H/2)^2 on the sources, H/2 on the boundary values, 2 / H on a derivative.
-    f_scale: f32,
-    bc_scale: f32,
-    dz_scale: f32,
-    pad: u32,
-}
-
-@group(0) @binding(1) var<storage, read_write> out: array<f32>;
-@group(0) @binding(2) var<storage, read> bvp: array<f32>;
-@group(0) @binding(3) var<storage, read> points: array<f32>;
-@group(0) @binding(4) var<storage, read> minv_table: array<f32>;
-@group(0) @binding(5) var<uniform> u: Solve;
+// thread; slab_solve_line.wgsl, a line a thread), imported by them: the uniform and the
+// bindings (slab_bindings.wgsl), the reader of the per-k tables, the output's walls' flow
+// and the inverse transform as a loop over the matrix (past WRITTEN_OUT_UP_TO points,
+// nodes/slab_solve.rs). The importer defines POINTS, `alias Lane` (a thread's lines: f32
+// or vec3<f32>) and `put(j, v: Lane)`, which writes the values v at point j.
+#import chebyshev/slab_bindings.wgsl
 
 fn entry(row: u32, k: u32) -> f32 {
     return bvp[row * u.slab.nk + k];
@@ -27,11 +12,6 @@ fn entry(row: u32, k: u32) -> f32 {
 
 fn word(c: u32, z: u32, k: u32) -> u32 {
     return slab_word(c, z, k, POINTS, u.slab.nk);
-}
-
-fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
-    let w = ((r * 6u + c) * 2u) * u.slab.nk + k;
-    return vec2<f32>(minv_table[w], minv_table[w + u.slab.nk]);
 }
 
 // This thread's output: its first word, the factor on the transform's values (0 where the

@@ -68,7 +68,6 @@ fn put(j: u32, v: Lane) {
 @compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let n = POINTS;
     let nk = u.slab.nk;
     let part = lid % 2u;
     let slot = lid / 2u;

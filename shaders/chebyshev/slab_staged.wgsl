@@ -23,22 +23,9 @@
 #import stokes_slab/slab.wgsl
 #import chebyshev/slab_lines.wgsl
 #import stokes_slab/wall_flow.wgsl
-
-struct Solve {
-    slab: Slab,
-    // (H/2)^2 on the sources, H/2 on the boundary values, 2 / H on a derivative.
-    f_scale: f32,
-    bc_scale: f32,
-    dz_scale: f32,
-    pad: u32,
-}
+#import chebyshev/slab_bindings.wgsl
 
 @group(0) @binding(0) var<storage, read> f: array<f32>;
-@group(0) @binding(1) var<storage, read_write> out: array<f32>;
-@group(0) @binding(2) var<storage, read> bvp: array<f32>;
-@group(0) @binding(3) var<storage, read> points: array<f32>;
-@group(0) @binding(4) var<storage, read> minv_table: array<f32>;
-@group(0) @binding(5) var<uniform> u: Solve;
 
 const LINES: u32 = 6u * KS;
 
@@ -65,11 +52,6 @@ fn entry(row: u32, slot: u32) -> f32 {
 
 fn line_of(c: u32, slot: u32, part: u32) -> u32 {
     return (c * KS + slot) * 2u + part;
-}
-
-fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
-    let w = ((r * 6u + c) * 2u) * u.slab.nk + k;
-    return vec2<f32>(minv_table[w], minv_table[w + u.slab.nk]);
 }
 
 // The velocity's value at end e (0 top, 1 bottom) of component c of slot `slot`.
