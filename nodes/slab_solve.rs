@@ -32,10 +32,11 @@
 //! kept for the walls after the barrier had cost registers and so resident threads (with
 //! the line loops bounded by the constant POINTS: slab_lines.wgsl says why).
 //!
-//! Both write the walls' constants out in the kernel rather than through
-//! stokes_slab/wall_flow.wgsl's `wall_constants` and `wall_factors` (arrays as arguments
-//! and results): through those the thread-per-line kernel took 0.63 ms at 10^6 instead of
-//! 0.33 and the three-lines kernel 1.02 instead of 0.25 (H100, 2026-12-07). The per-k
+//! Both take the walls' constants and factors from stokes_slab/wall_flow.wgsl, whose
+//! values are matrices of complex columns indexed by constants: through its earlier
+//! helpers (arrays as arguments and results, indexed in loops) the thread-per-line kernel
+//! took 0.63 ms at 10^6 instead of 0.33 and the three-lines kernel 1.02 instead of 0.25;
+//! through these, 0.2301 ms against 0.2311 written out (H100, 2026-12-07 11:28Z). The per-k
 //! tables (chebyshev_bvp's, the slit's 6 x 6 inverse) are built in f64 on the host, as
 //! the chain's nodes build them; the pressure and velocity solves share one table (the
 //! same k and domain). The point tables (zeta_j and the weights of dv/dz at the top from

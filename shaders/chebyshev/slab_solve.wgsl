@@ -54,6 +54,11 @@ fn velocity_end(slot: u32, c: u32, e: u32) -> vec2<f32> {
                      velocity_ends[((slot * 2u + 1u) * 3u + c) * 2u + e]);
 }
 
+// The velocity's values at end e (0 top, 1 bottom) of slot `slot`, columns x, y, z.
+fn velocity_ends_at(slot: u32, e: u32) -> mat3x2<f32> {
+    return mat3x2<f32>(velocity_end(slot, 0u, e), velocity_end(slot, 1u, e), velocity_end(slot, 2u, e));
+}
+
 // The velocity's values v (three components) at point j, with the walls' flow there, to
 // `out` (out_word: component x's word).
 fn put(j: u32, v: Lane) {
@@ -191,34 +196,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         }
     } else if (walls != 0u) {
         out_walls = true;
-        // The walls' constants C, D: the bottom wall's C = -v(bottom), D = 0; the slit's
-        // Minv w for its walls' velocities w = (-v(bottom), -v(top)). Written out here, not
-        // through wall_flow.wgsl's wall_constants and wall_factors (arrays as arguments):
-        // through them this kernel took 1.02 ms at 10^6 spheres instead of 0.25 (H100,
-        // 2026-12-07 08:21Z and 08:31Z).
-        var big_c: array<vec2<f32>, 3>;
-        var big_d: array<vec2<f32>, 3>;
-        for (var i = 0u; i < 3u; i++) {
-            big_c[i] = -velocity_end(slot, i, 1u);
-            big_d[i] = vec2<f32>(0.0);
-        }
-        if (walls == 2u) {
-            var w: array<vec2<f32>, 6>;
-            for (var i = 0u; i < 3u; i++) {
-                w[i] = big_c[i];
-                w[3u + i] = -velocity_end(slot, i, 0u);
-            }
-            for (var i = 0u; i < 3u; i++) {
-                big_c[i] = slit_row(i, w, k);
-                big_d[i] = slit_row(3u + i, w, k);
-            }
-        }
-        let a = big_c[2] - times_i(kk.x * big_c[0] + kk.y * big_c[1]) / kabs;
-        let b = -big_d[2] - times_i(kk.x * big_d[0] + kk.y * big_d[1]) / kabs;
-        out_b1 = Lane(big_c[0][part], big_c[1][part], big_c[2][part]);
-        out_b2 = Lane(big_d[0][part], big_d[1][part], big_d[2][part]);
-        out_a1 = Lane(times_i(-kk.x * a)[part], times_i(-kk.y * a)[part], kabs * a[part]);
-        out_a2 = Lane(times_i(kk.x * b)[part], times_i(kk.y * b)[part], kabs * b[part]);
+        // The walls' constants and factors (stokes_slab/wall_flow.wgsl).
+        let cd = wall_constants(walls, velocity_ends_at(slot, 1u), velocity_ends_at(slot, 0u), k);
+        let ab = wall_factors(cd, kk, kabs);
+        out_b1 = Lane(cd.c[0][part], cd.c[1][part], cd.c[2][part]);
+        out_b2 = Lane(cd.d[0][part], cd.d[1][part], cd.d[2][part]);
+        out_a1 = Lane(times_i(-kk.x * ab[0])[part], times_i(-kk.y * ab[0])[part], kabs * ab[0][part]);
+        out_a2 = Lane(times_i(kk.x * ab[1])[part], times_i(kk.y * ab[1])[part], kabs * ab[1][part]);
     }
     // Values at the points, with the walls' flow (slab_fused.wgsl).
     if (WRITTEN_OUT) {

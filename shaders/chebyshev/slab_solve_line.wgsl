@@ -40,6 +40,11 @@ fn velocity_end(slot: u32, c: u32, e: u32) -> vec2<f32> {
     return vec2<f32>(velocity_ends[b * 2u + e], velocity_ends[(b + 1u) * 2u + e]);
 }
 
+// The velocity's values at end e (0 top, 1 bottom) of slot `slot`, columns x, y, z.
+fn velocity_ends_at(slot: u32, e: u32) -> mat3x2<f32> {
+    return mat3x2<f32>(velocity_end(slot, 0u, e), velocity_end(slot, 1u, e), velocity_end(slot, 2u, e));
+}
+
 // The velocity's value v at point j, with the walls' flow there, to `out`.
 fn put(j: u32, v: Lane) {
     out[out_word + 2u * j * u.slab.nk] = with_walls(j, v);
@@ -171,32 +176,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         }
     } else if (walls != 0u) {
         out_walls = true;
-        // The walls' constants C, D (the bottom wall's C = -v(bottom), D = 0; the slit's
-        // Minv w for its walls' velocities w = (-v(bottom), -v(top))) and the factors a, b
-        // written out here, as wall_flow.wgsl's wall_constants and wall_factors compute
-        // them: through those calls (arrays as arguments) this kernel took 0.63 ms at 10^6
-        // spheres (31 points) instead of 0.33 (H100, 2026-12-07 08:31Z).
-        var big_c: array<vec2<f32>, 3>;
-        var big_d: array<vec2<f32>, 3>;
-        for (var i = 0u; i < 3u; i++) {
-            big_c[i] = -velocity_end(slot, i, 1u);
-            big_d[i] = vec2<f32>(0.0);
-        }
-        if (walls == 2u) {
-            var w: array<vec2<f32>, 6>;
-            for (var i = 0u; i < 3u; i++) {
-                w[i] = big_c[i];
-                w[3u + i] = -velocity_end(slot, i, 0u);
-            }
-            for (var i = 0u; i < 3u; i++) {
-                big_c[i] = slit_row(i, w, k);
-                big_d[i] = slit_row(3u + i, w, k);
-            }
-        }
-        let a = big_c[2] - times_i(kk.x * big_c[0] + kk.y * big_c[1]) / kabs;
-        let b = -big_d[2] - times_i(kk.x * big_d[0] + kk.y * big_d[1]) / kabs;
-        out_b1 = big_c[c][part];
-        out_b2 = big_d[c][part];
+        // The walls' constants and factors (stokes_slab/wall_flow.wgsl).
+        let cd = wall_constants(walls, velocity_ends_at(slot, 1u), velocity_ends_at(slot, 0u), k);
+        let ab = wall_factors(cd, kk, kabs);
+        let a = ab[0];
+        let b = ab[1];
+        out_b1 = cd.c[c][part];
+        out_b2 = cd.d[c][part];
         if (c == 2u) {
             out_a1 = kabs * a[part];
             out_a2 = kabs * b[part];

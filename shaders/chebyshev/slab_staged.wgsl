@@ -279,7 +279,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
             let w0 = walls_cd[slot * 3u];
             let w1 = walls_cd[slot * 3u + 1u];
             let w2 = walls_cd[slot * 3u + 2u];
-            let cd = array<vec2<f32>, 6>(w0.xy, w1.xy, w2.xy, w0.zw, w1.zw, w2.zw);
+            let cd = WallConstants(mat3x2<f32>(w0.xy, w1.xy, w2.xy), mat3x2<f32>(w0.zw, w1.zw, w2.zw));
             let ab = wall_factors(cd, kk, kabs);
             let a = ab[0];
             let b = ab[1];

@@ -84,27 +84,22 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         }
         return;
     }
-    // The walls' velocities (the top's for the slit only).
-    var w: array<vec2<f32>, 6>;
-    for (var c = 0u; c < 3u; c++) {
-        w[c] = -load(c, n - 1u, k);
-        w[3u + c] = vec2<f32>(0.0);
-        if (s.walls == 2u) {
-            w[3u + c] = -load(c, 0u, k);
-        }
+    // The walls' constants from the velocity at the bottom (and the top, for the slit).
+    let bottom = mat3x2<f32>(load(0u, n - 1u, k), load(1u, n - 1u, k), load(2u, n - 1u, k));
+    var top = mat3x2<f32>();
+    if (s.walls == 2u) {
+        top = mat3x2<f32>(load(0u, 0u, k), load(1u, 0u, k), load(2u, 0u, k));
     }
-    let cd = wall_constants(s.walls, w, k);
+    let cd = wall_constants(s.walls, bottom, top, k);
     let ab = wall_factors(cd, q, kabs);
-    let a = ab[0];
-    let b = ab[1];
     let decay = exp(-kabs * zeta);
     let grow = exp(kabs * (zeta - s.height));
-    let az = a * zeta;
-    let bz = b * zeta;
+    let az = ab[0] * zeta;
+    let bz = ab[1] * zeta;
     let corr = array<vec2<f32>, 3>(
-        (times_i(-q.x * az) + cd[0]) * decay + (times_i(q.x * bz) + cd[3]) * grow,
-        (times_i(-q.y * az) + cd[1]) * decay + (times_i(q.y * bz) + cd[4]) * grow,
-        (kabs * az + cd[2]) * decay + (kabs * bz + cd[5]) * grow,
+        (times_i(-q.x * az) + cd.c[0]) * decay + (times_i(q.x * bz) + cd.d[0]) * grow,
+        (times_i(-q.y * az) + cd.c[1]) * decay + (times_i(q.y * bz) + cd.d[1]) * grow,
+        (kabs * az + cd.c[2]) * decay + (kabs * bz + cd.d[2]) * grow,
     );
     for (var c = 0u; c < 3u; c++) {
         store(c, j, k, load(c, j, k) + corr[c]);
