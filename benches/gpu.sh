@@ -18,6 +18,7 @@
 #               bottom spends its time with the fused, staged or chained slab solve and the
 #               workgroup or lane kernels
 #               and 10^4, 10^6 (the boundary-value solves' GB/s), torch's copy bandwidth
+#               and its copy of the bytes each slab solve moves (benches/torch_copy.py)
 #   stream      bd_fcm.json at 10^6 for 1000 steps, with and without a frame every 100
 #               steps streamed to GSD and NPY (`run --every`): the run's wall time
 #   scene       scenes/colloids.json (the main job) against the hand-written bd_fcm.json on
@@ -105,6 +106,9 @@ suite_dpstokes() {
       --reps 10 --slab fused,staged,chain --spread-kernel $k
   done
   run python3 benches/torch_reduce.py
+  # torch's copy of the bytes each default slab_solve moves (BENCHMARKS.md: bottom at 10^4,
+  # 10^5, 10^6; the slit and no walls at 10^6).
+  run python3 benches/torch_copy.py 3.5 31.8 335.5 327.3 378.3
 }
 
 suite_nbody() {
