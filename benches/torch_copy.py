@@ -9,21 +9,8 @@ import sys
 
 import torch
 
-
-def single_ms(f, reps=50):
-    for _ in range(5):
-        f()
-    torch.cuda.synchronize()
-    times = []
-    for _ in range(reps):
-        a, b = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
-        a.record()
-        f()
-        b.record()
-        torch.cuda.synchronize()
-        times.append(a.elapsed_time(b))
-    times.sort()
-    return times[len(times) // 2]
+# CUDA events around each call: 3 warm-up calls, then (median, min) of `reps`.
+from torch_primitives import time_ms
 
 
 def batch_ms(f, reps=100):
@@ -46,5 +33,5 @@ for arg in sys.argv[1:]:
     src = torch.rand(n, device="cuda")
     dst = torch.empty_like(src)
     f = lambda: dst.copy_(src)
-    s, b = single_ms(f), batch_ms(f)
+    s, b = time_ms(f, 50)[0], batch_ms(f)
     print(f"{float(arg):>10.1f} {s:>10.4f} {moved / s / 1e6:>8.0f} {b:>10.4f} {moved / b / 1e6:>8.0f}")
