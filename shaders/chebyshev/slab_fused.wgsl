@@ -3,7 +3,9 @@
 // bindings (slab_bindings.wgsl), the reader of the per-k tables, the output's walls' flow
 // and the inverse transform as a loop over the matrix (past WRITTEN_OUT_UP_TO points,
 // nodes/slab_solve.rs). The importer defines POINTS, `alias Lane` (a thread's lines: f32
-// or vec3<f32>) and `put(j, v: Lane)`, which writes the values v at point j.
+// or vec3<f32>), `put(j, v: Lane)`, which writes the values v at point j, and
+// `velocity_end(slot, c, e)`, the velocity's value at end e (0 top, 1 bottom) of
+// component c of slot `slot`, complex, from its workgroup memory.
 #import chebyshev/slab_bindings.wgsl
 
 fn entry(row: u32, k: u32) -> f32 {
@@ -12,6 +14,11 @@ fn entry(row: u32, k: u32) -> f32 {
 
 fn word(c: u32, z: u32, k: u32) -> u32 {
     return slab_word(c, z, k, POINTS, u.slab.nk);
+}
+
+// The velocity's values at end e (0 top, 1 bottom) of slot `slot`, columns x, y, z.
+fn velocity_ends_at(slot: u32, e: u32) -> mat3x2<f32> {
+    return mat3x2<f32>(velocity_end(slot, 0u, e), velocity_end(slot, 1u, e), velocity_end(slot, 2u, e));
 }
 
 // This thread's output: its first word, the factor on the transform's values (0 where the

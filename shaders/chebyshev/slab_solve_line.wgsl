@@ -40,11 +40,6 @@ fn velocity_end(slot: u32, c: u32, e: u32) -> vec2<f32> {
     return vec2<f32>(velocity_ends[b * 2u + e], velocity_ends[(b + 1u) * 2u + e]);
 }
 
-// The velocity's values at end e (0 top, 1 bottom) of slot `slot`, columns x, y, z.
-fn velocity_ends_at(slot: u32, e: u32) -> mat3x2<f32> {
-    return mat3x2<f32>(velocity_end(slot, 0u, e), velocity_end(slot, 1u, e), velocity_end(slot, 2u, e));
-}
-
 // The velocity's value v at point j, with the walls' flow there, to `out`.
 fn put(j: u32, v: Lane) {
     out[out_word + 2u * j * u.slab.nk] = with_walls(j, v);
