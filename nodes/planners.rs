@@ -153,7 +153,7 @@ static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "dpstokes_slab",
-        doc: "dpstokes_slab(slab, points, grid): how lib/dpstokes_mobility.json solves between its Chebyshev transforms, 'fused' (slab_solve's kernel of a thread per line, from the forcing's coefficients), 'staged' (slab_solve's staged kernel, from the forcing's values along z: no forward chebyshev dispatch) or 'chain' (the nodes one by one): slab as given, auto the staged kernel up to slab_solve's STAGED_UP_TO wave numbers (grid [nx, ny]: (nx / 2 + 1) ny of them), the fused one past them, the chain past slab_solve's points",
+        doc: "dpstokes_slab(slab, points, grid): how lib/dpstokes_mobility.json solves between its Chebyshev transforms, 'fused' (slab_solve's one kernel, a wave number's lines in registers, from the forcing's coefficients), 'staged' (slab_solve's staged kernel, from the forcing's values along z: no forward chebyshev dispatch) or 'chain' (the nodes one by one): slab as given, auto the staged kernel up to slab_solve's STAGED_UP_TO wave numbers (grid [nx, ny]: (nx / 2 + 1) ny of them), the fused one past them, the chain past slab_solve's points",
         call: |a| {
             arity(a, 3)?;
             let points = number(a, 1, "points")?;
