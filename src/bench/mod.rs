@@ -509,8 +509,8 @@ pub enum BenchCommand {
         kernel: String,
         /// The solve between the Chebyshev transforms, a row each: auto (staged up to 4096
         /// wave numbers, fused past them up to slab_solve's points), fused (slab_solve, one
-        /// kernel, a wave number's lines in registers), staged (slab_solve's staged kernel, the forward
-        /// transform along z inside) or chain (the nodes one by one); e.g.
+        /// kernel, a wave number's lines in registers), staged (slab_solve's staged kernel,
+        /// the forward transform along z inside) or chain (the nodes one by one); e.g.
         /// `--slab fused,staged,chain`.
         #[arg(long, value_delimiter = ',', default_values_t = ["auto".to_string()])]
         slab: Vec<String>,
