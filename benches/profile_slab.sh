@@ -8,6 +8,9 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 log=${OUT:-/tmp}/profile_slab.log
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee -a "$log"
+# Nsight Compute's warp stall reasons, each per issued instruction.
+stalls=long_scoreboard,short_scoreboard,wait,math_pipe_throttle,barrier,lg_throttle,not_selected,selected,mio_throttle,no_instruction,dispatch_stall,imc_miss,drain,branch_resolving,membar,sleeping,tex_throttle
+metrics=$(tr , '\n' <<< "$stalls" | sed 's/.*/smsp__average_warps_issue_stalled_&_per_issue_active.ratio/' | paste -sd,)
 for case in 30:175 31:560; do
   n=${case%:*} side=${case#*:}
   bin=/tmp/slab$n
@@ -16,8 +19,6 @@ for case in 30:175 31:560; do
   $bin $side $side 2>&1 | tee -a "$log"
   ncu --section LaunchStats --section Occupancy --section SchedulerStats --section WarpStateStats \
     -k slab_solve -c 1 $bin $side $side >> "$log" 2>&1
-  stalls=long_scoreboard,short_scoreboard,wait,math_pipe_throttle,barrier,lg_throttle,not_selected,selected,mio_throttle,no_instruction,dispatch_stall,imc_miss,drain,branch_resolving,membar,sleeping,tex_throttle
-  metrics=$(tr , '\n' <<< "$stalls" | sed 's/.*/smsp__average_warps_issue_stalled_&_per_issue_active.ratio/' | paste -sd,)
   ncu --metrics "$metrics,smsp__inst_executed.sum,sm__cycles_elapsed.avg,dram__throughput.avg.pct_of_peak_sustained_elapsed,smsp__warps_active.avg.per_cycle_active" \
     -k slab_solve -c 1 $bin $side $side > /tmp/metrics$n.log 2>&1
   cat /tmp/metrics$n.log >> "$log"
