@@ -153,7 +153,7 @@ static FUNCTIONS: &[HostFunction] = &[
     },
     HostFunction {
         name: "dpstokes_slab",
-        doc: "dpstokes_slab(slab, points, grid): how lib/dpstokes_mobility.json solves between its Chebyshev transforms, 'fused' (slab_solve's one kernel, a wave number's lines in registers, from the forcing's coefficients), 'staged' (slab_solve's staged kernel, from the forcing's values along z: no forward chebyshev dispatch) or 'chain' (the nodes one by one): slab as given, auto the staged kernel up to slab_solve's STAGED_UP_TO wave numbers (grid [nx, ny]: (nx / 2 + 1) ny of them), the fused one past them, the chain past slab_solve's points",
+        doc: "dpstokes_slab(slab, points, grid): how lib/dpstokes_mobility.json solves between its Chebyshev transforms, 'fused' (slab_solve's one kernel, a wave number's lines in registers, from the forcing's coefficients), 'lanes' (slab_solve's lanes kernel, a wave number's line over subgroup lanes), 'staged' (slab_solve's staged kernel, from the forcing's values along z: no forward chebyshev dispatch) or 'chain' (the nodes one by one): slab as given, auto the staged kernel up to slab_solve's STAGED_UP_TO wave numbers (grid [nx, ny]: (nx / 2 + 1) ny of them), the fused one past them, the chain past slab_solve's points",
         call: |a| {
             arity(a, 3)?;
             let points = number(a, 1, "points")?;
@@ -165,13 +165,13 @@ static FUNCTIONS: &[HostFunction] = &[
             }
             let waves = (grid[0] as u64 / 2 + 1) * grid[1] as u64;
             let path = match text(a, 0, "slab")? {
-                p @ ("fused" | "staged" | "chain") => p,
+                p @ ("fused" | "lanes" | "staged" | "chain") => p,
                 "auto" if points > crate::nodes::slab_solve::MAX_POINTS as f64 => "chain",
                 "auto" if waves <= crate::nodes::slab_solve::STAGED_UP_TO => "staged",
                 "auto" => "fused",
                 other => {
                     return Err(format!(
-                        "slab must be auto, fused, staged or chain, got `{other}`"
+                        "slab must be auto, fused, lanes, staged or chain, got `{other}`"
                     ));
                 }
             };

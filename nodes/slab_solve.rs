@@ -200,6 +200,48 @@ fn staged_shape(n: u32) -> StagedShape {
     }
 }
 
+/// Lanes a wave number of the `lanes` kernel takes at most (of the adapter's smallest
+/// subgroup).
+const LANES_SEG: u32 = 8;
+
+/// Threads a workgroup of the `lanes` kernel.
+const LANES_WG: u32 = 64;
+
+/// The `lanes` kernel's shape for n points (shaders/chebyshev/slab_lanes.wgsl's constants).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LanesShape {
+    /// Lanes a wave number (a power of two, at most the smallest subgroup).
+    seg: u32,
+    /// Points a lane: even, seg per >= n.
+    per: u32,
+    /// Upper-half points a lane in the inverse transform: seg half >= (n + 1) / 2.
+    half: u32,
+    /// Threads a workgroup.
+    wg: u32,
+}
+
+fn lanes_shape(n: u32, caps: &DeviceCaps) -> Result<LanesShape, String> {
+    let seg = match caps.subgroups {
+        Some((min, _)) if min.is_power_of_two() && min >= 2 => min.min(LANES_SEG),
+        _ => {
+            return Err(
+                "slab_solve `lanes` needs subgroups (a power of two wide); this adapter has none"
+                    .into(),
+            );
+        }
+    };
+    let seg = std::env::var("MESOFLOW_PROBE_SEG")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(seg);
+    Ok(LanesShape {
+        seg,
+        per: 2 * n.div_ceil(2 * seg),
+        half: n.div_ceil(2).div_ceil(seg),
+        wg: LANES_WG.max(seg),
+    })
+}
+
 struct SlabSolve {
     lengths: [f64; 2],
     viscosity: f64,
@@ -211,6 +253,9 @@ struct SlabSolve {
     /// The input holds the forcing's values along z (staged only): the forward transform
     /// runs inside.
     values: bool,
+    /// The `lanes` kernel (slab_lanes.wgsl): a wave number's line over a segment of
+    /// subgroup lanes.
+    lanes: bool,
 }
 
 impl SlabSolve {
@@ -228,10 +273,13 @@ impl SlabSolve {
             walls: stokes_slab::walls_code(p),
             staged: p.flag("staged"),
             values: p.flag("values"),
+            lanes: p.flag("lanes"),
         })
         .and_then(|s| {
             if s.values && !s.staged {
                 Err("`values` (the forcing's values along z) needs `staged`".into())
+            } else if s.lanes && s.staged {
+                Err("`lanes` and `staged` are two kernels: set one".into())
             } else {
                 Ok(s)
             }
@@ -339,7 +387,19 @@ impl GpuKernels for SlabSolve {
             .map(|&v| v as f32)
             .collect();
         points.extend(wall_points);
-        let (ks, wg, source) = if self.staged {
+        let (ks, wg, source) = if self.lanes {
+            let l = lanes_shape(n as u32, cx.caps()).map_err(CompileError::Unsupported)?;
+            let source = format!(
+                "const WG: u32 = {}u;\nconst SEG: u32 = {}u;\nconst PER: u32 = {}u;\n\
+                 const HALF: u32 = {}u;\nconst POINTS: u32 = {n}u;\n{}",
+                l.wg,
+                l.seg,
+                l.per,
+                l.half,
+                cx.shader("chebyshev/slab_lanes.wgsl")?
+            );
+            (l.wg / l.seg, l.wg, source)
+        } else if self.staged {
             let s = staged_shape(n as u32);
             points.extend(chebyshev::matrix(n, true).iter().map(|&v| v as f32));
             let source = format!(
@@ -376,6 +436,8 @@ impl GpuKernels for SlabSolve {
         let kernel = cx.kernel(&KernelSpec::new(
             if self.staged {
                 "slab solve staged"
+            } else if self.lanes {
+                "slab solve lanes"
             } else {
                 "slab solve"
             },
@@ -427,6 +489,11 @@ pub fn register(r: &mut Registry) {
             "staged",
             false,
             "the staged kernel: 8 wave numbers a workgroup staged in workgroup memory with their tables, the dense transforms spread over 4 threads a line (for grids with few wave numbers, where the default kernel's serial chain per thread sets its time); else the kernel of 2 threads a wave number (three lines a thread) up to 32 points, of 6 (a line a thread) past them",
+        ))
+        .param(ParamSpec::flag(
+            "lanes",
+            false,
+            "the lanes kernel: a wave number's z line over a segment of up to 8 subgroup lanes, the solves' recurrences as scans by shuffles (for grids with few wave numbers, where a thread's serial chain along z sets the kernel's time; needs subgroups)",
         ))
         .param(ParamSpec::flag(
             "values",

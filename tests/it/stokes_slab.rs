@@ -179,6 +179,12 @@ fn chain_and_fused_graph(f: &HostArray, zmin: f64, zmax: f64, walls: &str) -> St
             r#""f": "inputs.f""#,
         ),
         node(
+            "lanes",
+            "slab_solve",
+            &format!(r#"{b}, {eta}, {domain}, {walls}, "lanes": true"#),
+            r#""f": "inputs.f""#,
+        ),
+        node(
             "forcing_values",
             "chebyshev",
             r#""direction": "inverse""#,
@@ -192,7 +198,7 @@ fn chain_and_fused_graph(f: &HostArray, zmin: f64, zmax: f64, walls: &str) -> St
         ),
     ];
     format!(
-        r#"{{"mesoflow": 1, "inputs": {{"f": {}}}, "nodes": [{}], "outputs": {{"chain": {{"from": "walls.out"}}, "fused": {{"from": "fused.out"}}, "staged": {{"from": "staged.out"}}, "staged_values": {{"from": "staged_values.out"}}, "forcing_values": {{"from": "forcing_values.out"}}}}}}"#,
+        r#"{{"mesoflow": 1, "inputs": {{"f": {}}}, "nodes": [{}], "outputs": {{"chain": {{"from": "walls.out"}}, "fused": {{"from": "fused.out"}}, "staged": {{"from": "staged.out"}}, "lanes": {{"from": "lanes.out"}}, "staged_values": {{"from": "staged_values.out"}}, "forcing_values": {{"from": "forcing_values.out"}}}}}}"#,
         input_decl(&f.ty),
         nodes.join(", ")
     )
@@ -236,7 +242,7 @@ fn slab_solve_matches_the_chain_of_nodes() {
                 r#""box": [7.0, 5.5], "viscosity": 0.7, "zmin": {zmin}, "zmax": {zmax}, "walls": "{walls}""#
             );
             let want = reference("slab_solve", &format!("{{{params}}}"), &[Some(&f)]).remove(0);
-            for kernel in ["fused", "staged", "staged_values"] {
+            for kernel in ["fused", "staged", "staged_values", "lanes"] {
                 let got = out[kernel].data.to_f64();
                 let (mut worst, mut at) = (0.0f64, 0);
                 for (i, (a, b)) in chain.iter().zip(&got).enumerate() {
