@@ -59,6 +59,19 @@
 //! of its words. With `values` the input is the forcing's values along z (rfft's output)
 //! and the forward transform runs inside, so the product needs no `chebyshev` dispatch
 //! before it. The kernels share the line steps (shaders/chebyshev/slab_lines.wgsl).
+//!
+//! `lanes` (shaders/chebyshev/slab_lanes.wgsl, where the adapter has subgroups): a wave
+//! number's z line over a segment of up to 8 subgroup lanes, an even number of consecutive
+//! points a lane, the real and imaginary parts of the three velocity components (and the
+//! pressure) as two vec3 lines in each lane's registers. The steps that are serial along z
+//! in the kernels above are first-order recurrences within a parity (the banded
+//! elimination, its back substitution, the Chebyshev derivative): each runs as a scan of
+//! affine maps, a lane's own elements composed, then the segment's lanes by shuffles in
+//! log2 of its width, then applied; the boundary rows and end values are shuffle sums,
+//! and the inverse transform (by parity) reads the other lanes' coefficients by shuffle.
+//! No workgroup memory and no barrier. A wave number's serial chain is then a few points
+//! and a few shuffles long, and a grid has 8 times the threads of the kernels of whole
+//! lines, for grids whose few wave numbers leave those kernels' chains unhidden.
 
 use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{
@@ -238,7 +251,11 @@ fn lanes_shape(n: u32, caps: &DeviceCaps) -> Result<LanesShape, String> {
         seg,
         per: 2 * n.div_ceil(2 * seg),
         half: n.div_ceil(2).div_ceil(seg),
-        wg: LANES_WG.max(seg),
+        wg: std::env::var("MESOFLOW_PROBE_LANES_WG")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(LANES_WG)
+            .max(seg),
     })
 }
 
@@ -517,6 +534,28 @@ mod tests {
             assert!(ks >= 1 && ks * (2 * n + 16) <= SHARED_WORDS, "n {n}: {ks}");
         }
         assert_eq!(wave_numbers_per_group(35), 16);
+    }
+
+    /// The lanes kernel's segment covers every length it takes with an even count of
+    /// points a lane (its scans keep a parity per element index), its transform's upper
+    /// half too, on subgroups of 4 to 128 lanes; none without subgroups.
+    #[test]
+    fn the_lanes_segment_covers_the_line() {
+        let caps = |s: Option<(u32, u32)>| DeviceCaps {
+            subgroups: s,
+            ..DeviceCaps::baseline()
+        };
+        for min in [4, 8, 16, 32, 64, 128] {
+            for n in 2..=MAX_POINTS {
+                let l = lanes_shape(n, &caps(Some((min, 128)))).unwrap();
+                assert!(l.seg <= min && l.seg.is_power_of_two(), "{min} {n}: {l:?}");
+                assert!(l.per % 2 == 0 && l.seg * l.per >= n, "{min} {n}: {l:?}");
+                assert!(l.seg * l.half >= n.div_ceil(2), "{min} {n}: {l:?}");
+                assert!(l.wg % l.seg == 0 && l.wg <= 256, "{min} {n}: {l:?}");
+            }
+        }
+        assert!(lanes_shape(31, &caps(None)).is_err());
+        assert!(lanes_shape(31, &caps(Some((12, 12)))).is_err());
     }
 
     /// The staged kernel's workgroup memory fits the 16 KiB every adapter has, its

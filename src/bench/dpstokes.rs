@@ -9,7 +9,7 @@
 //! the slit (no closed form), as the largest relative difference. With
 //! MESOFLOW_BENCH_DISPATCHES the per-dispatch times, and the two boundary-value solves'
 //! rate: the words they must read and write once (f and y, the per-k tables) over their
-//! time, in GB/s (the chain's). `slab` (`--slab auto,fused,staged,chain`): a row per way of
+//! time, in GB/s (the chain's). `slab` (`--slab auto,fused,lanes,staged,chain`): a row per way of
 //! solving between the Chebyshev transforms (lib/dpstokes_mobility.json's param), the
 //! fcm.json time shared.
 
@@ -34,7 +34,7 @@ pub struct DpStokesBench {
     pub sizes: Vec<u32>,
     pub tolerance: f64,
     pub kernel: String,
-    /// lib/dpstokes_mobility.json's `slab` per row: auto, fused, staged, chain.
+    /// lib/dpstokes_mobility.json's `slab` per row: auto, fused, lanes, staged, chain.
     pub slab: Vec<String>,
     /// dpstokes.json's spread_kernel (auto, workgroup, lanes).
     pub spread_kernel: String,

@@ -509,9 +509,10 @@ pub enum BenchCommand {
         kernel: String,
         /// The solve between the Chebyshev transforms, a row each: auto (staged up to 4096
         /// wave numbers, fused past them up to slab_solve's points), fused (slab_solve, one
-        /// kernel, a wave number's lines in registers), staged (slab_solve's staged kernel,
-        /// the forward transform along z inside) or chain (the nodes one by one); e.g.
-        /// `--slab fused,staged,chain`.
+        /// kernel, a wave number's lines in registers), lanes (slab_solve's lanes kernel, a
+        /// wave number's line over a segment of subgroup lanes), staged (slab_solve's staged
+        /// kernel, the forward transform along z inside) or chain (the nodes one by one);
+        /// e.g. `--slab fused,lanes,staged,chain`.
         #[arg(long, value_delimiter = ',', default_values_t = ["auto".to_string()])]
         slab: Vec<String>,
         /// dpstokes.json's spread_kernel, the kernels of spread_chebyshev and

@@ -106,8 +106,8 @@ fn slab_walls_leave_no_velocity_on_the_walls() {
 
 /// The chain slab_solve fuses, as graphs/lib/dpstokes_mobility.json runs it (the
 /// forcing's coefficients `f` to the velocity's values with the walls), beside slab_solve's
-/// kernels: `fused`, `staged` from f, and `staged` from f's values along z (the inverse
-/// transform of f, output `forcing_values`); box [7, 5.5], eta 0.7, the domain [zmin, zmax].
+/// kernels: `fused`, `staged` from f, `staged` from f's values along z (the inverse
+/// transform of f, output `forcing_values`) and `lanes`; box [7, 5.5], eta 0.7, the domain [zmin, zmax].
 fn chain_and_fused_graph(f: &HostArray, zmin: f64, zmax: f64, walls: &str) -> String {
     let node = |id: &str, kind: &str, p: &str, inputs: &str| {
         format!(r#"{{"id": "{id}", "kind": "{kind}", "params": {{{p}}}, "inputs": {{{inputs}}}}}"#)
@@ -206,11 +206,13 @@ fn chain_and_fused_graph(f: &HostArray, zmin: f64, zmax: f64, walls: &str) -> St
 
 /// slab_solve, the fused solve between the transforms, gives the chain of nodes' result
 /// (GPU against GPU) and its f64 reference (the chain's references) for every wall mode
-/// and both kernels (`staged` also from the forcing's values along z, its forward
-/// transform inside), on non-square grids of even sizes (unpaired Nyquist indices) and odd
-/// ones, random spectra (the k = 0 and Nyquist modes among them), wave numbers that leave
-/// the last workgroup part empty, an even number of points (the staged lines padded to odd
-/// strides) and one long enough that a staged workgroup takes fewer wave numbers (7).
+/// and every kernel (`fused`; `staged`, also from the forcing's values along z, its
+/// forward transform inside; `lanes`, whose segments pad the line to an even count a lane:
+/// 3 points on 8 lanes of 2), on non-square grids of even sizes (unpaired Nyquist indices)
+/// and odd ones, random spectra (the k = 0 and Nyquist modes among them), wave numbers that
+/// leave the last workgroup part empty, an even number of points (the staged lines padded
+/// to odd strides) and one long enough that a staged workgroup takes fewer wave numbers
+/// (7).
 #[test]
 fn slab_solve_matches_the_chain_of_nodes() {
     let Some(gpu) = gpu() else { return };
@@ -227,6 +229,7 @@ fn slab_solve_matches_the_chain_of_nodes() {
         [5, 4, 32],
         [6, 5, 40],
         [4, 3, 70],
+        [3, 4, 3],
     ] {
         let tol = 2e-5 * (dims[2] as f64 / 40.0).powi(2).max(1.0);
         let f = spectrum(&mut rng, dims, 3);
