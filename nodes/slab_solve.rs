@@ -243,19 +243,11 @@ fn lanes_shape(n: u32, caps: &DeviceCaps) -> Result<LanesShape, String> {
             );
         }
     };
-    let seg = std::env::var("MESOFLOW_PROBE_SEG")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(seg);
     Ok(LanesShape {
         seg,
         per: 2 * n.div_ceil(2 * seg),
         half: n.div_ceil(2).div_ceil(seg),
-        wg: std::env::var("MESOFLOW_PROBE_LANES_WG")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(LANES_WG)
-            .max(seg),
+        wg: LANES_WG.max(seg),
     })
 }
 
@@ -549,9 +541,15 @@ mod tests {
             for n in 2..=MAX_POINTS {
                 let l = lanes_shape(n, &caps(Some((min, 128)))).unwrap();
                 assert!(l.seg <= min && l.seg.is_power_of_two(), "{min} {n}: {l:?}");
-                assert!(l.per % 2 == 0 && l.seg * l.per >= n, "{min} {n}: {l:?}");
+                assert!(
+                    l.per.is_multiple_of(2) && l.seg * l.per >= n,
+                    "{min} {n}: {l:?}"
+                );
                 assert!(l.seg * l.half >= n.div_ceil(2), "{min} {n}: {l:?}");
-                assert!(l.wg % l.seg == 0 && l.wg <= 256, "{min} {n}: {l:?}");
+                assert!(
+                    l.wg.is_multiple_of(l.seg) && l.wg <= 256,
+                    "{min} {n}: {l:?}"
+                );
             }
         }
         assert!(lanes_shape(31, &caps(None)).is_err());
