@@ -17,9 +17,11 @@
 // step, not POINTS, and a grid with few wave numbers has SEG times the threads of the
 // kernel of whole lines to hide each one's latency. No workgroup memory and no barrier:
 // a lane's line of the real and of the imaginary parts (x, y, z as the lanes of a vec3)
-// stays in registers. For neighbouring k in neighbouring segments, a warp's load of one
-// element reads 32-byte runs of SEG / 32 ... words: (re, im) of 32 / SEG consecutive k in
-// each of SEG planes.
+// stays in registers. Neighbouring k sit in neighbouring segments, so a warp's load of
+// one element reads, in each of SEG planes, the (re, im) pairs of 32 / SEG consecutive k.
+// On an H100 (2026-12-07, BENCHMARKS.md) it took 0.047 ms at 10^5 spheres (bottom wall,
+// 30 points) against the three-lines kernel's 0.053, 0.25 against 0.23 at 10^6, and
+// lost past 32 points (6 points a lane, the line padded): opt-in, not `auto`'s choice.
 // Every shuffle is outside any branch that depends on the lane: segments past the last k
 // run on k = nk - 1 and write nothing. Assumes full subgroups of consecutive invocations,
 // as the other lane kernels do (chebyshev/lanes.wgsl).
