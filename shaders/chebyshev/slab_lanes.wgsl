@@ -49,6 +49,10 @@ var<private> above: array<f32, PER>;
 var<private> own: array<f32, PER>;
 var<private> g0: array<f32, PER>;
 var<private> g1: array<f32, PER>;
+// The Chebyshev derivative's recurrence factors: 1 on the element two above, 2 z on the
+// element itself.
+var<private> unit: array<f32, PER>;
+var<private> twice_z: array<f32, PER>;
 // Per k: the Schur complement's 2 x 2 inverse (rows y0, p0) and kappa^2.
 var<private> s_inv: vec4<f32>;
 var<private> kappa2: f32;
@@ -137,18 +141,19 @@ fn eliminate_upwards(line: ptr<function, Line>) {
     }
 }
 
-// The back substitution x_z = above_z x_(z+2) + own_z x_z downwards along each parity (0
-// past the line): a scan over the segment from its last lane.
-fn substitute_downwards(line: ptr<function, Line>) {
+// The recurrence x_z = mul_z x_(z+2) + scale_z x_z downwards along each parity (0 past
+// the line): a scan over the segment from its last lane, whose chain starts past the line.
+fn scan_downwards(line: ptr<function, Line>, mul: ptr<private, array<f32, PER>>,
+                  scale: ptr<private, array<f32, PER>>) {
     var a = vec2<f32>(1.0);
     var b0 = L(0.0);
     var b1 = L(0.0);
     for (var j = 0u; j < PER; j += 2u) {
         let i = PER - 2u - j;
-        b0 = above[i] * b0 + own[i] * (*line)[i];
-        a.x *= above[i];
-        b1 = above[i + 1u] * b1 + own[i + 1u] * (*line)[i + 1u];
-        a.y *= above[i + 1u];
+        b0 = (*mul)[i] * b0 + (*scale)[i] * (*line)[i];
+        a.x *= (*mul)[i];
+        b1 = (*mul)[i + 1u] * b1 + (*scale)[i + 1u] * (*line)[i + 1u];
+        a.y *= (*mul)[i + 1u];
     }
     for (var d = 1u; d < SEG; d *= 2u) {
         let ap = subgroupShuffleDown(a, d);
@@ -160,7 +165,6 @@ fn substitute_downwards(line: ptr<function, Line>) {
             a *= ap;
         }
     }
-    // The last lane's chain starts past the line (its elements past it are 0).
     var x0 = subgroupShuffleDown(b0, 1u);
     var x1 = subgroupShuffleDown(b1, 1u);
     if (lane == SEG - 1u) {
@@ -169,9 +173,9 @@ fn substitute_downwards(line: ptr<function, Line>) {
     }
     for (var j = 0u; j < PER; j += 2u) {
         let i = PER - 2u - j;
-        x0 = above[i] * x0 + own[i] * (*line)[i];
+        x0 = (*mul)[i] * x0 + (*scale)[i] * (*line)[i];
         (*line)[i] = x0;
-        x1 = above[i + 1u] * x1 + own[i + 1u] * (*line)[i + 1u];
+        x1 = (*mul)[i + 1u] * x1 + (*scale)[i + 1u] * (*line)[i + 1u];
         (*line)[i + 1u] = x1;
     }
 }
@@ -193,38 +197,12 @@ fn previous_lane_last(line: ptr<function, Line>) -> L {
 // d_0 halved. The suffix sums per parity t_z = sum over j >= z, j - z even, of 2 j c_j,
 // then d_m = t_(m+1).
 fn differentiate(line: ptr<function, Line>) {
-    var t: Line;
     for (var i = 0u; i < PER; i++) {
-        t[i] = 2.0 * f32(z_of(i)) * (*line)[i];
+        unit[i] = 1.0;
+        twice_z[i] = 2.0 * f32(z_of(i));
     }
-    // This lane's sums per parity, then the sums of the lanes after it.
-    var s0 = L(0.0);
-    var s1 = L(0.0);
-    for (var i = 0u; i < PER; i += 2u) {
-        s0 += t[i];
-        s1 += t[i + 1u];
-    }
-    for (var d = 1u; d < SEG; d *= 2u) {
-        let p0 = subgroupShuffleDown(s0, d);
-        let p1 = subgroupShuffleDown(s1, d);
-        if (lane + d < SEG) {
-            s0 += p0;
-            s1 += p1;
-        }
-    }
-    var x0 = subgroupShuffleDown(s0, 1u);
-    var x1 = subgroupShuffleDown(s1, 1u);
-    if (lane == SEG - 1u) {
-        x0 = L(0.0);
-        x1 = L(0.0);
-    }
-    for (var j = 0u; j < PER; j += 2u) {
-        let i = PER - 2u - j;
-        x0 += t[i];
-        t[i] = x0;
-        x1 += t[i + 1u];
-        t[i + 1u] = x1;
-    }
+    var t = *line;
+    scan_downwards(&t, &unit, &twice_z);
     let after = next_lane_first(&t);
     for (var i = 0u; i < PER; i++) {
         var d: L;
@@ -260,7 +238,8 @@ fn solve(line: ptr<function, Line>, alpha: L, beta: L) {
         (*line)[1] += kappa2 * p0;
     }
     eliminate_upwards(line);
-    substitute_downwards(line);
+    // The back substitution x_z = above_z x_(z+2) + own_z x_z.
+    scan_downwards(line, &above, &own);
     // y'_0 = P0, y'_1 = a_0 - a_2 / 2, y'_m = (a_(m-1) - a_(m+1)) / 2m (0 from n on).
     var slope: Line;
     let a_before = previous_lane_last(line);
