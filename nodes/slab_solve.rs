@@ -251,7 +251,7 @@ fn lanes_shape(n: u32, caps: &DeviceCaps) -> Result<LanesShape, String> {
         seg,
         per: 2 * n.div_ceil(2 * seg),
         half: n.div_ceil(2).div_ceil(seg),
-        wg: LANES_WG.max(seg),
+        wg: LANES_WG,
     })
 }
 

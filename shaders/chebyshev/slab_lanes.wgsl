@@ -49,17 +49,13 @@ var<private> above: array<f32, PER>;
 var<private> own: array<f32, PER>;
 var<private> g0: array<f32, PER>;
 var<private> g1: array<f32, PER>;
-// The Chebyshev derivative's recurrence factors: 1 on the element two above, 2 z on the
-// element itself.
+// The Chebyshev derivative's recurrence factors (`differentiate`): 1 on the element two
+// above, 2 z on the element itself.
 var<private> unit: array<f32, PER>;
 var<private> twice_z: array<f32, PER>;
 // Per k: the Schur complement's 2 x 2 inverse (rows y0, p0) and kappa^2.
 var<private> s_inv: vec4<f32>;
 var<private> kappa2: f32;
-
-fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
-    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
-}
 
 fn entry(row: u32, k: u32) -> f32 {
     return bvp[row * u.slab.nk + k];
@@ -197,10 +193,6 @@ fn previous_lane_last(line: ptr<function, Line>) -> L {
 // d_0 halved. The suffix sums per parity t_z = sum over j >= z, j - z even, of 2 j c_j,
 // then d_m = t_(m+1).
 fn differentiate(line: ptr<function, Line>) {
-    for (var i = 0u; i < PER; i++) {
-        unit[i] = 1.0;
-        twice_z[i] = 2.0 * f32(z_of(i));
-    }
     var t = *line;
     scan_downwards(&t, &unit, &twice_z);
     let after = next_lane_first(&t);
@@ -329,6 +321,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         own[i] = select(0.0, q, live);
         g0[i] = select(0.0, entry(3u * n + zc, k), live);
         g1[i] = select(0.0, entry(4u * n + zc, k), live);
+        unit[i] = 1.0;
+        twice_z[i] = 2.0 * f32(z);
     }
     s_inv = vec4<f32>(entry(5u * n, k), entry(5u * n + 1u, k), entry(5u * n + 2u, k), entry(5u * n + 3u, k));
     kappa2 = entry(5u * n + 4u, k);
@@ -396,15 +390,19 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     var w_im = w_re;
     let walls = u.slab.walls;
     // dv/dz at the top from the coefficients, (2 / H) sum m^2 c_m (the bottom wall's k = 0).
+    // Summed only with the bottom wall (uniform over the dispatch, so its shuffles stay
+    // outside any branch that depends on the lane).
     var slope_re = L(0.0);
     var slope_im = L(0.0);
-    for (var i = 0u; i < PER; i++) {
-        let m2 = f32(z_of(i) * z_of(i));
-        slope_re -= m2 * re[i];
-        slope_im -= m2 * im[i];
+    if (walls == 1u) {
+        for (var i = 0u; i < PER; i++) {
+            let m2 = f32(z_of(i) * z_of(i));
+            slope_re -= m2 * re[i];
+            slope_im -= m2 * im[i];
+        }
+        slope_re = u.dz_scale * segment_sum(slope_re);
+        slope_im = u.dz_scale * segment_sum(slope_im);
     }
-    slope_re = u.dz_scale * segment_sum(slope_re);
-    slope_im = u.dz_scale * segment_sum(slope_im);
     if (kabs == 0.0) {
         // Zero but for the bottom wall's and the slit's shear flows (x, y).
         w_re.keep = L(0.0);

@@ -93,7 +93,3 @@ fn derivative(m: u32, p0: Lane) -> Lane {
     }
     return (a_at(m - 1u) - a_at(m + 1u)) / (2.0 * f32(m));
 }
-
-fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
-    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
-}

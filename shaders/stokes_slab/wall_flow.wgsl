@@ -1,11 +1,12 @@
 // template: the walls' homogeneous flow of one wave number k != 0 (slab_walls' correction,
 // nodes/stokes_slab.rs), imported by slab_walls (stokes_slab/walls.wgsl) and the slab
-// solve kernels (chebyshev/slab_solve.wgsl, slab_solve_line.wgsl, slab_staged.wgsl). At
+// solve kernels (chebyshev/slab_solve.wgsl, slab_solve_line.wgsl, slab_staged.wgsl,
+// slab_lanes.wgsl), with `cmul`, which they all use. At
 // height zeta its x, y components are (C_c - i k_c a zeta) exp(-|k| zeta) + (D_c + i k_c b
 // zeta) exp(|k| (zeta - H)), its z component (C_z + |k| a zeta) exp(-|k| zeta) + (D_z +
 // |k| b zeta) exp(|k| (zeta - H)). The importer defines `minv(r, c, k)`, entry (r, c) of
 // k's 6 x 6 complex inverse (nodes/stokes_slab.rs `slit_inverse`, built in f64 on the
-// host), and `cmul`; stokes_slab/slab.wgsl gives `times_i`.
+// host); stokes_slab/slab.wgsl gives `times_i`.
 // The constants and factors travel as matrices of complex columns (x, y, z), every index
 // a constant: as arrays returned by value and indexed in loops (the helpers before
 // 2026-12-07) they made the fused slab solve kernels 2x to 4x slower on NVIDIA.
@@ -14,6 +15,10 @@
 struct WallConstants {
     c: mat3x2<f32>,
     d: mat3x2<f32>,
+}
+
+fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
 }
 
 // Row r of (C_x, C_y, C_z, D_x, D_y, D_z) = Minv w for the walls' velocities w =

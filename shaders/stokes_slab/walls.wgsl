@@ -33,10 +33,6 @@ fn store(c: u32, z: u32, k: u32, x: vec2<f32>) {
     out[w + 1u] = x.y;
 }
 
-fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
-    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
-}
-
 fn minv(r: u32, c: u32, k: u32) -> vec2<f32> {
     let base = 2u * s.nz;
     let w = ((r * 6u + c) * 2u) * s.nk + k;
