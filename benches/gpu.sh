@@ -58,6 +58,11 @@
 #   fft         rfft + irfft against cuFFT (torch), convolutions (a folded filter)
 #   primitives  reduce, sort (every variant), scan against CUB (torch)
 #   overhead    the executor against raw wgpu
+#   kernels     what the driver makes of DP Stokes' kernels (`mesoflow kernel-stats`:
+#               registers, spills, code size as the driver reports them) for every slab
+#               kernel and wall mode at 10^5 and 10^6, their internal representations in
+#               $OUT/kernel_ir where the driver gives them; then the lanes kernel's steps
+#               taken out in turn (benches/variants.py's lanes_*), timed at 10^5 and 10^6
 #   determinism FCM (1e-3) and PSE (split 0.5) at 10^4 and 10^5, default and
 #               --deterministic; two identical runs of each at 10^5 compared word by word
 #   all         every suite above, in this order
@@ -71,7 +76,7 @@
 # the date, the GPU, its driver and mesoflow's adapter line, goes to $OUT/bench.log (/tmp
 # without OUT); plots to $OUT.
 set -uo pipefail
-suites=(fcm pse poisson dpstokes nbody python mpcd spheres spheres_acf spheres_rates poiseuille disks spread atomics fft primitives overhead determinism stream scene)
+suites=(fcm pse poisson dpstokes nbody python mpcd spheres spheres_acf spheres_rates poiseuille disks spread atomics fft primitives overhead determinism stream scene kernels)
 usage() { sed -n '2,/^set -uo/{/^#/p}' "$0" | sed 's/^# \{0,1\}//'; }
 want=()
 for s in "$@"; do
@@ -379,6 +384,23 @@ suite_disks() {
   # Every launch of a step on the GPU clock: the loops run a fixed number of times.
   MESOFLOW_BENCH_DISPATCHES=1 run $bin bench disks --graph benches/bd_delaunay_fixed.json \
     --configs c0 --ranges short --sizes 1048576 --reps 5 --order lattice
+}
+
+suite_kernels() {
+  local dump=/tmp/kernel_dump
+  rm -rf "$dump"
+  # One rep each: the kernels are built (and dumped) whatever their timing.
+  MESOFLOW_KERNEL_DUMP=$dump run $bin bench dpstokes --walls bottom,slit,none \
+    --sizes 100000,1000000 --reps 1 --slab fused,lanes,staged
+  run $bin kernel-stats --ir "$out/kernel_ir" $(grep -l -E "^// (slab solve|spread_chebyshev|interpolate_chebyshev|chebyshev)" "$dump"/*.wgsl)
+  # The variants here, not through gpu_variants.sh, whose common.sh would start the log again.
+  python3 benches/variants.py "$out/variants" > /dev/null
+  mkdir -p "$out/variants/base"
+  for v in base lanes_nosolve lanes_nodiff lanes_notransform lanes_nowalls lanes_skeleton; do
+    echo "== variant $v" | tee -a "$log"
+    MESOFLOW_SHADER_DIR=$out/variants/$v MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes \
+      --walls bottom --sizes 100000,1000000 --reps 10 --slab lanes
+  done
 }
 
 suite_overhead() {

@@ -8,14 +8,16 @@
 # The interp_* variants replace files of the workgroup-table interpolation kernel: since
 # the lane kernels (generated, nodes/spread/interpgen.rs) they show in the rows labelled
 # "tables" only. VARIANT_BENCH=dpstokes times DP Stokes' bottom-wall rows instead (CASES
-# then its sizes, e.g. 100000,1000000; the cheb_* variants), with its dispatches.
+# then its sizes, e.g. 100000,1000000; VARIANT_SLAB its --slab, e.g. lanes for the lanes_*
+# variants), with its dispatches.
 source benches/common.sh
 cases=$1; shift
 dir=${OUT:-/tmp}/variants
 python3 benches/variants.py "$dir" > /dev/null
 bench() {
   if [ "${VARIANT_BENCH:-spread}" = dpstokes ]; then
-    MESOFLOW_BENCH_DISPATCHES=1 $bin bench dpstokes --walls bottom --sizes "$cases" --reps 10
+    MESOFLOW_BENCH_DISPATCHES=1 $bin bench dpstokes --walls bottom --sizes "$cases" --reps 10 \
+      ${VARIANT_SLAB:+--slab $VARIANT_SLAB}
   else
     $bin bench spread --cells 128 --reps 20 --cases "$cases"
   fi

@@ -8,7 +8,15 @@ follow them:
 (BENCHMARKS.md, issue 5, fifth version: what they showed). DP Stokes variants
 (VARIANT_BENCH=dpstokes in benches/gpu_variants.sh) go under shaders/chebyshev/ the
 same way; none is kept now (cheb_interp_pairs, threads over (column, z point) pairs,
-timed 2026-12-06 on an H100: 0.24 -> 0.47 ms at 10^5, slower; removed).
+timed 2026-12-06 on an H100: 0.24 -> 0.47 ms at 10^5, slower; removed). The lanes_*
+variants each take a step out of slab_solve's lanes kernel (shaders/chebyshev/slab_lanes.wgsl;
+time them with VARIANT_SLAB=lanes), so their numbers are wrong and only their times
+count; every table entry and forcing word is still read and every output word written:
+  lanes_nosolve     the three banded solves (each element instead mixes its table rows)
+  lanes_nodiff      the two Chebyshev derivatives (each element scaled)
+  lanes_notransform the inverse transform's shuffles and sums (coefficients as values)
+  lanes_nowalls     the walls' constants, factors and exponentials
+  lanes_skeleton    all four: loads, the pressure's sources, stores
 Usage:
   python3 benches/variants.py OUT_DIR"""
 import pathlib
@@ -56,6 +64,43 @@ fn column_sums(lid: u32, seg: u32, ppw: u32) -> vec4<f32> {{
     return src[:start] + body + src[end:]
 
 
+def lanes_without(src, steps):
+    """slab_lanes.wgsl without the named steps (see the docstring), for timing only."""
+    if "solve" in steps:
+        start = src.index("fn solve(line: ptr<function, Line>, alpha: L, beta: L) {")
+        end = src.index("// The walls' flow of one part")
+        src = src[:start] + """fn solve(line: ptr<function, Line>, alpha: L, beta: L) {
+    for (var i = 0u; i < PER; i++) {
+        (*line)[i] = own[i] * (*line)[i] + below[i] * alpha + above[i] * beta + g0[i] + kappa2 * g1[i] + s_inv.x;
+    }
+}
+
+""" + src[end:]
+    if "diff" in steps:
+        start = src.index("fn differentiate(line: ptr<function, Line>) {")
+        end = src.index("// chebyshev_bvp's solve")
+        src = src[:start] + """fn differentiate(line: ptr<function, Line>) {
+    for (var i = 0u; i < PER; i++) {
+        (*line)[i] = u.dz_scale * (unit[i] + twice_z[i]) * (*line)[i];
+    }
+}
+
+""" + src[end:]
+    if "transform" in steps:
+        start = src.index("    for (var src = 0u; src < SEG; src++) {")
+        end = src.index("    if (!valid) {")
+        src = src[:start] + """    for (var h = 0u; h < HALF; h++) {
+        even_re[h] = re[h % PER] + points[h];
+        odd_re[h] = re[(h + 1u) % PER];
+        even_im[h] = im[h % PER];
+        odd_im[h] = im[(h + 1u) % PER];
+    }
+""" + src[end:]
+    if "walls" in steps:
+        src = src.replace("let walls = u.slab.walls;", "let walls = 0u;")
+    return src
+
+
 def main():
     out = pathlib.Path(sys.argv[1])
     common = pathlib.Path("shaders/spread/interpolate_common.wgsl").read_text()
@@ -69,6 +114,10 @@ def main():
         "interp_unroll8": ("interpolate_common.wgsl", unroll8(common)),
     }
     variants = {name: ("spread/" + file, text) for name, (file, text) in variants.items()}
+    lanes = pathlib.Path("shaders/chebyshev/slab_lanes.wgsl").read_text()
+    for name, steps in [("nosolve", ["solve"]), ("nodiff", ["diff"]), ("notransform", ["transform"]),
+                        ("nowalls", ["walls"]), ("skeleton", ["solve", "diff", "transform", "walls"])]:
+        variants["lanes_" + name] = ("chebyshev/slab_lanes.wgsl", lanes_without(lanes, steps))
     for name, (file, text) in variants.items():
         f = out / name / file
         f.parent.mkdir(parents=True, exist_ok=True)

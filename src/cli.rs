@@ -142,6 +142,18 @@ pub enum Command {
         #[command(subcommand)]
         which: BenchCommand,
     },
+    /// What the Vulkan driver makes of kernels: build each kernel a run wrote with
+    /// MESOFLOW_KERNEL_DUMP=<folder> (its .wgsl files) on the device again and print the
+    /// driver's statistics for it (registers, spills, code size: whatever the driver
+    /// reports through VK_KHR_pipeline_executable_properties). For kernel work.
+    KernelStats {
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// Also write the driver's internal representations (its IR or machine code, where
+        /// it gives them) of each kernel into this folder, as <file stem>.<n>.txt.
+        #[arg(long, value_name = "FOLDER")]
+        ir: Option<PathBuf>,
+    },
 }
 
 /// A failure of a command, with its exit code.
@@ -270,6 +282,68 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
             Ok(())
         }
         Command::Bench { which } => Ok(crate::bench::run(which)?),
+        Command::KernelStats { files, ir } => kernel_stats(&files, ir.as_deref()),
+    }
+}
+
+fn kernel_stats(files: &[PathBuf], ir: Option<&Path>) -> Result<(), CliError> {
+    use mesoflow::gpu::driver_stats::{DriverStats, DriverStatsError, DumpedKernel};
+    // Every file is read first, so a wrong one fails before the device opens.
+    let kernels = files
+        .iter()
+        .map(|f| DumpedKernel::read(f).map(|k| (f, k)))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| CliError::Input(e.to_string()))?;
+    let wanted = std::env::var("MESOFLOW_ADAPTER")
+        .ok()
+        .filter(|s| !s.is_empty());
+    let stats = DriverStats::open(wanted.as_deref()).map_err(|e| match e {
+        DriverStatsError::NoDevice(_) | DriverStatsError::Unsupported(_) => {
+            CliError::Input(e.to_string())
+        }
+        _ => CliError::Runtime(e.to_string()),
+    })?;
+    outln!("driver statistics on {}", stats.adapter);
+    if let Some(dir) = ir {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| CliError::Input(format!("--ir {}: {e}", dir.display())))?;
+    }
+    let mut failed = Vec::new();
+    for (file, kernel) in &kernels {
+        outln!("{} ({}):", kernel.label, file.display());
+        let executables = match stats.kernel(kernel, ir.is_some()) {
+            Ok(e) => e,
+            Err(message) => {
+                outln!("  cannot build it: {message}");
+                failed.push(file.display().to_string());
+                continue;
+            }
+        };
+        for (i, e) in executables.iter().enumerate() {
+            outln!("  {} (subgroup {})", e.name, e.subgroup_size);
+            for s in &e.statistics {
+                outln!("    {:<28} {:>12}   {}", s.name, s.value, s.description);
+            }
+            if let Some(dir) = ir {
+                let stem = file
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                for (n, (name, body)) in e.representations.iter().enumerate() {
+                    let path = dir.join(format!("{stem}.{i}.{n}.txt"));
+                    std::fs::write(&path, format!("// {name}\n{body}"))
+                        .map_err(|err| CliError::Runtime(format!("{}: {err}", path.display())))?;
+                }
+            }
+        }
+    }
+    if failed.is_empty() {
+        Ok(())
+    } else {
+        Err(CliError::Runtime(format!(
+            "the driver could not build {}",
+            failed.join(", ")
+        )))
     }
 }
 

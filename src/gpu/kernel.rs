@@ -102,7 +102,6 @@ impl KernelCache {
         if let Some(k) = self.map.get(spec) {
             return Ok(k.clone());
         }
-        dump(spec);
         let k = Arc::new(build_kernel(gpu, spec)?);
         self.built += 1;
         self.map.insert(spec.clone(), k.clone());
@@ -121,9 +120,10 @@ impl KernelCache {
 /// For kernel work and for checking that a refactor leaves the kernels as they were:
 /// with `MESOFLOW_KERNEL_DUMP=<folder>`, every kernel built is written there as
 /// `<hash of its spec>.wgsl`, its label, entry, bindings and constants in a comment
-/// first, so two runs' folders compare file by file. Failing to write is reported on
-/// stderr, never an error of the run.
-fn dump(spec: &KernelSpec) {
+/// first, then the WGSL as compiled (`specialised` for the device), so two runs' folders
+/// compare file by file and `mesoflow kernel-stats` can build a file again. Failing to
+/// write is reported on stderr, never an error of the run.
+fn dump(spec: &KernelSpec, specialised: &str) {
     use std::hash::{Hash, Hasher};
     static DIR: std::sync::OnceLock<Option<std::path::PathBuf>> = std::sync::OnceLock::new();
     let Some(dir) = DIR
@@ -146,7 +146,7 @@ fn dump(spec: &KernelSpec) {
         spec.bindings,
         spec.specialise,
         constants.join(", "),
-        spec.source
+        specialised
     );
     let file = dir.join(format!("{:016x}.wgsl", h.finish()));
     if let Err(e) = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&file, text)) {
@@ -202,6 +202,7 @@ fn build_kernel(gpu: &GpuContext, spec: &KernelSpec) -> Result<Kernel, CompileEr
     } else {
         std::borrow::Cow::Borrowed(spec.source.as_str())
     };
+    dump(spec, &source);
     let descriptor = wgpu::ShaderModuleDescriptor {
         label: Some(&spec.label),
         source: wgpu::ShaderSource::Wgsl(source),

@@ -1,7 +1,9 @@
 //! The GPU layer: device context and capabilities, kernels and their cache, the embedded
-//! WGSL library. Knows nothing about graphs.
+//! WGSL library, and what the driver makes of a kernel (`driver_stats`, a tool for kernel
+//! work). Knows nothing about graphs.
 
 mod context;
+pub mod driver_stats;
 mod kernel;
 pub mod shaders;
 

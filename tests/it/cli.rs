@@ -1216,3 +1216,84 @@ fn a_run_resumed_from_its_checkpoint_goes_on_bit_for_bit() {
     assert!(!dir.join("no.npy").exists());
     assert!(temporaries(&dir).is_empty(), "{:?}", temporaries(&dir));
 }
+
+#[test]
+fn kernel_stats_builds_the_dumped_kernels_or_names_what_the_driver_lacks() {
+    use mesoflow::gpu::driver_stats::DumpedKernel;
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tmpdir("cli-kernel-stats");
+    let dump = dir.join("kernels");
+    let p = positions(&dir, "p.npy", vec![1.0, 2.0, 1.5, 3.0, 4.0, 2.5], 2);
+    let f = positions(&dir, "f.npy", vec![1.0, 0.0, 0.0, 0.0, 0.0, 1.0], 2);
+    let graph = root().join("graphs/dpstokes.json").display().to_string();
+    // The lanes slab solve: subgroup operations in the SPIR-V below.
+    let o = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+        .args([
+            "run",
+            &graph,
+            "--set",
+            "box=[8,8]",
+            "--set",
+            "zmax=4",
+            "--set",
+            "slab=lanes",
+        ])
+        .args([
+            "--input",
+            &format!("positions={p}"),
+            "--input",
+            &format!("forces={f}"),
+        ])
+        .args(["--output", "velocities"])
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .env("MESOFLOW_KERNEL_DUMP", &dump)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let mut files: Vec<_> = std::fs::read_dir(&dump)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    assert!(files.len() >= 5, "{files:?}");
+    // Each dump is the kernel as compiled and builds to SPIR-V as wgpu builds it.
+    let mut labels = Vec::new();
+    for file in &files {
+        let k = DumpedKernel::read(file).unwrap();
+        let words = k
+            .spirv((1, 3))
+            .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        assert_eq!(words[0], 0x0723_0203, "{}: not SPIR-V", file.display());
+        labels.push(k.label);
+    }
+    assert!(labels.iter().any(|l| l == "slab solve lanes"), "{labels:?}");
+    let mut args = vec!["kernel-stats".to_string()];
+    args.extend(files.iter().map(|f| f.display().to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = mesoflow(&args);
+    let t = text(&o);
+    assert!(!t.contains("panicked"), "{t}");
+    match o.status.code() {
+        // A driver with statistics: every kernel's, under its label.
+        Some(0) => {
+            assert!(t.contains("driver statistics on"), "{t}");
+            for l in &labels {
+                assert!(t.contains(&format!("{l} (")), "{l}: {t}");
+            }
+        }
+        // One without (the lavapipe of Mesa 22.3 on CI): a clear error naming the device.
+        Some(2) => assert!(
+            t.contains("does not report kernel statistics")
+                && t.contains("VK_KHR_pipeline_executable_properties"),
+            "{t}"
+        ),
+        other => panic!("exit {other:?}: {t}"),
+    }
+    // A file that is not a dump: exit 2 naming it, before any device opens.
+    fails_with(
+        &["kernel-stats", &relax()],
+        &["relax.json", "not a MESOFLOW_KERNEL_DUMP file"],
+    );
+}
