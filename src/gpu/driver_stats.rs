@@ -493,36 +493,23 @@ impl DriverStats {
         // those sizes.
         unsafe {
             let mut count = 0u32;
-            (fp.get_pipeline_executable_internal_representations_khr)(
-                handle,
-                info,
-                &mut count,
-                std::ptr::null_mut(),
-            )
-            .result()
-            .map_err(|r| format!("{call}: {r}"))?;
+            let query =
+                |count: &mut u32, data: *mut vk::PipelineExecutableInternalRepresentationKHR| {
+                    (fp.get_pipeline_executable_internal_representations_khr)(
+                        handle, info, count, data,
+                    )
+                    .result()
+                    .map_err(|r| format!("{call}: {r}"))
+                };
+            query(&mut count, std::ptr::null_mut())?;
             let mut reps =
                 vec![vk::PipelineExecutableInternalRepresentationKHR::default(); count as usize];
-            (fp.get_pipeline_executable_internal_representations_khr)(
-                handle,
-                info,
-                &mut count,
-                reps.as_mut_ptr(),
-            )
-            .result()
-            .map_err(|r| format!("{call}: {r}"))?;
+            query(&mut count, reps.as_mut_ptr())?;
             let mut buffers: Vec<Vec<u8>> = reps.iter().map(|r| vec![0u8; r.data_size]).collect();
             for (r, b) in reps.iter_mut().zip(buffers.iter_mut()) {
                 r.p_data = b.as_mut_ptr().cast();
             }
-            (fp.get_pipeline_executable_internal_representations_khr)(
-                handle,
-                info,
-                &mut count,
-                reps.as_mut_ptr(),
-            )
-            .result()
-            .map_err(|r| format!("{call}: {r}"))?;
+            query(&mut count, reps.as_mut_ptr())?;
             Ok(reps
                 .iter()
                 .zip(buffers)
