@@ -391,7 +391,7 @@ suite_kernels() {
   rm -rf "$dump"
   # One rep each: the kernels are built (and dumped) whatever their timing.
   MESOFLOW_KERNEL_DUMP=$dump run $bin bench dpstokes --walls bottom,slit,none \
-    --sizes 100000,1000000 --reps 1 --slab fused,lanes,staged
+    --sizes 100000,1000000 --reps 1 --slab fused,lanes
   run $bin kernel-stats --ir "$out/kernel_ir" $(grep -l -E "^// (slab solve|spread_chebyshev|interpolate_chebyshev|chebyshev)" "$dump"/*.wgsl)
   # The variants here, not through gpu_variants.sh, whose common.sh would start the log again.
   python3 benches/variants.py "$out/variants" > /dev/null

@@ -536,3 +536,67 @@ impl Drop for DriverStats {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const KERNEL: &str = "// a kernel\n// entry main, bindings [StorageRead, StorageReadWrite, Uniform], specialise true\n// constants: SCALE = 2.5\n\
+        override SCALE: f32;\n\
+        struct U { n: u32 }\n\
+        @group(0) @binding(0) var<storage, read> x: array<f32>;\n\
+        @group(0) @binding(1) var<storage, read_write> y: array<f32>;\n\
+        @group(0) @binding(2) var<uniform> u: U;\n\
+        @compute @workgroup_size(64)\n\
+        fn main(@builtin(global_invocation_id) g: vec3<u32>) {\n\
+            if (g.x < u.n) { y[g.x] = SCALE * subgroupAdd(x[g.x]); }\n\
+        }\n";
+
+    #[test]
+    fn a_dump_parses_and_builds_to_spirv_with_its_constants() {
+        let k = DumpedKernel::parse(KERNEL).unwrap();
+        assert_eq!(k.label, "a kernel");
+        assert_eq!(k.entry, "main");
+        assert_eq!(
+            k.bindings,
+            [
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform
+            ]
+        );
+        assert_eq!(k.constants, [("SCALE".to_string(), 2.5)]);
+        let words = k.spirv((1, 3)).unwrap();
+        assert_eq!(words[0], 0x0723_0203);
+        // The override is resolved: without its value the build fails, naming it.
+        let unset = DumpedKernel {
+            constants: Vec::new(),
+            ..k
+        };
+        let e = unset.spirv((1, 3)).unwrap_err();
+        assert!(e.contains("SCALE") || e.contains("override"), "{e}");
+    }
+
+    #[test]
+    fn what_is_not_a_dump_is_an_error_that_says_why() {
+        for (text, needle) in [
+            ("fn main() {}\n", "not a MESOFLOW_KERNEL_DUMP file"),
+            (
+                "// k\n// entry main, bindings [Texture], specialise true\n// constants: \n",
+                "unknown binding \"Texture\"",
+            ),
+            (
+                "// k\n// entry main, bindings [], specialise true\n// constants: N = many\n",
+                "constant N: \"many\" is not a number",
+            ),
+        ] {
+            let e = DumpedKernel::parse(text).unwrap_err();
+            assert!(e.contains(needle), "{text:?}: {e}");
+        }
+        let k = DumpedKernel::parse(
+            "// k\n// entry main, bindings [], specialise true\n// constants: \nfn broken(\n",
+        )
+        .unwrap();
+        assert!(k.spirv((1, 3)).is_err());
+    }
+}
