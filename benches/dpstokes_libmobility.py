@@ -8,7 +8,8 @@ Stokes drag's 1 / (6 pi eta a)). Three references:
   self_mobility_{bw,sc}_w4   libMobility's DPStokes itself (its default kernel, f64)
   pair_mobility_{bw,sc}_w4   the same for two spheres 3a, 4a, 8a apart along x
 Prints, per reference, the largest deviation of each mobility entry; against the physics
-also the relative deviation at h >= 2a (below it the closed forms are themselves off).
+also the relative deviation at h >= 2a and 3a (below them the closed forms are themselves
+off), and libMobility's own (self_mobility_bw_w4, interpolated to the same heights).
 Any adapter (lavapipe takes a few minutes: --stride thins the heights).
 Usage: python benches/dpstokes_libmobility.py LIBMOBILITY/tests/ref [--tolerance T] [--stride S]"""
 import argparse
@@ -53,7 +54,7 @@ def main():
     p.add_argument("--stride", type=int, default=3)
     args = p.parse_args()
     print(f"mesoflow DPStokes, tolerance {args.tolerance}, against libMobility's tests/ref")
-    print(f"{'reference':<24} {'walls':<10} {'heights':>8} {'max |dM|':>10} {'rel. h>=2a':>11}")
+    print(f"{'reference':<24} {'walls':<10} {'heights':>8} {'max |dM|':>10} {'rel. h>=2a':>11} {'h>=3a':>9}")
     for mode, tag in (("single_wall", "bw"), ("two_walls", "sc")):
         s = solver(mode, args.tolerance)
         refs = [f"self_mobility_{tag}_w4"] + (["self_mobility_bw_ref"] if tag == "bw" else [])
@@ -62,9 +63,19 @@ def main():
             hs = r["heights"].flatten()[:: args.stride]
             want = np.array([np.diag(m)[:3] for m in r["M"][:: args.stride]])
             got = self_rows(s, hs)
-            far = hs >= 2.0
-            rel = np.abs(got[far] / want[far] - 1).max() if far.any() else float("nan")
-            print(f"{name:<24} {mode:<10} {len(hs):>8} {np.abs(got - want).max():>10.2e} {rel:>11.2e}")
+
+            def rel(m, h0):
+                far = hs >= h0
+                return np.abs(m[far] / want[far] - 1).max() if far.any() else float("nan")
+
+            print(f"{name:<24} {mode:<10} {len(hs):>8} {np.abs(got - want).max():>10.2e} "
+                  f"{rel(got, 2.0):>11.2e} {rel(got, 3.0):>9.2e}")
+            if name == "self_mobility_bw_ref":
+                w4 = np.load(args.ref / "self_mobility_bw_w4.npz")
+                wh = w4["heights"].flatten()
+                theirs = np.array([[np.interp(h, wh, w4["M"][:, c, c]) for c in range(3)] for h in hs])
+                print(f"{'  libMobility w4 on it':<24} {mode:<10} {len(hs):>8} "
+                      f"{np.abs(theirs - want).max():>10.2e} {rel(theirs, 2.0):>11.2e} {rel(theirs, 3.0):>9.2e}")
         r = np.load(args.ref / f"pair_mobility_{tag}_w4.npz")
         hs = r["heights"].flatten()[:: args.stride]
         worst = 0.0
