@@ -287,11 +287,11 @@ pub fn execute(cmd: Command) -> Result<(), CliError> {
 }
 
 fn kernel_stats(files: &[PathBuf], ir: Option<&Path>) -> Result<(), CliError> {
-    use mesoflow::gpu::driver_stats::{DriverStats, DumpedKernel};
+    use mesoflow::gpu::driver_stats::{DriverStats, read_dump};
     // Every file is read first, so a wrong one fails before the device opens.
     let kernels = files
         .iter()
-        .map(|f| DumpedKernel::read(f).map(|k| (f, k)))
+        .map(|f| read_dump(f).map(|k| (f, k)))
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| CliError::Input(e.to_string()))?;
     let wanted = std::env::var("MESOFLOW_ADAPTER")

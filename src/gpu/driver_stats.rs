@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use ash::vk;
 use thiserror::Error;
 
-use super::kernel::Binding;
+use super::kernel::{Binding, KernelSpec};
 
 #[derive(Debug, Error)]
 #[non_exhaustive]
@@ -39,120 +39,58 @@ fn vulkan(call: &'static str) -> impl Fn(vk::Result) -> DriverStatsError {
     move |result| DriverStatsError::Vulkan { call, result }
 }
 
-/// One kernel dump file, parsed: the header `kernel.rs`'s dump writes, then the WGSL.
-#[derive(Debug)]
-pub struct DumpedKernel {
-    pub label: String,
-    pub entry: String,
-    pub bindings: Vec<Binding>,
-    pub constants: Vec<(String, f64)>,
-    pub source: String,
+/// The kernel of a `MESOFLOW_KERNEL_DUMP` file (`KernelSpec::from_dump`).
+pub fn read_dump(file: &Path) -> Result<KernelSpec, DriverStatsError> {
+    let fail = |message: String| DriverStatsError::Kernel {
+        file: file.into(),
+        message,
+    };
+    let text = std::fs::read_to_string(file).map_err(|e| fail(e.to_string()))?;
+    KernelSpec::from_dump(&text).map_err(fail)
 }
 
-impl DumpedKernel {
-    pub fn read(file: &Path) -> Result<DumpedKernel, DriverStatsError> {
-        let fail = |message: String| DriverStatsError::Kernel {
-            file: file.into(),
-            message,
-        };
-        let text = std::fs::read_to_string(file).map_err(|e| fail(e.to_string()))?;
-        Self::parse(&text).map_err(fail)
-    }
-
-    /// `// label`, `// entry E, bindings [..], specialise B`, `// constants: N = V, ...`.
-    pub fn parse(text: &str) -> Result<DumpedKernel, String> {
-        let mut lines = text.splitn(4, '\n');
-        let not_a_dump = || "not a MESOFLOW_KERNEL_DUMP file (its three header lines)".to_string();
-        let label = lines
-            .next()
-            .and_then(|l| l.strip_prefix("// "))
-            .ok_or_else(not_a_dump)?;
-        let spec = lines
-            .next()
-            .and_then(|l| l.strip_prefix("// entry "))
-            .ok_or_else(not_a_dump)?;
-        let constants = lines
-            .next()
-            .and_then(|l| l.strip_prefix("// constants:"))
-            .ok_or_else(not_a_dump)?;
-        let source = lines.next().unwrap_or("").to_string();
-        let (entry, rest) = spec.split_once(", bindings [").ok_or_else(not_a_dump)?;
-        let (list, _) = rest.split_once(']').ok_or_else(not_a_dump)?;
-        let bindings = list
-            .split(',')
-            .map(str::trim)
-            .filter(|b| !b.is_empty())
-            .map(|b| match b {
-                "StorageRead" => Ok(Binding::StorageRead),
-                "StorageReadWrite" => Ok(Binding::StorageReadWrite),
-                "Uniform" => Ok(Binding::Uniform),
-                other => Err(format!("unknown binding {other:?} in its header")),
-            })
-            .collect::<Result<_, _>>()?;
-        let constants = constants
-            .split(',')
-            .map(str::trim)
-            .filter(|c| !c.is_empty())
-            .map(|c| {
-                let (name, value) = c.split_once(" = ").ok_or_else(not_a_dump)?;
-                let value = value
-                    .parse()
-                    .map_err(|_| format!("constant {name}: {value:?} is not a number"))?;
-                Ok((name.to_string(), value))
-            })
-            .collect::<Result<_, String>>()?;
-        Ok(DumpedKernel {
-            label: label.to_string(),
-            entry: entry.to_string(),
-            bindings,
-            constants,
-            source,
-        })
-    }
-
-    /// SPIR-V as wgpu's Vulkan backend writes it for this kernel under the default
-    /// `trusted` runtime checks (`kernel.rs`'s `runtime_checks`).
-    pub fn spirv(&self, lang_version: (u8, u8)) -> Result<Vec<u32>, String> {
-        use naga::back::spv;
-        let module = naga::front::wgsl::parse_str(&self.source)
-            .map_err(|e| e.emit_to_string(&self.source))?;
-        let info = naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::all(),
-        )
-        .validate(&module)
-        .map_err(|e| e.emit_to_string(&self.source))?;
-        let constants = self
-            .constants
-            .iter()
-            .map(|(n, v)| (n.clone(), *v))
-            .collect();
-        let stage = naga::ShaderStage::Compute;
-        let (module, info) = naga::back::pipeline_constants::process_overrides(
-            &module,
-            &info,
-            Some((stage, &self.entry)),
-            &constants,
-        )
-        .map_err(|e| e.to_string())?;
-        let options = spv::Options {
-            lang_version,
-            bounds_check_policies: naga::proc::BoundsCheckPolicies {
-                index: naga::proc::BoundsCheckPolicy::Unchecked,
-                buffer: naga::proc::BoundsCheckPolicy::Unchecked,
-                image_load: naga::proc::BoundsCheckPolicy::Unchecked,
-                binding_array: naga::proc::BoundsCheckPolicy::Unchecked,
-            },
-            force_loop_bounding: false,
-            zero_initialize_workgroup_memory: spv::ZeroInitializeWorkgroupMemoryMode::None,
-            ..spv::Options::default()
-        };
-        let pipeline = spv::PipelineOptions {
-            shader_stage: stage,
-            entry_point: self.entry.clone(),
-        };
-        spv::write_vec(&module, &info, &options, Some(&pipeline)).map_err(|e| e.to_string())
-    }
+/// SPIR-V as wgpu's Vulkan backend writes it for this kernel under the default `trusted`
+/// runtime checks (`kernel.rs`'s `runtime_checks`).
+pub fn spirv(spec: &KernelSpec, lang_version: (u8, u8)) -> Result<Vec<u32>, String> {
+    use naga::back::spv;
+    let module =
+        naga::front::wgsl::parse_str(&spec.source).map_err(|e| e.emit_to_string(&spec.source))?;
+    let info = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .map_err(|e| e.emit_to_string(&spec.source))?;
+    let constants = spec
+        .constants
+        .iter()
+        .map(|(n, bits)| (n.clone(), f64::from_bits(*bits)))
+        .collect();
+    let stage = naga::ShaderStage::Compute;
+    let (module, info) = naga::back::pipeline_constants::process_overrides(
+        &module,
+        &info,
+        Some((stage, &spec.entry)),
+        &constants,
+    )
+    .map_err(|e| e.to_string())?;
+    let options = spv::Options {
+        lang_version,
+        bounds_check_policies: naga::proc::BoundsCheckPolicies {
+            index: naga::proc::BoundsCheckPolicy::Unchecked,
+            buffer: naga::proc::BoundsCheckPolicy::Unchecked,
+            image_load: naga::proc::BoundsCheckPolicy::Unchecked,
+            binding_array: naga::proc::BoundsCheckPolicy::Unchecked,
+        },
+        force_loop_bounding: false,
+        zero_initialize_workgroup_memory: spv::ZeroInitializeWorkgroupMemoryMode::None,
+        ..spv::Options::default()
+    };
+    let pipeline = spv::PipelineOptions {
+        shader_stage: stage,
+        entry_point: spec.entry.clone(),
+    };
+    spv::write_vec(&module, &info, &options, Some(&pipeline)).map_err(|e| e.to_string())
 }
 
 /// One statistic as the driver names and describes it.
@@ -332,10 +270,10 @@ impl DriverStats {
     /// `representations`, the driver's internal representations).
     pub fn kernel(
         &self,
-        kernel: &DumpedKernel,
+        kernel: &KernelSpec,
         representations: bool,
     ) -> Result<Vec<Executable>, String> {
-        let words = kernel.spirv(self.lang_version)?;
+        let words = spirv(kernel, self.lang_version)?;
         let fail = |call: &str, r: vk::Result| format!("{call}: {r}");
         // SAFETY: handles created here from this device and destroyed before returning.
         unsafe {
@@ -387,7 +325,7 @@ impl DriverStats {
 
     unsafe fn capture(
         &self,
-        kernel: &DumpedKernel,
+        kernel: &KernelSpec,
         layout: vk::PipelineLayout,
         module: vk::ShaderModule,
         representations: bool,
@@ -541,8 +479,7 @@ impl Drop for DriverStats {
 mod tests {
     use super::*;
 
-    const KERNEL: &str = "// a kernel\n// entry main, bindings [StorageRead, StorageReadWrite, Uniform], specialise true\n// constants: SCALE = 2.5\n\
-        override SCALE: f32;\n\
+    const SOURCE: &str = "override SCALE: f32;\n\
         struct U { n: u32 }\n\
         @group(0) @binding(0) var<storage, read> x: array<f32>;\n\
         @group(0) @binding(1) var<storage, read_write> y: array<f32>;\n\
@@ -552,51 +489,23 @@ mod tests {
             if (g.x < u.n) { y[g.x] = SCALE * subgroupAdd(x[g.x]); }\n\
         }\n";
 
+    /// A dumped kernel builds to SPIR-V with its override constants, and fails without
+    /// them or with a source that does not parse.
     #[test]
-    fn a_dump_parses_and_builds_to_spirv_with_its_constants() {
-        let k = DumpedKernel::parse(KERNEL).unwrap();
-        assert_eq!(k.label, "a kernel");
-        assert_eq!(k.entry, "main");
-        assert_eq!(
-            k.bindings,
-            [
-                Binding::StorageRead,
-                Binding::StorageReadWrite,
-                Binding::Uniform
-            ]
-        );
-        assert_eq!(k.constants, [("SCALE".to_string(), 2.5)]);
-        let words = k.spirv((1, 3)).unwrap();
+    fn a_dumped_kernel_builds_to_spirv_with_its_constants() {
+        let bindings = [
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+            Binding::Uniform,
+        ];
+        let spec = KernelSpec::new("a kernel", SOURCE, &bindings).constant("SCALE", 2.5);
+        let k = KernelSpec::from_dump(&spec.dump_text(SOURCE)).unwrap();
+        let words = spirv(&k, (1, 3)).unwrap();
         assert_eq!(words[0], 0x0723_0203);
-        // The override is resolved: without its value the build fails, naming it.
-        let unset = DumpedKernel {
-            constants: Vec::new(),
-            ..k
-        };
-        let e = unset.spirv((1, 3)).unwrap_err();
+        let unset = KernelSpec::new("a kernel", SOURCE, &bindings);
+        let e = spirv(&unset, (1, 3)).unwrap_err();
         assert!(e.contains("SCALE") || e.contains("override"), "{e}");
-    }
-
-    #[test]
-    fn what_is_not_a_dump_is_an_error_that_says_why() {
-        for (text, needle) in [
-            ("fn main() {}\n", "not a MESOFLOW_KERNEL_DUMP file"),
-            (
-                "// k\n// entry main, bindings [Texture], specialise true\n// constants: \n",
-                "unknown binding \"Texture\"",
-            ),
-            (
-                "// k\n// entry main, bindings [], specialise true\n// constants: N = many\n",
-                "constant N: \"many\" is not a number",
-            ),
-        ] {
-            let e = DumpedKernel::parse(text).unwrap_err();
-            assert!(e.contains(needle), "{text:?}: {e}");
-        }
-        let k = DumpedKernel::parse(
-            "// k\n// entry main, bindings [], specialise true\n// constants: \nfn broken(\n",
-        )
-        .unwrap();
-        assert!(k.spirv((1, 3)).is_err());
+        let broken = KernelSpec::new("k", "fn broken(\n", &[]);
+        assert!(spirv(&broken, (1, 3)).is_err());
     }
 }

@@ -117,12 +117,94 @@ impl KernelCache {
     }
 }
 
+impl Binding {
+    /// Its name in a kernel dump's header.
+    fn name(self) -> &'static str {
+        match self {
+            Binding::StorageRead => "StorageRead",
+            Binding::StorageReadWrite => "StorageReadWrite",
+            Binding::Uniform => "Uniform",
+        }
+    }
+}
+
+impl KernelSpec {
+    /// The text `MESOFLOW_KERNEL_DUMP` writes for this kernel: its label, entry, bindings
+    /// and constants in three comment lines, then `compiled`, the WGSL as built.
+    pub fn dump_text(&self, compiled: &str) -> String {
+        let bindings: Vec<&str> = self.bindings.iter().map(|b| b.name()).collect();
+        let constants: Vec<String> = self
+            .constants
+            .iter()
+            .map(|(n, bits)| format!("{n} = {}", f64::from_bits(*bits)))
+            .collect();
+        format!(
+            "// {}\n// entry {}, bindings [{}], specialise {}\n// constants: {}\n{}",
+            self.label,
+            self.entry,
+            bindings.join(", "),
+            self.specialise,
+            constants.join(", "),
+            compiled
+        )
+    }
+
+    /// The kernel of a dump's text (`dump_text`), its source as it was compiled (so
+    /// `specialise` is off: the device's forms are in it already).
+    pub fn from_dump(text: &str) -> Result<KernelSpec, String> {
+        let not_a_dump = || "not a MESOFLOW_KERNEL_DUMP file (its three header lines)".to_string();
+        let mut lines = text.splitn(4, '\n');
+        let mut header = |prefix: &str| {
+            lines
+                .next()
+                .and_then(|l| l.strip_prefix(prefix))
+                .ok_or_else(not_a_dump)
+        };
+        let label = header("// ")?;
+        let spec = header("// entry ")?;
+        let constants = header("// constants:")?;
+        let source = lines.next().unwrap_or("");
+        let (entry, rest) = spec.split_once(", bindings [").ok_or_else(not_a_dump)?;
+        let (list, _) = rest.split_once(']').ok_or_else(not_a_dump)?;
+        let all = [
+            Binding::StorageRead,
+            Binding::StorageReadWrite,
+            Binding::Uniform,
+        ];
+        let bindings = list
+            .split(',')
+            .map(str::trim)
+            .filter(|b| !b.is_empty())
+            .map(|b| {
+                all.into_iter()
+                    .find(|x| x.name() == b)
+                    .ok_or_else(|| format!("unknown binding {b:?} in its header"))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut spec = KernelSpec::new(label, source, &bindings)
+            .entry(entry)
+            .portable();
+        for c in constants
+            .split(',')
+            .map(str::trim)
+            .filter(|c| !c.is_empty())
+        {
+            let (name, value) = c.split_once(" = ").ok_or_else(not_a_dump)?;
+            let value = value
+                .parse()
+                .map_err(|_| format!("constant {name}: {value:?} is not a number"))?;
+            spec = spec.constant(name, value);
+        }
+        Ok(spec)
+    }
+}
+
 /// For kernel work and for checking that a refactor leaves the kernels as they were:
 /// with `MESOFLOW_KERNEL_DUMP=<folder>`, every kernel built is written there as
-/// `<hash of its spec>.wgsl`, its label, entry, bindings and constants in a comment
-/// first, then the WGSL as compiled (`specialised` for the device), so two runs' folders
-/// compare file by file and `mesoflow kernel-stats` can build a file again. Failing to
-/// write is reported on stderr, never an error of the run.
+/// `<hash of its spec>.wgsl` (`KernelSpec::dump_text`: the WGSL as compiled, `specialised`
+/// for the device), so two runs' folders compare file by file and `mesoflow kernel-stats`
+/// can build a file again (`KernelSpec::from_dump`). Failing to write is reported on
+/// stderr, never an error of the run.
 fn dump(spec: &KernelSpec, specialised: &str) {
     use std::hash::{Hash, Hasher};
     static DIR: std::sync::OnceLock<Option<std::path::PathBuf>> = std::sync::OnceLock::new();
@@ -134,21 +216,8 @@ fn dump(spec: &KernelSpec, specialised: &str) {
     };
     let mut h = std::collections::hash_map::DefaultHasher::new();
     spec.hash(&mut h);
-    let constants: Vec<String> = spec
-        .constants
-        .iter()
-        .map(|(n, bits)| format!("{n} = {}", f64::from_bits(*bits)))
-        .collect();
-    let text = format!(
-        "// {}\n// entry {}, bindings {:?}, specialise {}\n// constants: {}\n{}",
-        spec.label,
-        spec.entry,
-        spec.bindings,
-        spec.specialise,
-        constants.join(", "),
-        specialised
-    );
     let file = dir.join(format!("{:016x}.wgsl", h.finish()));
+    let text = spec.dump_text(specialised);
     if let Err(e) = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&file, text)) {
         let _ = writeln!(
             std::io::stderr(),
@@ -565,7 +634,46 @@ fn runtime_checks() -> Option<wgpu::ShaderRuntimeChecks> {
 
 #[cfg(test)]
 mod tests {
-    use super::grid_1d;
+    use super::{Binding, KernelSpec, grid_1d};
+
+    /// A dump's text gives back the kernel it was written from (its source as compiled),
+    /// and what is not a dump is an error that says why.
+    #[test]
+    fn a_dump_gives_back_its_kernel() {
+        let spec = KernelSpec::new(
+            "a kernel",
+            "fn main() {}",
+            &[
+                Binding::StorageRead,
+                Binding::StorageReadWrite,
+                Binding::Uniform,
+            ],
+        )
+        .entry("go")
+        .constant("SCALE", 2.5)
+        .constant("TINY", 1e-300);
+        let back = KernelSpec::from_dump(&spec.dump_text("// compiled\nfn main() {}")).unwrap();
+        assert_eq!(back.label, spec.label);
+        assert_eq!(back.entry, spec.entry);
+        assert_eq!(back.bindings, spec.bindings);
+        assert_eq!(back.constants, spec.constants);
+        assert_eq!(back.source, "// compiled\nfn main() {}");
+        assert!(!back.specialise);
+        for (text, needle) in [
+            ("fn main() {}\n", "not a MESOFLOW_KERNEL_DUMP file"),
+            (
+                "// k\n// entry main, bindings [Texture], specialise true\n// constants: \n",
+                "unknown binding \"Texture\"",
+            ),
+            (
+                "// k\n// entry main, bindings [], specialise true\n// constants: N = many\n",
+                "constant N: \"many\" is not a number",
+            ),
+        ] {
+            let e = KernelSpec::from_dump(text).unwrap_err();
+            assert!(e.contains(needle), "{text:?}: {e}");
+        }
+    }
 
     #[test]
     fn grid_folds_past_the_dimension_cap() {

@@ -1219,7 +1219,7 @@ fn a_run_resumed_from_its_checkpoint_goes_on_bit_for_bit() {
 
 #[test]
 fn kernel_stats_builds_the_dumped_kernels_or_names_what_the_driver_lacks() {
-    use mesoflow::gpu::driver_stats::DumpedKernel;
+    use mesoflow::gpu::driver_stats::{read_dump, spirv};
     if gpu().is_none() {
         return;
     }
@@ -1261,10 +1261,8 @@ fn kernel_stats_builds_the_dumped_kernels_or_names_what_the_driver_lacks() {
     // Each dump is the kernel as compiled and builds to SPIR-V as wgpu builds it.
     let mut labels = Vec::new();
     for file in &files {
-        let k = DumpedKernel::read(file).unwrap();
-        let words = k
-            .spirv((1, 3))
-            .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        let k = read_dump(file).unwrap();
+        let words = spirv(&k, (1, 3)).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
         assert_eq!(words[0], 0x0723_0203, "{}: not SPIR-V", file.display());
         labels.push(k.label);
     }
