@@ -60,9 +60,11 @@
 #   overhead    the executor against raw wgpu
 #   kernels     what the driver makes of DP Stokes' kernels (`mesoflow kernel-stats`:
 #               registers, spills, code size as the driver reports them) for every slab
-#               kernel and wall mode at 10^5 and 10^6, their internal representations in
-#               $OUT/kernel_ir where the driver gives them; then the lanes kernel's steps
-#               taken out in turn (benches/variants.py's lanes_*), timed at 10^5 and 10^6
+#               kernel (bottom wall and none) at 10^5 and 10^6, their internal
+#               representations in $OUT/kernel_ir where the driver gives them; the
+#               candidate lanes_lean's statistics beside them; then the lanes kernel and
+#               lanes_lean timed at 10^5 and 10^6 (twice), and the lanes kernel's steps
+#               taken out in turn (benches/variants.py's lanes_*)
 #   determinism FCM (1e-3) and PSE (split 0.5) at 10^4 and 10^5, default and
 #               --deterministic; two identical runs of each at 10^5 compared word by word
 #   all         every suite above, in this order
@@ -388,15 +390,19 @@ suite_disks() {
 
 suite_kernels() {
   local dump=/tmp/kernel_dump
-  rm -rf "$dump"
-  # One rep each: the kernels are built (and dumped) whatever their timing.
-  MESOFLOW_KERNEL_DUMP=$dump run $bin bench dpstokes --walls bottom,slit,none \
-    --sizes 100000,1000000 --reps 1 --slab fused,lanes
-  run $bin kernel-stats --ir "$out/kernel_ir" $(grep -l -E "^// (slab solve|spread_chebyshev|interpolate_chebyshev|chebyshev)" "$dump"/*.wgsl)
+  rm -rf "$dump" "$dump"_lean
   # The variants here, not through gpu_variants.sh, whose common.sh would start the log again.
   python3 benches/variants.py "$out/variants" > /dev/null
   mkdir -p "$out/variants/base"
-  for v in base lanes_nosolve lanes_nodiff lanes_notransform lanes_nowalls lanes_skeleton; do
+  # One rep each: the kernels are built (and dumped) whatever their timing.
+  MESOFLOW_KERNEL_DUMP=$dump run $bin bench dpstokes --walls bottom,none \
+    --sizes 100000,1000000 --reps 1 --slab fused,lanes
+  MESOFLOW_SHADER_DIR=$out/variants/lanes_lean MESOFLOW_KERNEL_DUMP=${dump}_lean run $bin \
+    bench dpstokes --walls bottom,none --sizes 100000 --reps 1 --slab lanes
+  run $bin kernel-stats --ir "$out/kernel_ir" $(grep -l -E "^// (slab solve|spread_chebyshev|interpolate_chebyshev|chebyshev)" "$dump"/*.wgsl)
+  echo "== lanes_lean" | tee -a "$log"
+  run $bin kernel-stats $(grep -l -E "^// slab solve" "$dump"_lean/*.wgsl)
+  for v in base lanes_lean lanes_skeleton lanes_nosolve lanes_notransform lanes_nodiff lanes_nowalls base lanes_lean; do
     echo "== variant $v" | tee -a "$log"
     MESOFLOW_SHADER_DIR=$out/variants/$v MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes \
       --walls bottom --sizes 100000,1000000 --reps 10 --slab lanes

@@ -17,6 +17,11 @@ count; every table entry and forcing word is still read and every output word wr
   lanes_notransform the inverse transform's shuffles and sums (coefficients as values)
   lanes_nowalls     the walls' constants, factors and exponentials
   lanes_skeleton    all four: loads, the pressure's sources, stores
+The lanes_lean variant is a candidate, right to the last word (it passes tests/it/stokes_slab.rs
+with MESOFLOW_SHADER_DIR): the lanes kernel with its table rows read where used instead of
+held in private arrays, and the derivative's factors (1, 2 z) computed in place, so fewer
+registers a thread and more resident warps (at 10^5 the kernel's 3850 warps fit one wave
+only at 64 registers or fewer).
 Usage:
   python3 benches/variants.py OUT_DIR"""
 import pathlib
@@ -101,6 +106,73 @@ def lanes_without(src, steps):
     return src
 
 
+def lanes_lean(src):
+    """slab_lanes.wgsl with its table rows read where used (lanes_lean in the docstring)."""
+    def cut(start, end, new):
+        i, j = src.index(start), src.index(end)
+        return src[:i] + new + src[j:]
+    src = cut("// This lane's rows of chebyshev_bvp's tables", "// Per k: the Schur complement's", """\
+// This wave number (the segment's k); its table rows are read where used (0 past the line).
+var<private> wave: u32;
+
+fn below(i: u32) -> f32 {
+    let z = z_of(i);
+    return select(0.0, -entry(min(z, POINTS - 1u), wave), z < POINTS && z >= 2u);
+}
+
+fn above(i: u32) -> f32 {
+    let z = z_of(i);
+    let zc = min(z, POINTS - 1u);
+    return select(0.0, -entry(POINTS + zc, wave) * entry(2u * POINTS + zc, wave), z + 2u < POINTS);
+}
+
+fn own(i: u32) -> f32 {
+    let z = z_of(i);
+    return select(0.0, entry(POINTS + min(z, POINTS - 1u), wave), z < POINTS);
+}
+
+fn boundary_row(row: u32, i: u32) -> f32 {
+    let z = z_of(i);
+    return select(0.0, entry(row * POINTS + min(z, POINTS - 1u), wave), z < POINTS);
+}
+
+// The downward recurrences' factors: the back substitution's (above, own) or the
+// derivative's (1 on the element two above, 2 z on the element itself).
+fn down_mul(derivative: bool, i: u32) -> f32 {
+    if (derivative) {
+        return 1.0;
+    }
+    return above(i);
+}
+
+fn down_scale(derivative: bool, i: u32) -> f32 {
+    if (derivative) {
+        return 2.0 * f32(z_of(i));
+    }
+    return own(i);
+}
+
+""")
+    src = cut("    for (var i = 0u; i < PER; i++) {\n        let z = z_of(i);\n        let live = z < n;",
+              "    s_inv = vec4", "    wave = k;\n")
+    swaps = [
+        ("below[i + 1u]", "below(i + 1u)"), ("below[i]", "below(i)"),
+        ("""fn scan_downwards(line: ptr<function, Line>, mul: ptr<private, array<f32, PER>>,
+                  scale: ptr<private, array<f32, PER>>) {""",
+         "fn scan_downwards(line: ptr<function, Line>, derivative: bool) {"),
+        ("(*mul)[i + 1u]", "down_mul(derivative, i + 1u)"), ("(*mul)[i]", "down_mul(derivative, i)"),
+        ("(*scale)[i + 1u]", "down_scale(derivative, i + 1u)"), ("(*scale)[i]", "down_scale(derivative, i)"),
+        ("scan_downwards(&t, &unit, &twice_z);", "scan_downwards(&t, true);"),
+        ("scan_downwards(line, &above, &own);", "scan_downwards(line, false);"),
+        ("r0 += g0[i] * (*line)[i];", "r0 += boundary_row(3u, i) * (*line)[i];"),
+        ("r1 += g1[i] * (*line)[i];", "r1 += boundary_row(4u, i) * (*line)[i];"),
+    ]
+    for old, new in swaps:
+        assert old in src, f"slab_lanes.wgsl changed: update benches/variants.py ({old!r})"
+        src = src.replace(old, new)
+    return src
+
+
 def main():
     out = pathlib.Path(sys.argv[1])
     common = pathlib.Path("shaders/spread/interpolate_common.wgsl").read_text()
@@ -118,6 +190,7 @@ def main():
     for name, steps in [("nosolve", ["solve"]), ("nodiff", ["diff"]), ("notransform", ["transform"]),
                         ("nowalls", ["walls"]), ("skeleton", ["solve", "diff", "transform", "walls"])]:
         variants["lanes_" + name] = ("chebyshev/slab_lanes.wgsl", lanes_without(lanes, steps))
+    variants["lanes_lean"] = ("chebyshev/slab_lanes.wgsl", lanes_lean(lanes))
     for name, (file, text) in variants.items():
         f = out / name / file
         f.parent.mkdir(parents=True, exist_ok=True)
