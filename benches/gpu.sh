@@ -59,12 +59,13 @@
 #   primitives  reduce, sort (every variant), scan against CUB (torch)
 #   overhead    the executor against raw wgpu
 #   kernels     what the driver makes of DP Stokes' kernels (`mesoflow kernel-stats`:
-#               registers, spills, code size as the driver reports them) for every slab
-#               kernel (bottom wall and none) at 10^5 and 10^6, their internal
-#               representations in $OUT/kernel_ir where the driver gives them; the
-#               candidate lanes_lean's statistics beside them; then the lanes kernel and
-#               lanes_lean timed at 10^5 and 10^6 (twice), and the lanes kernel's steps
-#               taken out in turn (benches/variants.py's lanes_*)
+#               registers, spills, code size as the driver reports them): the slab,
+#               spreading and interpolation kernels at 10^5 (bottom wall and none), with
+#               the lanes kernel's candidates lanes_lean and lanes_lean2 (benches/
+#               variants.py), internal representations in $OUT/kernel_ir.tgz where the
+#               driver gives them; then the lanes kernel and both candidates timed at
+#               10^5 and 10^6 (twice, alternating), and the lanes kernel's steps taken
+#               out in turn (lanes_*)
 #   determinism FCM (1e-3) and PSE (split 0.5) at 10^4 and 10^5, default and
 #               --deterministic; two identical runs of each at 10^5 compared word by word
 #   all         every suite above, in this order
@@ -389,22 +390,30 @@ suite_disks() {
 }
 
 suite_kernels() {
-  local dump=/tmp/kernel_dump
-  rm -rf "$dump" "$dump"_lean
   # The variants here, not through gpu_variants.sh, whose common.sh would start the log again.
-  python3 benches/variants.py "$out/variants" > /dev/null
-  mkdir -p "$out/variants/base"
+  local v=/tmp/variants
+  rm -rf $v /tmp/kernel_dump_* /tmp/kernel_ir_*
+  python3 benches/variants.py $v > /dev/null
+  mkdir -p $v/base
   # One rep each: the kernels are built (and dumped) whatever their timing.
-  MESOFLOW_KERNEL_DUMP=$dump run $bin bench dpstokes --walls bottom,none \
-    --sizes 100000,1000000 --reps 1 --slab fused,lanes
-  MESOFLOW_SHADER_DIR=$out/variants/lanes_lean MESOFLOW_KERNEL_DUMP=${dump}_lean run $bin \
-    bench dpstokes --walls bottom,none --sizes 100000 --reps 1 --slab lanes
-  run $bin kernel-stats --ir "$out/kernel_ir" $(grep -l -E "^// (slab solve|spread_chebyshev|interpolate_chebyshev|chebyshev)" "$dump"/*.wgsl)
-  echo "== lanes_lean" | tee -a "$log"
-  run $bin kernel-stats $(grep -l -E "^// slab solve" "$dump"_lean/*.wgsl)
-  for v in base lanes_lean lanes_skeleton lanes_nosolve lanes_notransform lanes_nodiff lanes_nowalls base lanes_lean; do
-    echo "== variant $v" | tee -a "$log"
-    MESOFLOW_SHADER_DIR=$out/variants/$v MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes \
+  for c in base lanes_lean lanes_lean2; do
+    MESOFLOW_SHADER_DIR=$v/$c MESOFLOW_KERNEL_DUMP=/tmp/kernel_dump_$c $bin bench dpstokes \
+      --walls bottom,none --sizes 100000 --reps 1 --slab lanes,fused > /dev/null 2>&1
+    echo "== statistics: $c" | tee -a "$log"
+    run $bin kernel-stats --ir /tmp/kernel_ir_$c $(grep -l -E \
+      "^// (slab solve|spread_chebyshev|interpolate_chebyshev)" /tmp/kernel_dump_$c/*.wgsl)
+  done
+  tar czf "$out/kernel_ir.tgz" -C /tmp $(cd /tmp && ls -d kernel_ir_*)
+  for round in 1 2; do
+    for c in base lanes_lean lanes_lean2; do
+      echo "== variant $c (round $round)" | tee -a "$log"
+      MESOFLOW_SHADER_DIR=$v/$c MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes \
+        --walls bottom,none --sizes 100000,1000000 --reps 10 --slab lanes
+    done
+  done
+  for c in lanes_skeleton lanes_nosolve lanes_notransform lanes_nodiff lanes_nowalls; do
+    echo "== variant $c" | tee -a "$log"
+    MESOFLOW_SHADER_DIR=$v/$c MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes \
       --walls bottom --sizes 100000,1000000 --reps 10 --slab lanes
   done
 }

@@ -21,7 +21,9 @@ The lanes_lean variant is a candidate, right to the last word (it passes tests/i
 with MESOFLOW_SHADER_DIR): the lanes kernel with its table rows read where used instead of
 held in private arrays, and the derivative's factors (1, 2 z) computed in place, so fewer
 registers a thread and more resident warps (at 10^5 the kernel's 3850 warps fit one wave
-only at 64 registers or fewer).
+only at 64 registers or fewer). lanes_lean2, also right: lanes_lean with the walls' per-part
+constants built after the inverse transform's sums, and those sums one part (re, im) at a
+time, so fewer values are live during them.
 Usage:
   python3 benches/variants.py OUT_DIR"""
 import pathlib
@@ -173,6 +175,66 @@ fn down_scale(derivative: bool, i: u32) -> f32 {
     return src
 
 
+def lanes_lean2(src):
+    """lanes_lean, its walls' per-part constants built after the inverse transform's sums
+    and those sums one part at a time (fewer values live at once; lanes_lean2 in the
+    docstring)."""
+    src = lanes_lean(src)
+    tb = src.index("    // The velocity at the top and the bottom, columns x, y, z of (re, im).")
+    walls = src.index("    // The walls (slab_walls) and the k = 0 mode, per part.")
+    transform = src.index("    // The inverse transform by parity")
+    decl = "    var w_re = PartWalls(L(1.0), L(0.0), L(0.0), L(0.0), L(0.0));\n    var w_im = w_re;\n"
+    block = src[walls:transform]
+    split = block.index("    if (kabs == 0.0) {")
+    slope, constants = block[:split], block[split:]
+    assert decl in slope, "slab_lanes.wgsl changed: update benches/variants.py (walls)"
+    slope = slope.replace(decl, "").replace("    // The walls (slab_walls) and the k = 0 mode, per part.\n", "")
+    constants = "    // The walls (slab_walls) and the k = 0 mode, per part.\n" + decl + constants
+    ends = src[tb:walls]
+    src = src[:tb] + slope + src[transform:]
+    at = src.index("    if (!valid) {")
+    src = src[:at] + ends + constants + src[at:]
+    both = """            let c_re = subgroupShuffle(re[i], first_lane + src);
+            let c_im = subgroupShuffle(im[i], first_lane + src);
+            let m = PER * src + i;
+            if (m < n) {
+                for (var h = 0u; h < HALF; h++) {
+                    let j = min(HALF * lane + h, upper - 1u);
+                    let t = points[j * n + m];
+                    if (i % 2u == 0u) {
+                        even_re[h] += t * c_re;
+                        even_im[h] += t * c_im;
+                    } else {
+                        odd_re[h] += t * c_re;
+                        odd_im[h] += t * c_im;
+                    }
+                }
+            }
+        }
+    }
+"""
+    assert both in src, "slab_lanes.wgsl changed: update benches/variants.py (transform)"
+    def one(part):
+        return f"""            let c_{part} = subgroupShuffle({part}[i], first_lane + src);
+            let m = PER * src + i;
+            if (m < n) {{
+                for (var h = 0u; h < HALF; h++) {{
+                    let t = points[min(HALF * lane + h, upper - 1u) * n + m];
+                    if (i % 2u == 0u) {{
+                        even_{part}[h] += t * c_{part};
+                    }} else {{
+                        odd_{part}[h] += t * c_{part};
+                    }}
+                }}
+            }}
+        }}
+    }}
+"""
+    return src.replace(both, one("re") + """    for (var src = 0u; src < SEG; src++) {
+        for (var i = 0u; i < PER; i++) {
+""" + one("im"))
+
+
 def main():
     out = pathlib.Path(sys.argv[1])
     common = pathlib.Path("shaders/spread/interpolate_common.wgsl").read_text()
@@ -191,6 +253,7 @@ def main():
                         ("nowalls", ["walls"]), ("skeleton", ["solve", "diff", "transform", "walls"])]:
         variants["lanes_" + name] = ("chebyshev/slab_lanes.wgsl", lanes_without(lanes, steps))
     variants["lanes_lean"] = ("chebyshev/slab_lanes.wgsl", lanes_lean(lanes))
+    variants["lanes_lean2"] = ("chebyshev/slab_lanes.wgsl", lanes_lean2(lanes))
     for name, (file, text) in variants.items():
         f = out / name / file
         f.parent.mkdir(parents=True, exist_ok=True)
