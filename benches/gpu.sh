@@ -59,13 +59,11 @@
 #   primitives  reduce, sort (every variant), scan against CUB (torch)
 #   overhead    the executor against raw wgpu
 #   kernels     what the driver makes of DP Stokes' kernels (`mesoflow kernel-stats`:
-#               registers, spills, code size as the driver reports them): the slab,
-#               spreading and interpolation kernels at 10^5 (bottom wall and none), with
-#               the lanes kernel's candidates lanes_lean and lanes_lean2 (benches/
-#               variants.py), internal representations in $OUT/kernel_ir.tgz where the
-#               driver gives them; then the lanes kernel and both candidates timed at
-#               10^5 and 10^6 (twice, alternating), and the lanes kernel's steps taken
-#               out in turn (lanes_*)
+#               registers, code size, workgroup memory as the driver reports them): the
+#               slab, spreading and interpolation kernels at 10^5 (bottom wall and none),
+#               internal representations in $OUT/kernel_ir.tgz where the driver gives
+#               them (NVIDIA's 580 driver gives none); then the lanes kernel timed at 10^5
+#               and 10^6 with each of its steps taken out in turn (benches/variants.py)
 #   determinism FCM (1e-3) and PSE (split 0.5) at 10^4 and 10^5, default and
 #               --deterministic; two identical runs of each at 10^5 compared word by word
 #   all         every suite above, in this order
@@ -392,26 +390,16 @@ suite_disks() {
 suite_kernels() {
   # The variants here, not through gpu_variants.sh, whose common.sh would start the log again.
   local v=/tmp/variants
-  rm -rf $v /tmp/kernel_dump_* /tmp/kernel_ir_*
+  rm -rf $v /tmp/kernel_dump /tmp/kernel_ir
   python3 benches/variants.py $v > /dev/null
   mkdir -p $v/base
   # One rep each: the kernels are built (and dumped) whatever their timing.
-  for c in base lanes_lean lanes_lean2; do
-    MESOFLOW_SHADER_DIR=$v/$c MESOFLOW_KERNEL_DUMP=/tmp/kernel_dump_$c $bin bench dpstokes \
-      --walls bottom,none --sizes 100000 --reps 1 --slab lanes,fused > /dev/null 2>&1
-    echo "== statistics: $c" | tee -a "$log"
-    run $bin kernel-stats --ir /tmp/kernel_ir_$c $(grep -l -E \
-      "^// (slab solve|spread_chebyshev|interpolate_chebyshev)" /tmp/kernel_dump_$c/*.wgsl)
-  done
-  tar czf "$out/kernel_ir.tgz" -C /tmp $(cd /tmp && ls -d kernel_ir_*)
-  for round in 1 2; do
-    for c in base lanes_lean lanes_lean2; do
-      echo "== variant $c (round $round)" | tee -a "$log"
-      MESOFLOW_SHADER_DIR=$v/$c MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes \
-        --walls bottom,none --sizes 100000,1000000 --reps 10 --slab lanes
-    done
-  done
-  for c in lanes_skeleton lanes_nosolve lanes_notransform lanes_nodiff lanes_nowalls; do
+  MESOFLOW_KERNEL_DUMP=/tmp/kernel_dump $bin bench dpstokes --walls bottom,none \
+    --sizes 100000 --reps 1 --slab lanes,fused > /dev/null 2>&1
+  run $bin kernel-stats --ir /tmp/kernel_ir $(grep -l -E \
+    "^// (slab solve|spread_chebyshev|interpolate_chebyshev)" /tmp/kernel_dump/*.wgsl)
+  [ -d /tmp/kernel_ir ] && tar czf "$out/kernel_ir.tgz" -C /tmp kernel_ir
+  for c in base lanes_skeleton lanes_nosolve lanes_notransform lanes_nodiff lanes_nowalls; do
     echo "== variant $c" | tee -a "$log"
     MESOFLOW_SHADER_DIR=$v/$c MESOFLOW_BENCH_DISPATCHES=1 run $bin bench dpstokes \
       --walls bottom --sizes 100000,1000000 --reps 10 --slab lanes

@@ -17,13 +17,6 @@ count; every table entry and forcing word is still read and every output word wr
   lanes_notransform the inverse transform's shuffles and sums (coefficients as values)
   lanes_nowalls     the walls' constants, factors and exponentials
   lanes_skeleton    all four: loads, the pressure's sources, stores
-The lanes_lean variant is a candidate, right to the last word (it passes tests/it/stokes_slab.rs
-with MESOFLOW_SHADER_DIR): the lanes kernel with its table rows read where used instead of
-held in private arrays, and the derivative's factors (1, 2 z) computed in place, so fewer
-registers a thread and more resident warps (at 10^5 the kernel's 3850 warps fit one wave
-only at 64 registers or fewer). lanes_lean2, also right: lanes_lean with the walls' per-part
-constants built after the inverse transform's sums, and those sums one part (re, im) at a
-time, so fewer values are live during them.
 Usage:
   python3 benches/variants.py OUT_DIR"""
 import pathlib
@@ -78,7 +71,7 @@ def lanes_without(src, steps):
         end = src.index("// The walls' flow of one part")
         src = src[:start] + """fn solve(line: ptr<function, Line>, alpha: L, beta: L) {
     for (var i = 0u; i < PER; i++) {
-        (*line)[i] = own[i] * (*line)[i] + below[i] * alpha + above[i] * beta + g0[i] + kappa2 * g1[i] + s_inv.x;
+        (*line)[i] = own(i) * (*line)[i] + below(i) * alpha + above(i) * beta + boundary_row(3u, i) + kappa2 * boundary_row(4u, i) + s_inv.x;
     }
 }
 
@@ -88,14 +81,14 @@ def lanes_without(src, steps):
         end = src.index("// chebyshev_bvp's solve")
         src = src[:start] + """fn differentiate(line: ptr<function, Line>) {
     for (var i = 0u; i < PER; i++) {
-        (*line)[i] = u.dz_scale * (unit[i] + twice_z[i]) * (*line)[i];
+        (*line)[i] = u.dz_scale * (1.0 + 2.0 * f32(z_of(i))) * (*line)[i];
     }
 }
 
 """ + src[end:]
     if "transform" in steps:
         start = src.index("    for (var src = 0u; src < SEG; src++) {")
-        end = src.index("    if (!valid) {")
+        end = src.index("    // The velocity at the top and the bottom")
         src = src[:start] + """    for (var h = 0u; h < HALF; h++) {
         even_re[h] = re[h % PER] + points[h];
         odd_re[h] = re[(h + 1u) % PER];
@@ -106,133 +99,6 @@ def lanes_without(src, steps):
     if "walls" in steps:
         src = src.replace("let walls = u.slab.walls;", "let walls = 0u;")
     return src
-
-
-def lanes_lean(src):
-    """slab_lanes.wgsl with its table rows read where used (lanes_lean in the docstring)."""
-    def cut(start, end, new):
-        i, j = src.index(start), src.index(end)
-        return src[:i] + new + src[j:]
-    src = cut("// This lane's rows of chebyshev_bvp's tables", "// Per k: the Schur complement's", """\
-// This wave number (the segment's k); its table rows are read where used (0 past the line).
-var<private> wave: u32;
-
-fn below(i: u32) -> f32 {
-    let z = z_of(i);
-    return select(0.0, -entry(min(z, POINTS - 1u), wave), z < POINTS && z >= 2u);
-}
-
-fn above(i: u32) -> f32 {
-    let z = z_of(i);
-    let zc = min(z, POINTS - 1u);
-    return select(0.0, -entry(POINTS + zc, wave) * entry(2u * POINTS + zc, wave), z + 2u < POINTS);
-}
-
-fn own(i: u32) -> f32 {
-    let z = z_of(i);
-    return select(0.0, entry(POINTS + min(z, POINTS - 1u), wave), z < POINTS);
-}
-
-fn boundary_row(row: u32, i: u32) -> f32 {
-    let z = z_of(i);
-    return select(0.0, entry(row * POINTS + min(z, POINTS - 1u), wave), z < POINTS);
-}
-
-// The downward recurrences' factors: the back substitution's (above, own) or the
-// derivative's (1 on the element two above, 2 z on the element itself).
-fn down_mul(derivative: bool, i: u32) -> f32 {
-    if (derivative) {
-        return 1.0;
-    }
-    return above(i);
-}
-
-fn down_scale(derivative: bool, i: u32) -> f32 {
-    if (derivative) {
-        return 2.0 * f32(z_of(i));
-    }
-    return own(i);
-}
-
-""")
-    src = cut("    for (var i = 0u; i < PER; i++) {\n        let z = z_of(i);\n        let live = z < n;",
-              "    s_inv = vec4", "    wave = k;\n")
-    swaps = [
-        ("below[i + 1u]", "below(i + 1u)"), ("below[i]", "below(i)"),
-        ("""fn scan_downwards(line: ptr<function, Line>, mul: ptr<private, array<f32, PER>>,
-                  scale: ptr<private, array<f32, PER>>) {""",
-         "fn scan_downwards(line: ptr<function, Line>, derivative: bool) {"),
-        ("(*mul)[i + 1u]", "down_mul(derivative, i + 1u)"), ("(*mul)[i]", "down_mul(derivative, i)"),
-        ("(*scale)[i + 1u]", "down_scale(derivative, i + 1u)"), ("(*scale)[i]", "down_scale(derivative, i)"),
-        ("scan_downwards(&t, &unit, &twice_z);", "scan_downwards(&t, true);"),
-        ("scan_downwards(line, &above, &own);", "scan_downwards(line, false);"),
-        ("r0 += g0[i] * (*line)[i];", "r0 += boundary_row(3u, i) * (*line)[i];"),
-        ("r1 += g1[i] * (*line)[i];", "r1 += boundary_row(4u, i) * (*line)[i];"),
-    ]
-    for old, new in swaps:
-        assert old in src, f"slab_lanes.wgsl changed: update benches/variants.py ({old!r})"
-        src = src.replace(old, new)
-    return src
-
-
-def lanes_lean2(src):
-    """lanes_lean, its walls' per-part constants built after the inverse transform's sums
-    and those sums one part at a time (fewer values live at once; lanes_lean2 in the
-    docstring)."""
-    src = lanes_lean(src)
-    tb = src.index("    // The velocity at the top and the bottom, columns x, y, z of (re, im).")
-    walls = src.index("    // The walls (slab_walls) and the k = 0 mode, per part.")
-    transform = src.index("    // The inverse transform by parity")
-    decl = "    var w_re = PartWalls(L(1.0), L(0.0), L(0.0), L(0.0), L(0.0));\n    var w_im = w_re;\n"
-    block = src[walls:transform]
-    split = block.index("    if (kabs == 0.0) {")
-    slope, constants = block[:split], block[split:]
-    assert decl in slope, "slab_lanes.wgsl changed: update benches/variants.py (walls)"
-    slope = slope.replace(decl, "").replace("    // The walls (slab_walls) and the k = 0 mode, per part.\n", "")
-    constants = "    // The walls (slab_walls) and the k = 0 mode, per part.\n" + decl + constants
-    ends = src[tb:walls]
-    src = src[:tb] + slope + src[transform:]
-    at = src.index("    if (!valid) {")
-    src = src[:at] + ends + constants + src[at:]
-    both = """            let c_re = subgroupShuffle(re[i], first_lane + src);
-            let c_im = subgroupShuffle(im[i], first_lane + src);
-            let m = PER * src + i;
-            if (m < n) {
-                for (var h = 0u; h < HALF; h++) {
-                    let j = min(HALF * lane + h, upper - 1u);
-                    let t = points[j * n + m];
-                    if (i % 2u == 0u) {
-                        even_re[h] += t * c_re;
-                        even_im[h] += t * c_im;
-                    } else {
-                        odd_re[h] += t * c_re;
-                        odd_im[h] += t * c_im;
-                    }
-                }
-            }
-        }
-    }
-"""
-    assert both in src, "slab_lanes.wgsl changed: update benches/variants.py (transform)"
-    def one(part):
-        return f"""            let c_{part} = subgroupShuffle({part}[i], first_lane + src);
-            let m = PER * src + i;
-            if (m < n) {{
-                for (var h = 0u; h < HALF; h++) {{
-                    let t = points[min(HALF * lane + h, upper - 1u) * n + m];
-                    if (i % 2u == 0u) {{
-                        even_{part}[h] += t * c_{part};
-                    }} else {{
-                        odd_{part}[h] += t * c_{part};
-                    }}
-                }}
-            }}
-        }}
-    }}
-"""
-    return src.replace(both, one("re") + """    for (var src = 0u; src < SEG; src++) {
-        for (var i = 0u; i < PER; i++) {
-""" + one("im"))
 
 
 def main():
@@ -252,8 +118,6 @@ def main():
     for name, steps in [("nosolve", ["solve"]), ("nodiff", ["diff"]), ("notransform", ["transform"]),
                         ("nowalls", ["walls"]), ("skeleton", ["solve", "diff", "transform", "walls"])]:
         variants["lanes_" + name] = ("chebyshev/slab_lanes.wgsl", lanes_without(lanes, steps))
-    variants["lanes_lean"] = ("chebyshev/slab_lanes.wgsl", lanes_lean(lanes))
-    variants["lanes_lean2"] = ("chebyshev/slab_lanes.wgsl", lanes_lean2(lanes))
     for name, (file, text) in variants.items():
         f = out / name / file
         f.parent.mkdir(parents=True, exist_ok=True)

@@ -72,10 +72,10 @@
 //! No workgroup memory and no barrier. A wave number's serial chain is then a few points
 //! and a few shuffles long, and a grid has 8 times the threads of the kernels of whole
 //! lines, for grids whose few wave numbers leave those kernels' chains unhidden. On an
-//! H100 (2026-12-07 19:04Z) 0.047 ms at 10^5 spheres (bottom wall, 30 points) against the
+//! H100 (2026-12-08 00:32Z) 0.043 ms at 10^5 spheres (bottom wall, 30 points) against the
 //! three-lines kernel's 0.053, but 0.25 against 0.23 at 10^6 and slower past 32 points,
 //! so it is opt-in (`slab` `lanes`): `auto` is planned without the device its subgroups
-//! need, for at most 2 % of the product.
+//! need, for about 2 % of the product.
 
 use crate::gpu::{Binding, CompileCtx, CompileError, DeviceCaps, Dispatch, KernelSpec, NodeIo};
 use crate::node::{

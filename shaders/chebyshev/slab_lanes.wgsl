@@ -19,9 +19,9 @@
 // a lane's line of the real and of the imaginary parts (x, y, z as the lanes of a vec3)
 // stays in registers. Neighbouring k sit in neighbouring segments, so a warp's load of
 // one element reads, in each of SEG planes, the (re, im) pairs of 32 / SEG consecutive k.
-// On an H100 (2026-12-07, BENCHMARKS.md) it took 0.047 ms at 10^5 spheres (bottom wall,
+// On an H100 (2026-12-08, BENCHMARKS.md) it took 0.043 ms at 10^5 spheres (bottom wall,
 // 30 points) against the three-lines kernel's 0.053, 0.25 against 0.23 at 10^6, and
-// lost past 32 points (6 points a lane, the line padded): opt-in, not `auto`'s choice.
+// loses past 32 points (6 points a lane, the line padded): opt-in, not `auto`'s choice.
 // Every shuffle is outside any branch that depends on the lane: segments past the last k
 // run on k = nk - 1 and write nothing. Assumes full subgroups of consecutive invocations,
 // as the other lane kernels do (chebyshev/lanes.wgsl).
@@ -41,18 +41,52 @@ alias Line = array<L, PER>;
 var<private> lane: u32;
 var<private> first_lane: u32;
 
-// This lane's rows of chebyshev_bvp's tables, 0 past the line: the forward elimination's
-// factor on the element two below (-l_z), the back substitution's on the element two
-// above (-q_z u_z) and on the element itself (q_z), and the boundary rows g0, g1.
-var<private> below: array<f32, PER>;
-var<private> above: array<f32, PER>;
-var<private> own: array<f32, PER>;
-var<private> g0: array<f32, PER>;
-var<private> g1: array<f32, PER>;
-// The Chebyshev derivative's recurrence factors (`differentiate`): 1 on the element two
-// above, 2 z on the element itself.
-var<private> unit: array<f32, PER>;
-var<private> twice_z: array<f32, PER>;
+// This wave number (the segment's k). Its rows of chebyshev_bvp's tables are read where
+// used, 0 past the line, not held in private arrays: `below`, the forward elimination's
+// factor on the element two below (-l_z); `above` and `own`, the back substitution's on
+// the element two above (-q_z u_z) and on the element itself (q_z); the boundary rows g0
+// (row 3) and g1 (row 4). Held in arrays (and with the derivative's factors as arrays) the
+// kernel ran the same at 30 points and 1.13x / 1.29x slower at 34 (10^5 / 10^6, H100,
+// 2026-12-08; 155 registers a thread either way there, by the driver's statistics).
+var<private> wave: u32;
+
+fn below(i: u32) -> f32 {
+    let z = z_of(i);
+    return select(0.0, -entry(min(z, POINTS - 1u), wave), z < POINTS && z >= 2u);
+}
+
+fn above(i: u32) -> f32 {
+    let z = z_of(i);
+    let zc = min(z, POINTS - 1u);
+    return select(0.0, -entry(POINTS + zc, wave) * entry(2u * POINTS + zc, wave), z + 2u < POINTS);
+}
+
+fn own(i: u32) -> f32 {
+    let z = z_of(i);
+    return select(0.0, entry(POINTS + min(z, POINTS - 1u), wave), z < POINTS);
+}
+
+fn boundary_row(row: u32, i: u32) -> f32 {
+    let z = z_of(i);
+    return select(0.0, entry(row * POINTS + min(z, POINTS - 1u), wave), z < POINTS);
+}
+
+// The downward recurrences' factors: the back substitution's (above, own) or the Chebyshev
+// derivative's (`differentiate`: 1 on the element two above, 2 z on the element itself).
+fn down_mul(derivative: bool, i: u32) -> f32 {
+    if (derivative) {
+        return 1.0;
+    }
+    return above(i);
+}
+
+fn down_scale(derivative: bool, i: u32) -> f32 {
+    if (derivative) {
+        return 2.0 * f32(z_of(i));
+    }
+    return own(i);
+}
+
 // Per k: the Schur complement's 2 x 2 inverse (rows y0, p0) and kappa^2.
 var<private> s_inv: vec4<f32>;
 var<private> kappa2: f32;
@@ -105,10 +139,10 @@ fn eliminate_upwards(line: ptr<function, Line>) {
     var b0 = L(0.0);
     var b1 = L(0.0);
     for (var i = 0u; i < PER; i += 2u) {
-        b0 = below[i] * b0 + (*line)[i];
-        a.x *= below[i];
-        b1 = below[i + 1u] * b1 + (*line)[i + 1u];
-        a.y *= below[i + 1u];
+        b0 = below(i) * b0 + (*line)[i];
+        a.x *= below(i);
+        b1 = below(i + 1u) * b1 + (*line)[i + 1u];
+        a.y *= below(i + 1u);
     }
     // Inclusive scan: each lane's map after those of the lanes before it.
     for (var d = 1u; d < SEG; d *= 2u) {
@@ -130,26 +164,25 @@ fn eliminate_upwards(line: ptr<function, Line>) {
         x1 = L(0.0);
     }
     for (var i = 0u; i < PER; i += 2u) {
-        x0 = below[i] * x0 + (*line)[i];
+        x0 = below(i) * x0 + (*line)[i];
         (*line)[i] = x0;
-        x1 = below[i + 1u] * x1 + (*line)[i + 1u];
+        x1 = below(i + 1u) * x1 + (*line)[i + 1u];
         (*line)[i + 1u] = x1;
     }
 }
 
 // The recurrence x_z = mul_z x_(z+2) + scale_z x_z downwards along each parity (0 past
 // the line): a scan over the segment from its last lane, whose chain starts past the line.
-fn scan_downwards(line: ptr<function, Line>, mul: ptr<private, array<f32, PER>>,
-                  scale: ptr<private, array<f32, PER>>) {
+fn scan_downwards(line: ptr<function, Line>, derivative: bool) {
     var a = vec2<f32>(1.0);
     var b0 = L(0.0);
     var b1 = L(0.0);
     for (var j = 0u; j < PER; j += 2u) {
         let i = PER - 2u - j;
-        b0 = (*mul)[i] * b0 + (*scale)[i] * (*line)[i];
-        a.x *= (*mul)[i];
-        b1 = (*mul)[i + 1u] * b1 + (*scale)[i + 1u] * (*line)[i + 1u];
-        a.y *= (*mul)[i + 1u];
+        b0 = down_mul(derivative, i) * b0 + down_scale(derivative, i) * (*line)[i];
+        a.x *= down_mul(derivative, i);
+        b1 = down_mul(derivative, i + 1u) * b1 + down_scale(derivative, i + 1u) * (*line)[i + 1u];
+        a.y *= down_mul(derivative, i + 1u);
     }
     for (var d = 1u; d < SEG; d *= 2u) {
         let ap = subgroupShuffleDown(a, d);
@@ -169,9 +202,9 @@ fn scan_downwards(line: ptr<function, Line>, mul: ptr<private, array<f32, PER>>,
     }
     for (var j = 0u; j < PER; j += 2u) {
         let i = PER - 2u - j;
-        x0 = (*mul)[i] * x0 + (*scale)[i] * (*line)[i];
+        x0 = down_mul(derivative, i) * x0 + down_scale(derivative, i) * (*line)[i];
         (*line)[i] = x0;
-        x1 = (*mul)[i + 1u] * x1 + (*scale)[i + 1u] * (*line)[i + 1u];
+        x1 = down_mul(derivative, i + 1u) * x1 + down_scale(derivative, i + 1u) * (*line)[i + 1u];
         (*line)[i + 1u] = x1;
     }
 }
@@ -194,7 +227,7 @@ fn previous_lane_last(line: ptr<function, Line>) -> L {
 // then d_m = t_(m+1).
 fn differentiate(line: ptr<function, Line>) {
     var t = *line;
-    scan_downwards(&t, &unit, &twice_z);
+    scan_downwards(&t, true);
     let after = next_lane_first(&t);
     for (var i = 0u; i < PER; i++) {
         var d: L;
@@ -217,8 +250,8 @@ fn solve(line: ptr<function, Line>, alpha: L, beta: L) {
     var r0 = L(0.0);
     var r1 = L(0.0);
     for (var i = 0u; i < PER; i++) {
-        r0 += g0[i] * (*line)[i];
-        r1 += g1[i] * (*line)[i];
+        r0 += boundary_row(3u, i) * (*line)[i];
+        r1 += boundary_row(4u, i) * (*line)[i];
     }
     r0 = segment_sum(r0) - alpha;
     r1 = segment_sum(r1) - beta;
@@ -231,7 +264,7 @@ fn solve(line: ptr<function, Line>, alpha: L, beta: L) {
     }
     eliminate_upwards(line);
     // The back substitution x_z = above_z x_(z+2) + own_z x_z.
-    scan_downwards(line, &above, &own);
+    scan_downwards(line, false);
     // y'_0 = P0, y'_1 = a_0 - a_2 / 2, y'_m = (a_(m-1) - a_(m+1)) / 2m (0 from n on).
     var slope: Line;
     let a_before = previous_lane_last(line);
@@ -311,19 +344,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let k_here = (wid.y * nwg.x + wid.x) * (WG / SEG) + lid / SEG;
     let valid = k_here < nk;
     let k = min(k_here, nk - 1u);
-    for (var i = 0u; i < PER; i++) {
-        let z = z_of(i);
-        let live = z < n;
-        let zc = min(z, n - 1u);
-        let q = entry(n + zc, k);
-        below[i] = select(0.0, -entry(zc, k), live && z >= 2u);
-        above[i] = select(0.0, -q * entry(2u * n + zc, k), z + 2u < n);
-        own[i] = select(0.0, q, live);
-        g0[i] = select(0.0, entry(3u * n + zc, k), live);
-        g1[i] = select(0.0, entry(4u * n + zc, k), live);
-        unit[i] = 1.0;
-        twice_z[i] = 2.0 * f32(z);
-    }
+    wave = k;
     s_inv = vec4<f32>(entry(5u * n, k), entry(5u * n + 1u, k), entry(5u * n + 2u, k), entry(5u * n + 3u, k));
     kappa2 = entry(5u * n + 4u, k);
     let q = slab_wave(u.slab, k, true);
@@ -379,15 +400,6 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     solve(&im, alpha_im, beta_im);
     let re_ends = line_ends(&re);
     let im_ends = line_ends(&im);
-    // The velocity at the top and the bottom, columns x, y, z of (re, im).
-    let top = mat3x2<f32>(vec2<f32>(re_ends[0].x, im_ends[0].x), vec2<f32>(re_ends[0].y, im_ends[0].y),
-                          vec2<f32>(re_ends[0].z, im_ends[0].z));
-    let bottom = mat3x2<f32>(vec2<f32>(re_ends[1].x, im_ends[1].x), vec2<f32>(re_ends[1].y, im_ends[1].y),
-                             vec2<f32>(re_ends[1].z, im_ends[1].z));
-
-    // The walls (slab_walls) and the k = 0 mode, per part.
-    var w_re = PartWalls(L(1.0), L(0.0), L(0.0), L(0.0), L(0.0));
-    var w_im = w_re;
     let walls = u.slab.walls;
     // dv/dz at the top from the coefficients, (2 / H) sum m^2 c_m (the bottom wall's k = 0).
     // Summed only with the bottom wall (uniform over the dispatch, so its shuffles stay
@@ -403,6 +415,64 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         slope_re = u.dz_scale * segment_sum(slope_re);
         slope_im = u.dz_scale * segment_sum(slope_im);
     }
+    // The inverse transform by parity: this lane's upper-half points j = HALF lane + h
+    // (and their mirrors n - 1 - j) from every lane's coefficients, read by shuffle: one
+    // part's sums, then the other's, and the walls' constants after both. Against both
+    // parts' sums in one loop after the constants: 0.0466 -> 0.0426 ms at 10^5 (bottom wall,
+    // H100 2026-12-08), though the driver gives this order 128 registers, not 96; at 34
+    // points 128 with 4.5 KiB of workgroup memory, not 155.
+    var even_re: array<L, HALF>;
+    var odd_re: array<L, HALF>;
+    var even_im: array<L, HALF>;
+    var odd_im: array<L, HALF>;
+    for (var h = 0u; h < HALF; h++) {
+        even_re[h] = L(0.0);
+        odd_re[h] = L(0.0);
+        even_im[h] = L(0.0);
+        odd_im[h] = L(0.0);
+    }
+    let upper = (n + 1u) / 2u;
+    for (var src = 0u; src < SEG; src++) {
+        for (var i = 0u; i < PER; i++) {
+            let c_re = subgroupShuffle(re[i], first_lane + src);
+            let m = PER * src + i;
+            if (m < n) {
+                for (var h = 0u; h < HALF; h++) {
+                    let t = points[min(HALF * lane + h, upper - 1u) * n + m];
+                    if (i % 2u == 0u) {
+                        even_re[h] += t * c_re;
+                    } else {
+                        odd_re[h] += t * c_re;
+                    }
+                }
+            }
+        }
+    }
+    for (var src = 0u; src < SEG; src++) {
+        for (var i = 0u; i < PER; i++) {
+            let c_im = subgroupShuffle(im[i], first_lane + src);
+            let m = PER * src + i;
+            if (m < n) {
+                for (var h = 0u; h < HALF; h++) {
+                    let t = points[min(HALF * lane + h, upper - 1u) * n + m];
+                    if (i % 2u == 0u) {
+                        even_im[h] += t * c_im;
+                    } else {
+                        odd_im[h] += t * c_im;
+                    }
+                }
+            }
+        }
+    }
+    // The velocity at the top and the bottom, columns x, y, z of (re, im).
+    let top = mat3x2<f32>(vec2<f32>(re_ends[0].x, im_ends[0].x), vec2<f32>(re_ends[0].y, im_ends[0].y),
+                          vec2<f32>(re_ends[0].z, im_ends[0].z));
+    let bottom = mat3x2<f32>(vec2<f32>(re_ends[1].x, im_ends[1].x), vec2<f32>(re_ends[1].y, im_ends[1].y),
+                             vec2<f32>(re_ends[1].z, im_ends[1].z));
+
+    // The walls (slab_walls) and the k = 0 mode, per part.
+    var w_re = PartWalls(L(1.0), L(0.0), L(0.0), L(0.0), L(0.0));
+    var w_im = w_re;
     if (kabs == 0.0) {
         // Zero but for the bottom wall's and the slit's shear flows (x, y).
         w_re.keep = L(0.0);
@@ -429,39 +499,6 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         w_im = PartWalls(L(1.0), part_of(a1, 1u), part_of(cd.c, 1u), part_of(a2, 1u), part_of(cd.d, 1u));
     }
 
-    // The inverse transform by parity: this lane's upper-half points j = HALF lane + h
-    // (and their mirrors n - 1 - j) from every lane's coefficients, read by shuffle.
-    var even_re: array<L, HALF>;
-    var odd_re: array<L, HALF>;
-    var even_im: array<L, HALF>;
-    var odd_im: array<L, HALF>;
-    for (var h = 0u; h < HALF; h++) {
-        even_re[h] = L(0.0);
-        odd_re[h] = L(0.0);
-        even_im[h] = L(0.0);
-        odd_im[h] = L(0.0);
-    }
-    let upper = (n + 1u) / 2u;
-    for (var src = 0u; src < SEG; src++) {
-        for (var i = 0u; i < PER; i++) {
-            let c_re = subgroupShuffle(re[i], first_lane + src);
-            let c_im = subgroupShuffle(im[i], first_lane + src);
-            let m = PER * src + i;
-            if (m < n) {
-                for (var h = 0u; h < HALF; h++) {
-                    let j = min(HALF * lane + h, upper - 1u);
-                    let t = points[j * n + m];
-                    if (i % 2u == 0u) {
-                        even_re[h] += t * c_re;
-                        even_im[h] += t * c_im;
-                    } else {
-                        odd_re[h] += t * c_re;
-                        odd_im[h] += t * c_im;
-                    }
-                }
-            }
-        }
-    }
     if (!valid) {
         return;
     }
