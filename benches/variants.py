@@ -87,14 +87,18 @@ def lanes_without(src, steps):
 
 """ + src[end:]
     if "transform" in steps:
-        start = src.index("    for (var src = 0u; src < SEG; src++) {")
-        end = src.index("    // The velocity at the top and the bottom")
-        src = src[:start] + """    for (var h = 0u; h < HALF; h++) {
-        even_re[h] = re[h % PER] + points[h];
-        odd_re[h] = re[(h + 1u) % PER];
-        even_im[h] = im[h % PER];
-        odd_im[h] = im[(h + 1u) % PER];
+        start = src.index("fn parity_sums(line: ptr<function, Line>) -> array<Half, 2> {")
+        end = src.index("@compute @workgroup_size(WG)")
+        src = src[:start] + """fn parity_sums(line: ptr<function, Line>) -> array<Half, 2> {
+    var even: Half;
+    var odd: Half;
+    for (var h = 0u; h < HALF; h++) {
+        even[h] = (*line)[h % PER] + points[h];
+        odd[h] = (*line)[(h + 1u) % PER];
     }
+    return array<Half, 2>(even, odd);
+}
+
 """ + src[end:]
     if "walls" in steps:
         src = src.replace("let walls = u.slab.walls;", "let walls = 0u;")

@@ -333,6 +333,39 @@ fn part_of(m: mat3x2<f32>, part: u32) -> L {
     return L(m[0][part], m[1][part], m[2][part]);
 }
 
+alias Half = array<L, HALF>;
+
+// The inverse transform by parity of one part's line: at this lane's upper-half points j =
+// HALF lane + h the sums over the even and over the odd coefficients of every lane, read
+// by shuffle (the values at j and at its mirror n - 1 - j are their sum and difference).
+fn parity_sums(line: ptr<function, Line>) -> array<Half, 2> {
+    let n = POINTS;
+    let upper = (n + 1u) / 2u;
+    var even: Half;
+    var odd: Half;
+    for (var h = 0u; h < HALF; h++) {
+        even[h] = L(0.0);
+        odd[h] = L(0.0);
+    }
+    for (var src = 0u; src < SEG; src++) {
+        for (var i = 0u; i < PER; i++) {
+            let c = subgroupShuffle((*line)[i], first_lane + src);
+            let m = PER * src + i;
+            if (m < n) {
+                for (var h = 0u; h < HALF; h++) {
+                    let t = points[min(HALF * lane + h, upper - 1u) * n + m];
+                    if (i % 2u == 0u) {
+                        even[h] += t * c;
+                    } else {
+                        odd[h] += t * c;
+                    }
+                }
+            }
+        }
+    }
+    return array<Half, 2>(even, odd);
+}
+
 @compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32,
@@ -415,55 +448,13 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         slope_re = u.dz_scale * segment_sum(slope_re);
         slope_im = u.dz_scale * segment_sum(slope_im);
     }
-    // The inverse transform by parity: this lane's upper-half points j = HALF lane + h
-    // (and their mirrors n - 1 - j) from every lane's coefficients, read by shuffle: one
-    // part's sums, then the other's, and the walls' constants after both. Against both
-    // parts' sums in one loop after the constants: 0.0466 -> 0.0426 ms at 10^5 (bottom wall,
-    // H100 2026-12-08), though the driver gives this order 128 registers, not 96; at 34
-    // points 128 with 4.5 KiB of workgroup memory, not 155.
-    var even_re: array<L, HALF>;
-    var odd_re: array<L, HALF>;
-    var even_im: array<L, HALF>;
-    var odd_im: array<L, HALF>;
-    for (var h = 0u; h < HALF; h++) {
-        even_re[h] = L(0.0);
-        odd_re[h] = L(0.0);
-        even_im[h] = L(0.0);
-        odd_im[h] = L(0.0);
-    }
-    let upper = (n + 1u) / 2u;
-    for (var src = 0u; src < SEG; src++) {
-        for (var i = 0u; i < PER; i++) {
-            let c_re = subgroupShuffle(re[i], first_lane + src);
-            let m = PER * src + i;
-            if (m < n) {
-                for (var h = 0u; h < HALF; h++) {
-                    let t = points[min(HALF * lane + h, upper - 1u) * n + m];
-                    if (i % 2u == 0u) {
-                        even_re[h] += t * c_re;
-                    } else {
-                        odd_re[h] += t * c_re;
-                    }
-                }
-            }
-        }
-    }
-    for (var src = 0u; src < SEG; src++) {
-        for (var i = 0u; i < PER; i++) {
-            let c_im = subgroupShuffle(im[i], first_lane + src);
-            let m = PER * src + i;
-            if (m < n) {
-                for (var h = 0u; h < HALF; h++) {
-                    let t = points[min(HALF * lane + h, upper - 1u) * n + m];
-                    if (i % 2u == 0u) {
-                        even_im[h] += t * c_im;
-                    } else {
-                        odd_im[h] += t * c_im;
-                    }
-                }
-            }
-        }
-    }
+    // The inverse transform's sums (`parity_sums`): one part's, then the other's, and the
+    // walls' constants after both. Against both parts' sums in one loop after the
+    // constants: 0.0466 -> 0.0426 ms at 10^5 (bottom wall, H100 2026-12-08), though the
+    // driver gives this order 128 registers, not 96; at 34 points 128 with 4.5 KiB of
+    // workgroup memory, not 155.
+    let sums_re = parity_sums(&re);
+    let sums_im = parity_sums(&im);
     // The velocity at the top and the bottom, columns x, y, z of (re, im).
     let top = mat3x2<f32>(vec2<f32>(re_ends[0].x, im_ends[0].x), vec2<f32>(re_ends[0].y, im_ends[0].y),
                           vec2<f32>(re_ends[0].z, im_ends[0].z));
@@ -505,6 +496,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     // Open z leaves k != 0 as the transform makes it.
     let walled = kabs == 0.0 || walls != 0u;
     let component = 2u * n * nk;
+    let upper = (n + 1u) / 2u;
     for (var h = 0u; h < HALF; h++) {
         let j = HALF * lane + h;
         if (j >= upper) {
@@ -520,8 +512,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
                     break;
                 }
             }
-            var v_re = even_re[h] + sign * odd_re[h];
-            var v_im = even_im[h] + sign * odd_im[h];
+            var v_re = sums_re[0][h] + sign * sums_re[1][h];
+            var v_im = sums_im[0][h] + sign * sums_im[1][h];
             if (walled) {
                 let zeta = points[n * n + at];
                 let decay = exp(-kabs * zeta);
