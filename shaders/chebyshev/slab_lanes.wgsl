@@ -139,10 +139,10 @@ fn eliminate_upwards(line: ptr<function, Line>) {
     var b0 = L(0.0);
     var b1 = L(0.0);
     for (var i = 0u; i < PER; i += 2u) {
-        b0 = below(i) * b0 + (*line)[i];
-        a.x *= below(i);
-        b1 = below(i + 1u) * b1 + (*line)[i + 1u];
-        a.y *= below(i + 1u);
+        let m = vec2<f32>(below(i), below(i + 1u));
+        b0 = m.x * b0 + (*line)[i];
+        b1 = m.y * b1 + (*line)[i + 1u];
+        a *= m;
     }
     // Inclusive scan: each lane's map after those of the lanes before it.
     for (var d = 1u; d < SEG; d *= 2u) {
@@ -179,10 +179,10 @@ fn scan_downwards(line: ptr<function, Line>, derivative: bool) {
     var b1 = L(0.0);
     for (var j = 0u; j < PER; j += 2u) {
         let i = PER - 2u - j;
-        b0 = down_mul(derivative, i) * b0 + down_scale(derivative, i) * (*line)[i];
-        a.x *= down_mul(derivative, i);
-        b1 = down_mul(derivative, i + 1u) * b1 + down_scale(derivative, i + 1u) * (*line)[i + 1u];
-        a.y *= down_mul(derivative, i + 1u);
+        let m = vec2<f32>(down_mul(derivative, i), down_mul(derivative, i + 1u));
+        b0 = m.x * b0 + down_scale(derivative, i) * (*line)[i];
+        b1 = m.y * b1 + down_scale(derivative, i + 1u) * (*line)[i + 1u];
+        a *= m;
     }
     for (var d = 1u; d < SEG; d *= 2u) {
         let ap = subgroupShuffleDown(a, d);
@@ -451,8 +451,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
     // The inverse transform's sums (`parity_sums`): one part's, then the other's, and the
     // walls' constants after both. Against both parts' sums in one loop after the
     // constants: 0.0466 -> 0.0426 ms at 10^5 (bottom wall, H100 2026-12-08), though the
-    // driver gives this order 128 registers, not 96; at 34 points 128 with 4.5 KiB of
-    // workgroup memory, not 155.
+    // driver gives this order 128 registers, not 96 (at 34 points 128 with 4.5 KiB of
+    // workgroup memory, not 155), and each part reads the transform's matrix again.
     let sums_re = parity_sums(&re);
     let sums_im = parity_sums(&im);
     // The velocity at the top and the bottom, columns x, y, z of (re, im).
